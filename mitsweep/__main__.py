@@ -1,0 +1,3 @@
+from mitsweep.cli.main import entry
+
+entry()

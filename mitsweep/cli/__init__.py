@@ -1,0 +1,1 @@
+"""The ``mitsweep`` command-line program (argparse subcommands, each ``main(argv) -> int``)."""

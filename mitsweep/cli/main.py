@@ -1,0 +1,53 @@
+"""``mitsweep``: one program, one subcommand per job.
+
+Each subcommand module exposes ``NAME``, ``HELP``, ``add_arguments(parser)`` and
+``run(args) -> int``; adding a command is adding its module name to ``COMMANDS``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+from .common import USER_ERRORS, ArgumentParser, configure_logging, user_error_message
+
+# Module names under mitsweep.cli, in the order shown by --help.
+COMMANDS = [
+    "sweep_range",
+]
+
+
+def build_parser() -> ArgumentParser:
+    from .. import __version__
+
+    parser = ArgumentParser(prog="mitsweep", description="Focal-sweep EDOF catadioptric "
+                            "imaging: design, IPSFs, rendering, deconvolution, capture.")
+    parser.add_argument("--version", action="version", version=f"mitsweep {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0,
+                        help="more log output on stderr (-vv for debug)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=ArgumentParser)
+    sub.required = True
+    for name in COMMANDS:
+        mod = importlib.import_module(f"mitsweep.cli.{name}")
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    configure_logging(args.verbose)
+    try:
+        return int(args._run(args) or 0)
+    except KeyboardInterrupt:
+        print("mitsweep: interrupted", file=sys.stderr)
+        return 130
+    except USER_ERRORS as exc:
+        print(user_error_message(exc), file=sys.stderr)
+        return 2
+
+
+def entry() -> None:
+    sys.exit(main())

@@ -1,0 +1,458 @@
+"""Setup dataclasses and TOML loading.
+
+A *setup* describes one catadioptric focal-sweep camera: the mirror, the lens, the
+sensor, the sweep and, optionally, the rendered scene and the rig. Every section is a
+frozen, keyword-only dataclass validated in ``__post_init__``; a bad value raises
+:class:`SetupError` naming the key and the allowed range. TOML files are strict:
+unknown sections and keys are rejected, so that a typo never passes silently.
+
+All lengths are millimetres, angles are degrees at this edge (``*_deg``), time is
+seconds (``*_s``).
+
+Mirror kinds (all normalised to a conic of vertex radius ``radius`` and conic constant
+``conic``, plus optional even-asphere coefficients):
+
+- ``"conic"``: ``radius``, ``conic``, ``rim_radius``, ``vertex_distance``.
+- ``"sphere"``: ``radius`` and either ``center_distance`` (lens centre to the sphere's
+  centre, as in the paper) or ``vertex_distance``; ``conic`` must be absent or 0.
+- ``"paraboloid"``: ``focal_length`` (R = 2 f, k = -1) and ``vertex_distance``.
+- ``"asphere"``: like ``"conic"`` plus ``aspheric = [a4, a6, ...]``, the coefficients of
+  ρ⁴, ρ⁶, ... added to the conic sag.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+try:  # Python >= 3.11
+    import tomllib
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as tomllib  # type: ignore[no-redef]
+
+__all__ = [
+    "SetupError",
+    "Mirror",
+    "Lens",
+    "Sensor",
+    "Sweep",
+    "Scene",
+    "Rig",
+    "Setup",
+    "load_setup",
+    "setup_from_dict",
+    "setup_to_dict",
+    "DEFAULT_SETUP",
+]
+
+MIRROR_KINDS = ("conic", "sphere", "paraboloid", "asphere")
+MOTION_PROFILES = ("linear", "trapezoidal", "tabulated")
+
+
+class SetupError(ValueError):
+    """A setup value is missing, unknown or outside its allowed range."""
+
+
+def _require(ok: bool, key: str, message: str) -> None:
+    if not ok:
+        raise SetupError(f"{key}: {message}")
+
+
+def _finite(value: Any, key: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise SetupError(f"{key}: expected a number, got {value!r}") from None
+    _require(math.isfinite(x), key, f"must be finite, got {value!r}")
+    return x
+
+
+def _positive(value: Any, key: str) -> float:
+    x = _finite(value, key)
+    _require(x > 0, key, f"must be > 0, got {value!r}")
+    return x
+
+
+@dataclass(frozen=True, kw_only=True)
+class Mirror:
+    """A rotationally symmetric convex mirror, placed on the camera axis.
+
+    Parameters
+    ----------
+    radius : float
+        Vertex radius of curvature R, mm (> 0; the mirror is convex toward the camera).
+    conic : float
+        Conic constant k (0 sphere, -1 paraboloid, < -1 hyperboloid, (-1, 0) prolate,
+        > 0 oblate ellipsoid).
+    rim_radius : float
+        Radial extent of the mirror, mm. Must lie inside the conic's domain
+        ``(1 + k) ρ² < R²``.
+    vertex_distance : float
+        Distance from the lens centre to the mirror vertex along the camera axis, mm.
+    tilt_deg : float
+        Rotation of the mirror about its vertex in the x–z plane, degrees, in (-90, 90).
+    aspheric : tuple of float
+        Even-asphere coefficients of ρ⁴, ρ⁶, ... (mm^-3, mm^-5, ...).
+    kind : str
+        The kind the setup was written as (kept for provenance).
+    """
+
+    radius: float
+    conic: float = 0.0
+    rim_radius: float
+    vertex_distance: float
+    tilt_deg: float = 0.0
+    aspheric: tuple[float, ...] = ()
+    kind: str = "conic"
+
+    def __post_init__(self) -> None:
+        _require(self.kind in MIRROR_KINDS, "mirror.kind",
+                 f"must be one of {', '.join(MIRROR_KINDS)}, got {self.kind!r}")
+        R = _positive(self.radius, "mirror.radius")
+        k = _finite(self.conic, "mirror.conic")
+        rim = _positive(self.rim_radius, "mirror.rim_radius")
+        vd = _positive(self.vertex_distance, "mirror.vertex_distance")
+        tilt = _finite(self.tilt_deg, "mirror.tilt_deg")
+        _require(-90.0 < tilt < 90.0, "mirror.tilt_deg", f"must be in (-90, 90), got {tilt}")
+        coeffs = tuple(_finite(a, f"mirror.aspheric[{i}]") for i, a in enumerate(self.aspheric))
+        if 1.0 + k > 0:
+            rho_lim = R / math.sqrt(1.0 + k)
+            _require(rim <= rho_lim, "mirror.rim_radius",
+                     f"must be <= {rho_lim:.6g} mm, where a conic of radius {R:g} and "
+                     f"conic constant {k:g} ends (got {rim:g})")
+        object.__setattr__(self, "radius", R)
+        object.__setattr__(self, "conic", k)
+        object.__setattr__(self, "rim_radius", rim)
+        object.__setattr__(self, "vertex_distance", vd)
+        object.__setattr__(self, "tilt_deg", tilt)
+        object.__setattr__(self, "aspheric", coeffs)
+
+    @property
+    def tilt(self) -> float:
+        """Tilt in radians."""
+        return math.radians(self.tilt_deg)
+
+    @property
+    def is_sphere(self) -> bool:
+        return self.conic == 0.0 and not any(self.aspheric)
+
+    @property
+    def is_symmetric(self) -> bool:
+        """True when the camera axis is the mirror's axis of rotation."""
+        return self.tilt_deg == 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class Lens:
+    """Thin lens: ``focal_length`` (mm, > 0) and ``f_number`` (> 0)."""
+
+    focal_length: float = 50.0
+    f_number: float = 2.8
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "focal_length", _positive(self.focal_length, "lens.focal_length"))
+        object.__setattr__(self, "f_number", _positive(self.f_number, "lens.f_number"))
+
+    @property
+    def aperture_radius(self) -> float:
+        """Entrance-pupil radius, mm: f / (2 N)."""
+        return self.focal_length / (2.0 * self.f_number)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Sensor:
+    """Image sensor: ``resolution = [width, height]`` in pixels, ``pixel_pitch`` in mm."""
+
+    resolution: tuple[int, int] = (512, 512)
+    pixel_pitch: float = 0.018
+
+    def __post_init__(self) -> None:
+        res = self.resolution
+        _require(isinstance(res, (tuple, list)) and len(res) == 2, "sensor.resolution",
+                 f"must be [width, height], got {res!r}")
+        w, h = res
+        for name, v in (("width", w), ("height", h)):
+            _require(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 65536,
+                     "sensor.resolution", f"{name} must be an integer in [1, 65536], got {v!r}")
+        object.__setattr__(self, "resolution", (int(w), int(h)))
+        object.__setattr__(self, "pixel_pitch", _positive(self.pixel_pitch, "sensor.pixel_pitch"))
+
+    @property
+    def width(self) -> int:
+        return self.resolution[0]
+
+    @property
+    def height(self) -> int:
+        return self.resolution[1]
+
+    @property
+    def size_mm(self) -> tuple[float, float]:
+        return (self.width * self.pixel_pitch, self.height * self.pixel_pitch)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Sweep:
+    """The wanted field of view and depth range, and the stage motion.
+
+    ``focus_min``/``focus_max`` (mm, optional, both or neither) override the optimal
+    sweep range computed from ``fov_deg`` and the depth range (paper Eq. 8–9), e.g. to
+    reproduce Table 1's longer sweeps.
+    """
+
+    fov_deg: float
+    depth_min: float = 300.0
+    depth_max: float = 10000.0
+    velocity: float = 1.0
+    profile: str = "linear"
+    focus_min: float | None = None
+    focus_max: float | None = None
+
+    def __post_init__(self) -> None:
+        fov = _finite(self.fov_deg, "sweep.fov_deg")
+        _require(0.0 < fov < 360.0, "sweep.fov_deg", f"must be in (0, 360), got {fov}")
+        dmin = _positive(self.depth_min, "sweep.depth_min")
+        dmax = float(self.depth_max)
+        _require(not math.isnan(dmax) and dmax > 0, "sweep.depth_max",
+                 f"must be > 0 (inf allowed), got {self.depth_max!r}")
+        _require(dmin <= dmax, "sweep.depth_min",
+                 f"must be <= sweep.depth_max ({dmax:g}), got {dmin:g}")
+        vel = _positive(self.velocity, "sweep.velocity")
+        _require(self.profile in MOTION_PROFILES, "sweep.profile",
+                 f"must be one of {', '.join(MOTION_PROFILES)}, got {self.profile!r}")
+        _require((self.focus_min is None) == (self.focus_max is None), "sweep.focus_min",
+                 "give both focus_min and focus_max, or neither")
+        if self.focus_min is not None:
+            fmin = _positive(self.focus_min, "sweep.focus_min")
+            fmax = _positive(self.focus_max, "sweep.focus_max")
+            _require(fmin < fmax, "sweep.focus_min",
+                     f"must be < sweep.focus_max ({fmax:g}), got {fmin:g}")
+            object.__setattr__(self, "focus_min", fmin)
+            object.__setattr__(self, "focus_max", fmax)
+        object.__setattr__(self, "fov_deg", fov)
+        object.__setattr__(self, "depth_min", dmin)
+        object.__setattr__(self, "depth_max", dmax)
+        object.__setattr__(self, "velocity", vel)
+
+    @property
+    def fov(self) -> float:
+        return math.radians(self.fov_deg)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scene:
+    """Synthetic surroundings for rendering (owned by ``mitsweep.render``).
+
+    ``room_size = [x, y, z]`` mm: an axis-aligned room around the mirror whose walls,
+    floor and ceiling lie between ~10 cm and 3 m from it; ``objects`` adds textured
+    boards at those depths; ``texture_seed`` picks the texture layout.
+    """
+
+    room_size: tuple[float, float, float] = (4000.0, 4000.0, 2500.0)
+    objects: int = 6
+    texture_seed: int = 0
+    max_depth: int = 0  # integrator depth; 0 = chosen from the scene
+
+    def __post_init__(self) -> None:
+        rs = self.room_size
+        _require(isinstance(rs, (tuple, list)) and len(rs) == 3, "scene.room_size",
+                 f"must be [x, y, z] in mm, got {rs!r}")
+        object.__setattr__(self, "room_size",
+                           tuple(_positive(v, "scene.room_size") for v in rs))
+        _require(isinstance(self.objects, int) and 0 <= self.objects <= 64, "scene.objects",
+                 f"must be an integer in [0, 64], got {self.objects!r}")
+        _require(isinstance(self.texture_seed, int), "scene.texture_seed",
+                 f"must be an integer, got {self.texture_seed!r}")
+        _require(isinstance(self.max_depth, int) and 0 <= self.max_depth <= 64,
+                 "scene.max_depth", f"must be an integer in [0, 64], got {self.max_depth!r}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Rig:
+    """The capture rig (owned by ``mitsweep.rig``): stage limits and motion.
+
+    ``travel`` is the stage's usable travel (mm), ``max_velocity`` (mm/s) and
+    ``acceleration`` (mm/s²) its limits, ``home_position`` (mm) where the sensor sits
+    at the start of the sweep relative to its soft-limit origin.
+    """
+
+    travel: float = 25.0
+    max_velocity: float = 5.0
+    acceleration: float = 10.0
+    settle_distance: float = 0.05
+    min_exposure_s: float = 1.0 / 4000.0
+    max_exposure_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        for name in ("travel", "max_velocity", "acceleration", "min_exposure_s", "max_exposure_s"):
+            object.__setattr__(self, name, _positive(getattr(self, name), f"rig.{name}"))
+        sd = _finite(self.settle_distance, "rig.settle_distance")
+        _require(sd >= 0, "rig.settle_distance", f"must be >= 0, got {sd}")
+        object.__setattr__(self, "settle_distance", sd)
+        _require(self.min_exposure_s < self.max_exposure_s, "rig.min_exposure_s",
+                 "must be < rig.max_exposure_s")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Setup:
+    """One catadioptric focal-sweep camera and, optionally, its scene and rig."""
+
+    mirror: Mirror
+    lens: Lens = field(default_factory=Lens)
+    sensor: Sensor = field(default_factory=Sensor)
+    sweep: Sweep
+    scene: Scene = field(default_factory=Scene)
+    rig: Rig = field(default_factory=Rig)
+    name: str = "setup"
+
+    def __post_init__(self) -> None:
+        _require(self.mirror.vertex_distance > self.lens.focal_length, "mirror.vertex_distance",
+                 f"must be > lens.focal_length ({self.lens.focal_length:g} mm) so the "
+                 f"camera can focus on the mirror, got {self.mirror.vertex_distance:g}")
+        if self.sweep.focus_min is not None:
+            _require(self.sweep.focus_min > self.lens.focal_length, "sweep.focus_min",
+                     f"must be > lens.focal_length ({self.lens.focal_length:g} mm), "
+                     f"got {self.sweep.focus_min:g}")
+
+
+_SECTIONS: dict[str, type] = {
+    "mirror": Mirror, "lens": Lens, "sensor": Sensor, "sweep": Sweep,
+    "scene": Scene, "rig": Rig,
+}
+
+
+def _mirror_from_table(table: Mapping[str, Any]) -> Mirror:
+    t = dict(table)
+    kind = t.pop("kind", "conic")
+    if kind == "sphere":
+        allowed = {"radius", "center_distance", "vertex_distance", "rim_radius", "tilt_deg", "conic"}
+        _reject_unknown(t, allowed, "mirror")
+        _require("radius" in t, "mirror.radius", "missing (required for kind = 'sphere')")
+        R = _positive(t["radius"], "mirror.radius")
+        _require(_finite(t.get("conic", 0.0), "mirror.conic") == 0.0, "mirror.conic",
+                 "must be 0 for kind = 'sphere' (use kind = 'conic')")
+        has_c, has_v = "center_distance" in t, "vertex_distance" in t
+        _require(has_c != has_v, "mirror.center_distance",
+                 "give exactly one of center_distance and vertex_distance for a sphere")
+        vd = (_positive(t["center_distance"], "mirror.center_distance") - R) if has_c \
+            else t["vertex_distance"]
+        return Mirror(kind=kind, radius=R, conic=0.0, rim_radius=t.get("rim_radius", R),
+                      vertex_distance=vd, tilt_deg=t.get("tilt_deg", 0.0))
+    if kind == "paraboloid":
+        allowed = {"focal_length", "radius", "rim_radius", "vertex_distance", "tilt_deg", "conic"}
+        _reject_unknown(t, allowed, "mirror")
+        _require(("focal_length" in t) != ("radius" in t), "mirror.focal_length",
+                 "give exactly one of focal_length and radius (= 2 focal_length) for a paraboloid")
+        R = 2.0 * _positive(t["focal_length"], "mirror.focal_length") if "focal_length" in t \
+            else t["radius"]
+        _require(_finite(t.get("conic", -1.0), "mirror.conic") == -1.0, "mirror.conic",
+                 "must be -1 for kind = 'paraboloid' (use kind = 'conic')")
+        for key in ("rim_radius", "vertex_distance"):
+            _require(key in t, f"mirror.{key}", "missing (required)")
+        return Mirror(kind=kind, radius=R, conic=-1.0, rim_radius=t["rim_radius"],
+                      vertex_distance=t["vertex_distance"], tilt_deg=t.get("tilt_deg", 0.0))
+    if kind in ("conic", "asphere"):
+        allowed = {"radius", "conic", "rim_radius", "vertex_distance", "tilt_deg"}
+        if kind == "asphere":
+            allowed.add("aspheric")
+        _reject_unknown(t, allowed, "mirror")
+        for key in ("radius", "rim_radius", "vertex_distance"):
+            _require(key in t, f"mirror.{key}", "missing (required)")
+        asph = t.get("aspheric", ())
+        _require(isinstance(asph, (list, tuple)), "mirror.aspheric",
+                 f"must be a list of numbers [a4, a6, ...], got {asph!r}")
+        return Mirror(kind=kind, radius=t["radius"], conic=t.get("conic", 0.0),
+                      rim_radius=t["rim_radius"], vertex_distance=t["vertex_distance"],
+                      tilt_deg=t.get("tilt_deg", 0.0), aspheric=tuple(asph))
+    raise SetupError(f"mirror.kind: must be one of {', '.join(MIRROR_KINDS)}, got {kind!r}")
+
+
+def _reject_unknown(table: Mapping[str, Any], allowed: set[str], section: str) -> None:
+    unknown = sorted(set(table) - set(allowed))
+    if unknown:
+        raise SetupError(f"{section}.{unknown[0]}: unknown key; allowed keys: "
+                         f"{', '.join(sorted(allowed))}")
+
+
+def _section_from_table(cls: type, table: Mapping[str, Any], section: str) -> Any:
+    if not isinstance(table, Mapping):
+        raise SetupError(f"{section}: must be a table, got {table!r}")
+    names = {f.name for f in fields(cls)}
+    _reject_unknown(table, names, section)
+    required = {f.name for f in fields(cls)
+                if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING}
+    missing = sorted(required - set(table))
+    if missing:
+        raise SetupError(f"{section}.{missing[0]}: missing (required)")
+    kwargs = {k: (tuple(v) if isinstance(v, list) else v) for k, v in table.items()}
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:  # wrong type reaching a comparison
+        raise SetupError(f"{section}: {exc}") from None
+
+
+def setup_from_dict(data: Mapping[str, Any], *, name: str = "setup") -> Setup:
+    """Build a validated :class:`Setup` from a TOML-like nested mapping."""
+    if not isinstance(data, Mapping):
+        raise SetupError(f"setup: must be a table, got {type(data).__name__}")
+    allowed = set(_SECTIONS) | {"name"}
+    _reject_unknown(data, allowed, "setup")
+    _require("mirror" in data, "mirror", "missing section [mirror]")
+    _require("sweep" in data, "sweep", "missing section [sweep]")
+    kwargs: dict[str, Any] = {"name": str(data.get("name", name))}
+    mirror_table = data["mirror"]
+    _require(isinstance(mirror_table, Mapping), "mirror", "must be a table")
+    kwargs["mirror"] = _mirror_from_table(mirror_table)
+    for section, cls in _SECTIONS.items():
+        if section != "mirror" and section in data:
+            kwargs[section] = _section_from_table(cls, data[section], section)
+    return Setup(**kwargs)
+
+
+def load_setup(path: str | Path) -> Setup:
+    """Load and validate a setup TOML file.
+
+    Raises
+    ------
+    SetupError
+        If the file is missing, is not TOML, or holds an unknown, missing or
+        out-of-range key. The message names the key and the allowed values.
+    """
+    p = Path(path)
+    try:
+        text = p.read_bytes()
+    except FileNotFoundError:
+        raise SetupError(f"{p}: no such setup file") from None
+    except OSError as exc:
+        raise SetupError(f"{p}: cannot read ({exc.strerror})") from None
+    try:
+        data = tomllib.loads(text.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise SetupError(f"{p}: not a valid TOML file ({exc})") from None
+    return setup_from_dict(data, name=p.stem)
+
+
+def setup_to_dict(setup: Setup) -> dict[str, Any]:
+    """The setup as a plain, JSON/TOML-serialisable nested dict (normalised to a conic)."""
+    out: dict[str, Any] = {"name": setup.name}
+    for section in _SECTIONS:
+        value = dataclasses.asdict(getattr(setup, section))
+        out[section] = {k: (list(v) if isinstance(v, tuple) else v)
+                        for k, v in value.items() if v is not None}
+    return out
+
+
+#: The embedded default: the paper's spherical mirror (Sec. 3.1 and 5.2).
+DEFAULT_SETUP = Setup(
+    name="sphere",
+    mirror=Mirror(kind="sphere", radius=25.0, conic=0.0, rim_radius=25.0, vertex_distance=327.0),
+    lens=Lens(focal_length=50.0, f_number=2.8),
+    sweep=Sweep(fov_deg=237.0, depth_min=300.0, depth_max=10000.0, velocity=1.0),
+)
+
+
+def with_sweep(setup: Setup, **changes: Any) -> Setup:
+    """A copy of ``setup`` with sweep fields replaced (validated)."""
+    return replace(setup, sweep=replace(setup.sweep, **changes))

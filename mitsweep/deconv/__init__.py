@@ -1,0 +1,1 @@
+"""mitsweep.deconv (see DESIGN.md)."""

@@ -1,0 +1,145 @@
+"""EXR images with provenance metadata, through the OpenEXR package.
+
+Images are NumPy arrays (H, W) or (H, W, C) float32 (float64 is stored as float32,
+float16 as half). Metadata is a flat dict of str → JSON-serialisable values, stored as
+string attributes prefixed ``mitsweep:`` so that other tools show them and leave them be.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .atomic import atomic_path
+
+__all__ = ["ExrError", "write_exr", "read_exr", "read_exr_header", "channel_names_for"]
+
+_PREFIX = "mitsweep:"
+
+
+class ExrError(ValueError):
+    """An EXR file cannot be read or does not hold what was expected."""
+
+
+def channel_names_for(n: int) -> list[str]:
+    return {1: ["Y"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}.get(
+        n, [f"C{i}" for i in range(n)])
+
+
+def write_exr(path: str | Path, image=None, *, channels: Mapping[str, np.ndarray] | None = None,
+              metadata: Mapping[str, Any] | None = None) -> Path:
+    """Write ``image`` (H, W[, C]) and/or named ``channels`` (each (H, W)) atomically.
+
+    Parameters
+    ----------
+    path : path
+        Target file; written to a temporary file and renamed, so an interrupted write
+        leaves no partial EXR and keeps any previous file.
+    image : (H, W) or (H, W, C) ndarray, optional
+        Channels Y; R, G, B[, A]; or C0… by count.
+    channels : mapping of str to (H, W) ndarray, optional
+        Extra named layers, e.g. ``{"depth.Z": ..., "mask.Y": ...}``.
+    metadata : mapping, optional
+        Provenance; each value is stored JSON-encoded under ``mitsweep:KEY``.
+    """
+    import OpenEXR
+
+    chans: dict[str, np.ndarray] = {}
+    if image is not None:
+        img = np.asarray(image)
+        if img.ndim == 2:
+            img = img[..., None]
+        if img.ndim != 3:
+            raise ExrError(f"image must be (H, W) or (H, W, C), got shape {img.shape}")
+        for i, name in enumerate(channel_names_for(img.shape[2])):
+            chans[name] = img[..., i]
+    for name, arr in (channels or {}).items():
+        arr = np.asarray(arr)
+        if arr.ndim != 2:
+            raise ExrError(f"channel {name!r} must be (H, W), got shape {arr.shape}")
+        chans[name] = arr
+    if not chans:
+        raise ExrError("nothing to write: give an image or channels")
+    shapes = {a.shape for a in chans.values()}
+    if len(shapes) != 1:
+        raise ExrError(f"all channels must have one shape, got {sorted(shapes)}")
+    out = {}
+    for name, arr in chans.items():
+        dt = np.float16 if arr.dtype == np.float16 else np.float32
+        a = np.ascontiguousarray(arr, dtype=dt)
+        if not np.all(np.isfinite(a)):
+            raise ExrError(f"channel {name!r} holds NaN or inf values; refusing to write them")
+        out[name] = a
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, value in (metadata or {}).items():
+        header[_PREFIX + str(key)] = json.dumps(value, default=_json_default)
+    with atomic_path(path, suffix=".exr") as tmp:
+        with OpenEXR.File(header, out) as f:
+            f.write(str(tmp))
+    return Path(path)
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
+
+
+def _metadata(header: Mapping[str, Any]) -> dict[str, Any]:
+    meta = {}
+    for k, v in header.items():
+        if isinstance(k, str) and k.startswith(_PREFIX):
+            try:
+                meta[k[len(_PREFIX):]] = json.loads(v)
+            except (TypeError, ValueError):
+                meta[k[len(_PREFIX):]] = v
+    return meta
+
+
+def read_exr(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """Read every channel (name → (H, W) float array) and the mitsweep metadata."""
+    import OpenEXR
+
+    p = Path(path)
+    if not p.is_file():
+        raise ExrError(f"{p}: no such file")
+    try:
+        with OpenEXR.File(str(p), separate_channels=True) as f:
+            chans = {name: np.array(c.pixels) for name, c in f.channels().items()}
+            meta = _metadata(f.header())
+    except ExrError:
+        raise
+    except Exception as exc:  # OpenEXR raises plain RuntimeError/IOError
+        raise ExrError(f"{p}: not a readable EXR file ({exc})") from None
+    return chans, meta
+
+
+def read_exr_header(path: str | Path) -> dict[str, Any]:
+    """Only the mitsweep metadata of an EXR file."""
+    import OpenEXR
+
+    p = Path(path)
+    if not p.is_file():
+        raise ExrError(f"{p}: no such file")
+    try:
+        with OpenEXR.File(str(p), header_only=True) as f:
+            return _metadata(f.header())
+    except Exception as exc:
+        raise ExrError(f"{p}: not a readable EXR file ({exc})") from None
+
+
+def stack_channels(chans: Mapping[str, np.ndarray], names=("R", "G", "B")) -> np.ndarray:
+    """(H, W, C) from named channels, or (H, W) for a single ``Y`` channel."""
+    if "Y" in chans and not all(n in chans for n in names):
+        return chans["Y"]
+    missing = [n for n in names if n not in chans]
+    if missing:
+        raise ExrError(f"missing channels {missing}; present: {sorted(chans)}")
+    return np.stack([chans[n] for n in names], axis=-1)

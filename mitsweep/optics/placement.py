@@ -1,0 +1,90 @@
+"""Placement of the mirror relative to the camera, and points on the mirror.
+
+World frame (DESIGN.md): the mirror vertex at the origin, its untilted axis +z toward
+the camera, the lens centre at ``(0, 0, vertex_distance)``; the camera looks down −z,
+image right = world +x, image up = world +y. Tilt rotates the mirror about its vertex in
+the x–z plane: the local axis becomes ``(sin t, 0, cos t)``, so for t > 0 the mirror's
+−x rim moves toward the camera.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .profiles import Profile, profile_of
+
+__all__ = ["Placement", "placement_of", "SurfacePoints"]
+
+
+@dataclass(frozen=True)
+class SurfacePoints:
+    """Points on the mirror in world coordinates with their local description.
+
+    Attributes
+    ----------
+    position, normal : (..., 3) ndarray
+        World position (mm) and unit outward normal.
+    rho : (...) ndarray
+        Local radial coordinate, mm.
+    radial_dir : (..., 3) ndarray
+        World unit vector of the local radial (meridional) direction, tangent to the
+        surface; undefined (x) on the axis.
+    """
+
+    position: np.ndarray
+    normal: np.ndarray
+    rho: np.ndarray
+    radial_dir: np.ndarray
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A mirror profile placed in front of the lens."""
+
+    profile: Profile
+    vertex_distance: float
+    tilt: float = 0.0  # radians
+    rim_radius: float = np.inf
+
+    @property
+    def lens_center(self) -> np.ndarray:
+        return np.array([0.0, 0.0, self.vertex_distance])
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """Local-to-world rotation (about y by the tilt)."""
+        c, s = np.cos(self.tilt), np.sin(self.tilt)
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+    @property
+    def axis(self) -> np.ndarray:
+        return self.rotation[:, 2]
+
+    def to_local(self, p) -> np.ndarray:
+        """World points (..., 3) to the mirror's local frame."""
+        return np.asarray(p, dtype=float) @ self.rotation
+
+    def to_world(self, p) -> np.ndarray:
+        return np.asarray(p, dtype=float) @ self.rotation.T
+
+    def surface(self, x, y) -> SurfacePoints:
+        """World points and normals at local coordinates (x, y), mm (broadcast)."""
+        x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+        rho = np.hypot(x, y)
+        z = -self.profile.sag(rho)
+        nr, nz = self.profile.normal_components(rho)
+        safe = np.where(rho > 0, rho, 1.0)
+        cx, cy = np.where(rho > 0, x / safe, 1.0), np.where(rho > 0, y / safe, 0.0)
+        local_p = np.stack([x, y, z], axis=-1)
+        local_n = np.stack([nr * cx, nr * cy, nz], axis=-1)
+        # Tangent along increasing ρ: (cos φ, sin φ, −s') normalised = (nz cφ, nz sφ, −nr).
+        local_t = np.stack([nz * cx, nz * cy, -nr], axis=-1)
+        return SurfacePoints(self.to_world(local_p), self.to_world(local_n), rho,
+                             self.to_world(local_t))
+
+
+def placement_of(mirror) -> Placement:
+    """The :class:`Placement` of a :class:`mitsweep.config.Mirror`."""
+    return Placement(profile_of(mirror), mirror.vertex_distance, mirror.tilt, mirror.rim_radius)

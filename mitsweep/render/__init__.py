@@ -1,0 +1,1 @@
+"""mitsweep.render (see DESIGN.md)."""

@@ -1,0 +1,1 @@
+"""mitsweep.rig (see DESIGN.md)."""

@@ -1,0 +1,1 @@
+"""mitsweep.tracer (see DESIGN.md)."""
