@@ -14,6 +14,7 @@ from .common import USER_ERRORS, ArgumentParser, configure_logging, user_error_m
 # Module names under mitsweep.cli, in the order shown by --help.
 COMMANDS = [
     "sweep_range",
+    "bench",
 ]
 
 
@@ -41,6 +42,8 @@ def main(argv: list[str] | None = None) -> int:
     configure_logging(args.verbose)
     try:
         return int(args._run(args) or 0)
+    except BrokenPipeError:  # output piped into head & co.
+        return 0
     except KeyboardInterrupt:
         print("mitsweep: interrupted", file=sys.stderr)
         return 130
