@@ -271,11 +271,21 @@ class Scene:
 
 @dataclass(frozen=True, kw_only=True)
 class Rig:
-    """The capture rig (owned by ``mitsweep.rig``): stage limits and motion.
+    """The capture rig (owned by ``mitsweep.rig``): stage limits, motion and camera.
 
     ``travel`` is the stage's usable travel (mm), ``max_velocity`` (mm/s) and
-    ``acceleration`` (mm/s²) its limits, ``home_position`` (mm) where the sensor sits
-    at the start of the sweep relative to its soft-limit origin.
+    ``acceleration`` (mm/s²) its limits; ``settle_distance`` (mm) is run at constant
+    velocity after the ramp before the shutter opens (and before the ramp down after
+    it closes). ``min_exposure_s``/``max_exposure_s`` bound the camera's bulb exposure.
+
+    ``steps_per_mm`` converts stage millimetres to the controller's (micro)steps (the
+    Arduino's stepper, or a Zaber stage's microsteps). ``soft_limit_min`` /
+    ``soft_limit_max`` (mm, stage coordinates, default 0 .. ``travel``) bound every
+    commanded position. ``sensor_distance_at_zero`` (mm) is the lens-to-sensor distance
+    when the stage is at position 0, and ``sensor_direction`` (+1 or -1) the sign of
+    d(sensor distance)/d(stage position); when ``sensor_distance_at_zero`` is absent
+    (an uncalibrated rig) the sweep is centred within the soft limits. ``baudrate`` and
+    ``reply_timeout_s`` (deadline on every reply) set the serial links.
     """
 
     travel: float = 25.0
@@ -284,15 +294,42 @@ class Rig:
     settle_distance: float = 0.05
     min_exposure_s: float = 1.0 / 4000.0
     max_exposure_s: float = 30.0
+    steps_per_mm: float = 400.0
+    soft_limit_min: float = 0.0
+    soft_limit_max: float | None = None
+    sensor_distance_at_zero: float | None = None
+    sensor_direction: int = 1
+    baudrate: int = 115200
+    reply_timeout_s: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("travel", "max_velocity", "acceleration", "min_exposure_s", "max_exposure_s"):
+        for name in ("travel", "max_velocity", "acceleration", "min_exposure_s", "max_exposure_s",
+                     "steps_per_mm", "reply_timeout_s"):
             object.__setattr__(self, name, _positive(getattr(self, name), f"rig.{name}"))
         sd = _finite(self.settle_distance, "rig.settle_distance")
         _require(sd >= 0, "rig.settle_distance", f"must be >= 0, got {sd}")
         object.__setattr__(self, "settle_distance", sd)
         _require(self.min_exposure_s < self.max_exposure_s, "rig.min_exposure_s",
                  "must be < rig.max_exposure_s")
+        lo = _finite(self.soft_limit_min, "rig.soft_limit_min")
+        hi = self.travel if self.soft_limit_max is None else _finite(self.soft_limit_max,
+                                                                     "rig.soft_limit_max")
+        _require(0.0 <= lo, "rig.soft_limit_min", f"must be >= 0 mm, got {lo:g}")
+        _require(hi <= self.travel, "rig.soft_limit_max",
+                 f"must be <= rig.travel ({self.travel:g} mm), got {hi:g}")
+        _require(lo < hi, "rig.soft_limit_min",
+                 f"must be < rig.soft_limit_max ({hi:g} mm), got {lo:g}")
+        object.__setattr__(self, "soft_limit_min", lo)
+        object.__setattr__(self, "soft_limit_max", hi)
+        if self.sensor_distance_at_zero is not None:
+            object.__setattr__(self, "sensor_distance_at_zero",
+                               _positive(self.sensor_distance_at_zero,
+                                         "rig.sensor_distance_at_zero"))
+        _require(self.sensor_direction in (1, -1) and not isinstance(self.sensor_direction, bool),
+                 "rig.sensor_direction", f"must be 1 or -1, got {self.sensor_direction!r}")
+        _require(isinstance(self.baudrate, int) and not isinstance(self.baudrate, bool)
+                 and 300 <= self.baudrate <= 4_000_000, "rig.baudrate",
+                 f"must be an integer in [300, 4000000], got {self.baudrate!r}")
 
 
 @dataclass(frozen=True, kw_only=True)
