@@ -106,7 +106,7 @@ class Mirror:
     vertex_distance: float
     tilt_deg: float = 0.0
     aspheric: tuple[float, ...] = ()
-    kind: str = "conic"
+    kind: str = field(default="conic", compare=False)
 
     def __post_init__(self) -> None:
         _require(self.kind in MIRROR_KINDS, "mirror.kind",
@@ -476,6 +476,10 @@ def setup_to_dict(setup: Setup) -> dict[str, Any]:
     out: dict[str, Any] = {"name": setup.name}
     for section in _SECTIONS:
         value = dataclasses.asdict(getattr(setup, section))
+        if section == "mirror":
+            value["kind"] = "asphere" if any(value["aspheric"]) else "conic"
+            if value["kind"] == "conic":
+                del value["aspheric"]
         out[section] = {k: (list(v) if isinstance(v, tuple) else v)
                         for k, v in value.items() if v is not None}
     return out

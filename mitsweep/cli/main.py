@@ -13,6 +13,7 @@ from .common import USER_ERRORS, ArgumentParser, configure_logging, user_error_m
 
 # Module names under mitsweep.cli, in the order shown by --help.
 COMMANDS = [
+    "demo",
     "sweep_range",
     "bench",
 ]

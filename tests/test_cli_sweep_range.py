@@ -1,0 +1,92 @@
+"""``mitsweep sweep-range``: output, plot, and one-line errors with exit status 2."""
+
+import json
+
+import pytest
+
+from conftest import run_cli
+
+JSON_KEYS = {"focus_min_mm", "focus_max_mm", "sensor_start_mm", "sensor_end_mm",
+             "translation_mm", "exposure_s", "rho_max_mm"}
+
+
+def test_json_output_has_the_documented_keys(scenes_dir):
+    rc, out, err = run_cli("sweep-range", scenes_dir / "sphere.toml", "--json")
+    assert rc == 0, err
+    data = json.loads(out)
+    assert JSON_KEYS <= set(data)
+    assert 338.0 <= data["focus_min_mm"] <= 340.0 and 363.0 <= data["focus_max_mm"] <= 365.0
+
+
+def test_fov_and_depth_overrides(scenes_dir):
+    rc, out, _ = run_cli("sweep-range", scenes_dir / "sphere.toml", "--json",
+                         "--fov", "180", "--depth", "500", "inf")
+    assert rc == 0
+    data = json.loads(out)
+    assert data["fov_deg"] == 180.0 and data["depth_max_mm"] == "inf"
+
+
+def test_plot_is_written(scenes_dir, tmp_path):
+    png = tmp_path / "fig6.png"
+    rc, _, err = run_cli("sweep-range", scenes_dir / "paraboloid_tilted.toml", "--plot", png)
+    assert rc == 0, err
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _write(tmp_path, text):
+    p = tmp_path / "s.toml"
+    p.write_text(text)
+    return p
+
+
+GOOD = """
+[mirror]
+kind = "sphere"
+radius = 25.0
+center_distance = 352.0
+[lens]
+focal_length = 50.0
+f_number = {fnum}
+[sweep]
+fov_deg = {fov}
+depth_min = {dmin}
+depth_max = 10000.0
+"""
+
+
+@pytest.mark.parametrize("fmt,args,message", [
+    (dict(fnum=2.8, fov=355, dmin=300), [], "the largest FOV it gives is 351.85"),
+    (dict(fnum=0, fov=237, dmin=300), [], "lens.f_number: must be > 0"),
+    (dict(fnum=2.8, fov=237, dmin=20000), [], "sweep.depth_min: must be <= sweep.depth_max"),
+    (dict(fnum=2.8, fov=237, dmin=300), ["--depth", "900", "100"], "--depth: MIN (900) must be <= MAX"),
+    (dict(fnum=2.8, fov=237, dmin=300), ["--fov", "-3"], "--fov: must be > 0"),
+])
+def test_bad_input_exits_2_with_one_line(tmp_path, fmt, args, message):
+    path = _write(tmp_path, GOOD.format(**fmt))
+    rc, out, err = run_cli("sweep-range", path, *args)
+    assert rc == 2
+    assert message in err
+    assert len(err.strip().splitlines()) == 1, err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("text,message", [
+    ("[mirror\n", "not a valid TOML file"),
+    (GOOD.format(fnum=2.8, fov=237, dmin=300).replace("radius = 25.0", "radius = 25.0\nradus = 3"),
+     "mirror.radus: unknown key"),
+    (GOOD.format(fnum=2.8, fov=237, dmin=300).replace("fov_deg = 237", "# no fov"),
+     "sweep.fov_deg: missing"),
+    (GOOD.format(fnum=2.8, fov=237, dmin=300).replace("center_distance = 352.0",
+                                                      "center_distance = 60.0"),
+     "mirror.vertex_distance: must be > lens.focal_length"),
+    (GOOD.format(fnum=2.8, fov=237, dmin=300) + "focus_min = 45.0\nfocus_max = 400.0\n",
+     "sweep.focus_min: must be > lens.focal_length"),
+])
+def test_bad_setup_files_exit_2(tmp_path, text, message):
+    rc, _, err = run_cli("sweep-range", _write(tmp_path, text))
+    assert rc == 2 and message in err and "Traceback" not in err
+
+
+def test_missing_file_exits_2(tmp_path):
+    rc, _, err = run_cli("sweep-range", tmp_path / "none.toml")
+    assert rc == 2 and "no such setup file" in err

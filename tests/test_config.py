@@ -1,0 +1,106 @@
+"""Setup files: strict loading, validation messages that name the key and the range."""
+
+import math
+
+import pytest
+
+from mitsweep.config import (DEFAULT_SETUP, SetupError, load_setup, setup_from_dict,
+                             setup_to_dict)
+
+BASE = {
+    "mirror": {"kind": "conic", "radius": 25.0, "conic": 0.0, "rim_radius": 25.0,
+               "vertex_distance": 327.0, "tilt_deg": 0.0},
+    "lens": {"focal_length": 50.0, "f_number": 2.8},
+    "sweep": {"fov_deg": 237.0, "depth_min": 300.0, "depth_max": 10000.0, "velocity": 1.0},
+}
+
+
+def _with(section, **changes):
+    data = {k: dict(v) for k, v in BASE.items()}
+    data[section].update(changes)
+    return data
+
+
+@pytest.mark.parametrize("name", ["sphere", "paraboloid", "paraboloid_tilted"])
+def test_shipped_setups_load(scenes_dir, name):
+    s = load_setup(scenes_dir / f"{name}.toml")
+    assert s.name == name
+
+
+def test_sphere_kind_normalises_to_conic(scenes_dir):
+    s = load_setup(scenes_dir / "sphere.toml")
+    assert (s.mirror.radius, s.mirror.conic, s.mirror.vertex_distance) == (25.0, 0.0, 327.0)
+    assert s.mirror == DEFAULT_SETUP.mirror
+
+
+def test_paraboloid_kind_uses_twice_the_focal_length(scenes_dir):
+    s = load_setup(scenes_dir / "paraboloid.toml")
+    assert s.mirror.radius == pytest.approx(28.2) and s.mirror.conic == -1.0
+
+
+def test_round_trip_through_dict():
+    s = setup_from_dict(BASE)
+    again = setup_from_dict({k: v for k, v in setup_to_dict(s).items()})
+    assert again == s
+
+
+@pytest.mark.parametrize("section,key,value,message", [
+    ("lens", "f_number", 0.0, r"lens.f_number: must be > 0"),
+    ("lens", "f_number", -2.0, r"lens.f_number: must be > 0"),
+    ("lens", "focal_length", math.nan, r"lens.focal_length: must be finite"),
+    ("sweep", "depth_min", 20000.0, r"sweep.depth_min: must be <= sweep.depth_max"),
+    ("sweep", "fov_deg", 400.0, r"sweep.fov_deg: must be in \(0, 360\)"),
+    ("sweep", "velocity", 0.0, r"sweep.velocity: must be > 0"),
+    ("sweep", "profile", "sine", r"sweep.profile: must be one of linear"),
+    ("mirror", "radius", -5.0, r"mirror.radius: must be > 0"),
+    ("mirror", "tilt_deg", 95.0, r"mirror.tilt_deg: must be in \(-90, 90\)"),
+    ("mirror", "vertex_distance", -10.0, r"mirror.vertex_distance: must be > 0"),
+    ("mirror", "vertex_distance", 40.0, r"must be > lens.focal_length"),
+    ("mirror", "rim_radius", 30.0, r"mirror.rim_radius: must be <= 25"),
+    ("mirror", "radius", "big", r"mirror.radius: expected a number"),
+])
+def test_bad_values_name_key_and_range(section, key, value, message):
+    with pytest.raises(SetupError, match=message):
+        setup_from_dict(_with(section, **{key: value}))
+
+
+def test_unknown_key_is_rejected_with_the_allowed_ones():
+    with pytest.raises(SetupError, match=r"lens.focal_lenght: unknown key; allowed keys: "
+                                         r"f_number, focal_length"):
+        setup_from_dict(_with("lens", focal_lenght=50.0))
+
+
+def test_unknown_section_is_rejected():
+    data = dict(BASE, camera={"x": 1})
+    with pytest.raises(SetupError, match="setup.camera: unknown key"):
+        setup_from_dict(data)
+
+
+@pytest.mark.parametrize("section,key", [("mirror", "radius"), ("sweep", "fov_deg")])
+def test_missing_required_key(section, key):
+    data = {k: dict(v) for k, v in BASE.items()}
+    del data[section][key]
+    with pytest.raises(SetupError, match=rf"{section}.{key}: missing"):
+        setup_from_dict(data)
+
+
+def test_not_toml_and_missing_file(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[mirror\nradius = ")
+    with pytest.raises(SetupError, match="not a valid TOML file"):
+        load_setup(bad)
+    with pytest.raises(SetupError, match="no such setup file"):
+        load_setup(tmp_path / "nope.toml")
+
+
+def test_focus_override_needs_both_ends():
+    with pytest.raises(SetupError, match="give both focus_min and focus_max"):
+        setup_from_dict(_with("sweep", focus_min=340.0))
+    with pytest.raises(SetupError, match="sweep.focus_min: must be > lens.focal_length"):
+        setup_from_dict(_with("sweep", focus_min=40.0, focus_max=360.0))
+
+
+def test_setup_is_frozen():
+    s = setup_from_dict(BASE)
+    with pytest.raises(Exception):
+        s.lens.f_number = 4.0  # type: ignore[misc]
