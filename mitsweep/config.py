@@ -50,6 +50,7 @@ __all__ = [
 
 MIRROR_KINDS = ("conic", "sphere", "paraboloid", "asphere")
 MOTION_PROFILES = ("linear", "trapezoidal", "tabulated")
+SCENE_LIGHTING = ("emissive", "lit")
 
 
 class SetupError(ValueError):
@@ -248,12 +249,19 @@ class Scene:
     ``room_size = [x, y, z]`` mm: an axis-aligned room around the mirror whose walls,
     floor and ceiling lie between ~10 cm and 3 m from it; ``objects`` adds textured
     boards at those depths; ``texture_seed`` picks the texture layout.
+    ``lighting``: ``"emissive"`` (textured self-luminous surfaces, one bounce off the
+    mirror suffices, noise only from the lens) or ``"lit"`` (diffuse textured surfaces
+    under a ceiling light, two bounces). ``mesh_sag_tol`` (mm) and
+    ``mesh_normal_tol`` (rad) bound the mirror tessellation where a mesh is needed.
     """
 
     room_size: tuple[float, float, float] = (4000.0, 4000.0, 2500.0)
     objects: int = 6
     texture_seed: int = 0
     max_depth: int = 0  # integrator depth; 0 = chosen from the scene
+    lighting: str = "emissive"
+    mesh_sag_tol: float = 1e-4
+    mesh_normal_tol: float = 1e-4
 
     def __post_init__(self) -> None:
         rs = self.room_size
@@ -267,6 +275,10 @@ class Scene:
                  f"must be an integer, got {self.texture_seed!r}")
         _require(isinstance(self.max_depth, int) and 0 <= self.max_depth <= 64,
                  "scene.max_depth", f"must be an integer in [0, 64], got {self.max_depth!r}")
+        _require(self.lighting in SCENE_LIGHTING, "scene.lighting",
+                 f"must be one of {', '.join(SCENE_LIGHTING)}, got {self.lighting!r}")
+        for name in ("mesh_sag_tol", "mesh_normal_tol"):
+            object.__setattr__(self, name, _positive(getattr(self, name), f"scene.{name}"))
 
 
 @dataclass(frozen=True, kw_only=True)

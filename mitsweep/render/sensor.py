@@ -1,0 +1,352 @@
+"""The ``focalsweep`` sensor: a thin-lens camera whose sensor moves during the exposure.
+
+.. list-table:: Plugin parameters
+   :header-rows: 1
+
+   * - name
+     - type
+     - meaning
+   * - ``focal_length``
+     - float
+     - Thin-lens focal length f, mm (required, > 0).
+   * - ``aperture_radius`` / ``f_number``
+     - float
+     - Entrance-pupil radius a (mm, >= 0; 0 is a pinhole), or the f-number N with
+       ``a = f / (2 N)``. Give at most one; default: a pinhole.
+   * - ``pixel_pitch``
+     - float
+     - Physical pixel pitch on the sensor, mm (required, > 0). Pixels are fixed
+       physical positions, so the magnification "breathes" as the sensor moves.
+   * - ``sensor_distance``
+     - float
+     - A fixed lens-to-sensor distance i, mm (the sweep collapsed; a normal camera).
+   * - ``sensor_start``, ``sensor_end``
+     - float
+     - Sensor distance at shutter open and close, mm (instead of ``sensor_distance``).
+   * - ``profile``
+     - string
+     - Stage motion between them: ``linear`` (default), ``trapezoidal`` (with
+       ``accel_fraction``) or ``tabulated`` (with ``times`` and ``positions``, each a
+       whitespace/comma-separated string or a ``TensorXf``).
+   * - ``shutter_open``, ``shutter_close``
+     - float
+     - Exposure interval, s (Mitsuba's; the normalised time is
+       ``(time − open) / (close − open)``). A sweep needs ``close > open``.
+   * - ``near_clip``, ``far_clip``
+     - float
+     - Clip distances, mm (defaults 0.01 and 1e4 as in Mitsuba: set ``far_clip``).
+   * - ``to_world``
+     - transform
+     - Camera-to-world (``look_at``); local +z is the viewing direction, local +x
+       the image's left, local +y its up, as in Mitsuba's built-in cameras.
+
+Ray generation (camera-local frame, see :func:`_sensor_point`): a film sample gives
+upright sensor coordinates ``(u, v)`` in mm (pixel (0, 0) top-left, image centre on the
+axis). At time t the sensor sits at ``i(t)``; the thin lens ``1/f = 1/i + 1/o`` focuses
+it on the plane ``z = o(t)``, where the sensor point images to
+``q = (−u o/i, v o/i, o)``. A uniformly sampled aperture point ``p_a = (a ξ, 0)`` gives
+the ray ``p_a → q``. With ``i`` fixed this is exactly Mitsuba's ``thinlens`` with
+``x_fov = 2 atan(W p / 2 i)`` and ``focus_distance = o`` (and ``perspective`` for a = 0).
+As in ``thinlens``, the ray weight is 1 (no cos⁴ fall-off; the 1/i² irradiance change
+during the sweep, < 0.2 % for the paper's setups, is ignored).
+
+Importance for light tracing (:meth:`FocalSweepSensor.sample_direction`) samples the
+aperture uniformly; the contribution is ``W(ω) / dist²`` with the pinhole importance
+``W = 1 / (A cos³θ)``, ``A = W H p² / i(t)²`` the image area at unit distance, and the
+pixel found where the ray through the aperture point crosses the focal plane.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import re
+
+import numpy as np
+
+from ..backend import set_mitsuba_variant
+
+__all__ = ["register", "motion_table", "PLUGIN_NAME", "MOTION_TABLE_SIZE"]
+
+log = logging.getLogger(__name__)
+
+PLUGIN_NAME = "focalsweep"
+#: Trapezoidal and tabulated motions are resampled on this many uniform intervals of t
+#: and interpolated linearly in the kernel (error < 1e-7 mm for the paper's sweeps).
+MOTION_TABLE_SIZE = 4096
+
+_registered_for: set[str] = set()
+
+
+def _floats(value, name: str) -> np.ndarray:
+    """A 1-D float array from a TensorXf/array or a whitespace/comma separated string."""
+    if isinstance(value, str):
+        parts = [p for p in re.split(r"[\s,]+", value.strip()) if p]
+        try:
+            return np.array([float(p) for p in parts], dtype=float)
+        except ValueError:
+            raise ValueError(f"focalsweep: {name} must be a list of numbers, got {value!r}") \
+                from None
+    return np.asarray(value, dtype=float).ravel()
+
+
+def motion_table(motion, n: int = MOTION_TABLE_SIZE) -> np.ndarray:
+    """Sensor distances (mm) of a :class:`~mitsweep.optics.motion.MotionProfile` at
+    ``n + 1`` uniform normalised times ``k / n`` (the kernel interpolates linearly)."""
+    return np.asarray(motion.sensor_distance(np.linspace(0.0, 1.0, n + 1)), dtype=float)
+
+
+def _make_class():
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..optics.motion import MotionProfile
+
+    class FocalSweepSensor(mi.Sensor):
+        """A thin-lens sensor translating along its axis during the exposure."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            self.m_needs_sample_3 = True  # aperture sample (see DESIGN.md pitfalls)
+            f = props.get("focal_length", None)
+            if f is None or not (float(f) > 0):
+                raise ValueError(f"focalsweep: focal_length must be > 0 mm, got {f!r}")
+            self.focal_length = float(f)
+            pitch = props.get("pixel_pitch", None)
+            if pitch is None or not (float(pitch) > 0):
+                raise ValueError(f"focalsweep: pixel_pitch must be > 0 mm, got {pitch!r}")
+            self.pixel_pitch = float(pitch)
+            has_a, has_n = props.has_property("aperture_radius"), props.has_property("f_number")
+            if has_a and has_n:
+                raise ValueError("focalsweep: give aperture_radius or f_number, not both")
+            if has_n:
+                n = float(props.get("f_number"))
+                if not n > 0:
+                    raise ValueError(f"focalsweep: f_number must be > 0, got {n}")
+                self.aperture_radius = self.focal_length / (2.0 * n)
+            else:
+                self.aperture_radius = float(props.get("aperture_radius", 0.0))
+            if not (self.aperture_radius >= 0 and math.isfinite(self.aperture_radius)):
+                raise ValueError(f"focalsweep: aperture_radius must be >= 0 mm, "
+                                 f"got {self.aperture_radius}")
+            self.near_clip = float(props.get("near_clip", 0.01))
+            self.far_clip = float(props.get("far_clip", 1e4))
+            if not (0 < self.near_clip < self.far_clip):
+                raise ValueError(f"focalsweep: need 0 < near_clip < far_clip, got "
+                                 f"{self.near_clip}, {self.far_clip}")
+            self.motion = self._motion_from(props)
+            lo, hi = self.motion_span
+            if not lo > self.focal_length:
+                raise ValueError(
+                    f"focalsweep: the sensor distance reaches {lo:g} mm, at or inside the "
+                    f"focal length ({self.focal_length:g} mm); every sensor distance of the "
+                    f"sweep must be > focal_length")
+            if self.motion[0] != "fixed" and not self.shutter_open_time() > 0:
+                raise ValueError("focalsweep: a moving sensor needs shutter_close > "
+                                 "shutter_open (the exposure interval)")
+            film = self.film()
+            self.size = np.array(film.size(), dtype=float)
+            self.crop_offset = np.array(film.crop_offset(), dtype=float)
+            self.crop_size = np.array(film.crop_size(), dtype=float)
+            self._make_opaque()
+
+        # -- parameters --------------------------------------------------------------
+        def _motion_from(self, props):
+            has_fixed = props.has_property("sensor_distance")
+            has_range = props.has_property("sensor_start") or props.has_property("sensor_end")
+            if has_fixed == has_range:
+                raise ValueError("focalsweep: give either sensor_distance (fixed) or "
+                                 "sensor_start and sensor_end (a sweep)")
+            if has_fixed:
+                i = float(props.get("sensor_distance"))
+                return ("fixed", np.array([i]))
+            if not (props.has_property("sensor_start") and props.has_property("sensor_end")):
+                raise ValueError("focalsweep: a sweep needs both sensor_start and sensor_end")
+            s, e = float(props.get("sensor_start")), float(props.get("sensor_end"))
+            kind = props.get("profile", "linear")
+            if kind == "linear":
+                if s == e:
+                    return ("fixed", np.array([s]))
+                return ("linear", np.array([s, e]))
+            if kind == "trapezoidal":
+                mp = MotionProfile.trapezoidal(s, e, float(props.get("accel_fraction", 0.1)))
+            elif kind == "tabulated":
+                if not (props.has_property("times") and props.has_property("positions")):
+                    raise ValueError("focalsweep: profile 'tabulated' needs times and positions")
+                t = _floats(props.get("times"), "times")
+                p = _floats(props.get("positions"), "positions")
+                mp = MotionProfile.tabulated(t, p)
+                if not (np.isclose(mp.start, s) and np.isclose(mp.end, e)):
+                    raise ValueError(f"focalsweep: tabulated positions run {mp.start:g} -> "
+                                     f"{mp.end:g} mm but sensor_start/end are {s:g}, {e:g}")
+            else:
+                raise ValueError(f"focalsweep: profile must be linear, trapezoidal or "
+                                 f"tabulated, got {kind!r}")
+            return ("table", motion_table(mp))
+
+        @property
+        def motion_span(self) -> tuple[float, float]:
+            vals = self.motion[1]
+            return float(vals.min()), float(vals.max())
+
+        def _make_opaque(self):
+            kind, vals = self.motion
+            self.m_table = mi.Float(vals.astype(np.float32))
+            self.m_aperture = mi.Float(self.aperture_radius)
+            self.m_pitch = mi.Float(self.pixel_pitch)
+            self.m_f = mi.Float(self.focal_length)
+            dr.make_opaque(self.m_table, self.m_aperture, self.m_pitch, self.m_f)
+
+        # -- geometry -----------------------------------------------------------------
+        def _sensor_distance(self, time):
+            kind, vals = self.motion
+            if kind == "fixed":
+                return dr.gather(mi.Float, self.m_table, mi.UInt32(0))
+            t = dr.clip((time - self.shutter_open()) / self.shutter_open_time(), 0.0, 1.0)
+            if kind == "linear":
+                a = dr.gather(mi.Float, self.m_table, mi.UInt32(0))
+                b = dr.gather(mi.Float, self.m_table, mi.UInt32(1))
+                return dr.fma(b - a, t, a)
+            n = len(vals) - 1
+            x = t * n
+            k = mi.UInt32(dr.clip(dr.floor(x), 0, n - 1))
+            w = x - mi.Float(k)
+            a = dr.gather(mi.Float, self.m_table, k)
+            b = dr.gather(mi.Float, self.m_table, k + 1)
+            return dr.fma(b - a, w, a)
+
+        def _sensor_point(self, sample2):
+            """Upright sensor coordinates (u, v), mm, of a film sample (crop-relative)."""
+            px = (self.crop_offset[0] + sample2.x * self.crop_size[0]) / self.size[0]
+            py = (self.crop_offset[1] + sample2.y * self.crop_size[1]) / self.size[1]
+            u = (px - 0.5) * (self.size[0] * self.m_pitch)
+            v = (0.5 - py) * (self.size[1] * self.m_pitch)
+            return u, v
+
+        def _rays(self, time, sample1, sample2, sample3, active, differentials):
+            wavelengths, wav_weight = self.sample_wavelengths(
+                dr.zeros(mi.SurfaceInteraction3f), sample1, active)
+            i = self._sensor_distance(time)
+            o = self.m_f * i / (i - self.m_f)      # thin lens, paper Eq. 1
+            scale = o / i
+            u, v = self._sensor_point(sample2)
+            focus_p = mi.Vector3f(-u * scale, v * scale, o)
+            disk = mi.warp.square_to_uniform_disk_concentric(sample3) * self.m_aperture
+            aperture_p = mi.Vector3f(disk.x, disk.y, 0.0)
+            d = dr.normalize(focus_p - aperture_p)
+            to_world = self.world_transform()
+            ray = mi.RayDifferential3f() if differentials else mi.Ray3f()
+            ray.time = time
+            ray.wavelengths = wavelengths
+            ray.o = to_world @ mi.Point3f(aperture_p)
+            ray.d = to_world @ d
+            inv_z = dr.rcp(d.z)
+            near_t = self.near_clip * inv_z
+            far_t = self.far_clip * inv_z
+            ray.o = ray.o + ray.d * near_t
+            ray.maxt = far_t - near_t
+            if differentials:
+                step = self.m_pitch * scale
+                ray.o_x = ray.o
+                ray.o_y = ray.o
+                ray.d_x = to_world @ dr.normalize(focus_p + mi.Vector3f(-step, 0, 0) - aperture_p)
+                ray.d_y = to_world @ dr.normalize(focus_p + mi.Vector3f(0, -step, 0) - aperture_p)
+                ray.has_differentials = True
+            return ray, wav_weight
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return self._rays(time, sample1, sample2, sample3, active, False)
+
+        def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
+            return self._rays(time, sample1, sample2, sample3, active, True)
+
+        def sample_direction(self, it, sample, active=True):
+            """Connect a scene point to a sampled aperture point (for light tracing)."""
+            to_world = self.world_transform()
+            ref = to_world.inverse() @ it.p
+            i = self._sensor_distance(it.time)
+            o = self.m_f * i / (i - self.m_f)
+            disk = mi.warp.square_to_uniform_disk_concentric(sample) * self.m_aperture
+            aperture_p = mi.Point3f(disk.x, disk.y, 0.0)
+            local_d = mi.Vector3f(ref - aperture_p)
+            dist = dr.norm(local_d)
+            inv_dist = dr.rcp(dist)
+            local_d *= inv_dist
+            ct = local_d.z
+            inv_ct = dr.rcp(ct)
+            q = aperture_p + local_d * (o * inv_ct)     # crossing of the focal plane
+            u = -q.x * i / o
+            v = q.y * i / o
+            px = u / (self.size[0] * self.m_pitch) + 0.5
+            py = 0.5 - v / (self.size[1] * self.m_pitch)
+            cx = (px * self.size[0] - self.crop_offset[0]) / self.crop_size[0]
+            cy = (py * self.size[1] - self.crop_offset[1]) / self.crop_size[1]
+            valid = (active & (ref.z >= self.near_clip) & (ref.z <= self.far_clip)
+                     & (ct > 0) & (cx >= 0) & (cx <= 1) & (cy >= 0) & (cy <= 1))
+            area = self.size[0] * self.size[1] * self.m_pitch * self.m_pitch / (i * i)
+            value = dr.select(valid, inv_ct * inv_ct * inv_ct / area, 0.0)
+            ds = dr.zeros(mi.DirectionSample3f)
+            ds.uv = mi.Point2f(cx * self.crop_size[0], cy * self.crop_size[1])
+            ds.p = to_world @ aperture_p
+            ds.d = mi.Vector3f(ds.p - it.p) * inv_dist
+            ds.dist = dist
+            ds.n = to_world @ mi.Vector3f(0, 0, 1)
+            ds.time = it.time
+            lens_area = math.pi * self.aperture_radius ** 2
+            pdf = (dist * dist * inv_ct / lens_area) if lens_area > 0 else mi.Float(1.0)
+            ds.pdf = dr.select(valid, pdf, 0.0)
+            ds.delta = lens_area == 0
+            return ds, mi.Color3f(value * inv_dist * inv_dist)
+
+        def bbox(self):
+            p = self.world_transform() @ mi.ScalarPoint3f(0.0)
+            return mi.ScalarBoundingBox3f(p, p)
+
+        def traverse(self, callback):
+            callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)
+            callback.put("aperture_radius", self.m_aperture, mi.ParamFlags.NonDifferentiable)
+            callback.put("pixel_pitch", self.m_pitch, mi.ParamFlags.NonDifferentiable)
+            callback.put("focal_length", self.m_f, mi.ParamFlags.NonDifferentiable)
+            callback.put("sensor_distances", self.m_table, mi.ParamFlags.NonDifferentiable)
+
+        def parameters_changed(self, keys):
+            super().parameters_changed(keys)
+            # Keep the Python-side copies (used for validation and repr) in step.
+            self.aperture_radius = float(dr.slice(self.m_aperture, 0))
+            self.pixel_pitch = float(dr.slice(self.m_pitch, 0))
+            self.focal_length = float(dr.slice(self.m_f, 0))
+            vals = self.m_table.numpy().astype(float)
+            if vals.size != self.motion[1].size:
+                raise ValueError("focalsweep: sensor_distances cannot change length")
+            self.motion = (self.motion[0], vals)
+            if not self.motion_span[0] > self.focal_length:
+                raise ValueError("focalsweep: a sensor distance is at or inside the focal "
+                                 "length")
+            dr.make_opaque(self.m_table, self.m_aperture, self.m_pitch, self.m_f)
+
+        def to_string(self):
+            lo, hi = self.motion_span
+            return (f"FocalSweepSensor[focal_length={self.focal_length}, "
+                    f"aperture_radius={self.aperture_radius}, pixel_pitch={self.pixel_pitch}, "
+                    f"motion={self.motion[0]}, sensor_distance={lo}..{hi}, "
+                    f"film={self.film()}]")
+
+    return FocalSweepSensor
+
+
+def register() -> str:
+    """Register the ``focalsweep`` sensor for the current Mitsuba variant.
+
+    When no variant is set yet, selects one through
+    :func:`mitsweep.backend.set_mitsuba_variant`; call again after changing the variant
+    (Mitsuba keeps plugins per variant). Returns the variant.
+    """
+    import mitsuba as mi
+
+    variant = mi.variant() or set_mitsuba_variant()
+    if variant not in _registered_for:
+        cls = _make_class()
+        mi.register_sensor(PLUGIN_NAME, lambda props: cls(props))
+        _registered_for.add(variant)
+        log.debug("registered %s for %s", PLUGIN_NAME, variant)
+    return variant

@@ -1,0 +1,86 @@
+"""Offline textures with high-frequency content (no download).
+
+Procedural resolution targets (Siemens star, bar chart, checkerboard) and the images
+bundled with scikit-image. Everything is returned as linear-light float32 RGB arrays
+(H, W, 3) in [0, 1], ready for a Mitsuba ``bitmap`` texture.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+__all__ = ["siemens_star", "bar_chart", "checkerboard", "skimage_texture", "texture",
+           "TEXTURE_NAMES", "srgb_to_linear"]
+
+#: Images shipped with scikit-image (no network) used as textures.
+_SKIMAGE = ("astronaut", "camera", "coffee", "chelsea", "brick", "grass", "gravel", "text",
+            "rocket", "retina")
+TEXTURE_NAMES = ("siemens", "bars", "checker") + _SKIMAGE
+
+
+def srgb_to_linear(x: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function inverted (IEC 61966-2-1), elementwise on [0, 1]."""
+    x = np.asarray(x, dtype=np.float32)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def _rgb(gray: np.ndarray) -> np.ndarray:
+    return np.repeat(gray[..., None], 3, axis=-1).astype(np.float32)
+
+
+def siemens_star(size: int = 512, spokes: int = 36) -> np.ndarray:
+    """A Siemens star of ``spokes`` black/white pairs, (size, size, 3) in {0.05, 0.95}."""
+    y, x = np.mgrid[0:size, 0:size] + 0.5 - size / 2
+    ang = np.arctan2(y, x)
+    star = (np.sin(spokes * ang) > 0).astype(np.float32)
+    r = np.hypot(x, y) / (size / 2)
+    star = np.where(r > 1.0, 0.5, star)
+    return _rgb(0.05 + 0.9 * star)
+
+
+def bar_chart(size: int = 512) -> np.ndarray:
+    """Groups of bars whose period halves from row to row (a 1951-USAF-like chart)."""
+    img = np.full((size, size), 0.95, dtype=np.float32)
+    rows = 6
+    h = size // rows
+    x = np.arange(size)
+    for k in range(rows):
+        period = max(2, size // (4 * 2 ** k))
+        bars = ((x // (period // 2 or 1)) % 2 == 0)
+        img[k * h + h // 8: (k + 1) * h - h // 8, :] = np.where(bars, 0.05, 0.95)
+    return _rgb(img)
+
+
+def checkerboard(size: int = 512, squares: int = 16) -> np.ndarray:
+    y, x = np.mgrid[0:size, 0:size]
+    c = ((x * squares // size + y * squares // size) % 2).astype(np.float32)
+    return _rgb(0.1 + 0.8 * c)
+
+
+@functools.lru_cache(maxsize=None)
+def skimage_texture(name: str) -> np.ndarray:
+    """A scikit-image bundled image as linear RGB float32 (H, W, 3)."""
+    from skimage import data
+
+    if name not in _SKIMAGE:
+        raise ValueError(f"texture: unknown scikit-image image {name!r}; "
+                         f"known: {', '.join(_SKIMAGE)}")
+    img = np.asarray(getattr(data, name)())
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=-1)
+    img = img[..., :3]
+    scale = 255.0 if img.dtype == np.uint8 else float(max(img.max(), 1e-12))
+    return srgb_to_linear(img.astype(np.float32) / scale)
+
+
+def texture(name: str) -> np.ndarray:
+    """Any texture of :data:`TEXTURE_NAMES` as linear RGB float32 (H, W, 3)."""
+    if name == "siemens":
+        return siemens_star()
+    if name == "bars":
+        return bar_chart()
+    if name == "checker":
+        return checkerboard()
+    return skimage_texture(name)
