@@ -72,8 +72,10 @@ log = logging.getLogger(__name__)
 
 PLUGIN_NAME = "focalsweep"
 #: Trapezoidal and tabulated motions are resampled on this many uniform intervals of t
-#: and interpolated linearly in the kernel (error < 1e-7 mm for the paper's sweeps).
-MOTION_TABLE_SIZE = 4096
+#: and interpolated linearly in the kernel. Error: at most ``|Δv| h / 4`` at a kink of a
+#: tabulated profile (Δv the change of di/dt, mm per unit t; h = 1/65536), 4e-6 mm for
+#: Δv = 1 mm, about the float32 spacing at 58 mm; ``v h² / (8 a)`` on trapezoidal ramps.
+MOTION_TABLE_SIZE = 65536
 
 _registered_for: set[str] = set()
 
@@ -116,7 +118,7 @@ def _make_class():
             if pitch is None or not (float(pitch) > 0):
                 raise ValueError(f"focalsweep: pixel_pitch must be > 0 mm, got {pitch!r}")
             self.pixel_pitch = float(pitch)
-            has_a, has_n = props.has_property("aperture_radius"), props.has_property("f_number")
+            has_a, has_n = ("aperture_radius" in props), ("f_number" in props)
             if has_a and has_n:
                 raise ValueError("focalsweep: give aperture_radius or f_number, not both")
             if has_n:
@@ -152,15 +154,15 @@ def _make_class():
 
         # -- parameters --------------------------------------------------------------
         def _motion_from(self, props):
-            has_fixed = props.has_property("sensor_distance")
-            has_range = props.has_property("sensor_start") or props.has_property("sensor_end")
+            has_fixed = ("sensor_distance" in props)
+            has_range = ("sensor_start" in props) or ("sensor_end" in props)
             if has_fixed == has_range:
                 raise ValueError("focalsweep: give either sensor_distance (fixed) or "
                                  "sensor_start and sensor_end (a sweep)")
             if has_fixed:
                 i = float(props.get("sensor_distance"))
                 return ("fixed", np.array([i]))
-            if not (props.has_property("sensor_start") and props.has_property("sensor_end")):
+            if not (("sensor_start" in props) and ("sensor_end" in props)):
                 raise ValueError("focalsweep: a sweep needs both sensor_start and sensor_end")
             s, e = float(props.get("sensor_start")), float(props.get("sensor_end"))
             kind = props.get("profile", "linear")
@@ -171,7 +173,7 @@ def _make_class():
             if kind == "trapezoidal":
                 mp = MotionProfile.trapezoidal(s, e, float(props.get("accel_fraction", 0.1)))
             elif kind == "tabulated":
-                if not (props.has_property("times") and props.has_property("positions")):
+                if not (("times" in props) and ("positions" in props)):
                     raise ValueError("focalsweep: profile 'tabulated' needs times and positions")
                 t = _floats(props.get("times"), "times")
                 p = _floats(props.get("positions"), "positions")

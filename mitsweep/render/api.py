@@ -1,0 +1,391 @@
+"""Rendering API: the four camera modes on one reference pixel grid, AOVs, EXR output.
+
+Reference geometry (DESIGN.md): the reference sensor distance is mid-travel of the
+setup's sweep, ``i_ref = optimal_sweep_range(setup).reference_sensor_distance``; every
+mode's pixel (col, row) has the chief ray of the pinhole camera at ``i_ref`` with the
+setup's pixel pitch, so all images line up pixel for pixel with the ground truth.
+
+Modes
+-----
+``pinhole``
+    All-in-focus ground truth: aperture 0, sensor at ``i_ref``.
+``focused``
+    A normal camera focused at the mirror centre: focus distance ``D_0`` = axial
+    distance of the focal image of the mirror's vertex (ρ = 0) for a depth of 500 mm,
+    the paper's IPSF reference depth (mean of D_m and D_s, equal on an untilted
+    mirror's axis); sensor at ``i_f = f D_0 / (D_0 − f)``, aperture ``f / (2 N)`` with
+    the setup's f-number. Expressed on the reference grid by scaling the pitch to
+    ``p i_f / i_ref``: a pixel's chief ray direction ``(u, v, i)/|…|`` is then the
+    pinhole's. This equals resampling the real camera's image by the magnification
+    ratio ``i_ref / i_f`` (≈ 1 ± 0.5 %).
+``stopped``
+    As ``focused`` at a smaller aperture (``f_number``, default 11, paper Fig. 10).
+``sweep``
+    The sensor moves over ``[sensor_start, sensor_end]`` with the setup's motion profile
+    during the exposure, pixels at fixed physical positions (pitch unchanged): the image
+    breathes by ``i(t)/i_ref`` exactly as in the rig, and the IPSF bank accounts for it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..optics import (focal_image_axial_distances, image_distance, image_point,
+                      mirror_point_from_image, optimal_sweep_range, placement_of)
+from ..optics.motion import MotionProfile, motion_for
+
+__all__ = ["MODES", "RenderResult", "render_image", "render_to_exr", "render_point_source",
+           "camera_dict", "reference_sensor_distance", "focus_distance_mirror_centre",
+           "mirror_image_bbox", "AOV_NAMES", "FOCUS_REFERENCE_DEPTH_MM"]
+
+log = logging.getLogger(__name__)
+
+MODES = ("pinhole", "focused", "sweep", "stopped")
+AOV_NAMES = ("depth", "mask")
+#: Depth (mm) whose focal image at the mirror centre the ``focused`` camera focuses on.
+FOCUS_REFERENCE_DEPTH_MM = 500.0
+DEFAULT_STOPPED_F_NUMBER = 11.0
+#: Largest wavefront (pixels × samples per pass): bounds memory on the LLVM backend.
+_MAX_LANES = 1 << 24
+
+
+@dataclass
+class RenderResult:
+    """A rendered image on the reference grid.
+
+    Attributes
+    ----------
+    image : (H, W, 3) ndarray of float32
+        Linear RGB radiance.
+    aovs : dict of str to (H, W) ndarray of float32
+        ``depth``: depth l (mm) along the world-bound reflected chief ray of the pixel
+        centre (0 where the pixel does not see the mirror or the ray escapes);
+        ``mask``: 1 where the pixel centre's chief ray hits the mirror.
+    metadata : dict
+        Provenance: setup, mode, spp, seed, sweep, camera, version, timings.
+    """
+
+    image: np.ndarray
+    aovs: dict = field(default_factory=dict)
+    metadata: dict = field(default_factory=dict)
+
+
+def _sweep_of(setup, sweep):
+    """(SweepRange, MotionProfile) for the ``sweep`` argument (None, SweepRange or motion)."""
+    if isinstance(sweep, MotionProfile):
+        return optimal_sweep_range(setup), sweep
+    sr = optimal_sweep_range(setup) if sweep is None else sweep
+    return sr, motion_for(setup, sr)
+
+
+def reference_sensor_distance(setup, sweep=None) -> float:
+    """Mid-travel sensor distance (mm) of the setup's sweep: the reference grid's."""
+    sr, motion = _sweep_of(setup, sweep)
+    return motion.midpoint if isinstance(sweep, MotionProfile) else sr.reference_sensor_distance
+
+
+def focus_distance_mirror_centre(setup, depth: float = FOCUS_REFERENCE_DEPTH_MM) -> float:
+    """Object distance (mm) of the focal image of the mirror vertex for ``depth`` mm."""
+    d_m, d_s = focal_image_axial_distances(setup, np.array(0.0), depth)
+    return float(0.5 * (np.asarray(d_m) + np.asarray(d_s)))
+
+
+def camera_dict(setup, *, sensor_distance: float | None = None, motion: MotionProfile | None = None,
+                aperture_radius: float = 0.0, pixel_pitch: float | None = None,
+                spp: int = 16, crop: tuple[int, int, int, int] | None = None,
+                exposure_s: float = 1.0) -> dict:
+    """A ``focalsweep`` sensor dict at the lens centre, looking at the mirror.
+
+    Give ``sensor_distance`` (fixed) or ``motion`` (a sweep over ``exposure_s``).
+    ``crop = (x, y, w, h)`` renders a window of the film (pixels).
+    """
+    from .scene import FAR_CLIP, camera_transform
+
+    W, H = setup.sensor.resolution
+    film = {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"},
+            "pixel_format": "rgb", "sample_border": False}
+    if crop is not None:
+        x, y, w, h = (int(c) for c in crop)
+        film.update(crop_offset_x=x, crop_offset_y=y, crop_width=w, crop_height=h)
+    d = {"type": "focalsweep", "focal_length": setup.lens.focal_length,
+         "aperture_radius": float(aperture_radius),
+         "pixel_pitch": float(pixel_pitch or setup.sensor.pixel_pitch),
+         "to_world": camera_transform(setup), "far_clip": FAR_CLIP,
+         "film": film, "sampler": {"type": "independent", "sample_count": int(spp)}}
+    if (sensor_distance is None) == (motion is None):
+        raise ValueError("camera_dict: give sensor_distance or motion")
+    if motion is None:
+        d["sensor_distance"] = float(sensor_distance)
+    else:
+        d.update(sensor_start=motion.start, sensor_end=motion.end, profile=motion.kind,
+                 shutter_open=0.0, shutter_close=float(exposure_s))
+        if motion.kind == "trapezoidal":
+            d["accel_fraction"] = motion.accel_fraction
+        elif motion.kind == "tabulated":
+            d["times"] = " ".join(f"{t:.17g}" for t in motion.times)
+            d["positions"] = " ".join(f"{p:.17g}" for p in motion.positions)
+    return d
+
+
+def _mode_camera(setup, mode, sweep, f_number):
+    """(camera kwargs, description) of a mode on the reference grid."""
+    if mode not in MODES:
+        raise ValueError(f"mode: must be one of {', '.join(MODES)}, got {mode!r}")
+    sr, motion = _sweep_of(setup, sweep)
+    i_ref = reference_sensor_distance(setup, sweep)
+    f = setup.lens.focal_length
+    pitch = setup.sensor.pixel_pitch
+    desc = {"reference_sensor_distance_mm": i_ref, "sweep": sr.as_dict(),
+            "motion": motion.as_dict()}
+    if mode == "pinhole":
+        return dict(sensor_distance=i_ref, aperture_radius=0.0, pixel_pitch=pitch), desc
+    if mode == "sweep":
+        desc["aperture_radius_mm"] = setup.lens.aperture_radius
+        return dict(motion=motion, aperture_radius=setup.lens.aperture_radius,
+                    pixel_pitch=pitch, exposure_s=max(sr.exposure_s, 1e-6)), desc
+    n = setup.lens.f_number if mode == "focused" else (f_number or DEFAULT_STOPPED_F_NUMBER)
+    if not n > 0:
+        raise ValueError(f"f_number: must be > 0, got {n}")
+    focus = focus_distance_mirror_centre(setup)
+    i_f = image_distance(f, focus)
+    desc.update(focus_distance_mm=focus, focus_reference_depth_mm=FOCUS_REFERENCE_DEPTH_MM,
+                sensor_distance_mm=i_f, f_number=n, aperture_radius_mm=f / (2 * n),
+                pitch_scale=i_f / i_ref)
+    return dict(sensor_distance=i_f, aperture_radius=f / (2 * n),
+                pixel_pitch=pitch * i_f / i_ref), desc
+
+
+def mirror_image_bbox(setup, sensor_distance: float, margin_px: int = 8):
+    """Pixel window (x, y, w, h) holding the mirror's image (rim and centre + margin)."""
+    placement = placement_of(setup.mirror)
+    phi = np.linspace(0.0, 2 * math.pi, 721)
+    rims = []
+    for frac in (1.0, 0.75, 0.5, 0.25, 0.0):
+        r = setup.mirror.rim_radius * frac
+        surf = placement.surface(r * np.cos(phi), r * np.sin(phi))
+        from ..optics import chief_ray
+
+        u, v = image_point(chief_ray(placement, surf), sensor_distance)
+        rims.append((u, v))
+    u = np.concatenate([a for a, _ in rims])
+    v = np.concatenate([b for _, b in rims])
+    W, H = setup.sensor.resolution
+    p = setup.sensor.pixel_pitch
+    cols = W / 2 + u / p - 0.5
+    rows = H / 2 - v / p - 0.5
+    x0 = int(max(0, math.floor(cols.min()) - margin_px))
+    x1 = int(min(W, math.ceil(cols.max()) + margin_px + 1))
+    y0 = int(max(0, math.floor(rows.min()) - margin_px))
+    y1 = int(min(H, math.ceil(rows.max()) + margin_px + 1))
+    if x1 <= x0 or y1 <= y0:
+        return (0, 0, W, H)
+    return (x0, y0, x1 - x0, y1 - y0)
+
+
+def _pass_seeds(seed: int, n: int) -> list[int]:
+    return [int((seed * 1_000_003 + k) % (1 << 32)) for k in range(n)]
+
+
+def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render"):
+    """Render ``spp`` samples in passes (memory bound, progress); mean image (h, w, C)."""
+    import mitsuba as mi
+
+    film = scene_dict["sensor"]["film"]
+    w = film.get("crop_width", film["width"])
+    h = film.get("crop_height", film["height"])
+    per_pass = max(1, min(spp, _MAX_LANES // max(1, w * h)))
+    n_pass = math.ceil(spp / per_pass)
+    counts = [per_pass] * (n_pass - 1) + [spp - per_pass * (n_pass - 1)]
+    scene_dict["sensor"]["sampler"]["sample_count"] = per_pass
+    scene = mi.load_dict(scene_dict)
+    acc = None
+    bar = None
+    if progress and n_pass > 1:
+        from tqdm import tqdm
+
+        bar = tqdm(total=spp, desc=desc, unit="spp", leave=False)
+    for k, (s, c) in enumerate(zip(_pass_seeds(seed, n_pass), counts)):
+        img = np.array(mi.render(scene, seed=s, spp=c), dtype=np.float64)
+        acc = img * c if acc is None else acc + img * c
+        if bar is not None:
+            bar.update(c)
+    if bar is not None:
+        bar.close()
+    return (acc / spp).astype(np.float32), scene
+
+
+def _aovs(scene, setup, i_ref: float, wanted) -> dict:
+    """Depth l and mirror mask on the reference grid, one chief ray per pixel centre."""
+    import drjit as dr
+    import mitsuba as mi
+
+    W, H = setup.sensor.resolution
+    p = setup.sensor.pixel_pitch
+    cols, rows = np.meshgrid(np.arange(W), np.arange(H))
+    u = (cols + 0.5 - W / 2) * p
+    v = (H / 2 - rows - 0.5) * p
+    vd = setup.mirror.vertex_distance
+    d = np.stack([u, v, -np.full_like(u, i_ref)], axis=-1).reshape(-1, 3)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    ray = mi.Ray3f(mi.Point3f(0.0, 0.0, vd), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
+    si = scene.ray_intersect(ray)
+    bsdf = si.bsdf(ray)
+    on_mirror = si.is_valid() & mi.has_flag(bsdf.flags(), mi.BSDFFlags.DeltaReflection)
+    out = {}
+    if "mask" in wanted:
+        out["mask"] = np.array(mi.Float(on_mirror), dtype=np.float32).reshape(H, W)
+    if "depth" in wanted:
+        n = si.sh_frame.n
+        w = ray.d - 2.0 * dr.dot(ray.d, n) * n
+        si2 = scene.ray_intersect(si.spawn_ray(w), on_mirror)
+        l = dr.select(on_mirror & si2.is_valid(), si2.t, 0.0)
+        out["depth"] = np.array(l, dtype=np.float32).reshape(H, W)
+    return out
+
+
+def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=None,
+                 f_number: float | None = None, mirror_only: bool = True,
+                 progress: bool = False, max_depth: int | None = None) -> RenderResult:
+    """Render the setup's scene through the mirror in one of :data:`MODES`.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+    mode : {"pinhole", "focused", "sweep", "stopped"}
+        See the module docstring (all on the reference grid).
+    spp : int
+        Samples per pixel (> 0); rendered in passes of at most 2^24 samples.
+    seed : int
+        Base seed; pass k uses ``(seed · 1000003 + k) mod 2^32``.
+    aovs : iterable of {"depth", "mask"}
+        Extra layers, computed only when asked.
+    sweep : SweepRange or MotionProfile, optional
+        Default: the setup's optimal range and motion profile.
+    f_number : float, optional
+        The ``stopped`` mode's f-number (default 11).
+    mirror_only : bool
+        Render only the window holding the mirror's image (the rest is 0).
+    progress : bool
+        A tqdm bar on stderr over the passes.
+    max_depth : int, optional
+        Override the integrator depth chosen from the scene.
+
+    Returns
+    -------
+    RenderResult
+    """
+    from .. import __version__
+    from ..config import setup_to_dict
+    from .scene import build_scene
+    from .sensor import register
+
+    if not (isinstance(spp, (int, np.integer)) and spp > 0):
+        raise ValueError(f"spp: must be a positive integer, got {spp!r}")
+    unknown = sorted(set(aovs) - set(AOV_NAMES))
+    if unknown:
+        raise ValueError(f"aovs: unknown {unknown[0]!r}; allowed: {', '.join(AOV_NAMES)}")
+    variant = register()
+    kwargs, desc = _mode_camera(setup, mode, sweep, f_number)
+    i_ref = desc["reference_sensor_distance_mm"]
+    W, H = setup.sensor.resolution
+    crop = mirror_image_bbox(setup, i_ref, margin_px=8) if mirror_only else (0, 0, W, H)
+    cam = camera_dict(setup, spp=spp, crop=crop, **kwargs)
+    scene_dict, info = build_scene(setup, cam, max_depth=max_depth)
+    t0 = _time.perf_counter()
+    img, scene = _render_passes(scene_dict, spp, seed, progress=progress, desc=f"{mode}")
+    t_render = _time.perf_counter() - t0
+    full = np.zeros((H, W, 3), dtype=np.float32)
+    x, y, w, h = crop
+    full[y:y + h, x:x + w] = img[..., :3]
+    t1 = _time.perf_counter()
+    layers = _aovs(scene, setup, i_ref, set(aovs)) if aovs else {}
+    t_aov = _time.perf_counter() - t1
+    meta = {"setup": setup_to_dict(setup), "mode": mode, "spp": int(spp), "seed": int(seed),
+            "version": __version__, "variant": variant, "crop": list(crop),
+            "render_s": t_render, "aov_s": t_aov, **desc, **{"scene": info}}
+    return RenderResult(full, layers, meta)
+
+
+def render_to_exr(path, result: RenderResult) -> Path:
+    """Write a :class:`RenderResult` as EXR (atomic): RGB plus ``depth.Z`` and ``mask.Y``."""
+    from ..io import write_exr
+
+    channels = {}
+    if "depth" in result.aovs:
+        channels["depth.Z"] = result.aovs["depth"]
+    if "mask" in result.aovs:
+        channels["mask.Y"] = result.aovs["mask"]
+    return write_exr(path, result.image, channels=channels, metadata=result.metadata)
+
+
+def _world_per_pixel(setup, u, v, depth, i_ref) -> float:
+    """World distance (mm) at ``depth`` between chief rays one pixel apart (smaller axis)."""
+    placement = placement_of(setup.mirror)
+    p = setup.sensor.pixel_pitch
+    pts = []
+    for du, dv in ((0, 0), (p, 0), (0, p)):
+        ray = mirror_point_from_image(placement, u + du, v + dv, i_ref)
+        pts.append(ray.surface.position + depth * ray.world_dir)
+    return float(min(np.linalg.norm(pts[1] - pts[0]), np.linalg.norm(pts[2] - pts[0])))
+
+
+def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, seed: int = 0,
+                        mode: str = "sweep", window: int = 64, sweep=None,
+                        sensor_distance: float | None = None,
+                        f_number: float | None = None) -> np.ndarray:
+    """Image (H, W) of a tiny emitter seen through the mirror, normalised to unit sum.
+
+    The emitter is a sphere at depth ``depth`` (mm) along the world-bound chief ray of
+    the upright image point ``(u, v)`` (mm) at the reference distance; its radius is a
+    tenth of the world size of a pixel there, so its own image is sub-pixel. Only a
+    ``window`` × ``window`` pixel crop around the point's reference pixel is rendered.
+
+    ``sensor_distance`` (with mode ``"fixed"``) renders a fixed sensor at that distance
+    with the setup's pitch and aperture (the N-plane reference).
+    """
+    from .scene import build_scene
+    from .sensor import register
+
+    register()
+    i_ref = reference_sensor_distance(setup, sweep)
+    placement = placement_of(setup.mirror)
+    ray = mirror_point_from_image(placement, u, v, i_ref)
+    if not np.all(np.isfinite(ray.surface.position)):
+        raise ValueError(f"image point ({u:g}, {v:g}) mm: its chief ray misses the mirror")
+    centre = ray.surface.position + depth * ray.world_dir
+    radius = 0.1 * _world_per_pixel(setup, u, v, depth, i_ref)
+    if mode == "fixed":
+        if sensor_distance is None:
+            raise ValueError("mode 'fixed' needs sensor_distance")
+        kwargs = dict(sensor_distance=sensor_distance,
+                      aperture_radius=setup.lens.aperture_radius,
+                      pixel_pitch=setup.sensor.pixel_pitch)
+    else:
+        kwargs, _ = _mode_camera(setup, mode, sweep, f_number)
+    W, H = setup.sensor.resolution
+    col = W / 2 + u / setup.sensor.pixel_pitch - 0.5
+    row = H / 2 - v / setup.sensor.pixel_pitch - 0.5
+    x0 = int(np.clip(round(col) - window // 2, 0, max(0, W - window)))
+    y0 = int(np.clip(round(row) - window // 2, 0, max(0, H - window)))
+    crop = (x0, y0, min(window, W), min(window, H))
+    cam = camera_dict(setup, spp=spp, crop=crop, **kwargs)
+    source = {"type": "sphere", "center": centre.tolist(), "radius": radius,
+              "bsdf": {"type": "diffuse", "reflectance": 0.0},
+              "emitter": {"type": "area", "radiance": 1.0}}
+    scene_dict, _ = build_scene(setup, cam, surroundings=False, extra={"source": source},
+                                max_depth=2)
+    img, _ = _render_passes(scene_dict, spp, seed, progress=False)
+    out = np.zeros((H, W), dtype=np.float64)
+    x, y, w, h = crop
+    out[y:y + h, x:x + w] = img[..., :3].mean(axis=-1)
+    s = out.sum()
+    if not s > 0:
+        raise ValueError(f"point source at depth {depth:g} mm: no sample reached it "
+                         f"(raise spp or window)")
+    return out / s

@@ -1,0 +1,189 @@
+"""The ``focalsweep`` sensor against Mitsuba's built-in ``thinlens`` and ``perspective``.
+
+Scene: one emissive textured board (a Siemens star) facing the camera, so the only
+randomness is pixel and aperture sampling; 48×48 pixels keeps each render well under a
+second on the LLVM backend.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+mi = pytest.importorskip("mitsuba")
+
+from mitsweep.optics.motion import MotionProfile  # noqa: E402
+from mitsweep.render.sensor import motion_table, register  # noqa: E402
+
+W = H = 48
+PITCH = 0.05     # mm
+F = 50.0         # mm
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _variant():
+    register()
+
+
+def _scene(sensor: dict, board_distance: float = 420.0) -> "mi.Scene":
+    from mitsweep.render.textures import siemens_star
+
+    T = mi.ScalarTransform4f
+    return mi.load_dict({
+        "type": "scene", "integrator": {"type": "path", "max_depth": 2},
+        "sensor": sensor,
+        "board": {"type": "rectangle",
+                  "to_world": T().translate([0, 0, -board_distance]).scale(40.0),
+                  "bsdf": {"type": "diffuse", "reflectance": 0.0},
+                  "emitter": {"type": "area", "radiance": {
+                      "type": "bitmap", "bitmap": mi.Bitmap(siemens_star(256, 24)),
+                      "raw": True}}}})
+
+
+def _film():
+    return {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"},
+            "pixel_format": "rgb"}
+
+
+def _look():
+    return mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=[0, 0, -1], up=[0, 1, 0])
+
+
+def _focalsweep(spp=16, **kw):
+    d = {"type": "focalsweep", "focal_length": F, "pixel_pitch": PITCH, "to_world": _look(),
+         "film": _film(), "sampler": {"type": "independent", "sample_count": spp},
+         "far_clip": 1e5}
+    d.update(kw)
+    return d
+
+
+def _thinlens(i, aperture_radius, spp=16):
+    o = F * i / (i - F)
+    return {"type": "thinlens", "fov": math.degrees(2 * math.atan(W * PITCH / 2 / i)),
+            "fov_axis": "x", "aperture_radius": aperture_radius, "focus_distance": o,
+            "to_world": _look(), "film": _film(),
+            "sampler": {"type": "independent", "sample_count": spp}, "far_clip": 1e5}
+
+
+def _render(scene, seed, spp=None):
+    return np.array(mi.render(scene, seed=seed, spp=spp) if spp else mi.render(scene, seed=seed),
+                    dtype=np.float64)
+
+
+@pytest.mark.parametrize("sensor_distance", [56.0, 58.7])
+@pytest.mark.parametrize("f_number", [2.8, 11.0])
+def test_collapsed_sweep_equals_thinlens_with_same_seed(sensor_distance, f_number):
+    a = F / (2 * f_number)
+    ours = _render(_scene(_focalsweep(sensor_distance=sensor_distance, f_number=f_number)), 3)
+    ref = _render(_scene(_thinlens(sensor_distance, a)), 3)
+    # Same samples, same rays up to float32 rounding of o/i (~1e-7 relative): a sample
+    # can only change pixel or star sector when it lies within ~1e-5 px of a boundary.
+    assert np.max(np.abs(ours - ref)) < 1e-4 * max(1.0, ref.max())
+    assert ours.mean() > 0.1  # the board is in view
+
+
+def test_pinhole_equals_perspective_with_same_seed():
+    i = 57.0
+    persp = {"type": "perspective", "fov": math.degrees(2 * math.atan(W * PITCH / 2 / i)),
+             "fov_axis": "x", "to_world": _look(), "film": _film(),
+             "sampler": {"type": "independent", "sample_count": 8}, "far_clip": 1e5}
+    ours = _render(_scene(_focalsweep(spp=8, sensor_distance=i, aperture_radius=0.0)), 5)
+    ref = _render(_scene(persp), 5)
+    # The pixel sample is the sampler's first 2-D draw for both cameras and the board is
+    # seen directly, so the images agree up to float32 rounding (as above).
+    assert np.max(np.abs(ours - ref)) < 1e-4 * max(1.0, ref.max())
+
+
+def _passes(scene, seeds, spp):
+    imgs = np.stack([_render(scene, s, spp)[..., 0] for s in seeds])
+    return imgs.mean(axis=0), imgs.var(axis=0, ddof=1) / len(seeds)
+
+
+def test_collapsed_sweep_matches_thinlens_with_other_seeds_statistically():
+    i, a = 58.0, F / (2 * 2.8)
+    m1, v1 = _passes(_scene(_focalsweep(sensor_distance=i, aperture_radius=a)),
+                     range(100, 108), 16)
+    m2, v2 = _passes(_scene(_thinlens(i, a)), range(200, 208), 16)
+    var = v1 + v2
+    ok = var > 1e-10
+    z2 = (m1 - m2)[ok] ** 2 / var[ok]
+    n = int(ok.sum())
+    assert n > 500
+    # Under H0 z² has mean 1; with 8 passes the variance estimate is itself noisy
+    # (z follows a t-like law with ~14 dof: E[z²] ≈ 14/12 ≈ 1.17). Accept a mean of z²
+    # within [0.7, 1.6]: a bias of a few percent of the noise already pushes it out.
+    assert 0.7 < z2.mean() < 1.6, z2.mean()
+
+
+@pytest.mark.parametrize("kind", ["linear", "trapezoidal", "tabulated"])
+def test_sensor_distance_follows_motion_profile(kind):
+    start, end = 58.9, 58.2
+    if kind == "linear":
+        mp = MotionProfile.linear(start, end)
+        extra = {}
+    elif kind == "trapezoidal":
+        mp = MotionProfile.trapezoidal(start, end, 0.2)
+        extra = {"accel_fraction": 0.2}
+    else:
+        t = np.array([0.0, 0.3, 0.5, 1.0])
+        p = np.array([start, 58.7, 58.3, end])
+        mp = MotionProfile.tabulated(t, p)
+        extra = {"times": " ".join(map(str, t)), "positions": mi.TensorXf(p)}
+    sensor = mi.load_dict(_focalsweep(sensor_start=start, sensor_end=end, profile=kind,
+                                      shutter_open=0.5, shutter_close=2.5, **extra))
+    t = np.linspace(0, 1, 101)
+    got = np.array(sensor._sensor_distance(mi.Float(0.5 + 2.0 * t)))
+    # float32 holds ~58 mm to ~4e-6 mm; the 65536-interval table adds <= 5e-6 mm at the kinks.
+    np.testing.assert_allclose(got, mp.sensor_distance(t), atol=2e-5)
+
+
+def test_motion_table_is_uniform_in_time():
+    mp = MotionProfile.trapezoidal(60.0, 59.0, 0.25)
+    tab = motion_table(mp, 8)
+    np.testing.assert_allclose(tab, mp.sensor_distance(np.arange(9) / 8))
+
+
+@pytest.mark.parametrize("params, message", [
+    (dict(sensor_distance=58.0, bogus=1.0), "bogus"),
+    (dict(sensor_distance=50.0), "focal length"),
+    (dict(sensor_start=58.0, sensor_end=49.0, shutter_close=1.0), "focal length"),
+    (dict(sensor_distance=58.0, pixel_pitch=0.0), "pixel_pitch"),
+    (dict(sensor_distance=58.0, pixel_pitch=-0.01), "pixel_pitch"),
+    (dict(sensor_start=58.0, sensor_end=57.0), "shutter_close"),
+    (dict(sensor_start=58.0), "sensor_end"),
+    (dict(sensor_distance=58.0, f_number=2.0, aperture_radius=1.0), "not both"),
+    (dict(sensor_start=58.0, sensor_end=57.0, shutter_close=1.0, profile="sine"), "profile"),
+])
+def test_bad_parameters_raise_clear_errors(params, message):
+    with pytest.raises(Exception, match=message):
+        mi.load_dict(_focalsweep(**params))
+
+
+def test_traverse_exposes_parameters_and_updates_render():
+    scene = _scene(_focalsweep(sensor_distance=58.0, f_number=4.0))
+    params = mi.traverse(scene)
+    keys = set(params.keys())
+    for k in ("to_world", "aperture_radius", "pixel_pitch", "sensor_distances"):
+        assert f"sensor.{k}" in keys
+    params["sensor.sensor_distances"] = mi.Float([56.5])
+    params.update()
+    updated = _render(scene, 7)
+    direct = _render(_scene(_focalsweep(sensor_distance=56.5, f_number=4.0)), 7)
+    np.testing.assert_allclose(updated, direct, atol=1e-4)
+
+
+def test_sweep_blurs_between_its_end_focus_images():
+    """A sweep image lies between its two end-focused images in sharpness."""
+    i_focus = F * 420.0 / (420.0 - F)   # the board in focus
+    a = F / (2 * 2.0)
+    sharp = _render(_scene(_focalsweep(sensor_distance=i_focus, aperture_radius=a)), 1)
+    sweep = _render(_scene(_focalsweep(sensor_start=i_focus - 0.6, sensor_end=i_focus + 0.6,
+                                       shutter_close=1.0, aperture_radius=a)), 1)
+    far = _render(_scene(_focalsweep(sensor_distance=i_focus + 0.6, aperture_radius=a)), 1)
+
+    def contrast(img):
+        return float(np.abs(np.diff(img[..., 0], axis=1)).mean())
+
+    assert contrast(far) < contrast(sweep) < contrast(sharp)
