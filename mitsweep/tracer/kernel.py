@@ -1,0 +1,338 @@
+"""The Dr.Jit ray kernel: point source → mirror → thin lens → sensor, fused in one pass.
+
+Everything here is Dr.Jit; the rest of :mod:`mitsweep.tracer` talks NumPy. The kernel
+is written once, generic over the float type (``Float`` = float32 by default, ``Float64``
+for reference runs), and re-used for every chunk with opaque parameters, so it compiles
+once per process.
+
+Ray generation (independent of :mod:`mitsweep.optics` and of the renderer)
+---------------------------------------------------------------------------
+The point source sits at ``S = p_r + l w`` (mirror point ``p_r``, world-bound chief
+direction ``w``, depth ``l``). Rays are parametrised by their crossing ``Q = p_r + a e₁ +
+b e₂`` of the *aim plane* through ``p_r`` perpendicular to ``w`` (``e₁, e₂ ⊥ w``), with
+``(a, b)`` uniform in a box fitted to the part of the mirror whose reflections reach the
+lens (see :mod:`mitsweep.tracer.psf`). The direction is
+
+.. math:: \\hat d \\propto -w + (a/l)\\,e_1 + (b/l)\\,e_2,
+
+which stays exact in float32 for ``l → ∞`` (parallel rays), and the solid-angle weight of
+the sample is ``(1 + (a² + b²)/l²)^{-3/2}``. The ray starts on the true line from ``S``,
+at most ``margin`` mm before ``Q`` (the whole mirror lies within ``margin`` of ``p_r``),
+so float32 never carries the 10⁹ mm of a far source.
+
+Intersection
+------------
+In the mirror's local frame the conic is ``F(p) = x² + y² + (1+k) z² + 2 R z = 0`` with
+the mirror on the branch ``R + (1+k) z ≥ 0``. Along ``p = o + t d`` this is a quadratic
+``α t² + β t + γ = 0`` solved without cancellation (``q = −(β + sign(β) √Δ)/2``, roots
+``q/α`` and ``γ/q``; the second stays finite when ``α → 0``: paraboloid rays parallel to
+the axis). The hit is the nearest positive root on the mirror's branch; for a convex body
+and a ray from outside it is the entry point, so the hit must also face the ray
+(``d·n < 0``) and lie inside the rim. One Newton step on ``F`` polishes the root unless
+the ray grazes (``|∇F·d| < 10⁻³ |∇F|``, where Newton is ill-conditioned and the
+quadratic formula is the better estimate). Even-asphere terms are added by Newton steps
+on ``z + s(ρ) = 0`` from the conic root.
+
+Thin lens and sensor
+--------------------
+A reflected ray reaching the lens plane at ``L`` (``|L| ≤`` aperture radius) with
+direction ``r`` leaves toward the point ``f r_xy / r_z`` of the focal plane; on a sensor
+at distance ``i`` it lands at ``L (1 − i/f) + i r_xy/r_z``, affine in ``i``. In upright
+image coordinates (DESIGN.md) the hit is ``h(i) = A + B i`` with ``A = −L_xy`` and
+``B = L_xy/f − r_xy/r_z``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..backend import drjit_module
+
+__all__ = ["Geometry", "TraceParams", "trace_arrays", "deposit"]
+
+# Golden-ratio generalisation for a 3-D rank-1 lattice (Roberts' R3 sequence):
+# φ₃ is the real root of x⁴ = x + 1; the generators are 1/φ₃, 1/φ₃², 1/φ₃³.
+_PHI3 = 1.2207440846057596
+_R3 = tuple(int(round((1.0 / _PHI3 ** (j + 1)) % 1.0 * 2 ** 32)) & 0xFFFFFFFF for j in range(3))
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Everything the kernel needs, in the mirror's local frame, float64 (NumPy side).
+
+    Attributes
+    ----------
+    radius, conic : float
+        Vertex radius R (mm) and conic constant k.
+    aspheric : tuple of float
+        a4, a6, ... (ρ⁴, ρ⁶, ... coefficients).
+    rim_radius : float
+        mm; ``inf`` disables the rim (used to measure vignetting).
+    rotation : (3, 3) ndarray
+        Local-to-world rotation.
+    vertex_distance, focal_length, aperture_radius : float
+        Lens centre at world (0, 0, vertex_distance); thin lens f; aperture radius, mm.
+    origin_pr : (3,) ndarray
+        The chief mirror point p_r, local frame.
+    w, e1, e2 : (3,) ndarray
+        Local-frame unit vectors: world-bound chief direction and the aim-plane axes.
+    depth : float
+        l, mm (inf allowed).
+    margin : float
+        Upper bound of the distance from p_r to any mirror point, mm.
+    """
+
+    radius: float
+    conic: float
+    aspheric: tuple
+    rim_radius: float
+    rotation: np.ndarray
+    vertex_distance: float
+    focal_length: float
+    aperture_radius: float
+    origin_pr: np.ndarray
+    w: np.ndarray
+    e1: np.ndarray
+    e2: np.ndarray
+    depth: float
+    margin: float
+
+
+@dataclass(frozen=True)
+class TraceParams:
+    """Sampling box in the aim plane (mm) and the sample stream."""
+
+    a0: float
+    a1: float
+    b0: float
+    b1: float
+    seed: int = 0
+
+
+def _types(double: bool):
+    m = drjit_module()
+    if double:
+        return m, m.Float64, m.Array3f64
+    return m, m.Float, m.Array3f
+
+
+def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: bool):
+    """Trace ``n`` rays (sample indices ``offset … offset+n−1``); Dr.Jit values out.
+
+    Returns a dict of Dr.Jit arrays: ``landed`` (reaches the sensor through the rim and
+    the aperture), ``landed_free`` (would, without the rim), ``weight``, ``Au, Av, Bu,
+    Bv`` (sensor hit ``A + B i``, upright image mm), ``a, b`` (aim-plane sample), ``xi_t``
+    (a third low-discrepancy coordinate in [0, 1) for time).
+    """
+    import drjit as dr
+
+    m, Float, Array3 = _types(double)
+    UInt32 = m.UInt32
+    idx = dr.arange(UInt32, n) + dr.opaque(UInt32, offset & 0xFFFFFFFF)
+    # Cranley-Patterson shifts of the lattice from the seed (and the 2^32 block).
+    shift_vals = np.random.default_rng([params.seed, offset >> 32]).integers(
+        0, 2 ** 32, size=3, dtype=np.uint64)
+    shifts = [dr.opaque(UInt32, int(x)) for x in shift_vals]
+
+    def lattice(j):
+        # Exact fixed-point frac(idx * g_j + shift_j); top 24 bits -> [0, 1).
+        return Float((idx * UInt32(_R3[j]) + shifts[j]) >> 8) * (2.0 ** -24)
+
+    ua, ub, ut = lattice(0), lattice(1), lattice(2)
+    op = lambda x: dr.opaque(Float, float(x))  # noqa: E731 - compile once, update values
+    a = op(params.a0) + (op(params.a1) - op(params.a0)) * ua
+    b = op(params.b0) + (op(params.b1) - op(params.b0)) * ub
+
+    inv_l = 0.0 if math.isinf(geom.depth) else 1.0 / geom.depth
+    inv_l = op(inv_l)
+    w = Array3(*[op(x) for x in geom.w])
+    e1 = Array3(*[op(x) for x in geom.e1])
+    e2 = Array3(*[op(x) for x in geom.e2])
+    pr = Array3(*[op(x) for x in geom.origin_pr])
+    al, bl = a * inv_l, b * inv_l
+    d = dr.normalize(-w + e1 * al + e2 * bl)
+    weight = dr.rsqrt(1.0 + al * al + bl * bl)
+    weight = weight * weight * weight
+    q_pt = pr + e1 * a + e2 * b
+    # Distance from S to Q is sqrt(l² + a² + b²); start no farther back than the margin.
+    if math.isinf(geom.depth):
+        back = op(geom.margin)
+    else:
+        back = dr.minimum(op(geom.margin),
+                          op(geom.depth) * dr.sqrt(1.0 + al * al + bl * bl))
+    o = q_pt - d * back
+
+    R, ok = op(geom.radius), op(1.0 + geom.conic)
+    alpha = d.x * d.x + d.y * d.y + ok * d.z * d.z
+    beta = 2.0 * (o.x * d.x + o.y * d.y + ok * o.z * d.z + R * d.z)
+    gamma = o.x * o.x + o.y * o.y + ok * o.z * o.z + 2.0 * R * o.z
+    disc = beta * beta - 4.0 * alpha * gamma
+    has = disc >= 0.0
+    sq = dr.sqrt(dr.maximum(disc, 0.0))
+    qq = -0.5 * (beta + dr.copysign(sq, beta))
+    t1 = qq / alpha
+    t2 = gamma / qq
+    inf = Float(math.inf)
+
+    def valid(t):
+        z = o.z + t * d.z
+        return has & dr.isfinite(t) & (t > 0.0) & (R + ok * z >= -1e-6 * R)
+
+    t1v, t2v = valid(t1), valid(t2)
+    t = dr.minimum(dr.select(t1v, t1, inf), dr.select(t2v, t2, inf))
+    hit = t1v | t2v
+    t = dr.select(hit, t, 0.0)
+    # Newton polish on F along the ray, skipped at grazing incidence.
+    p = o + d * t
+    gx, gy, gz = p.x, p.y, ok * p.z + R
+    g_dot_d = gx * d.x + gy * d.y + gz * d.z
+    g_norm = dr.sqrt(gx * gx + gy * gy + gz * gz)
+    f_val = p.x * p.x + p.y * p.y + ok * p.z * p.z + 2.0 * R * p.z
+    polish = dr.abs(g_dot_d) > 1e-3 * g_norm
+    t = dr.select(polish, t - 0.5 * f_val / dr.select(polish, g_dot_d, 1.0), t)
+
+    coeffs = [float(c) for c in geom.aspheric]
+
+    def asphere_terms(r2):
+        """Even-asphere sag Σ c_j ρ^(2j+4) and its s'/ρ, Σ (2j+4) c_j ρ^(2j+2)."""
+        sag_p, slope_p = Float(0.0), Float(0.0)
+        for j, c in enumerate(coeffs):
+            sag_p = sag_p + c * r2 ** (j + 2)
+            slope_p = slope_p + (2 * j + 4) * c * r2 ** (j + 1)
+        return sag_p, slope_p
+
+    if any(coeffs):
+        for _ in range(4):  # Newton on G(t) = z + s(ρ) from the conic root
+            p = o + d * t
+            r2 = p.x * p.x + p.y * p.y
+            qc = dr.sqrt(dr.maximum(R * R - ok * r2, 0.0))
+            sag_p, slope_p = asphere_terms(r2)
+            g_over = 1.0 / dr.maximum(qc, 1e-12) + slope_p  # s'/ρ
+            dg = d.z + g_over * (p.x * d.x + p.y * d.y)
+            t = t - (p.z + r2 / (R + qc) + sag_p) / dg
+    p = o + d * t
+    r2 = p.x * p.x + p.y * p.y
+    if any(coeffs):
+        # n ∝ (x (1 + q P), y (1 + q P), q): finite on the axis and at q = 0.
+        qc = dr.sqrt(dr.maximum(R * R - ok * r2, 0.0))
+        h = 1.0 + qc * asphere_terms(r2)[1]
+        n_loc = dr.normalize(Array3(p.x * h, p.y * h, qc))
+    else:
+        n_loc = dr.normalize(Array3(p.x, p.y, R + ok * p.z))
+    d_dot_n = dr.dot(d, n_loc)
+    front = hit & (d_dot_n < 0.0)
+    inside = r2 <= op(geom.rim_radius ** 2 if math.isfinite(geom.rim_radius) else 3.0e38)
+    refl = d - n_loc * (2.0 * d_dot_n)
+
+    rot = geom.rotation
+    def to_world(v):
+        return Array3(op(rot[0, 0]) * v.x + op(rot[0, 1]) * v.y + op(rot[0, 2]) * v.z,
+                      op(rot[1, 0]) * v.x + op(rot[1, 1]) * v.y + op(rot[1, 2]) * v.z,
+                      op(rot[2, 0]) * v.x + op(rot[2, 1]) * v.y + op(rot[2, 2]) * v.z)
+
+    pw_ = to_world(p)
+    rw = to_world(refl)
+    toward = rw.z > 0.0
+    tl = (op(geom.vertex_distance) - pw_.z) / dr.select(toward, rw.z, 1.0)
+    lx, ly = pw_.x + rw.x * tl, pw_.y + rw.y * tl
+    in_ap = (lx * lx + ly * ly) <= op(geom.aperture_radius ** 2)
+    landed_free = front & toward & in_ap
+    landed = landed_free & inside
+    inv_f = op(1.0 / geom.focal_length)
+    inv_rz = 1.0 / dr.select(toward, rw.z, 1.0)
+    return {"landed": landed, "landed_free": landed_free, "weight": weight,
+            "Au": -lx, "Av": -ly, "Bu": lx * inv_f - rw.x * inv_rz,
+            "Bv": ly * inv_f - rw.y * inv_rz, "a": a, "b": b, "xi_t": ut}
+
+
+def trace_arrays(geom: Geometry, params: TraceParams, n: int, *, offset: int = 0,
+                 double: bool = False) -> dict[str, np.ndarray]:
+    """Trace ``n`` rays and return NumPy arrays (pilot passes, focus, tests).
+
+    Keys as in the kernel: ``landed``, ``landed_free`` (bool), ``weight``, ``Au``,
+    ``Av``, ``Bu``, ``Bv``, ``a``, ``b`` (float64 copies of the traced values).
+    """
+    import drjit as dr
+
+    out = _trace(geom, params, n, offset, double)
+    keys = ("landed", "landed_free", "weight", "Au", "Av", "Bu", "Bv", "a", "b")
+    vals = [out[k] for k in keys]
+    dr.eval(*vals)
+    res = {}
+    for k, v in zip(keys, vals):
+        arr = np.asarray(v.numpy())
+        res[k] = arr.astype(bool) if k.startswith("landed") else arr.astype(np.float64)
+    return res
+
+
+def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_size: int,
+            pitch: float, center_uv: tuple[float, float], times: list | None,
+            sensor_table: np.ndarray | None, linear: tuple[float, float] | None,
+            jitter: bool, buffer=None, double: bool = False):
+    """Trace ``n`` rays and add their sensor hits to a (K·K + 3) Dr.Jit buffer.
+
+    Each landed ray deposits its weight, split equally over ``M`` time samples: fixed
+    sensor distances ``times`` (PSF at one distance, or the N-plane sum), or ``M``
+    stratified times ``t_j = (j + ξ)/M`` (ξ per ray from the lattice) mapped to sensor
+    distances by the motion (``linear = (start, end)`` exactly, else linear
+    interpolation in ``sensor_table``, the distances at uniform times). Hits are binned
+    in pixels of the reference grid (box filter: the pixel integral of the irradiance).
+    Cells ``K·K``, ``K·K+1``, ``K·K+2`` accumulate the landed weight, the rim-free
+    landed weight and the in-window weight.
+    """
+    import drjit as dr
+
+    m, Float, _ = _types(double)
+    UInt32, Int32 = m.UInt32, m.Int32
+    K = int(kernel_size)
+    KK = K * K
+    Acc = m.Float64  # float32 sums of millions of rays drift by ~1 %: accumulate in float64
+    if buffer is None:
+        buffer = dr.zeros(Acc, KK + 3)
+    out = _trace(geom, params, n, offset, double)
+    op = lambda x: dr.opaque(Float, float(x))  # noqa: E731
+    landed, weight = out["landed"], out["weight"]
+    inv_p = op(1.0 / pitch)
+    au = (out["Au"] - op(center_uv[0])) * inv_p + (K // 2 + 0.5)
+    av = -(out["Av"] - op(center_uv[1])) * inv_p + (K // 2 + 0.5)
+    bu, bv = out["Bu"] * inv_p, -out["Bv"] * inv_p
+    if times is not None:
+        M = len(times)
+        dists = [op(x) for x in times]
+    else:
+        M = int(jitter)
+        assert M >= 1
+        xi = out["xi_t"]
+        dists = []
+        for j in range(M):
+            tt = (xi + j) * (1.0 / M)
+            if linear is not None:
+                dists.append(op(linear[0]) + (op(linear[1]) - op(linear[0])) * tt)
+            else:
+                tab = m.Float(sensor_table.astype(np.float32)) if not double else \
+                    m.Float64(sensor_table)
+                nt = len(sensor_table) - 1
+                x = tt * nt
+                k0 = UInt32(dr.minimum(dr.floor(x), nt - 1))
+                fr = x - Float(k0)
+                v0 = dr.gather(Float, tab, k0)
+                v1 = dr.gather(Float, tab, k0 + 1)
+                dists.append(v0 + (v1 - v0) * fr)
+    wj = Acc(weight * (1.0 / M))
+    for dist in dists:
+        col = Int32(dr.floor(au + bu * dist))
+        row = Int32(dr.floor(av + bv * dist))
+        ok = landed & (col >= 0) & (col < K) & (row >= 0) & (row < K)
+        index = UInt32(dr.select(ok, row * K + col, 0))
+        dr.scatter_reduce(dr.ReduceOp.Add, buffer, wj, index, active=ok)
+        dr.scatter_reduce(dr.ReduceOp.Add, buffer, wj, UInt32(KK + 2), active=ok,
+                          mode=dr.ReduceMode.Local)
+    weight = Acc(weight)
+    dr.scatter_reduce(dr.ReduceOp.Add, buffer, weight, UInt32(KK), active=landed,
+                      mode=dr.ReduceMode.Local)
+    dr.scatter_reduce(dr.ReduceOp.Add, buffer, weight, UInt32(KK + 1),
+                      active=out["landed_free"], mode=dr.ReduceMode.Local)
+    return buffer
