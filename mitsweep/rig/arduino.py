@@ -1,0 +1,328 @@
+"""Driver for the project's Arduino sweep controller (firmware in ``scripts/firmware/``).
+
+The board drives a stepper (STEP/DIR/ENABLE to a stepper driver, a home switch) and an
+optocoupler across the camera's remote-release lines, and speaks a line protocol at
+115200 baud, 8N1, lines ending in ``\\n``. Positions are integer steps, rates steps/s,
+accelerations steps/s², times the board's ``micros()`` (32-bit, wraps every ~71.6 min;
+the driver unwraps them).
+
+Protocol (version 1)
+--------------------
+On reset (opening the port resets an Uno) the board prints
+``READY mitsweep-sweep <firmware-version> <protocol>``.
+
+==========================================  ==============================================
+host → board                                board → host
+==========================================  ==============================================
+``ID``                                      ``OK ID mitsweep-sweep <fw> <protocol>``
+``STATE``                                   ``OK STATE <t_us> <pos> <homed> <moving>
+                                            <shutter>`` (0/1 flags)
+``CHK 1`` / ``CHK 0``                       ``OK CHK 1``: from then on every line both
+                                            ways ends in ``*HH`` (XOR of its bytes)
+``LIMITS <min> <max>``                      ``OK LIMITS <min> <max>``: soft limits, steps
+``HOME <rate>``                             ``OK HOME``; later ``EV HOMED <t> 0``
+``MOVE <target> <rate> <accel>``            ``OK MOVE``; later ``EV DONE <t> <pos>``
+``SWEEP <target> <rate> <accel> <open>      ``OK SWEEP``; events ``START``, ``OPEN``,
+<close>``                                   ``POS`` (every 50 ms), ``CLOSE``, ``DONE``
+``SHUTTER <delay_us> <duration_us>``        ``OK SHUTTER <t_us>``; later ``EV OPEN``,
+                                            ``EV CLOSE``
+``CLOSE``                                   ``OK CLOSE`` (shutter released now)
+``STOP``                                    ``OK STOP <t_us> <pos>`` (shutter released
+                                            first, then the motor stopped)
+==========================================  ==============================================
+
+``SWEEP`` ramps at ``accel`` to ``rate`` and back to rest at ``target``; the shutter is
+held open from the step that reaches ``open`` to the step that reaches ``close`` — both
+must lie in the constant-velocity part (the board checks: ``ERR RANGE``). Errors are
+``ERR <CODE> <text>`` with CODE in SYNTAX, RANGE, LIMIT, BUSY, HOME, CHECKSUM. Events are
+``EV <NAME> <t_us> <pos> [<detail>]``; ``EV FAULT <t> <pos> <CODE>`` (e.g. HOME_SWITCH,
+LIMIT) means the board has already released the shutter and stopped the motor.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+from dataclasses import dataclass
+from typing import Callable, Iterable
+
+from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
+from .interfaces import Shutter, Stage, StageState
+from .transport import LineTransport, XorChecksum
+
+__all__ = ["ArduinoSweepController", "BoardEvent", "BoardClock", "FIRMWARE_NAME",
+           "PROTOCOL_VERSION", "MAX_STEP_RATE", "EVENT_NAMES", "ERROR_CODES",
+           "POS_EVENT_PERIOD_US"]
+
+logger = logging.getLogger(__name__)
+
+FIRMWARE_NAME = "mitsweep-sweep"
+PROTOCOL_VERSION = 1
+#: Highest step rate the firmware generates reliably (steps/s), polling micros() on a 16 MHz Uno.
+MAX_STEP_RATE = 4000
+#: Period of ``EV POS`` samples during a SWEEP, µs.
+POS_EVENT_PERIOD_US = 50_000
+EVENT_NAMES = ("START", "OPEN", "POS", "CLOSE", "DONE", "HOMED", "FAULT")
+ERROR_CODES = ("SYNTAX", "RANGE", "LIMIT", "BUSY", "HOME", "CHECKSUM")
+
+_INT = r"-?\d+"
+_EVENT_RE = re.compile(rf"^EV ({'|'.join(EVENT_NAMES)}) (\d+) ({_INT})(?: ([A-Z_]+))?$")
+_ERR_RE = re.compile(rf"^ERR ({'|'.join(ERROR_CODES)})(?: (.*))?$")
+
+
+class BoardClock:
+    """Unwraps the board's 32-bit ``micros()`` into a monotonic 64-bit count."""
+
+    def __init__(self) -> None:
+        self._last: int | None = None
+        self._offset = 0
+
+    def unwrap(self, raw: int) -> int:
+        if not 0 <= raw < 2**32:
+            raise ProtocolError(f"board time {raw} outside 32-bit micros() range")
+        if self._last is not None and raw < self._last and self._last - raw > 2**31:
+            self._offset += 2**32
+        self._last = raw
+        return raw + self._offset
+
+
+@dataclass(frozen=True)
+class BoardEvent:
+    """An event from the board: ``name``, ``t_us`` (unwrapped board time), ``position``
+    (steps), ``detail`` (fault code or ""), ``host_t_s`` (log time of arrival)."""
+
+    name: str
+    t_us: int
+    position: int
+    detail: str
+    host_t_s: float
+
+    def as_dict(self) -> dict:
+        return {"name": self.name, "t_us": self.t_us, "position_steps": self.position,
+                "detail": self.detail, "host_t_s": round(self.host_t_s, 6)}
+
+
+class ArduinoSweepController(Stage, Shutter):
+    """The Arduino sweep controller: a stepper stage and a shutter on one board.
+
+    Parameters
+    ----------
+    transport : LineTransport
+        Line link to the board (``eol = b"\\n"``).
+    steps_per_mm : float
+        Stepper steps per stage millimetre.
+    name : str
+        Name in logs and messages.
+    """
+
+    name = "arduino"
+
+    def __init__(self, transport: LineTransport, *, steps_per_mm: float) -> None:
+        self.transport = transport
+        self.steps_per_mm = float(steps_per_mm)
+        self.clock = BoardClock()
+        self.events: list[BoardEvent] = []   # every event received, in order
+        self._unread: list[BoardEvent] = []  # events not yet consumed by wait_event
+        self.ready_line: str | None = None
+
+    # -- link ---------------------------------------------------------------------------
+    def wait_ready(self, timeout_s: float = 3.0) -> bool:
+        """Wait for the ``READY`` line a board prints after its reset.
+
+        Returns False (and logs) if none arrives: boards with auto-reset disabled print
+        nothing; :meth:`identify` then checks the firmware anyway.
+        """
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                line = self.transport.read_line(deadline=deadline)
+            except ReplyTimeout:
+                logger.info("%s: no READY line within %.1f s", self.name, timeout_s)
+                return False
+            if line.startswith("READY "):
+                parts = line.split()
+                if len(parts) != 4 or parts[1] != FIRMWARE_NAME:
+                    raise ProtocolError(f"{self.name}: unexpected firmware {line!r}; expected "
+                                        f"'READY {FIRMWARE_NAME} <version> <protocol>'")
+                self.ready_line = line
+                return True
+            raise ProtocolError(f"{self.name}: unexpected line before READY: {line!r}")
+
+    def enable_checksums(self) -> None:
+        """``CHK 1``: from now on every line both ways carries an XOR checksum."""
+        self.transport.write_line("CHK 1")
+        self.transport.checksum = XorChecksum()
+        self._expect_ok("CHK", self.transport.read_line(), n_fields=1)
+
+    # -- commands -----------------------------------------------------------------------
+    def identify(self) -> str:
+        fields = self._query("ID", n_fields=3)
+        name, fw, proto = fields
+        if name != FIRMWARE_NAME:
+            raise ProtocolError(f"{self.name}: device is {name!r}, not {FIRMWARE_NAME!r}")
+        if proto != str(PROTOCOL_VERSION):
+            raise ProtocolError(f"{self.name}: protocol version {proto}, this driver speaks "
+                                f"{PROTOCOL_VERSION}; update the firmware or mitsweep")
+        return f"{name} {fw} (protocol {proto})"
+
+    def state(self) -> StageState:
+        t, pos, homed, moving, shutter = self._ints(self._query("STATE", n_fields=5), "STATE")
+        self.clock.unwrap(t)
+        self.shutter_open = bool(shutter)
+        return StageState(position_mm=pos / self.steps_per_mm if homed else None,
+                          homed=bool(homed), moving=bool(moving))
+
+    def set_soft_limits(self, lo_mm: float, hi_mm: float) -> None:
+        lo, hi = self.steps(lo_mm), self.steps(hi_mm)
+        got = self._ints(self._query(f"LIMITS {lo} {hi}", n_fields=2), "LIMITS")
+        if got != [lo, hi]:
+            raise ProtocolError(f"{self.name}: LIMITS echoed {got}, sent {[lo, hi]}")
+
+    def home(self, *, velocity_mm_s: float, timeout_s: float) -> None:
+        self._query(f"HOME {self.rate(velocity_mm_s)}", n_fields=0)
+        self.wait_event("HOMED", timeout_s=timeout_s)
+
+    def move_to(self, position_mm: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
+                timeout_s: float) -> float:
+        target = self.steps(position_mm)
+        self._query(f"MOVE {target} {self.rate(velocity_mm_s)} "
+                    f"{self.accel(acceleration_mm_s2)}", n_fields=0)
+        ev = self.wait_event("DONE", timeout_s=timeout_s)
+        if ev.position != target:
+            raise ProtocolError(f"{self.name}: move ended at step {ev.position}, not {target}")
+        return ev.position / self.steps_per_mm
+
+    def start_sweep(self, *, target: int, rate: int, accel: int, open_at: int,
+                    close_at: int) -> None:
+        """Send ``SWEEP`` (integer steps, steps/s, steps/s²); events follow."""
+        self._query(f"SWEEP {target} {rate} {accel} {open_at} {close_at}", n_fields=0)
+
+    def fire(self, *, delay_us: int, duration_us: int) -> int:
+        """``SHUTTER``: open after ``delay_us`` for ``duration_us``; returns the board time
+        (unwrapped µs) at which the board received the command."""
+        (t,) = self._ints(self._query(f"SHUTTER {int(delay_us)} {int(duration_us)}",
+                                      n_fields=1), "SHUTTER")
+        return self.clock.unwrap(t)
+
+    def close_shutter(self) -> None:
+        self._query("CLOSE", n_fields=0)
+
+    def stop(self) -> None:
+        t, pos = self._ints(self._query("STOP", n_fields=2), "STOP")
+        self.clock.unwrap(t)
+        self.stopped_at = pos
+
+    # -- events -------------------------------------------------------------------------
+    def wait_event(self, name: str, *, timeout_s: float | None = None,
+                   deadline: float | None = None,
+                   on_event: Callable[[BoardEvent], None] | None = None) -> BoardEvent:
+        """Consume events until ``name`` arrives; ``EV FAULT`` raises :class:`DeviceFault`."""
+        if deadline is None:
+            deadline = time.monotonic() + (timeout_s if timeout_s is not None else 1.0)
+        while True:
+            while self._unread:
+                ev = self._unread.pop(0)
+                if on_event is not None:
+                    on_event(ev)
+                if ev.name == "FAULT":
+                    raise DeviceFault(f"{self.name}: board fault {ev.detail or '?'} at step "
+                                      f"{ev.position}")
+                if ev.name == name:
+                    return ev
+            try:
+                line = self.transport.read_line(deadline=deadline)
+            except ReplyTimeout:
+                raise ReplyTimeout(f"{self.name}: no EV {name} before the deadline") from None
+            if not self._take_event(line):
+                raise ProtocolError(f"{self.name}: unexpected line while waiting for "
+                                    f"EV {name}: {line!r}")
+
+    def poll_events(self) -> None:
+        """Read whatever events are waiting, without blocking (consumed by
+        :meth:`wait_event`)."""
+        while self.transport.pending():
+            line = self.transport.read_line(timeout_s=0.0)
+            if not self._take_event(line):
+                raise ProtocolError(f"{self.name}: unexpected line {line!r}")
+
+    def safe_stop(self, *, timeout_s: float = 1.0) -> int | None:
+        """Safety path: ``STOP`` (the board releases the shutter first, then stops the
+        motor), tolerant of stray lines from an interrupted exchange. Returns the step
+        position the board stopped at."""
+        try:
+            self.transport.drain()
+        except Exception:  # noqa: BLE001 - garbage in the buffer must not block the stop
+            logger.debug("%s: drain before STOP failed", self.name, exc_info=True)
+        self.transport.write_line("STOP")
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                line = self.transport.read_line(deadline=deadline)
+            except ProtocolError:
+                continue
+            if line.startswith("OK STOP "):
+                t, pos = self._ints(line.split()[2:], "STOP")
+                return pos
+            if line.startswith("EV "):
+                try:
+                    self._take_event(line)
+                except ProtocolError:
+                    pass
+
+    # -- units --------------------------------------------------------------------------
+    def steps(self, mm: float) -> int:
+        return int(round(mm * self.steps_per_mm))
+
+    def rate(self, mm_s: float) -> int:
+        r = int(round(mm_s * self.steps_per_mm))
+        if not 1 <= r <= MAX_STEP_RATE:
+            raise DeviceError(f"{self.name}: {mm_s:g} mm/s is {r} steps/s, outside the "
+                              f"firmware's 1..{MAX_STEP_RATE} steps/s")
+        return r
+
+    def accel(self, mm_s2: float) -> int:
+        return max(1, int(round(mm_s2 * self.steps_per_mm)))
+
+    # -- internals ----------------------------------------------------------------------
+    def _take_event(self, line: str) -> bool:
+        m = _EVENT_RE.match(line)
+        if not m:
+            return False
+        ev = BoardEvent(m.group(1), self.clock.unwrap(int(m.group(2))), int(m.group(3)),
+                        m.group(4) or "", self.transport.log.now())
+        self.events.append(ev)
+        self._unread.append(ev)
+        return True
+
+    def _query(self, command: str, *, n_fields: int) -> list[str]:
+        self.transport.write_line(command)
+        word = command.split()[0]
+        deadline = time.monotonic() + self.transport.timeout_s
+        while True:
+            try:
+                line = self.transport.read_line(deadline=deadline)
+            except ReplyTimeout:
+                raise ReplyTimeout(f"{self.name}: no reply to {command!r}") from None
+            if line.startswith("EV ") and self._take_event(line):
+                continue
+            return self._expect_ok(word, line, n_fields=n_fields, command=command)
+
+    def _expect_ok(self, word: str, line: str, *, n_fields: int,
+                   command: str | None = None) -> list[str]:
+        m = _ERR_RE.match(line)
+        if m:
+            raise DeviceError(f"{self.name}: {command or word!r} refused: {m.group(1)} "
+                              f"{m.group(2) or ''}".rstrip())
+        parts = line.split(" ")
+        if len(parts) != 2 + n_fields or parts[0] != "OK" or parts[1] != word:
+            raise ProtocolError(f"{self.name}: unexpected reply to {command or word!r}: "
+                                f"{line!r}")
+        return parts[2:]
+
+    def _ints(self, fields: Iterable[str], what: str) -> list[int]:
+        try:
+            return [int(f) for f in fields]
+        except ValueError:
+            raise ProtocolError(f"{self.name}: non-integer field in {what} reply "
+                                f"{' '.join(fields)!r}") from None

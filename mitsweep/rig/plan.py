@@ -1,0 +1,251 @@
+"""From a setup's sweep range to a stage move: the capture plan (pure, no I/O).
+
+The optical sweep (:func:`mitsweep.optics.optimal_sweep_range`) says the sensor must
+travel from ``sensor_start_mm`` to ``sensor_end_mm`` at ``velocity_mm_s`` with the
+shutter open, for ``exposure_s = translation_mm / velocity_mm_s``. A real stage must
+also accelerate to that velocity, run a little further so that vibrations settle, and
+decelerate afterwards, all inside its soft limits:
+
+.. math::
+
+    x_\\mathrm{approach} = x_\\mathrm{open} - \\sigma (d_r + d_s), \\qquad
+    x_\\mathrm{end} = x_\\mathrm{close} + \\sigma (d_s + d_r), \\qquad
+    d_r = \\frac{v^2}{2 a},
+
+with σ the direction of motion, d_s the settle distance and a the acceleration. The
+shutter is open only between ``x_open`` and ``x_close``, at constant velocity.
+
+Stage position x (mm, the stage's own coordinates) and sensor distance s (mm, lens to
+sensor) are related by ``s = s_0 + δ x`` with ``s_0 = rig.sensor_distance_at_zero`` and
+``δ = rig.sensor_direction``. An uncalibrated rig (no ``sensor_distance_at_zero``)
+centres the sweep within the soft limits; the record says so.
+
+Every check that can fail fails here, before a port is opened: a sweep longer than the
+travel, a velocity the stage cannot hold, an exposure outside the camera's range.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+from .arduino import MAX_STEP_RATE
+from .errors import PlanError
+from .zaber import SPEED_UNIT, accel_data, speed_data
+
+__all__ = ["CapturePlan", "plan_capture", "STAGE_KINDS"]
+
+STAGE_KINDS = ("arduino", "zaber")
+#: Largest relative difference between the requested velocity and the nearest one the
+#: controller can produce (integer steps/s, or Zaber speed units) that is accepted.
+VELOCITY_TOLERANCE = 0.01
+
+
+@dataclass(frozen=True)
+class CapturePlan:
+    """A capture, fully resolved into stage positions, rates and times.
+
+    Lengths mm (stage coordinates unless named ``sensor_*``), velocities mm/s, times s;
+    ``*_steps`` are controller steps (Arduino steps or Zaber microsteps).
+    """
+
+    setup: str
+    stage: str
+    steps_per_mm: float
+    sensor_start_mm: float
+    sensor_end_mm: float
+    translation_mm: float
+    exposure_s: float            # optical: translation / requested velocity
+    velocity_mm_s: float         # requested (sweep.velocity)
+    velocity_actual_mm_s: float  # what the controller will run
+    step_rate: int               # Arduino: steps/s; Zaber: maxspeed data value
+    accel_rate: int              # Arduino: steps/s²; Zaber: accel data value
+    acceleration_mm_s2: float
+    ramp_mm: float
+    settle_mm: float
+    direction: int               # +1 / -1: sign of the stage motion during the sweep
+    sensor_distance_at_zero_mm: float
+    sensor_direction: int
+    mapping: str                 # "calibrated" or "centred (uncalibrated rig)"
+    soft_limit_min_mm: float
+    soft_limit_max_mm: float
+    approach_steps: int
+    open_steps: int
+    close_steps: int
+    end_steps: int
+    planned_exposure_s: float    # after quantisation: what the shutter will be held for
+    ramp_time_s: float
+    sweep_duration_s: float      # approach -> end, at the sweep velocity
+    positioning_velocity_mm_s: float
+    positioning_acceleration_mm_s2: float
+
+    # -- derived ------------------------------------------------------------------------
+    def mm(self, steps: float) -> float:
+        return steps / self.steps_per_mm
+
+    @property
+    def approach_mm(self) -> float:
+        return self.mm(self.approach_steps)
+
+    @property
+    def open_mm(self) -> float:
+        return self.mm(self.open_steps)
+
+    @property
+    def close_mm(self) -> float:
+        return self.mm(self.close_steps)
+
+    @property
+    def end_mm(self) -> float:
+        return self.mm(self.end_steps)
+
+    def sensor_distance(self, position_mm):
+        """Sensor distance (mm) at stage position(s) ``position_mm``."""
+        return self.sensor_distance_at_zero_mm + self.sensor_direction * position_mm
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d.update(approach_mm=self.approach_mm, open_mm=self.open_mm, close_mm=self.close_mm,
+                 end_mm=self.end_mm,
+                 open_sensor_distance_mm=self.sensor_distance(self.open_mm),
+                 close_sensor_distance_mm=self.sensor_distance(self.close_mm))
+        return d
+
+    def summary(self) -> str:
+        """Human-readable plan (``--dry-run``)."""
+        return "\n".join([
+            f"setup              {self.setup} (stage: {self.stage}, {self.steps_per_mm:g} steps/mm)",
+            f"sensor distance    {self.sensor_start_mm:.4f} -> {self.sensor_end_mm:.4f} mm "
+            f"(travel {self.translation_mm:.4f} mm)",
+            f"velocity           {self.velocity_mm_s:g} mm/s requested, "
+            f"{self.velocity_actual_mm_s:.6g} mm/s run",
+            f"exposure           {self.planned_exposure_s:.6f} s "
+            f"(optical {self.exposure_s:.6f} s)",
+            f"ramp / settle      {self.ramp_mm:.4f} mm ({self.ramp_time_s:.3f} s at "
+            f"{self.acceleration_mm_s2:g} mm/s^2) / {self.settle_mm:.4f} mm",
+            f"stage positions    approach {self.approach_mm:.4f}, open {self.open_mm:.4f}, "
+            f"close {self.close_mm:.4f}, end {self.end_mm:.4f} mm",
+            f"soft limits        {self.soft_limit_min_mm:g} .. {self.soft_limit_max_mm:g} mm",
+            f"sensor mapping     s = {self.sensor_distance_at_zero_mm:.4f} "
+            f"{'+' if self.sensor_direction > 0 else '-'} x mm ({self.mapping})",
+            f"sweep duration     {self.sweep_duration_s:.3f} s",
+        ])
+
+
+def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CapturePlan:
+    """Resolve a setup's focal sweep into a stage move.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        ``setup.sweep.velocity`` (mm/s) and ``setup.rig`` (limits, acceleration, settle
+        distance, steps per mm, sensor mapping, camera exposure range).
+    stage : {"arduino", "zaber"}
+        Which controller moves the stage (sets the velocity quantisation).
+    sweep_range : mitsweep.optics.SweepRange, optional
+        Default: ``optimal_sweep_range(setup)``.
+
+    Raises
+    ------
+    PlanError
+        The sweep cannot be run on this rig; the message says why and what is allowed.
+    """
+    if stage not in STAGE_KINDS:
+        raise PlanError(f"stage must be one of {', '.join(STAGE_KINDS)}, got {stage!r}")
+    if sweep_range is None:
+        from ..optics import optimal_sweep_range
+
+        sweep_range = optimal_sweep_range(setup)
+    rig = setup.rig
+    spm = rig.steps_per_mm
+    v = float(sweep_range.velocity_mm_s)
+    s_start, s_end = float(sweep_range.sensor_start_mm), float(sweep_range.sensor_end_mm)
+    travel = abs(s_end - s_start)
+
+    if v > rig.max_velocity:
+        raise PlanError(f"sweep velocity {v:g} mm/s is more than the stage can hold "
+                        f"(rig.max_velocity = {rig.max_velocity:g} mm/s)")
+    if stage == "arduino":
+        rate = int(round(v * spm))
+        if not 1 <= rate <= MAX_STEP_RATE:
+            raise PlanError(f"sweep velocity {v:g} mm/s is {v * spm:.4g} steps/s at "
+                            f"{spm:g} steps/mm; the Arduino controller holds 1..{MAX_STEP_RATE}"
+                            f" steps/s ({1 / spm:g}..{MAX_STEP_RATE / spm:g} mm/s)")
+        accel = max(1, int(round(rig.acceleration * spm)))
+        v_run = rate / spm
+        a_run = accel / spm
+    else:
+        rate = speed_data(v, spm)
+        accel = accel_data(rig.acceleration, spm)
+        if rate < 1 or accel < 1:
+            raise PlanError(f"sweep velocity {v:g} mm/s or acceleration {rig.acceleration:g} "
+                            f"mm/s² is below the Zaber stage's resolution at {spm:g} "
+                            f"microsteps/mm")
+        v_run = rate / SPEED_UNIT / spm
+        a_run = accel * 10.0 / SPEED_UNIT / spm
+    if abs(v_run - v) > VELOCITY_TOLERANCE * v:
+        raise PlanError(f"sweep velocity {v:g} mm/s cannot be held: the nearest the "
+                        f"{stage} controller runs is {v_run:.6g} mm/s "
+                        f"({abs(v_run - v) / v:.1%} off, {VELOCITY_TOLERANCE:.0%} allowed)")
+
+    travel_steps = int(round(travel * spm))
+    if travel_steps < 1:
+        raise PlanError(f"sensor travel {travel:g} mm is less than one step "
+                        f"({1 / spm:g} mm)")
+    if stage == "arduino":
+        ramp_steps = math.ceil(rate * rate / (2.0 * accel))
+    else:
+        ramp_steps = math.ceil(v_run * v_run / (2.0 * a_run) * spm)
+    settle_steps = math.ceil(rig.settle_distance * spm - 1e-9)
+    margin = ramp_steps + settle_steps
+    planned_exposure = travel_steps / (v_run * spm)
+    if stage == "zaber":
+        planned_exposure = round(travel / v_run * 1e6) * 1e-6   # the Arduino's µs timer
+    if not rig.min_exposure_s <= planned_exposure <= rig.max_exposure_s:
+        raise PlanError(f"exposure {planned_exposure:.6g} s is outside the camera's range "
+                        f"{rig.min_exposure_s:g} .. {rig.max_exposure_s:g} s "
+                        f"(rig.min_exposure_s, rig.max_exposure_s); change sweep.velocity")
+
+    lo, hi = rig.soft_limit_min, rig.soft_limit_max
+    span = (travel_steps + 2 * margin) / spm
+    if span > hi - lo + 1e-9:
+        raise PlanError(f"the sweep needs {span:.4f} mm of stage travel (sensor travel "
+                        f"{travel:.4f} + 2 x (ramp {ramp_steps / spm:.4f} + settle "
+                        f"{settle_steps / spm:.4f})), more than the soft limits allow "
+                        f"({lo:g} .. {hi:g} mm = {hi - lo:g} mm)")
+
+    delta = rig.sensor_direction
+    if rig.sensor_distance_at_zero is not None:
+        s0 = rig.sensor_distance_at_zero
+        mapping = "calibrated"
+    else:
+        s0 = 0.5 * (s_start + s_end) - delta * 0.5 * (lo + hi)
+        mapping = "centred (uncalibrated rig)"
+    x_open = (s_start - s0) / delta
+    x_close = (s_end - s0) / delta
+    direction = 1 if x_close > x_open else -1
+    open_steps = int(round(x_open * spm))
+    close_steps = open_steps + direction * travel_steps
+    approach_steps = open_steps - direction * margin
+    end_steps = close_steps + direction * margin
+    for name, steps in (("approach", approach_steps), ("end", end_steps)):
+        x = steps / spm
+        if not lo - 1e-9 <= x <= hi + 1e-9:
+            raise PlanError(f"the sweep's {name} position {x:.4f} mm (sensor distance "
+                            f"{s0 + delta * x:.4f} mm) is outside the soft limits "
+                            f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
+    ramp_time = v_run / a_run
+    duration = 2 * ramp_time + (travel_steps + 2 * settle_steps +
+                                2 * ramp_steps - 2 * v_run * v_run / (2 * a_run) * spm) / (v_run * spm)
+    return CapturePlan(
+        setup=setup.name, stage=stage, steps_per_mm=spm,
+        sensor_start_mm=s_start, sensor_end_mm=s_end, translation_mm=travel,
+        exposure_s=float(sweep_range.exposure_s), velocity_mm_s=v, velocity_actual_mm_s=v_run,
+        step_rate=rate, accel_rate=accel, acceleration_mm_s2=a_run,
+        ramp_mm=ramp_steps / spm, settle_mm=settle_steps / spm, direction=direction,
+        sensor_distance_at_zero_mm=s0, sensor_direction=delta, mapping=mapping,
+        soft_limit_min_mm=lo, soft_limit_max_mm=hi,
+        approach_steps=approach_steps, open_steps=open_steps, close_steps=close_steps,
+        end_steps=end_steps, planned_exposure_s=planned_exposure, ramp_time_s=ramp_time,
+        sweep_duration_s=duration, positioning_velocity_mm_s=rig.max_velocity,
+        positioning_acceleration_mm_s2=rig.acceleration)

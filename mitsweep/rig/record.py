@@ -1,0 +1,243 @@
+"""The capture record: one JSON file per capture, written atomically, never lost.
+
+Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
+
+    complete        true only when the sweep ran to its end with the shutter cycle seen
+    status          "running" | "complete" | "interrupted" | "timeout" | "port lost" |
+                    "fault" | "error"
+    error           the reason, one line (null when complete)
+    setup           the setup (normalised, as setup_to_dict)
+    plan            the CapturePlan (positions, rates, planned exposure, sensor mapping)
+    ports, devices  what was opened and how the devices identified themselves
+    marks           host-time milestones (homed, at approach position, sweep started ...)
+    commands        every line sent and received: t_s (host monotonic, s since the
+                    capture started), device, dir ("tx"/"rx"), text
+    events          the Arduino's events (board µs clock, unwrapped)
+    stage_samples   Zaber position polls (host t_s, microsteps), zaber mode only
+    safety          what the safety path did (device, action, ok, detail)
+    measured        exposure: open/close times and positions, measured exposure;
+                    motion: time_s (from shutter open), position_mm, sensor_distance_mm
+
+``measured.motion`` is a measured motion profile: :func:`measured_motion` returns it as
+``(times_s, sensor_distance_mm)`` arrays, ready for
+``mitsweep.optics.motion.MotionProfile.tabulated(times, positions)``.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import logging
+import platform
+from pathlib import Path
+
+import numpy as np
+
+from .errors import RigError
+
+__all__ = ["FORMAT", "VERSION", "CaptureRecord", "load_capture_record", "measured_motion"]
+
+logger = logging.getLogger(__name__)
+
+FORMAT = "mitsweep-capture-record"
+VERSION = 1
+
+
+class CaptureRecord:
+    """Accumulates a capture as it happens; :meth:`save` writes it (atomically)."""
+
+    def __init__(self, *, setup, plan, log, ports=None, path=None) -> None:
+        self.setup = setup
+        self.plan = plan
+        self.log = log
+        self.ports = ports
+        self.path = Path(path) if path is not None else None
+        self.status = "running"
+        self.complete = False
+        self.error: str | None = None
+        self.devices: dict[str, str] = {}
+        self.homed = False
+        self.marks: list[dict] = []
+        self.safety_actions: list[dict] = []
+        self.board_events: list = []
+        self.stage_samples: list[tuple[float, int]] = []
+        self.clock_map: dict | None = None
+        self.created_utc = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+    # -- accumulate ---------------------------------------------------------------------
+    def mark(self, what: str) -> None:
+        self.marks.append({"t_s": round(self.log.now(), 6), "what": what})
+
+    def safety(self, device: str, action: str, *, ok: bool, detail: str = "") -> None:
+        self.safety_actions.append({"t_s": round(self.log.now(), 6), "device": device,
+                                    "action": action, "ok": ok, "detail": detail})
+
+    def set_board_events(self, events) -> None:
+        self.board_events = list(events)
+
+    def set_stage_samples(self, samples) -> None:
+        self.stage_samples = list(samples)
+
+    def finish(self, *, complete: bool, status: str, error: str | None = None) -> None:
+        if complete:
+            self.measurement(strict=True)   # a complete record has its measurement
+        self.complete, self.status, self.error = complete, status, error
+
+    # -- measurement --------------------------------------------------------------------
+    def _sweep_events(self):
+        evs = self.board_events
+        starts = [i for i, e in enumerate(evs) if e.name == "START"]
+        if self.plan.stage == "arduino" and starts:
+            evs = evs[starts[-1]:]
+        opens = [e for e in evs if e.name == "OPEN"]
+        closes = [e for e in evs if e.name == "CLOSE"]
+        return evs, (opens[-1] if opens else None), (closes[-1] if closes else None)
+
+    def measurement(self, *, strict: bool = False) -> dict | None:
+        """Measured exposure and motion, or None (``strict``: raise) when the shutter
+        cycle was not seen whole."""
+        plan = self.plan
+        evs, ev_open, ev_close = self._sweep_events()
+        if ev_open is None or ev_close is None or ev_close.t_us <= ev_open.t_us:
+            if strict:
+                raise RigError("capture: the shutter's OPEN/CLOSE events were not both seen")
+            return None
+        exposure = (ev_close.t_us - ev_open.t_us) * 1e-6
+        if plan.stage == "arduino":
+            pts = [(ev_open.t_us, ev_open.position)]
+            pts += [(e.t_us, e.position) for e in evs
+                    if e.name == "POS" and ev_open.t_us < e.t_us < ev_close.t_us]
+            pts.append((ev_close.t_us, ev_close.position))
+            t = np.array([(p[0] - ev_open.t_us) * 1e-6 for p in pts])
+            x = np.array([p[1] for p in pts], dtype=float) / plan.steps_per_mm
+            source = "arduino events (board micros clock)"
+            uncertainty = 1e-6
+        else:
+            if self.clock_map is None or len(self.stage_samples) < 2:
+                if strict:
+                    raise RigError("capture: no stage position samples to place the exposure")
+                return None
+            cm = self.clock_map
+            to_host = lambda t_us: cm["host_t_s"] + (t_us - cm["board_t_us"]) * 1e-6  # noqa: E731
+            h_open, h_close = to_host(ev_open.t_us), to_host(ev_close.t_us)
+            st = np.array([s[0] for s in self.stage_samples])
+            sx = np.array([s[1] for s in self.stage_samples], dtype=float) / plan.steps_per_mm
+            inside = (st > h_open) & (st < h_close)
+            t = np.concatenate([[h_open], st[inside], [h_close]]) - h_open
+            x = np.concatenate([[np.interp(h_open, st, sx)], sx[inside],
+                                [np.interp(h_close, st, sx)]])
+            source = "zaber position polls (host clock), interpolated at the shutter events"
+            uncertainty = cm["uncertainty_s"]
+        s = plan.sensor_distance(x)
+        return {
+            "exposure": {
+                "measured_exposure_s": exposure,
+                "planned_exposure_s": plan.planned_exposure_s,
+                "optical_exposure_s": plan.exposure_s,
+                "open_board_t_us": ev_open.t_us, "close_board_t_us": ev_close.t_us,
+                "open_position_mm": float(x[0]), "close_position_mm": float(x[-1]),
+                "open_sensor_distance_mm": float(s[0]),
+                "close_sensor_distance_mm": float(s[-1]),
+                "timing_uncertainty_s": uncertainty,
+            },
+            "motion": {"time_s": t.tolist(), "position_mm": x.tolist(),
+                       "sensor_distance_mm": s.tolist(), "source": source},
+        }
+
+    # -- output -------------------------------------------------------------------------
+    def as_dict(self) -> dict:
+        from .. import __version__
+        from ..config import setup_to_dict
+
+        ports = None
+        if self.ports is not None:
+            ports = {"arduino": self.ports.arduino, "zaber": self.ports.zaber,
+                     "checksums": self.ports.checksums}
+        return {
+            "format": FORMAT, "version": VERSION,
+            "complete": self.complete, "status": self.status, "error": self.error,
+            "created_utc": self.created_utc, "mitsweep_version": __version__,
+            "host": platform.node(),
+            "setup": setup_to_dict(self.setup), "plan": self.plan.as_dict(),
+            "ports": ports, "devices": dict(self.devices), "homed": self.homed,
+            "marks": list(self.marks),
+            "commands": self.log.as_list(),
+            "events": [e.as_dict() for e in self.board_events],
+            "stage_samples": [[round(t, 6), int(p)] for t, p in self.stage_samples],
+            "clock_map": self.clock_map,
+            "safety": list(self.safety_actions),
+            "measured": self.measurement(),
+        }
+
+    def save(self) -> Path | None:
+        """Write the record atomically to :attr:`path` (no-op without a path)."""
+        if self.path is None:
+            return None
+        from ..io.atomic import write_text_atomic
+
+        write_text_atomic(self.path, json.dumps(_jsonable(self.as_dict()), indent=1) + "\n")
+        return self.path
+
+
+def _jsonable(o):
+    if isinstance(o, float):
+        return o if np.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.generic):
+        return o.item()
+    return o
+
+
+def load_capture_record(path: str | Path) -> dict:
+    """Read a capture record; :class:`ValueError` if it is not one this version reads."""
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{p}: no such capture record") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{p}: not a JSON capture record ({exc})") from None
+    if not isinstance(data, dict) or data.get("format") != FORMAT:
+        raise ValueError(f"{p}: not a {FORMAT} file")
+    if data.get("version") != VERSION:
+        raise ValueError(f"{p}: capture record version {data.get('version')!r}, this "
+                         f"mitsweep reads version {VERSION}")
+    return data
+
+
+def measured_motion(record, *, require_complete: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """The measured motion profile of a capture: ``(times_s, sensor_distance_mm)``.
+
+    Parameters
+    ----------
+    record : dict or path
+        A record (as loaded by :func:`load_capture_record`) or its path.
+    require_complete : bool
+        Refuse a record marked incomplete (default).
+
+    Returns
+    -------
+    times_s : (n,) ndarray
+        Seconds since the shutter opened; ``times_s[-1]`` is the measured exposure.
+    sensor_distance_mm : (n,) ndarray
+        Lens-to-sensor distance at those times, mm.
+
+    Examples
+    --------
+    >>> from mitsweep.optics.motion import MotionProfile        # doctest: +SKIP
+    >>> profile = MotionProfile.tabulated(*measured_motion("capture.json"))  # doctest: +SKIP
+    """
+    if not isinstance(record, dict):
+        record = load_capture_record(record)
+    if require_complete and not record.get("complete"):
+        raise ValueError(f"capture record marked incomplete (status {record.get('status')!r}: "
+                         f"{record.get('error')}); pass require_complete=False to use it")
+    measured = record.get("measured")
+    if not measured:
+        raise ValueError("capture record holds no measured exposure (the shutter cycle "
+                         "was not seen whole)")
+    m = measured["motion"]
+    return np.asarray(m["time_s"], dtype=float), np.asarray(m["sensor_distance_mm"], dtype=float)

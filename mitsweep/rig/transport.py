@@ -1,0 +1,323 @@
+"""Line-based serial transport: deadlines on every read, strict framing, a timestamped log.
+
+A :class:`LineTransport` wraps any pyserial-like object (``write``, ``read``,
+``in_waiting``, ``timeout``, ``close``): a real port opened with :func:`open_port`, a pty
+served by :mod:`mitsweep.rig.simulator`, or a scripted byte stream in protocol tests
+(:mod:`mitsweep.rig.testing`). Drivers only see lines of text.
+
+Rules (so that a confused link never passes silently):
+
+- every read has a deadline; nothing at the deadline raises :class:`ReplyTimeout`, a
+  *partial* line at the deadline raises :class:`ProtocolError` (the device said
+  something, but not a whole line);
+- bytes outside printable ASCII in a line raise :class:`ProtocolError`;
+- an optional :class:`Checksum` is appended to every line sent and verified (and
+  stripped) on every line received;
+- a port that disappears (unplugged USB adapter, closed pty) raises :class:`PortLost`;
+- every line sent and received is appended to a :class:`CommandLog` with a monotonic
+  timestamp (seconds since the log was created) and the device's name.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from .errors import PortLost, PortUnavailable, ProtocolError, ReplyTimeout
+
+__all__ = ["LogEntry", "CommandLog", "Checksum", "XorChecksum", "ZaberChecksum",
+           "LineTransport", "open_port"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LogEntry:
+    """One line on a link: ``t_s`` seconds since the log started, ``device``,
+    ``direction`` (``"tx"`` host → device, ``"rx"`` device → host), ``text`` (without
+    the line terminator, with any checksum as it went over the wire)."""
+
+    t_s: float
+    device: str
+    direction: str
+    text: str
+
+    def as_dict(self) -> dict:
+        return {"t_s": round(self.t_s, 6), "device": self.device, "dir": self.direction,
+                "text": self.text}
+
+
+@dataclass
+class CommandLog:
+    """Thread-safe, append-only log of every line exchanged on one or more links.
+
+    ``t0`` is the ``time.monotonic()`` origin of the entries' ``t_s``; ``wall_t0`` the
+    matching UNIX time, for provenance.
+    """
+
+    t0: float = field(default_factory=time.monotonic)
+    wall_t0: float = field(default_factory=time.time)
+    entries: list[LogEntry] = field(default_factory=list)
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+
+    def now(self) -> float:
+        """Seconds since the log's origin (monotonic clock)."""
+        return time.monotonic() - self.t0
+
+    def add(self, device: str, direction: str, text: str, t_s: float | None = None) -> LogEntry:
+        entry = LogEntry(self.now() if t_s is None else t_s, device, direction, text)
+        with self._lock:
+            self.entries.append(entry)
+        logger.debug("%s %s %s", device, "<-" if direction == "tx" else "->", text)
+        return entry
+
+    def as_list(self) -> list[dict]:
+        with self._lock:
+            return [e.as_dict() for e in self.entries]
+
+
+class Checksum(Protocol):
+    """A line checksum: ``append(text) -> text_with_checksum``, ``strip(text) -> text``
+    (raises :class:`ProtocolError` when the checksum is missing or wrong)."""
+
+    def append(self, text: str) -> str: ...
+
+    def strip(self, text: str) -> str: ...
+
+
+class XorChecksum:
+    """NMEA-style checksum: ``TEXT*HH``, HH = XOR of every byte of TEXT, two upper-case
+    hex digits. Used by the project's Arduino sweep controller (``CHK 1``)."""
+
+    separator = "*"
+
+    @staticmethod
+    def value(text: str) -> int:
+        x = 0
+        for b in text.encode("ascii"):
+            x ^= b
+        return x
+
+    def append(self, text: str) -> str:
+        return f"{text}*{self.value(text):02X}"
+
+    def strip(self, text: str) -> str:
+        body, sep, tail = text.rpartition("*")
+        if not sep or len(tail) != 2:
+            raise ProtocolError(f"missing checksum in {text!r} (expected TEXT*HH)")
+        try:
+            got = int(tail, 16)
+        except ValueError:
+            raise ProtocolError(f"malformed checksum in {text!r}") from None
+        if got != self.value(body):
+            raise ProtocolError(f"bad checksum in {text!r}: expected "
+                                f"{self.value(body):02X}")
+        return body
+
+
+class ZaberChecksum:
+    """Zaber ASCII message checksum: ``/1 1 move abs 10000:HH``.
+
+    HH (two upper-case hex digits) is the 8-bit two's complement of the sum of the
+    message's bytes after the leading type character (``/``, ``@``, ``#`` or ``!``) and
+    before the colon, so that the bytes and the checksum sum to 0 modulo 256 (Zaber
+    ASCII protocol manual, "Checksumming").
+    """
+
+    @staticmethod
+    def value(text: str) -> int:
+        return (-sum(text[1:].encode("ascii"))) & 0xFF
+
+    def append(self, text: str) -> str:
+        return f"{text}:{self.value(text):02X}"
+
+    def strip(self, text: str) -> str:
+        body, sep, tail = text.rpartition(":")
+        if not sep or len(tail) != 2:
+            raise ProtocolError(f"missing checksum in {text!r} (expected MESSAGE:HH)")
+        try:
+            got = int(tail, 16)
+        except ValueError:
+            raise ProtocolError(f"malformed checksum in {text!r}") from None
+        if got != self.value(body):
+            raise ProtocolError(f"bad checksum in {text!r}: expected {self.value(body):02X}")
+        return body
+
+
+def open_port(port: str, *, baudrate: int = 115200, name: str | None = None):
+    """Open a serial port with pyserial (8N1, no flow control), non-blocking reads.
+
+    Raises
+    ------
+    PortUnavailable
+        The port does not exist or cannot be opened (busy, permissions): the message
+        names it. Raised before anything is sent.
+    """
+    import serial
+
+    try:
+        ser = serial.serial_for_url(port, baudrate=baudrate, timeout=0, write_timeout=1.0,
+                                    exclusive=True)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise PortUnavailable(f"{name or 'serial port'} {port!r}: cannot open ({exc})") from None
+    return ser
+
+
+class LineTransport:
+    """Lines of ASCII text over a byte stream, with deadlines and a log.
+
+    Parameters
+    ----------
+    serial : pyserial-like
+        Owned by the transport from now on (closed by :meth:`close`).
+    name : str
+        Device name in the log and in error messages (e.g. ``"arduino"``).
+    log : CommandLog, optional
+        Shared log (one per capture); a new one by default.
+    eol : bytes
+        Terminator appended to every line sent.
+    checksum : Checksum, optional
+        Appended to every line sent, verified on every line received. Can be set later
+        (:attr:`checksum`), e.g. after the device has been told to use one.
+    timeout_s : float
+        Default deadline of :meth:`read_line`, seconds.
+    """
+
+    def __init__(self, serial, *, name: str = "device", log: CommandLog | None = None,
+                 eol: bytes = b"\n", checksum: Checksum | None = None,
+                 timeout_s: float = 1.0) -> None:
+        self.serial = serial
+        self.name = name
+        self.log = log if log is not None else CommandLog()
+        self.eol = eol
+        self.checksum = checksum
+        self.timeout_s = float(timeout_s)
+        self._buffer = bytearray()
+        self._lost: str | None = None
+
+    # -- output -------------------------------------------------------------------------
+    def write_line(self, text: str) -> None:
+        """Send ``text`` (+ checksum) + eol. Raises :class:`PortLost` on a dead port."""
+        wire = self.checksum.append(text) if self.checksum is not None else text
+        data = wire.encode("ascii") + self.eol
+        self._check_alive()
+        try:
+            self.serial.write(data)
+            flush = getattr(self.serial, "flush", None)
+            if flush is not None:
+                flush()
+        except Exception as exc:  # pyserial raises SerialException / OSError / SerialTimeout
+            self._mark_lost(exc)
+        self.log.add(self.name, "tx", wire)
+
+    # -- input --------------------------------------------------------------------------
+    def read_line(self, timeout_s: float | None = None, *, deadline: float | None = None) -> str:
+        """The next whole line (terminator and checksum stripped), waiting at most
+        ``timeout_s`` (default :attr:`timeout_s`) or until the monotonic ``deadline``.
+
+        Accepts ``\\n``, ``\\r\\n`` and ``\\r`` line ends (Zaber devices send CR LF).
+        """
+        if deadline is None:
+            deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
+        while True:
+            line = self._pop_line()
+            if line is not None:
+                return self._accept(line)
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                if self._buffer:
+                    partial = bytes(self._buffer)
+                    self._buffer.clear()
+                    self.log.add(self.name, "rx", partial.decode("ascii", "replace") + " <partial>")
+                    raise ProtocolError(f"{self.name}: partial line {partial!r} at the deadline "
+                                        f"(no line terminator)")
+                raise ReplyTimeout(f"{self.name}: no reply within the deadline")
+            self._fill(min(remaining, 0.05))
+
+    def pending(self) -> bool:
+        """True if a whole line is already buffered or waiting on the port."""
+        self._fill(0.0)
+        return self._has_line()
+
+    def drain(self) -> list[str]:
+        """Read and log whatever is waiting now (used after a reset); returns raw texts."""
+        out = []
+        self._fill(0.0)
+        while (line := self._pop_line()) is not None:
+            text = line.decode("ascii", "replace")
+            self.log.add(self.name, "rx", text + " <drained>")
+            out.append(text)
+        return out
+
+    def close(self) -> None:
+        try:
+            self.serial.close()
+        except Exception:  # closing a dead port must not raise during cleanup
+            logger.debug("%s: error while closing", self.name, exc_info=True)
+
+    # -- internals ----------------------------------------------------------------------
+    def _check_alive(self) -> None:
+        if self._lost is not None:
+            raise PortLost(f"{self.name}: port lost ({self._lost})")
+
+    def _mark_lost(self, exc: BaseException) -> None:
+        self._lost = str(exc) or type(exc).__name__
+        self.log.add(self.name, "rx", f"<port lost: {self._lost}>")
+        raise PortLost(f"{self.name}: port lost ({self._lost})") from None
+
+    def _has_line(self) -> bool:
+        return b"\n" in self._buffer or b"\r" in self._buffer
+
+    def _pop_line(self) -> bytes | None:
+        # skip empty lines produced by CR LF pairs
+        while True:
+            idx = [i for i in (self._buffer.find(b"\n"), self._buffer.find(b"\r")) if i >= 0]
+            if not idx:
+                return None
+            i = min(idx)
+            line = bytes(self._buffer[:i])
+            del self._buffer[:i + 1]
+            if line:
+                return line
+
+    def _fill(self, wait_s: float) -> None:
+        self._check_alive()
+        try:
+            waiting = self.serial.in_waiting
+            if waiting:
+                self._buffer += self.serial.read(waiting)
+                return
+            if wait_s <= 0:
+                return
+            self.serial.timeout = wait_s
+            try:
+                chunk = self.serial.read(1)
+            finally:
+                self.serial.timeout = 0
+            if chunk:
+                self._buffer += chunk
+                waiting = self.serial.in_waiting
+                if waiting:
+                    self._buffer += self.serial.read(waiting)
+        except Exception as exc:
+            if isinstance(exc, (ProtocolError, ReplyTimeout)):
+                raise
+            self._mark_lost(exc)
+
+    def _accept(self, raw: bytes) -> str:
+        try:
+            text = raw.decode("ascii")
+        except UnicodeDecodeError:
+            text = None
+        if text is None or not text.isprintable():
+            shown = raw.decode("ascii", "replace")
+            self.log.add(self.name, "rx", shown + " <garbage>")
+            raise ProtocolError(f"{self.name}: garbage on the line: {raw[:40]!r}")
+        self.log.add(self.name, "rx", text)
+        if self.checksum is not None:
+            text = self.checksum.strip(text)
+        return text
+

@@ -1,0 +1,254 @@
+"""Driver for a Zaber linear stage speaking the Zaber ASCII protocol.
+
+Messages (Zaber ASCII protocol manual): commands ``/<device> <axis> [<id>] <command>
+[<data>][:<checksum>]`` end in ``\\n``; replies ``@<dd> <a> [<id>] <OK|RJ> <IDLE|BUSY>
+<warning flag> <data>[:<checksum>]`` end in ``\\r\\n``. Info lines start with ``#`` and
+alerts with ``!``. The warning flag is ``--`` when nothing is pending, otherwise the
+highest-priority flag: ``F*`` are faults (``FS`` stalled and stopped, ``FD`` driver
+disabled, ``FQ`` encoder error, ``FF`` critical system error, ...), ``W*`` warnings
+(``WR`` no reference position: the stage must be homed), ``N*`` notes (``NI`` a
+movement was interrupted by a new command, ``NC`` manual control). A rejected command
+(``RJ``) carries the reason as data (``BADDATA``, ``BADCOMMAND``, ``BADAXIS``, ...).
+
+Units: positions in microsteps; ``maxspeed`` in microsteps/s × 1.6384; ``accel`` in
+microsteps/s² × 1.6384 / 10 (the protocol's native data units). ``steps_per_mm`` is the
+stage's microsteps per millimetre (1 / microstep size).
+
+Only one stage is driven; the Arduino only fires the shutter in this configuration.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+from dataclasses import dataclass
+
+from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
+from .interfaces import Stage, StageState
+from .transport import LineTransport, ZaberChecksum
+
+__all__ = ["ZaberStage", "ZaberReply", "SPEED_UNIT", "ACCEL_UNIT", "FAULT_FLAGS",
+           "parse_reply", "speed_data", "accel_data"]
+
+logger = logging.getLogger(__name__)
+
+#: maxspeed data value per microstep/s (Zaber ASCII protocol).
+SPEED_UNIT = 1.6384
+#: accel data value per microstep/s².
+ACCEL_UNIT = 1.6384 / 10.0
+FAULT_FLAGS = {"FF": "critical system error", "FD": "driver disabled", "FQ": "encoder error",
+               "FS": "stalled and stopped", "FT": "excessive twist", "FB": "stream bounds error",
+               "FP": "interpolated path deviation", "FE": "limit error",
+               "FM": "unexpected limit trigger", "FO": "overdrive limit exceeded",
+               "FH": "hardware emergency stop"}
+_NOT_HOMED = ("WR", "WH")
+
+_REPLY_RE = re.compile(r"^@(\d{2}) (\d+) (?:(\d{1,2}) )?(OK|RJ) (IDLE|BUSY) ([A-Z-]{2}) (\S.*)$")
+
+
+def speed_data(mm_s: float, steps_per_mm: float) -> int:
+    """A velocity (mm/s) as a ``maxspeed`` data value."""
+    return int(round(mm_s * steps_per_mm * SPEED_UNIT))
+
+
+def accel_data(mm_s2: float, steps_per_mm: float) -> int:
+    """An acceleration (mm/s²) as an ``accel`` data value."""
+    return int(round(mm_s2 * steps_per_mm * ACCEL_UNIT))
+
+
+@dataclass(frozen=True)
+class ZaberReply:
+    device: int
+    axis: int
+    message_id: int | None
+    ok: bool
+    busy: bool
+    flag: str
+    data: str
+
+
+def parse_reply(line: str) -> ZaberReply:
+    """Parse a reply line (checksum already stripped); :class:`ProtocolError` if it is
+    not one."""
+    m = _REPLY_RE.match(line)
+    if not m:
+        raise ProtocolError(f"zaber: not a reply: {line!r}")
+    dev, axis, mid, flag_ok, status, warn, data = m.groups()
+    return ZaberReply(int(dev), int(axis), int(mid) if mid is not None else None,
+                      flag_ok == "OK", status == "BUSY", warn, data)
+
+
+class ZaberStage(Stage):
+    """A Zaber stage (one axis) on an ASCII-protocol link.
+
+    Parameters
+    ----------
+    transport : LineTransport
+        Link to the daisy chain (``eol = b"\\n"``; replies end in CR LF).
+    steps_per_mm : float
+        Microsteps per millimetre of this stage.
+    device, axis : int
+        Address on the chain (1..99) and axis (1..9).
+    message_ids : bool
+        Tag every command with a message id (0..99) and require it in the reply.
+    """
+
+    name = "zaber"
+
+    def __init__(self, transport: LineTransport, *, steps_per_mm: float, device: int = 1,
+                 axis: int = 1, message_ids: bool = False) -> None:
+        self.transport = transport
+        self.steps_per_mm = float(steps_per_mm)
+        self.device = int(device)
+        self.axis = int(axis)
+        self.message_ids = message_ids
+        self._next_id = 0
+        self.alerts: list[str] = []
+        self.samples: list[tuple[float, int]] = []  # (host log time s, microsteps) from polls
+
+    def enable_checksums(self) -> None:
+        """Append and require Zaber checksums on every message from now on."""
+        self.transport.checksum = ZaberChecksum()
+
+    # -- commands -----------------------------------------------------------------------
+    def command(self, text: str, *, axis: int | None = None, allow_rejection: bool = False,
+                check_faults: bool = True) -> ZaberReply:
+        """Send one command and return its reply.
+
+        Raises
+        ------
+        DeviceError
+            ``RJ`` (unless ``allow_rejection``).
+        DeviceFault
+            A fault (``F*``) warning flag, unless ``check_faults`` is False.
+        """
+        ax = self.axis if axis is None else axis
+        mid = None
+        if self.message_ids:
+            mid = self._next_id
+            self._next_id = (self._next_id + 1) % 100
+            wire = f"/{self.device} {ax} {mid} {text}"
+        else:
+            wire = f"/{self.device} {ax} {text}"
+        self.transport.write_line(wire)
+        deadline = time.monotonic() + self.transport.timeout_s
+        while True:
+            try:
+                line = self.transport.read_line(deadline=deadline)
+            except ReplyTimeout:
+                raise ReplyTimeout(f"{self.name}: no reply to {wire!r}") from None
+            if line.startswith("!") or line.startswith("#"):
+                self.alerts.append(line)   # alerts and info lines are logged, not replies
+                continue
+            reply = parse_reply(line)
+            if (reply.device, reply.axis) != (self.device, ax) or reply.message_id != mid:
+                raise ProtocolError(f"{self.name}: reply {line!r} does not answer {wire!r}")
+            if not reply.ok and not allow_rejection:
+                raise DeviceError(f"{self.name}: {text!r} rejected ({reply.data})")
+            if check_faults and reply.flag in FAULT_FLAGS:
+                raise DeviceFault(f"{self.name}: fault {reply.flag} "
+                                  f"({FAULT_FLAGS[reply.flag]}) after {text!r}")
+            return reply
+
+    def identify(self) -> str:
+        reply = self.command("get deviceid", axis=0)
+        if not reply.data.isdigit():
+            raise ProtocolError(f"{self.name}: device id {reply.data!r} is not a number")
+        return f"zaber device id {reply.data} at address {self.device}"
+
+    def get_position(self) -> tuple[int, ZaberReply]:
+        reply = self.command("get pos")
+        try:
+            pos = int(reply.data)
+        except ValueError:
+            raise ProtocolError(f"{self.name}: position {reply.data!r} is not an integer") from None
+        self.samples.append((self.transport.log.now(), pos))
+        return pos, reply
+
+    def state(self) -> StageState:
+        pos, reply = self.get_position()
+        homed = reply.flag not in _NOT_HOMED
+        return StageState(position_mm=pos / self.steps_per_mm if homed else None, homed=homed,
+                          moving=reply.busy, fault=reply.flag if reply.flag in FAULT_FLAGS else None)
+
+    def set_soft_limits(self, lo_mm: float, hi_mm: float) -> None:
+        self.command(f"set limit.min {self.steps(lo_mm)}")
+        self.command(f"set limit.max {self.steps(hi_mm)}")
+
+    def set_motion(self, velocity_mm_s: float, acceleration_mm_s2: float) -> None:
+        v = speed_data(velocity_mm_s, self.steps_per_mm)
+        a = accel_data(acceleration_mm_s2, self.steps_per_mm)
+        if v < 1 or a < 1:
+            raise DeviceError(f"{self.name}: {velocity_mm_s:g} mm/s or {acceleration_mm_s2:g} "
+                              f"mm/s² is below the stage's resolution")
+        self.command(f"set maxspeed {v}")
+        self.command(f"set accel {a}")
+
+    def home(self, *, velocity_mm_s: float, timeout_s: float) -> None:
+        self.command("home")
+        self.wait_idle(timeout_s=timeout_s)
+
+    def start_move(self, position_mm: float) -> int:
+        target = self.steps(position_mm)
+        self.command(f"move abs {target}")
+        return target
+
+    def move_to(self, position_mm: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
+                timeout_s: float) -> float:
+        self.set_motion(velocity_mm_s, acceleration_mm_s2)
+        target = self.start_move(position_mm)
+        pos = self.wait_idle(timeout_s=timeout_s)
+        if pos != target:
+            raise ProtocolError(f"{self.name}: move ended at {pos}, not {target} microsteps")
+        return pos / self.steps_per_mm
+
+    def wait_idle(self, *, timeout_s: float, poll_s: float = 0.0) -> int:
+        """Poll ``get pos`` until IDLE; returns the final position (microsteps). Every poll
+        is kept in :attr:`samples` (the measured motion)."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            pos, reply = self.get_position()
+            if not reply.busy:
+                return pos
+            if time.monotonic() > deadline:
+                raise ReplyTimeout(f"{self.name}: still moving after {timeout_s:.1f} s")
+            if poll_s:
+                time.sleep(poll_s)
+
+    def stop(self) -> None:
+        # the safety path: a fault flag must not prevent the stop from being sent
+        self.command("stop", check_faults=False, allow_rejection=True)
+
+    def safe_stop(self, *, timeout_s: float = 1.0) -> None:
+        """Safety path: ``stop``, tolerant of stray lines from an interrupted exchange."""
+        try:
+            self.transport.drain()
+        except Exception:  # noqa: BLE001
+            logger.debug("%s: drain before stop failed", self.name, exc_info=True)
+        wire = f"/{self.device} {self.axis} stop"
+        self.transport.write_line(wire)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                line = self.transport.read_line(deadline=deadline)
+            except ProtocolError:
+                continue
+            if line.startswith(f"@{self.device:02d} {self.axis} "):
+                return
+
+    def warnings(self) -> list[str]:
+        """Active warning flags (``warnings`` command)."""
+        reply = self.command("warnings", check_faults=False)
+        parts = reply.data.split()
+        try:
+            n = int(parts[0])
+        except (ValueError, IndexError):
+            raise ProtocolError(f"{self.name}: bad warnings reply {reply.data!r}") from None
+        if len(parts) != n + 1:
+            raise ProtocolError(f"{self.name}: warnings reply {reply.data!r} lists "
+                                f"{len(parts) - 1} flags, says {n}")
+        return parts[1:]
+
+    def steps(self, mm: float) -> int:
+        return int(round(mm * self.steps_per_mm))
