@@ -16,6 +16,7 @@ COMMANDS = [
     "demo",
     "sweep_range",
     "bench",
+    "capture",
 ]
 
 

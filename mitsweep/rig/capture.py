@@ -132,7 +132,7 @@ def _safe_stop(dev: _Devices, record: CaptureRecord) -> None:
                 logger.error("safety: %s: %s failed: %s", device, action, exc)
 
 
-def _status_of(exc: BaseException) -> str:
+def status_of(exc: BaseException) -> str:
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted"
     if isinstance(exc, PortLost):
@@ -286,7 +286,7 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
             record.set_board_events(dev.arduino.events)
             if dev.zaber is not None:
                 record.set_stage_samples(dev.zaber.samples)
-            record.finish(complete=False, status=_status_of(exc),
+            record.finish(complete=False, status=status_of(exc),
                           error=str(exc) or type(exc).__name__)
             record.save()
             raise
