@@ -1,0 +1,377 @@
+r"""Polar-domain deconvolution for rotationally symmetric setups (paper Sec. 5, Fig. 8).
+
+For an untilted mirror the IPSF depends only on the radius of the image point and
+rotates with its polar angle, so in polar coordinates (radius on axis 0, angle on
+axis 1) the blur is *circulant in angle*. The pipeline:
+
+1. Cartesian → polar (:func:`to_polar`) on a :class:`PolarGrid` with ≥ 2πR angles at a
+   fast FFT length and radially oversampled rows (cubic splines; rows continue through
+   the centre to negative radii, so the centre needs no special boundary);
+2. FFT along the angle (exact: the angle axis is periodic, no padding needed);
+3. the radius is cut into overlapping bands with hat windows that sum to one; each band
+   is restored with the Wiener filter of the bank's IPSF interpolated at the band's
+   radius, its transfer function evaluated analytically in (radial frequency,
+   angular harmonic m), where harmonic m is tangential frequency m / (2π r) cycles/px;
+4. polar → Cartesian (:func:`from_polar`) after band-limited (FFT) upsampling in angle.
+
+The small disk around the centre, where a polar grid cannot describe a kernel, is
+restored in Cartesian coordinates with the centre IPSF and blended in smoothly.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft as sfft
+import scipy.ndimage as ndi
+
+from ..io.bank import IPSFBank
+from .kernels import (check_bank_matches, interpolate_radial, optical_center, radii_px,
+                      select_depth)
+from .spatial import hat_weights
+from .wiener import (estimate_nsr, regulariser, wiener_deconvolve, wiener_filter,
+                     working_dtype)
+
+__all__ = ["PolarGrid", "polar_grid", "to_polar", "from_polar", "polar_deconvolve"]
+
+log = logging.getLogger(__name__)
+
+_WRAP = 12  # angle columns added on each side so the spline sees a periodic signal
+            # (the cubic B-spline prefilter decays as 0.268^n: 0.268^12 ≈ 1e-7)
+
+
+@dataclass(frozen=True)
+class PolarGrid:
+    """A polar sampling of an image: ``radii`` (rows) × ``angles`` (columns).
+
+    Attributes
+    ----------
+    center : (row, col)
+        Pixel coordinates of the pole (the optical axis).
+    radial_step : float
+        Radial sample spacing, pixels.
+    n_inner : int
+        Rows at negative radius (the ray through the centre continued: radius −r at
+        angle θ is the point at radius r, angle θ + π).
+    n_radii, n_angles : int
+        Grid size; ``n_angles`` is a fast FFT length.
+    r_max : float
+        Pixels farther than this from the pole are not mapped back.
+    """
+
+    center: tuple[float, float]
+    radial_step: float
+    n_inner: int
+    n_radii: int
+    n_angles: int
+    r_max: float
+
+    @property
+    def radii(self) -> np.ndarray:
+        """(n_radii,) radius of each row, pixels."""
+        return (np.arange(self.n_radii) - self.n_inner) * self.radial_step
+
+    @property
+    def angle_step(self) -> float:
+        return 2 * math.pi / self.n_angles
+
+    @property
+    def angles(self) -> np.ndarray:
+        """(n_angles,) polar angle of each column, radians, counter-clockwise from +u."""
+        return np.arange(self.n_angles) * self.angle_step
+
+    def row_of(self, r) -> np.ndarray:
+        """Fractional row index of radius ``r`` (pixels)."""
+        return np.asarray(r) / self.radial_step + self.n_inner
+
+
+def polar_grid(shape: tuple[int, ...], *, center: tuple[float, float] | None = None,
+               r_max: float | None = None, radial_oversampling: float = 1.5,
+               angular_oversampling: float = 1.25, inner_px: float = 4.0,
+               outer_px: float = 4.0) -> PolarGrid:
+    """The polar grid for an image of ``shape``.
+
+    Parameters
+    ----------
+    center : (row, col), optional
+        Pole in pixel coordinates; default the optical axis (image centre).
+    r_max : float, optional
+        Largest radius mapped back, pixels; default the farthest image corner.
+    radial_oversampling : float
+        Rows per pixel of radius (1.5: 0.67 px spacing).
+    angular_oversampling : float
+        Angles per pixel of circumference at ``r_max``: ``n_angles =
+        next_fast_len(ceil(2π r_max · angular_oversampling))`` (≥ 2π r_max).
+    inner_px, outer_px : float
+        Extra rows below radius 0 and beyond ``r_max`` (context for filters and splines).
+
+    Notes
+    -----
+    The defaults were chosen by measuring the round trip (:func:`to_polar` then
+    :func:`from_polar`) on scikit-image's camera and astronaut photographs (sharp to the
+    pixel): 56–58 dB PSNR inside the disk; ``radial_oversampling=1`` gives 43–45 dB.
+    """
+    if len(shape) < 2 or shape[0] < 2 or shape[1] < 2:
+        raise ValueError(f"image shape must be (H, W[, C]) with H, W >= 2, got {tuple(shape)}")
+    if not radial_oversampling > 0 or not angular_oversampling >= 1:
+        raise ValueError("radial_oversampling must be > 0 and angular_oversampling >= 1, got "
+                         f"{radial_oversampling}, {angular_oversampling}")
+    cy, cx = optical_center(shape) if center is None else (float(center[0]), float(center[1]))
+    H, W = shape[:2]
+    if r_max is None:
+        r_max = max(math.hypot(y - cy, x - cx) for y in (-0.5, H - 0.5) for x in (-0.5, W - 0.5))
+    r_max = float(r_max)
+    if not r_max > 1:
+        raise ValueError(f"r_max must be > 1 pixel, got {r_max}")
+    step = 1.0 / float(radial_oversampling)
+    n_inner = int(math.ceil(inner_px / step)) + 2
+    n_outer = int(math.ceil((r_max + outer_px) / step)) + 3
+    n_angles = sfft.next_fast_len(int(math.ceil(2 * math.pi * r_max * angular_oversampling)))
+    return PolarGrid(center=(cy, cx), radial_step=step, n_inner=n_inner,
+                     n_radii=n_inner + n_outer, n_angles=n_angles, r_max=r_max)
+
+
+def _channels(image: np.ndarray) -> tuple[np.ndarray, bool]:
+    img = np.asarray(image)
+    if img.ndim == 2:
+        return img[..., None], True
+    if img.ndim == 3:
+        return img, False
+    raise ValueError(f"image must be (H, W) or (H, W, C), got shape {img.shape}")
+
+
+def to_polar(image: np.ndarray, grid: PolarGrid, *, order: int = 3) -> np.ndarray:
+    """Sample ``image`` on ``grid``: (n_radii, n_angles[, C]), radius on axis 0.
+
+    Cubic B-spline interpolation (``order``); outside the image the image is mirrored
+    (``mode="reflect"``). float32 stays float32.
+    """
+    img, squeeze = _channels(image)
+    dt = working_dtype(img)
+    r = grid.radii.astype(dt)[:, None]
+    th = grid.angles
+    rows = grid.center[0] - r * np.sin(th).astype(dt)[None, :]
+    cols = grid.center[1] + r * np.cos(th).astype(dt)[None, :]
+    out = np.empty((grid.n_radii, grid.n_angles, img.shape[2]), dtype=dt)
+    for c in range(img.shape[2]):
+        coef = ndi.spline_filter(img[..., c].astype(dt, copy=False), order=order, output=dt,
+                                 mode="mirror") if order > 1 else img[..., c]
+        ndi.map_coordinates(coef, [rows, cols], order=order, mode="mirror", prefilter=False,
+                            output=out[..., c])
+    return out[..., 0] if squeeze else out
+
+
+def from_polar(polar: np.ndarray, grid: PolarGrid, shape: tuple[int, int], *,
+               order: int = 3, upsample: float = 1.5,
+               outside: np.ndarray | None = None) -> np.ndarray:
+    """Map a polar image back to Cartesian pixels of ``shape`` (H, W).
+
+    Parameters
+    ----------
+    polar : (n_radii, n_angles[, C]) ndarray
+    upsample : float
+        Angle samples are first multiplied by this factor by zero-padding their FFT
+        (exact for the band-limited periodic signal), so that the spline's error in angle
+        stays small at the rim.
+    outside : (H, W[, C]) ndarray, optional
+        Values for pixels farther than ``grid.r_max`` from the pole (default 0).
+
+    Returns
+    -------
+    (H, W[, C]) ndarray
+    """
+    pol, squeeze = _channels(polar)
+    if pol.shape[:2] != (grid.n_radii, grid.n_angles):
+        raise ValueError(f"polar image must be ({grid.n_radii}, {grid.n_angles}[, C]), "
+                         f"got {polar.shape}")
+    spec = sfft.rfft(pol, axis=1, workers=-1)
+    out = _from_angle_spectrum(spec, grid, shape, order=order, upsample=upsample,
+                               outside=outside, dtype=working_dtype(pol))
+    return out[..., 0] if squeeze else out
+
+
+def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
+    """``from_polar`` given the rfft along angle: (n_radii, n_angles//2+1, C) complex."""
+    H, W = int(shape[0]), int(shape[1])
+    C = spec.shape[2]
+    n2 = sfft.next_fast_len(int(math.ceil(grid.n_angles * max(1.0, upsample))))
+    up = sfft.irfft(spec, n=n2, axis=1, workers=-1) * (n2 / grid.n_angles)
+    up = np.concatenate([up[:, -_WRAP:], up, up[:, :_WRAP]], axis=1).astype(dtype, copy=False)
+    cy, cx = grid.center
+    yy, xx = np.mgrid[0:H, 0:W]
+    dy, dx = cy - yy, xx - cx
+    rr = np.hypot(dy, dx)
+    inside = rr <= grid.r_max
+    th = np.mod(np.arctan2(dy[inside], dx[inside]), 2 * math.pi)
+    coords = [grid.row_of(rr[inside]), th * (n2 / (2 * math.pi)) + _WRAP]
+    if outside is None:
+        out = np.zeros((H, W, C), dtype=dtype)
+    else:
+        o = np.asarray(outside, dtype=dtype)
+        out = (o[..., None] if o.ndim == 2 else o).copy()
+        if out.shape != (H, W, C):
+            raise ValueError(f"outside must be {(H, W, C)}, got {o.shape}")
+    for c in range(C):
+        out[inside, c] = ndi.map_coordinates(up[..., c], coords, order=order, mode="nearest")
+    return out
+
+
+def _radial_resample(k: np.ndarray, step: float) -> np.ndarray:
+    """Kernel columns (the radial axis) resampled at ``step`` px: (K, 2n+1), i=0 at n."""
+    K0, K1 = k.shape
+    n = int(math.floor((K1 // 2) / step))
+    cols = K1 // 2 + np.arange(-n, n + 1) * step
+    rows = np.arange(K0, dtype=np.float64)
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    out = ndi.map_coordinates(k, [rr, cc], order=3, mode="constant", cval=0.0)
+    return np.clip(out, 0, None)
+
+
+def _band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
+                   cdt) -> np.ndarray:
+    """Transfer function (L, M) of kernel ``k`` at radius ``r_band`` on the polar grid.
+
+    Tangential pixel offset t (kernel rows, upward = counter-clockwise) becomes angle
+    t / r, so harmonic m sees the phase exp(−i m t / r); radial offsets are resampled at
+    the grid's step and transformed by an FFT of length L.
+    """
+    kr = _radial_resample(k, step)                           # (K, 2n+1)
+    K0 = k.shape[0]
+    t = -(np.arange(K0) - K0 // 2).astype(np.float64)        # tangential offset, px
+    m = np.arange(M, dtype=np.float64)
+    E = np.exp(-1j * np.outer(t, m) / max(r_band, 1e-9))     # (K, M)
+    T = kr.T @ E                                            # (2n+1, M): radial i × harmonic
+    n = (kr.shape[1] - 1) // 2
+    if 2 * n + 1 > L:
+        raise ValueError(f"band of {L} rows is shorter than the kernel ({2 * n + 1} rows)")
+    big = np.zeros((L, M), dtype=np.complex128)
+    big[:n + 1] = T[n:]
+    if n:
+        big[-n:] = T[:n]
+    Hb = sfft.fft(big, axis=0, workers=-1)
+    return (Hb / Hb[0, 0].real).astype(cdt)
+
+
+def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
+                     center: tuple[float, float] | None = None, nsr: float | None = None,
+                     prior: str = "constant", depth_mm: float | str | None = None,
+                     r_max: float | None = None, radial_oversampling: float = 1.5,
+                     angular_oversampling: float = 1.25, band_spacing: float = 0.25,
+                     margin: int | None = None) -> np.ndarray:
+    r"""Deconvolve a focal-sweep image of a rotationally symmetric setup in polar space.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        Focal-sweep image on the bank's reference pixel grid; float32 stays float32.
+    bank : IPSFBank
+        A ``kind="radial"`` bank (kernels for points on the +u axis).
+    center : (row, col), optional
+        Pole, pixels; default the optical axis (image centre).
+    nsr, prior
+        Wiener regulariser, see :func:`~mitsweep.deconv.wiener.wiener_deconvolve`.
+        ``nsr=None`` estimates it from the image.
+    depth_mm
+        Bank depth to use (:func:`~mitsweep.deconv.kernels.select_depth`; default
+        500 mm as in the paper).
+    r_max : float, optional
+        Radius (pixels) of the region restored, default the largest bank radius plus a
+        kernel size, capped at the farthest corner; pixels beyond are returned unchanged.
+    radial_oversampling, angular_oversampling
+        Polar sampling (:func:`polar_grid`).
+    band_spacing : float
+        Relative radial spacing of the band centres (0.25: a band every 25 % of radius,
+        at least one kernel size apart): the IPSF and its angular scale 1/r are
+        treated as constant across a band and interpolated between bands.
+    margin : int, optional
+        Context pixels around each band for its filter (default 3 K).
+
+    Returns
+    -------
+    (H, W) or (H, W, C) ndarray
+
+    Notes
+    -----
+    With polar samples :math:`y(r_j, \theta_k)` and their DFT along angle
+    :math:`Y_j(m)`, band b (centre radius :math:`r_b`, window :math:`w_b(r)`) computes
+
+    .. math:: \hat X_b(\nu, m) = \frac{H_b^*(\nu, m)}{|H_b(\nu, m)|^2 + R(\nu, m / 2\pi r_b)}
+              \, \mathcal{F}_r[Y(m)](\nu),
+              \qquad H_b(\nu, m) = \sum_{s, t} k_b(s, t)\, e^{-2\pi i \nu s} e^{-i m t / r_b}
+
+    (s, t radial and tangential offsets in pixels) and the result is
+    :math:`\sum_b w_b \hat x_b`, mapped back to Cartesian pixels.
+    """
+    img, squeeze = _channels(image)
+    check_bank_matches(bank, img.shape)
+    dt = working_dtype(img)
+    cdt = np.complex64 if dt == np.float32 else np.complex128
+    img = img.astype(dt, copy=False)
+    if not np.all(np.isfinite(img)):
+        raise ValueError("image holds NaN or inf values")
+    kernels = select_depth(bank, depth_mm)
+    rad = radii_px(bank)
+    K = kernels.shape[-1]
+    if nsr is None:
+        nsr = estimate_nsr(img)
+        log.info("estimated NSR %.3g", nsr)
+    H, W = img.shape[:2]
+    corner = polar_grid(img.shape).r_max if center is None else None
+    if r_max is None:
+        far = corner if corner is not None else polar_grid(img.shape, center=center).r_max
+        r_max = min(float(rad.max()) + K, far)
+    m_px = 3 * K if margin is None else int(margin)
+    grid = polar_grid(img.shape, center=center, r_max=r_max,
+                      radial_oversampling=radial_oversampling,
+                      angular_oversampling=angular_oversampling, inner_px=m_px, outer_px=m_px)
+    step = grid.radial_step
+    pol = to_polar(img, grid)                                          # (n_r, n_th, C)
+    spec = sfft.rfft(pol, axis=1, workers=-1).astype(cdt, copy=False)  # (n_r, M, C)
+    del pol
+    n_r, M = spec.shape[:2]
+
+    r_in = max(2.0 * K, 8.0)                   # Cartesian disk around the pole
+    centres = [r_in / 2]
+    while centres[-1] < grid.r_max:
+        centres.append(centres[-1] + max(band_spacing * centres[-1], float(K)))
+    centres[-1] = max(min(centres[-1], grid.r_max), centres[-2] + 1.0)
+    centres = np.asarray(centres)
+    weights = hat_weights(grid.radii, centres)                         # (n_b, n_r)
+    m_rows = int(math.ceil(m_px / step))
+    acc = np.zeros_like(spec)
+    nu = None
+    for b, rb in enumerate(centres):
+        lo, hi = (lambda nz: (int(nz[0]), int(nz[-1]) + 1))(np.flatnonzero(weights[b] > 0))
+        s0, s1 = max(0, lo - m_rows), min(n_r, hi + m_rows)
+        L = sfft.next_fast_len(s1 - s0)
+        k_b = interpolate_radial(kernels, rad, rb)
+        Hb = _band_transfer(k_b, rb, step, L, M, cdt)
+        nu = sfft.fftfreq(L, d=step)[:, None]                         # cycles / px
+        ft = (np.arange(M) / (2 * math.pi * rb))[None, :]              # cycles / px
+        Gb = wiener_filter(Hb, regulariser((L, M), float(nsr), prior, dtype=dt,
+                                           freqs=(nu, ft))).astype(cdt, copy=False)
+        band = sfft.fft(spec[s0:s1], n=L, axis=0, workers=-1)
+        band *= Gb[..., None]
+        band = sfft.ifft(band, axis=0, workers=-1)[:s1 - s0]
+        acc[lo:hi] += weights[b, lo:hi, None, None].astype(dt) * band[lo - s0:hi - s0]
+    del spec
+    out = _from_angle_spectrum(acc, grid, (H, W), order=3, upsample=1.5, outside=img,
+                               dtype=dt)
+    del acc
+
+    # the disk around the pole: Cartesian Wiener with the centre IPSF, blended in
+    cy, cx = grid.center
+    half = int(math.ceil(r_in)) + 3 * K
+    y0, y1 = max(0, int(cy) - half), min(H, int(cy) + half + 2)
+    x0, x1 = max(0, int(cx) - half), min(W, int(cx) + half + 2)
+    if y1 - y0 > K and x1 - x0 > K:
+        k0 = interpolate_radial(kernels, rad, 0.0)
+        cart = wiener_deconvolve(img[y0:y1, x0:x1], k0, nsr=nsr, prior=prior)
+        yy, xx = np.mgrid[y0:y1, x0:x1]
+        rr = np.hypot(yy - cy, xx - cx)
+        blend = np.clip((r_in - rr) / (r_in - centres[0]), 0, 1).astype(dt)[..., None]
+        out[y0:y1, x0:x1] = blend * cart + (1 - blend) * out[y0:y1, x0:x1]
+    return out[..., 0] if squeeze else out
