@@ -15,6 +15,7 @@ from .common import USER_ERRORS, ArgumentParser, configure_logging, user_error_m
 COMMANDS = [
     "demo",
     "sweep_range",
+    "render",
     "bench",
     "capture",
 ]

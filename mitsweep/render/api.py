@@ -338,12 +338,13 @@ def _world_per_pixel(setup, u, v, depth, i_ref) -> float:
 def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, seed: int = 0,
                         mode: str = "sweep", window: int = 64, sweep=None,
                         sensor_distance: float | None = None,
-                        f_number: float | None = None) -> np.ndarray:
+                        f_number: float | None = None, radius_px: float = 0.1) -> np.ndarray:
     """Image (H, W) of a tiny emitter seen through the mirror, normalised to unit sum.
 
     The emitter is a sphere at depth ``depth`` (mm) along the world-bound chief ray of
-    the upright image point ``(u, v)`` (mm) at the reference distance; its radius is a
-    tenth of the world size of a pixel there, so its own image is sub-pixel. Only a
+    the upright image point ``(u, v)`` (mm) at the reference distance; its radius is
+    ``radius_px`` (default a tenth) of the world size of a pixel there, so its own image
+    is sub-pixel. Only a
     ``window`` × ``window`` pixel crop around the point's reference pixel is rendered.
 
     ``sensor_distance`` (with mode ``"fixed"``) renders a fixed sensor at that distance
@@ -359,7 +360,7 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
     if not np.all(np.isfinite(ray.surface.position)):
         raise ValueError(f"image point ({u:g}, {v:g}) mm: its chief ray misses the mirror")
     centre = ray.surface.position + depth * ray.world_dir
-    radius = 0.1 * _world_per_pixel(setup, u, v, depth, i_ref)
+    radius = radius_px * _world_per_pixel(setup, u, v, depth, i_ref)
     if mode == "fixed":
         if sensor_distance is None:
             raise ValueError("mode 'fixed' needs sensor_distance")

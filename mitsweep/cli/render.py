@@ -1,0 +1,96 @@
+"""``mitsweep render``: render a setup's scene through the mirror with Mitsuba 3."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from .common import UsageError, load_setup_arg, positive_float, positive_int, print_json
+
+NAME = "render"
+HELP = ("render a setup's scene through the mirror (pinhole ground truth, focused, "
+        "focal sweep, stopped-down) to an EXR with provenance")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("setup", help="setup TOML file (see scenes/)")
+    p.add_argument("--mode", required=True, choices=["pinhole", "focused", "sweep", "stopped"],
+                   help="pinhole: all-in-focus ground truth; focused: normal camera focused "
+                        "at the mirror centre; sweep: the sensor moves over the optimal "
+                        "range; stopped: focused at a smaller aperture (--f-number)")
+    p.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (64)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    p.add_argument("--out", required=True, metavar="FILE.exr", help="output EXR (atomic)")
+    p.add_argument("--aov", action="append", choices=["depth", "mask"], default=[],
+                   help="extra layer: depth (l, mm, along the reflected chief ray) or mask "
+                        "(pixels that see the mirror); repeatable")
+    p.add_argument("--f-number", type=positive_float, metavar="N",
+                   help="f-number of --mode stopped (default 11)")
+    p.add_argument("--full-frame", action="store_true",
+                   help="also render pixels outside the mirror's image (default: skip them)")
+    p.add_argument("--preview", metavar="FILE.png", help="also write a tone-mapped PNG")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+
+
+def _check_out(path: str, suffix: str) -> None:
+    from ..io.atomic import check_writable
+
+    if not path.lower().endswith(suffix):
+        raise UsageError(f"{path}: the output must end in {suffix}")
+    try:
+        check_writable(path)
+    except OSError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def write_preview(path: str, image) -> None:
+    """sRGB-encoded 8-bit PNG of a linear image (exposure: 99.5th percentile → white)."""
+    import numpy as np
+
+    from ..io.atomic import atomic_path
+
+    img = np.asarray(image, dtype=np.float64)
+    scale = float(np.percentile(img, 99.5)) or 1.0
+    x = np.clip(img / scale, 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with atomic_path(path, suffix=".png") as tmp:
+        plt.imsave(tmp, (srgb * 255 + 0.5).astype(np.uint8))
+
+
+def run(args) -> int:
+    from ..render import render_image, render_to_exr
+
+    setup = load_setup_arg(args.setup)
+    _check_out(args.out, ".exr")
+    if args.preview:
+        _check_out(args.preview, ".png")
+    if args.f_number is not None and args.mode != "stopped":
+        raise UsageError("--f-number applies to --mode stopped only (the other modes use "
+                         "the setup's lens.f_number)")
+    if args.seed < 0:
+        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    result = render_image(setup, args.mode, spp=args.spp, seed=args.seed,
+                          aovs=tuple(dict.fromkeys(args.aov)), f_number=args.f_number,
+                          mirror_only=not args.full_frame, progress=sys.stderr.isatty())
+    render_to_exr(args.out, result)
+    if args.preview:
+        write_preview(args.preview, result.image)
+    m = result.metadata
+    summary = {"out": args.out, "mode": args.mode, "spp": args.spp, "seed": args.seed,
+               "render_s": m["render_s"], "aovs": sorted(result.aovs),
+               "reference_sensor_distance_mm": m["reference_sensor_distance_mm"],
+               "mean": float(result.image.mean())}
+    if args.preview:
+        summary["preview"] = args.preview
+    if args.json:
+        print_json(summary)
+    else:
+        sys.stdout.write(f"{args.out}: {args.mode}, {args.spp} spp, seed {args.seed}, "
+                         f"{m['render_s']:.2f} s\n")
+    return 0 if math.isfinite(summary["mean"]) else 1
