@@ -26,12 +26,19 @@ import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from .errors import PortLost, PortUnavailable, ProtocolError, ReplyTimeout
+from .errors import PortLost, PortUnavailable, ProtocolError, ReplyTimeout  # noqa: F401
 
 __all__ = ["LogEntry", "CommandLog", "Checksum", "XorChecksum", "ZaberChecksum",
            "LineTransport", "open_port"]
 
 logger = logging.getLogger(__name__)
+
+try:
+    import termios as _termios
+
+    _PORT_ERRORS: tuple[type[BaseException], ...] = (OSError, _termios.error)
+except ImportError:  # pragma: no cover - Windows
+    _PORT_ERRORS = (OSError,)
 
 
 @dataclass(frozen=True)
@@ -209,7 +216,7 @@ class LineTransport:
             flush = getattr(self.serial, "flush", None)
             if flush is not None:
                 flush()
-        except Exception as exc:  # pyserial raises SerialException / OSError / SerialTimeout
+        except _PORT_ERRORS as exc:  # SerialException and SerialTimeoutException are OSErrors
             self._mark_lost(exc)
         self.log.add(self.name, "tx", wire)
 
@@ -251,6 +258,11 @@ class LineTransport:
             self.log.add(self.name, "rx", text + " <drained>")
             out.append(text)
         return out
+
+    @property
+    def unread(self) -> bytes:
+        """Bytes received but not yet returned as a line."""
+        return bytes(self._buffer)
 
     def close(self) -> None:
         try:
@@ -302,9 +314,7 @@ class LineTransport:
                 waiting = self.serial.in_waiting
                 if waiting:
                     self._buffer += self.serial.read(waiting)
-        except Exception as exc:
-            if isinstance(exc, (ProtocolError, ReplyTimeout)):
-                raise
+        except _PORT_ERRORS as exc:
             self._mark_lost(exc)
 
     def _accept(self, raw: bytes) -> str:
