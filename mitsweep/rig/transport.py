@@ -291,7 +291,8 @@ class LineTransport:
                 return None
             i = min(idx)
             line = bytes(self._buffer[:i])
-            del self._buffer[:i + 1]
+            end = i + 2 if self._buffer[i:i + 2] == b"\r\n" else i + 1
+            del self._buffer[:end]
             if line:
                 return line
 
