@@ -39,6 +39,7 @@ __all__ = ["PolarGrid", "polar_grid", "to_polar", "from_polar", "polar_deconvolv
 
 log = logging.getLogger(__name__)
 
+_SPLINE_PX = 8  # context a cubic spline needs around the mapped-back region (px; 0.268^12 ≈ 1e-7)
 _WRAP = 12  # angle columns added on each side so the spline sees a periodic signal
             # (the cubic B-spline prefilter decays as 0.268^n: 0.268^12 ≈ 1e-7)
 
@@ -219,39 +220,46 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
     return out
 
 
-def _radial_resample(k: np.ndarray, step: float) -> np.ndarray:
-    """Kernel columns (the radial axis) resampled at ``step`` px: (K, 2n+1), i=0 at n."""
-    K0, K1 = k.shape
-    n = int(math.floor((K1 // 2) / step))
-    cols = K1 // 2 + np.arange(-n, n + 1) * step
-    rows = np.arange(K0, dtype=np.float64)
-    rr, cc = np.meshgrid(rows, cols, indexing="ij")
-    out = ndi.map_coordinates(k, [rr, cc], order=3, mode="constant", cval=0.0)
-    return np.clip(out, 0, None)
+def _band_length(n: int, step: float) -> int:
+    """Smallest fast FFT length L >= n with L * step an integer (see _band_transfer)."""
+    L = sfft.next_fast_len(n)
+    while L < 4 * n + 64:
+        if abs(L * step - round(L * step)) < 1e-9 * L:
+            return L
+        L = sfft.next_fast_len(L + 1)
+    raise ValueError(f"radial step {step} px: no FFT length L >= {n} makes L * step "
+                     "an integer; use a radial_oversampling such as 1, 1.25, 1.5 or 2")
 
 
 def _band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
                    cdt) -> np.ndarray:
-    """Transfer function (L, M) of kernel ``k`` at radius ``r_band`` on the polar grid.
+    """Transfer function (L, M) of pixel kernel ``k`` at radius ``r_band`` on the polar grid.
 
-    Tangential pixel offset t (kernel rows, upward = counter-clockwise) becomes angle
-    t / r, so harmonic m sees the phase exp(−i m t / r); radial offsets are resampled at
-    the grid's step and transformed by an FFT of length L.
+    Axis 0: the radial frequencies of an L-point FFT over rows spaced ``step`` px,
+    ν = p / (L step) cycles/px; axis 1: angular harmonics m. The kernel is taken as its
+    pixel samples, as in Cartesian Wiener deconvolution: radially its DFT over
+    L step pixels gives exactly those ν up to the pixel Nyquist 1/2, and beyond (the
+    polar grid is oversampled; only interpolation residue lives there) the value at
+    ν = ±1/2 is held. Tangential pixel offset t (kernel rows, upward =
+    counter-clockwise) is an angle t / r, so harmonic m sees the phase exp(−i m t / r).
     """
-    kr = _radial_resample(k, step)                           # (K, 2n+1)
-    K0 = k.shape[0]
+    K0, K1 = k.shape
     t = -(np.arange(K0) - K0 // 2).astype(np.float64)        # tangential offset, px
     m = np.arange(M, dtype=np.float64)
-    E = np.exp(-1j * np.outer(t, m) / max(r_band, 1e-9))     # (K, M)
-    T = kr.T @ E                                            # (2n+1, M): radial i × harmonic
-    n = (kr.shape[1] - 1) // 2
-    if 2 * n + 1 > L:
-        raise ValueError(f"band of {L} rows is shorter than the kernel ({2 * n + 1} rows)")
-    big = np.zeros((L, M), dtype=np.complex128)
-    big[:n + 1] = T[n:]
-    if n:
-        big[-n:] = T[:n]
-    Hb = sfft.fft(big, axis=0, workers=-1)
+    E = np.exp(-1j * np.outer(t, m) / max(r_band, 1e-9))     # (K0, M)
+    T = k.T @ E                                             # (K1, M): radial offset s × m
+    L_px = int(round(L * step))
+    if L_px < K1:
+        raise ValueError(f"band of {L} rows is shorter than the kernel ({K1} px)")
+    big = np.zeros((L_px, M), dtype=np.complex128)
+    h = K1 // 2
+    big[:h + 1] = T[h:]
+    if h:
+        big[-h:] = T[:h]
+    H_px = sfft.fft(big, axis=0, workers=-1)
+    p = np.rint(sfft.fftfreq(L) * L).astype(int)             # signed numerator: ν = p / L_px
+    q = np.clip(p, -(L_px // 2), (L_px - 1) // 2) % L_px
+    Hb = H_px[q]
     return (Hb / Hb[0, 0].real).astype(cdt)
 
 
@@ -326,7 +334,8 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     m_px = 3 * K if margin is None else int(margin)
     grid = polar_grid(img.shape, center=center, r_max=r_max,
                       radial_oversampling=radial_oversampling,
-                      angular_oversampling=angular_oversampling, inner_px=m_px, outer_px=m_px)
+                      angular_oversampling=angular_oversampling, inner_px=m_px + _SPLINE_PX,
+                      outer_px=m_px + _SPLINE_PX)
     step = grid.radial_step
     pol = to_polar(img, grid)                                          # (n_r, n_th, C)
     spec = sfft.rfft(pol, axis=1, workers=-1).astype(cdt, copy=False)  # (n_r, M, C)
@@ -341,22 +350,32 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     centres = np.asarray(centres)
     weights = hat_weights(grid.radii, centres)                         # (n_b, n_r)
     m_rows = int(math.ceil(m_px / step))
+    # rows that the Cartesian pixels read (a spline's reach around [0, r_max])
+    keep0 = int(math.floor(grid.row_of(-_SPLINE_PX)))
+    keep1 = int(math.ceil(grid.row_of(grid.r_max + _SPLINE_PX))) + 1
     acc = np.zeros_like(spec)
     nu = None
     for b, rb in enumerate(centres):
-        lo, hi = (lambda nz: (int(nz[0]), int(nz[-1]) + 1))(np.flatnonzero(weights[b] > 0))
+        nz = np.flatnonzero(weights[b] > 0)
+        lo, hi = max(int(nz[0]), keep0), min(int(nz[-1]) + 1, keep1)
+        if hi <= lo:
+            continue
         s0, s1 = max(0, lo - m_rows), min(n_r, hi + m_rows)
-        L = sfft.next_fast_len(s1 - s0)
+        L = _band_length(s1 - s0, step)
         k_b = interpolate_radial(kernels, rad, rb)
         Hb = _band_transfer(k_b, rb, step, L, M, cdt)
         nu = sfft.fftfreq(L, d=step)[:, None]                         # cycles / px
         ft = (np.arange(M) / (2 * math.pi * rb))[None, :]              # cycles / px
         Gb = wiener_filter(Hb, regulariser((L, M), float(nsr), prior, dtype=dt,
                                            freqs=(nu, ft))).astype(cdt, copy=False)
-        band = sfft.fft(spec[s0:s1], n=L, axis=0, workers=-1)
+        # symmetric extension to the FFT length (as in wiener_deconvolve): no step at the
+        # slice ends, so smooth content, a constant above all, passes without ringing
+        a = (L - (s1 - s0)) // 2
+        ext = np.pad(spec[s0:s1], [(a, L - (s1 - s0) - a), (0, 0), (0, 0)], mode="symmetric")
+        band = sfft.fft(ext, axis=0, workers=-1, overwrite_x=True)
         band *= Gb[..., None]
-        band = sfft.ifft(band, axis=0, workers=-1)[:s1 - s0]
-        acc[lo:hi] += weights[b, lo:hi, None, None].astype(dt) * band[lo - s0:hi - s0]
+        band = sfft.ifft(band, axis=0, workers=-1, overwrite_x=True)
+        acc[lo:hi] += weights[b, lo:hi, None, None].astype(dt) * band[lo - s0 + a:hi - s0 + a]
     del spec
     out = _from_angle_spectrum(acc, grid, (H, W), order=3, upsample=1.5, outside=img,
                                dtype=dt)

@@ -1,0 +1,163 @@
+"""Polar resampling and polar-domain deconvolution of rotationally symmetric blur."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.fft as sfft
+from skimage import data, transform
+
+from mitsweep.deconv import deconvolve
+from mitsweep.deconv.metrics import disk_mask, psnr
+from mitsweep.deconv.polar import from_polar, polar_deconvolve, polar_grid, to_polar
+from mitsweep.deconv.spatial import scatter_blur
+from mitsweep.deconv.synthetic import (synthetic_grid_bank, synthetic_kernel_field,
+                                       synthetic_radial_bank)
+from mitsweep.io.bank import BankError, IPSFBank
+
+
+def _gray(name, size=None):
+    img = getattr(data, name)()
+    img = (img[..., 1] if img.ndim == 3 else img) / 255.0
+    return transform.resize(img, (size, size), anti_aliasing=True) if size else img
+
+
+@pytest.mark.parametrize("name", ["camera", "astronaut"])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_polar_round_trip_above_50_db_inside_the_disk(name, dtype):
+    img = _gray(name).astype(dtype)            # 512 x 512, sharp to the pixel
+    grid = polar_grid(img.shape, r_max=250)
+    back = from_polar(to_polar(img, grid), grid, img.shape)
+    assert back.dtype == dtype
+    # measured 56-58 dB with the default sampling (1.5 rows/px, 1.25 angles/px at the rim)
+    assert psnr(back, img, mask=disk_mask(img.shape, 248)) > 50
+
+
+def test_polar_grid_has_enough_angles_at_a_fast_length():
+    g = polar_grid((300, 400), r_max=140)
+    assert g.n_angles >= 2 * math.pi * 140
+    assert sfft.next_fast_len(g.n_angles) == g.n_angles
+    assert g.radii[0] < 0 and g.radii[-1] > 140    # continues through the centre and past r_max
+    assert g.center == (149.5, 199.5)
+
+
+@pytest.mark.parametrize("theta_deg,offset_rc", [(0, (0, 40)), (90, (-40, 0)),
+                                                 (180, (0, -40)), (270, (40, 0))])
+def test_polar_angle_is_counter_clockwise_from_plus_u(theta_deg, offset_rc):
+    img = np.zeros((128, 128))
+    cy, cx = 63.5, 63.5
+    img[int(cy + 0.5) + offset_rc[0] - 1:int(cy + 0.5) + offset_rc[0] + 1,
+        int(cx + 0.5) + offset_rc[1] - 1:int(cx + 0.5) + offset_rc[1] + 1] = 1.0
+    g = polar_grid(img.shape, r_max=60)
+    pol = to_polar(img, g)
+    j = np.argmin(np.abs(g.radii - 40.5))
+    k = int(np.argmax(pol[j]))
+    ang = math.degrees(g.angles[k])
+    assert min(abs(ang - theta_deg), 360 - abs(ang - theta_deg)) < 3
+
+
+def test_to_polar_samples_a_smooth_function_exactly():
+    yy, xx = np.mgrid[0:96, 0:96].astype(float)
+    img = 0.3 + 0.002 * xx - 0.001 * yy          # linear: reproduced by cubic splines
+    g = polar_grid(img.shape, r_max=40)
+    pol = to_polar(img, g)
+    r, th = g.radii[:, None], g.angles[None, :]
+    ok = (g.radii > -40)[:, None] & (g.radii < 40)[:, None]
+    expect = 0.3 + 0.002 * (47.5 + r * np.cos(th)) - 0.001 * (47.5 - r * np.sin(th))
+    np.testing.assert_allclose(np.broadcast_to(pol, expect.shape)[ok[:, 0]],
+                               expect[ok[:, 0]], atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def blurred_scene():
+    """A 192² image blurred by the exact per-pixel synthetic IPSF field (the truth)."""
+    img = _gray("camera", 192)
+    K, rmax = 17, 96.0
+    y = scatter_blur(img, synthetic_kernel_field(img.shape, size=K, r_max_px=rmax))
+    bank = synthetic_radial_bank(img.shape, size=K, r_max_px=rmax, n_radii=19)
+    return img, y, bank
+
+
+def test_polar_deconvolution_restores_the_true_spatially_varying_blur(blurred_scene):
+    img, y, bank = blurred_scene
+    x = polar_deconvolve(y, bank, nsr=1e-4)
+    rr = np.hypot(*(np.mgrid[0:192, 0:192] - 95.5))
+    # measured: blurred 27-28 dB in every ring, restored 38-43 dB. A wrong rotation
+    # direction or angular scale (harmonic m at m/r instead of m/(2 pi r)) drops the
+    # outer rings below 32 dB; 8 dB per ring is the bar.
+    for r0, r1 in [(0, 12), (12, 30), (30, 60), (60, 88)]:
+        ring = (rr >= r0) & (rr < r1)
+        assert psnr(x, img, mask=ring) > psnr(y, img, mask=ring) + 8, (r0, r1)
+
+
+def test_deconvolve_dispatches_radial_banks_to_polar(blurred_scene):
+    img, y, bank = blurred_scene
+    np.testing.assert_array_equal(deconvolve(y, bank, nsr=1e-3),
+                                  polar_deconvolve(y, bank, nsr=1e-3))
+
+
+def _delta_bank(shape, K=9):
+    k = np.zeros((1, 5, K, K), np.float32)
+    k[..., K // 2, K // 2] = 1
+    radii = np.linspace(0, 0.018 * shape[0] / 2, 5)
+    return IPSFBank(kernels=k, points_uv=np.stack([radii, 0 * radii], 1), depths_mm=np.array([500.]),
+                    pixel_pitch=0.018, reference_sensor_distance=30.0, kind="radial",
+                    radii_mm=radii)
+
+
+def test_delta_bank_polar_deconvolution_is_the_round_trip():
+    img = _gray("astronaut", 256)
+    x = polar_deconvolve(img, _delta_bank(img.shape), nsr=1e-9, r_max=120)
+    # resampling only: the same > 50 dB as the plain round trip
+    assert psnr(x, img, mask=disk_mask(img.shape, 118)) > 50
+    outside = ~disk_mask(img.shape, 121)
+    np.testing.assert_array_equal(x[outside], img[outside])   # beyond r_max: unchanged
+
+
+@pytest.mark.parametrize("scene", ["black", "saturated"])
+@pytest.mark.parametrize("prior", ["constant", "natural"])
+def test_constant_images_pass_unchanged(scene, prior):
+    val = 0.0 if scene == "black" else 1.0
+    img = np.full((128, 128), val, np.float32)
+    bank = synthetic_radial_bank(img.shape, size=15)
+    x = polar_deconvolve(img, bank, nsr=1e-4, prior=prior)
+    assert x.dtype == np.float32
+    # DC passes each band exactly and the windows sum to one; float32 splines ~1e-6
+    np.testing.assert_allclose(x, val, atol=1e-5)
+
+
+@pytest.mark.parametrize("nsr", [1e-6, 1e-2])
+def test_stable_with_spectral_zeros_and_noise(nsr):
+    rng = np.random.default_rng(0)
+    img = rng.random((128, 128))
+    K = 15
+    k = np.zeros((1, 4, K, K), np.float32)
+    k[..., K // 2, K // 2 - 3] = k[..., K // 2, K // 2 + 3] = 0.5   # exact spectral zeros
+    radii = np.linspace(0, 1.2, 4)
+    bank = IPSFBank(kernels=k, points_uv=np.stack([radii, 0 * radii], 1),
+                    depths_mm=np.array([500.]), pixel_pitch=0.018,
+                    reference_sensor_distance=30.0, kind="radial", radii_mm=radii)
+    x = polar_deconvolve(img, bank, nsr=nsr)
+    assert np.all(np.isfinite(x))
+    # Wiener gain <= 1/(2 sqrt(nsr)); allow that times the input's range
+    assert np.abs(x).max() < max(1.0, 1 / (2 * np.sqrt(nsr))) * 1.5
+
+
+def test_colour_images_are_restored_per_channel(blurred_scene):
+    _, y, bank = blurred_scene
+    rgb = np.stack([y, 0.5 * y, y ** 2], axis=-1)
+    out = polar_deconvolve(rgb, bank, nsr=1e-3)
+    np.testing.assert_allclose(out[..., 1], polar_deconvolve(0.5 * y, bank, nsr=1e-3),
+                               atol=1e-9)
+
+
+def test_grid_bank_is_refused_by_polar():
+    img = np.zeros((64, 64))
+    with pytest.raises(BankError, match="radial"):
+        polar_deconvolve(img, synthetic_grid_bank(img.shape, (3, 3), size=9), nsr=1e-3)
+
+
+def test_bank_for_another_sensor_is_refused():
+    bank = synthetic_radial_bank((128, 128), size=9)
+    with pytest.raises(BankError, match="128x128"):
+        polar_deconvolve(np.zeros((96, 128)), bank, nsr=1e-3)
