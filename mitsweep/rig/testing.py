@@ -90,3 +90,13 @@ def expected_protocol(factory: Callable[[LineTransport], object],
     ser.assert_all_used()
     if transport.unread:
         raise AssertionError(f"reply bytes never read: {transport.unread!r}")
+
+
+def fast_rig_setup(setup, *, steps_per_mm: float = 400.0):
+    """``setup`` with a rig that positions quickly (10 mm/s, 100 mm/s²), for tests and
+    demos against the simulator; the sweep itself keeps the setup's velocity."""
+    import dataclasses
+
+    rig = dataclasses.replace(setup.rig, max_velocity=10.0, acceleration=100.0,
+                              steps_per_mm=steps_per_mm)
+    return dataclasses.replace(setup, rig=rig)
