@@ -16,6 +16,10 @@ COMMANDS = [
     "demo",
     "sweep_range",
     "render",
+    "ipsf",
+    "table1",
+    "dataset",
+    "evaluate",
     "bench",
     "capture",
 ]

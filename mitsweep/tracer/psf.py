@@ -174,7 +174,6 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
     rows, cols = np.mgrid[0:K, 0:K]
     c_row = float((img * rows).sum() / total) - K // 2
     c_col = float((img * cols).sum() / total) - K // 2
-    area = (params.a1 - params.a0) * (params.b1 - params.b0)
     landed_est = landed_w  # weights are (1 + |a|²/l²)^(-3/2) ≈ 1 for rays near the chief ray
     info = {
         "vignetted_fraction": float(max(0.0, 1.0 - landed_w / free_w)),
@@ -189,7 +188,6 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         "mirror_point_mm": source.mirror_point.tolist(),
         "depth_mm": source.depth,
         "reference_sensor_distance_mm": source.reference_sensor_distance,
-        "relative_power": float(landed_w * area / rays),
         "box_mm": box_info["box_mm"],
         "seed": int(seed),
         "seconds": elapsed,

@@ -1,0 +1,213 @@
+"""``mitsweep ipsf``: one traced PSF/IPSF, or a bank of IPSFs, with the Dr.Jit tracer."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from pathlib import Path
+
+from .common import UsageError, load_setup_arg, positive_float, positive_int, print_json
+
+NAME = "ipsf"
+HELP = ("trace the integrated PSF of a point source over the focal sweep (or a PSF at one "
+        "sensor distance, or a radial/grid IPSF bank) with the Dr.Jit tracer")
+
+
+def _depth(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a depth in mm (or inf), got {text!r}") \
+            from None
+    if not x > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0 mm (inf allowed), got {text}")
+    return x
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("setup", help="setup TOML file (see scenes/)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--point", type=float, nargs=2, metavar=("U", "V"),
+                       help="image point, upright mm at the reference (mid-sweep) sensor "
+                            "distance (default: the image centre)")
+    where.add_argument("--radius", type=float, metavar="MM",
+                       help="image point at this radius (mm) and --angle")
+    p.add_argument("--angle", type=float, default=0.0, metavar="DEG",
+                   help="polar angle of --radius, degrees counter-clockwise from +u (0)")
+    p.add_argument("--bank", choices=["radial", "grid"],
+                   help="compute a bank instead of one IPSF (radial: untilted mirrors)")
+    p.add_argument("--radii", type=positive_int, default=19, help="radial bank size (19)")
+    p.add_argument("--grid", type=positive_int, nargs=2, default=(9, 9),
+                   metavar=("ROWS", "COLS"), help="grid bank shape (9 9)")
+    p.add_argument("--depth", type=_depth, nargs="+", default=[500.0], metavar="MM",
+                   help="depth(s) l of the source from the mirror, mm (500; inf allowed)")
+    p.add_argument("--sensor-distance", type=positive_float, metavar="MM",
+                   help="a PSF at this one sensor distance instead of the sweep's IPSF")
+    p.add_argument("--method", choices=["continuous", "planes"], default="continuous",
+                   help="continuous sweep (stratified time) or the paper's N-plane sum")
+    p.add_argument("--planes", type=positive_int, default=16,
+                   help="focal planes of --method planes (16, at most 64)")
+    p.add_argument("--time-samples", type=positive_int, default=8,
+                   help="stratified times per ray of --method continuous (8, at most 64)")
+    p.add_argument("--motion-table", metavar="CSV",
+                   help="measured stage motion (two columns: time, sensor distance mm) for "
+                        "sweep.profile = 'tabulated'")
+    p.add_argument("--rays", type=positive_int, default=1_000_000,
+                   help="rays per IPSF (1000000)")
+    p.add_argument("--kernel-size", type=positive_int, default=31,
+                   help="kernel size K, odd (31)")
+    p.add_argument("--seed", type=int, default=0, help="sample-stream seed (0)")
+    p.add_argument("--float64", action="store_true", help="trace in float64 (reference)")
+    p.add_argument("-o", "--output", metavar="FILE",
+                   help="write .npz (bank format) or .exr (layered, with metadata)")
+    p.add_argument("--plot", metavar="FILE.png",
+                   help="thumbnails and radial/tangential cross-sections (paper Fig. 3-5)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _motion(setup, table_path):
+    from ..optics import optimal_sweep_range
+    from ..optics.motion import motion_for
+
+    sweep = optimal_sweep_range(setup)
+    table = None
+    if table_path is not None:
+        import numpy as np
+
+        try:
+            data = np.loadtxt(table_path, delimiter=",", ndmin=2)
+        except ValueError as exc:
+            raise UsageError(f"--motion-table {table_path}: expected two numeric columns "
+                             f"(time, sensor distance mm) separated by commas ({exc})") from None
+        if data.shape[1] != 2:
+            raise UsageError(f"--motion-table {table_path}: expected 2 columns, got "
+                             f"{data.shape[1]}")
+        table = (data[:, 0], data[:, 1])
+        if setup.sweep.profile != "tabulated":
+            raise UsageError("--motion-table needs sweep.profile = 'tabulated' in the setup")
+    return sweep, motion_for(setup, sweep, table=table)
+
+
+def _check_output(path: str | None, allowed: tuple[str, ...], what: str) -> None:
+    if path is not None and Path(path).suffix.lower() not in allowed:
+        raise UsageError(f"{path}: {what} output must end in {' or '.join(allowed)}")
+
+
+def run(args) -> int:
+    import numpy as np
+
+    from .. import __version__
+    from ..config import setup_to_dict
+    from ..io import write_exr
+    from ..io.bank import IPSFBank, save_bank
+    from ..tracer import integrated_psf, ipsf_bank, psf
+
+    setup = load_setup_arg(args.setup)
+    if args.kernel_size % 2 == 0 or args.kernel_size < 3:
+        raise UsageError(f"--kernel-size: must be odd and >= 3, got {args.kernel_size}")
+    if args.seed < 0:
+        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    sweep, motion = _motion(setup, args.motion_table)
+    common = dict(rays=args.rays, kernel_size=args.kernel_size, seed=args.seed)
+    out: dict = {"setup": setup.name, "version": __version__}
+
+    if args.bank:
+        if args.point is not None or args.radius is not None or args.sensor_distance:
+            raise UsageError("--bank computes its own points: drop --point, --radius and "
+                             "--sensor-distance")
+        _check_output(args.output, (".npz", ".exr"), "a bank")
+        from tqdm import tqdm
+
+        n_pts = args.radii if args.bank == "radial" else args.grid[0] * args.grid[1]
+        with tqdm(total=n_pts * len(args.depth), desc="IPSF bank", unit="ipsf",
+                  file=sys.stderr, disable=not sys.stderr.isatty()) as bar:
+            bank = ipsf_bank(setup, kind=args.bank, n_radii=args.radii, grid=tuple(args.grid),
+                             depths=args.depth, sweep=sweep, motion=motion, method=args.method,
+                             time_samples=args.time_samples, n_planes=args.planes,
+                             progress=bar.update, **common)
+        out.update(kind=bank.kind, shape=list(bank.kernels.shape),
+                   reference_sensor_distance_mm=bank.reference_sensor_distance,
+                   depths_mm=bank.depths_mm.tolist(), points_uv_mm=bank.points_uv.tolist(),
+                   max_vignetted=float(np.max(bank.vignetted)),
+                   max_outside_kernel=float(np.max(bank.metadata["outside_kernel"])),
+                   seconds=bank.metadata["seconds"])
+        if args.output:
+            if args.output.lower().endswith(".npz"):
+                save_bank(args.output, bank)
+            else:
+                chans = {f"d{j}.p{i}.Y": bank.kernels[j, i]
+                         for j in range(bank.kernels.shape[0])
+                         for i in range(bank.kernels.shape[1])}
+                meta = dict(bank.metadata, kind=bank.kind, points_uv=bank.points_uv.tolist(),
+                            depths_mm=bank.depths_mm.tolist(), pixel_pitch=bank.pixel_pitch,
+                            reference_sensor_distance=bank.reference_sensor_distance,
+                            vignetted=bank.vignetted.tolist(),
+                            radii_mm=None if bank.radii_mm is None else bank.radii_mm.tolist(),
+                            grid_shape=bank.grid_shape)
+                write_exr(args.output, channels=chans, metadata=meta)
+            out["output"] = args.output
+        if args.plot:
+            from ..tracer.figures import plot_bank
+
+            plot_bank(bank, args.plot)
+            out["plot"] = args.plot
+        return _report(args, out)
+
+    _check_output(args.output, (".npz", ".exr"), "an IPSF")
+    if len(args.depth) != 1:
+        raise UsageError("give one --depth for a single IPSF (several need --bank)")
+    if args.radius is not None:
+        a = math.radians(args.angle)
+        u, v = args.radius * math.cos(a), args.radius * math.sin(a)
+    elif args.point is not None:
+        u, v = args.point
+    else:
+        u = v = 0.0
+    depth = args.depth[0]
+    if args.sensor_distance is not None:
+        kernel, info = psf(setup, u, v, depth, args.sensor_distance, double=args.float64,
+                           reference_sensor_distance=sweep.reference_sensor_distance, **common)
+    else:
+        kernel, info = integrated_psf(setup, u, v, depth, sweep=sweep, motion=motion,
+                                      method=args.method, time_samples=args.time_samples,
+                                      n_planes=args.planes, double=args.float64, **common)
+    out.update({k: v for k, v in info.items()})
+    if args.output:
+        meta = {"setup": setup_to_dict(setup), "sweep_range": sweep.as_dict(), **info}
+        if args.output.lower().endswith(".exr"):
+            write_exr(args.output, kernel, metadata=meta)
+        else:
+            depths = np.array([depth])
+            bank = IPSFBank(kernels=kernel[None, None], points_uv=np.array([[u, v]]),
+                            depths_mm=depths, pixel_pitch=setup.sensor.pixel_pitch,
+                            reference_sensor_distance=info["reference_sensor_distance_mm"],
+                            kind="grid", grid_shape=(1, 1),
+                            vignetted=np.array([[info["vignetted_fraction"]]]), metadata=meta)
+            save_bank(args.output, bank)
+        out["output"] = args.output
+    if args.plot:
+        from ..tracer.figures import plot_ipsf
+
+        title = "PSF" if args.sensor_distance else "IPSF"
+        plot_ipsf(kernel, args.plot, pitch_mm=setup.sensor.pixel_pitch,
+                  angle=math.atan2(v, u) if (u or v) else 0.0,
+                  title=f"{title} at ({u:.2f}, {v:.2f}) mm, l = {depth:g} mm")
+        out["plot"] = args.plot
+    return _report(args, out)
+
+
+def _report(args, out: dict) -> int:
+    if args.json:
+        print_json(out)
+        return 0
+    skip = {"motion", "box_mm", "mirror_point_mm", "points_uv_mm", "version"}
+    for key, value in out.items():
+        if key in skip:
+            continue
+        if isinstance(value, float):
+            value = f"{value:.6g}"
+        elif isinstance(value, (tuple, list)) and value and isinstance(value[0], float):
+            value = "(" + ", ".join(f"{x:.6g}" for x in value) + ")"
+        sys.stdout.write(f"{key:<30s} {value}\n")
+    return 0

@@ -1,0 +1,78 @@
+"""CLI: mitsweep ipsf, mitsweep table1, mitsweep sweep-range --verify (tracer side)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from mitsweep.cli.main import main
+from mitsweep.io import read_exr
+from mitsweep.io.bank import load_bank
+
+
+def _json(capsys, argv):
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_ipsf_single_to_exr_with_provenance(tmp_path, capsys):
+    out = tmp_path / "k.exr"
+    res = _json(capsys, ["ipsf", "scenes/sphere.toml", "--radius", "3", "--angle", "90",
+                         "--rays", "200000", "-o", str(out), "--plot", str(tmp_path / "k.png"),
+                         "--json"])
+    assert res["vignetted_fraction"] == 0.0
+    assert res["image_uv_mm"][1] == pytest.approx(3.0)
+    chans, meta = read_exr(out)
+    k = chans["Y"]
+    assert k.shape == (31, 31) and k.sum() == pytest.approx(1.0, abs=1e-5)
+    assert meta["setup"]["name"] == "sphere" and meta["seed"] == 0
+    assert (tmp_path / "k.png").stat().st_size > 0
+
+
+def test_ipsf_bank_to_npz(tmp_path, capsys):
+    out = tmp_path / "bank.npz"
+    res = _json(capsys, ["ipsf", "scenes/sphere.toml", "--bank", "radial", "--radii", "5",
+                         "--depth", "500", "inf", "--rays", "100000", "-o", str(out), "--json"])
+    assert res["shape"] == [2, 5, 31, 31]
+    bank = load_bank(out)
+    assert np.isinf(bank.depths_mm[1])
+    np.testing.assert_allclose(bank.kernels.sum(axis=(2, 3)), 1.0, atol=1e-5)
+
+
+def test_ipsf_psf_at_one_sensor_distance(capsys):
+    res = _json(capsys, ["ipsf", "scenes/paraboloid.toml", "--point", "1", "0.5",
+                         "--sensor-distance", "58.2", "--rays", "100000", "--json"])
+    assert res["sensor_distance_mm"] == 58.2
+
+
+@pytest.mark.parametrize("argv,match", [
+    (["--point", "60", "0"], "outside the mirror"),
+    (["--kernel-size", "30"], "odd"),
+    (["--bank", "radial", "--point", "1", "0"], "drop --point"),
+    (["--depth", "500", "900"], "several need --bank"),
+    (["-o", "x.txt"], "must end in"),
+])
+def test_ipsf_bad_input_is_one_line_and_status_2(capsys, argv, match):
+    assert main(["ipsf", "scenes/sphere.toml", "--rays", "1000", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert match in err and "\n" not in err
+
+
+def test_ipsf_radial_bank_of_tilted_mirror_is_refused(capsys):
+    assert main(["ipsf", "scenes/paraboloid_tilted.toml", "--bank", "radial",
+                 "--rays", "1000"]) == 2
+    assert "grid" in capsys.readouterr().err
+
+
+def test_table1_json_has_rows_and_conventional(capsys):
+    res = _json(capsys, ["table1", "scenes/sphere.toml", "--ranges", "339:348", "339:374",
+                         "--radii", "3", "--rays", "100000", "--json"])
+    assert [r["focus_max_mm"] for r in res["rows"]] == [348.0, 374.0]
+    assert res["conventional"]["v_avg"] > 100 * max(r["v_avg"] for r in res["rows"])
+
+
+def test_sweep_range_verify_adds_traced_range(capsys):
+    res = _json(capsys, ["sweep-range", "scenes/sphere.toml", "--verify", "--json"])
+    # Same field and depths as the analytic range; see test_tracer_focus for the bound.
+    assert res["traced_focus_min_mm"] == pytest.approx(res["focus_min_mm"], abs=0.05)
+    assert res["traced_focus_max_mm"] == pytest.approx(res["focus_max_mm"], abs=0.05)
