@@ -338,7 +338,8 @@ def _world_per_pixel(setup, u, v, depth, i_ref) -> float:
 def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, seed: int = 0,
                         mode: str = "sweep", window: int = 64, sweep=None,
                         sensor_distance: float | None = None,
-                        f_number: float | None = None, radius_px: float = 0.1) -> np.ndarray:
+                        f_number: float | None = None, radius_px: float = 0.1,
+                        mesh_tol: float | None = None) -> np.ndarray:
     """Image (H, W) of a tiny emitter seen through the mirror, normalised to unit sum.
 
     The emitter is a sphere at depth ``depth`` (mm) along the world-bound chief ray of
@@ -348,7 +349,8 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
     ``window`` × ``window`` pixel crop around the point's reference pixel is rendered.
 
     ``sensor_distance`` (with mode ``"fixed"``) renders a fixed sensor at that distance
-    with the setup's pitch and aperture (the N-plane reference).
+    with the setup's pitch and aperture (the N-plane reference). ``mesh_tol`` (mm and
+    rad) forces a mirror mesh with that sag and normal bound (accuracy studies).
     """
     from .scene import build_scene
     from .sensor import register
@@ -379,8 +381,10 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
     source = {"type": "sphere", "center": centre.tolist(), "radius": radius,
               "bsdf": {"type": "diffuse", "reflectance": 0.0},
               "emitter": {"type": "area", "radiance": 1.0}}
+    mesh = {} if mesh_tol is None else dict(mirror_mesh=True, sag_tol=mesh_tol,
+                                            normal_tol=mesh_tol)
     scene_dict, _ = build_scene(setup, cam, surroundings=False, extra={"source": source},
-                                max_depth=2)
+                                max_depth=2, **mesh)
     img, _ = _render_passes(scene_dict, spp, seed, progress=False)
     out = np.zeros((H, W), dtype=np.float64)
     x, y, w, h = crop
