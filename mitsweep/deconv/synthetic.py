@@ -62,12 +62,13 @@ def _bank_meta(shape, **kw):
 
 
 def synthetic_radial_bank(image_shape: tuple[int, int], *, n_radii: int = 19, size: int = 21,
-                          r_max_px: float | None = None, pixel_pitch: float = 0.018,
-                          depths_mm=(500.0,), **kw) -> IPSFBank:
-    """Radial bank of :func:`synthetic_ipsf` kernels at ``n_radii`` radii from 0 to r_max."""
+                          r_max_px: float | None = None, extent_px: float | None = None,
+                          pixel_pitch: float = 0.018, depths_mm=(500.0,), **kw) -> IPSFBank:
+    """Radial bank of :func:`synthetic_ipsf` kernels at ``n_radii`` radii from 0 to
+    ``extent_px`` (default ``r_max_px``, itself default half the smaller image side)."""
     H, W = image_shape[:2]
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)
-    radii = np.linspace(0, r_max, n_radii)
+    radii = np.linspace(0, r_max if extent_px is None else float(extent_px), n_radii)
     k = synthetic_ipsf(radii, np.zeros_like(radii), size, r_max, **kw)
     kernels = np.repeat(k[None], len(depths_mm), axis=0).astype(np.float32)
     pts = np.stack([radii * pixel_pitch, np.zeros_like(radii)], axis=1)
