@@ -29,11 +29,14 @@ Run ``python -m mitsweep.rig.simulator arduino|zaber`` to serve one by hand.
 
 from __future__ import annotations
 
+import fcntl
 import logging
 import math
 import os
 import re
 import select
+import struct
+import termios
 import threading
 import time
 import tty
@@ -160,8 +163,14 @@ class _Model:
                 return f
         return None
 
+    #: Whether opening the port resets the device (an Uno's auto-reset on DTR).
+    reset_on_open = False
+
     def boot(self, now: float) -> list[bytes]:  # pragma: no cover - overridden
         return []
+
+    def reset(self, now: float) -> None:
+        """The host opened (and flushed) the port."""
 
     def handle(self, line: bytes, now: float) -> list[bytes]:  # pragma: no cover
         raise NotImplementedError
@@ -199,6 +208,7 @@ class ArduinoModel(_Model):
         self.micros_start = int(micros_start)
         self.home_time_s = home_time_s
         self.boot_time_s = boot_time_s
+        self._boot_state = (homed, int(position))
         self.boot_t = 0.0
         self.stopped = False
         self._fault_at: float | None = None
@@ -231,13 +241,28 @@ class ArduinoModel(_Model):
         text = f"EV {name} {self.micros(t)} {pos}" + (f" {detail}" if detail else "")
         return t, self._line(text)
 
+    reset_on_open = True
+
     def boot(self, now: float) -> list[bytes]:
-        # the bootloader runs first (opening the port resets an Uno), so READY comes
-        # after the driver has opened and flushed the port
+        # the bootloader runs first, then the sketch prints READY
         self.boot_t = now
         self.schedule(now + self.boot_time_s,
                       self._line(f"READY {FIRMWARE_NAME} {FIRMWARE_VERSION} {PROTOCOL_VERSION}"))
         return []
+
+    def reset(self, now: float) -> None:
+        """Opening the port pulses DTR, which resets an Uno: the sketch restarts with
+        its constructor state (``homed=True`` thus models a board that keeps its
+        reference across resets, which a real one does not), shutter released."""
+        self.cancel_scheduled()
+        self.homed, self._pos = self._boot_state
+        self.limits = None
+        self.move = None
+        self._shutter_plan = None
+        self.shutter_open = False
+        self.checksums = False
+        self._fault_at = None
+        self.boot(now)
 
     # -- input --------------------------------------------------------------------------
     def handle(self, line: bytes, now: float) -> list[bytes]:
@@ -644,6 +669,11 @@ class PtyDevice:
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
         self.port = os.ttyname(self.slave)
+        # packet mode: the master learns when the slave's input is flushed, which
+        # pyserial does when it opens the port -- the moment a real Uno resets
+        self.packet_mode = bool(getattr(model, "reset_on_open", False)) and hasattr(termios, "TIOCPKT")
+        if self.packet_mode:
+            fcntl.ioctl(self.master, termios.TIOCPKT, struct.pack("i", 1))
         self.unplugged = False
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"sim-{self.port}", daemon=True)
@@ -710,6 +740,14 @@ class PtyDevice:
             except OSError:
                 time.sleep(self.poll_s)
                 continue
+            if self.packet_mode:
+                control, chunk = chunk[0], chunk[1:]
+                if control & termios.TIOCPKT_FLUSHREAD:
+                    with self._lock:
+                        self.model.reset(time.monotonic())
+                    buf.clear()
+                if control:
+                    continue
             buf += chunk
             while True:
                 idx = [i for i in (buf.find(b"\n"), buf.find(b"\r")) if i >= 0]

@@ -1,0 +1,143 @@
+"""Injected faults: each ends with the stage stopped, the shutter closed, a clear error
+and a record marked incomplete (real pty I/O against the simulators)."""
+
+from __future__ import annotations
+
+import _thread
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from mitsweep.config import load_setup
+from mitsweep.rig import (DeviceFault, PortLost, ProtocolError, ReplyTimeout, RigPorts,
+                          load_capture_record, plan_capture, run_capture)
+from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
+from mitsweep.rig.testing import fast_rig_setup
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+ZABER_STEPS_PER_MM = 1 / 0.047625e-3
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return fast_rig_setup(load_setup(SCENES / "sphere.toml"))
+
+
+@pytest.fixture(scope="module")
+def sphere_zaber():
+    return fast_rig_setup(load_setup(SCENES / "sphere.toml"), steps_per_mm=ZABER_STEPS_PER_MM)
+
+
+def assert_safe(model, plan, lo_steps, hi_steps):
+    """Stage at rest inside the soft limits, shutter closed."""
+    now = time.monotonic()
+    assert not model.moving(now), "stage still moving"
+    assert lo_steps <= model.position(now) <= hi_steps
+    assert not getattr(model, "shutter_open", False), "shutter left open"
+
+
+def assert_incomplete(out, status):
+    data = load_capture_record(out)
+    assert data["complete"] is False
+    assert data["status"] == status
+    assert data["error"]
+    assert data["safety"], "the safety path must be recorded"
+    return data
+
+
+@pytest.mark.parametrize("fault, error, status, stop_ok", [
+    (Fault("no_reply", command="SWEEP"), ReplyTimeout, "timeout", True),
+    (Fault("garbage", command="SWEEP"), ProtocolError, "error", True),
+    (Fault("fault_flag", at_fraction=0.5), DeviceFault, "fault", True),
+    (Fault("late_event", delay_s=5.0), ReplyTimeout, "timeout", True),
+    (Fault("unplug", at_fraction=0.5), PortLost, "port lost", False),
+], ids=lambda x: x.kind if isinstance(x, Fault) else None)
+def test_arduino_fault_stops_and_records_incomplete(sphere, tmp_path, fault, error, status,
+                                                    stop_ok):
+    plan = plan_capture(sphere)
+    out = tmp_path / "capture.json"
+    lo, hi = (round(x * plan.steps_per_mm) for x in (plan.soft_limit_min_mm,
+                                                      plan.soft_limit_max_mm))
+    with PtyDevice(ArduinoModel([fault], homed=True, position=plan.approach_steps)) as dev:
+        t0 = time.monotonic()
+        with pytest.raises(error):
+            run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+        # no hanging: the deadline is the sweep's duration plus a bounded slack
+        assert time.monotonic() - t0 < plan.sweep_duration_s * 1.25 + 2.5
+        assert_safe(dev.model, plan, lo, hi)
+    data = assert_incomplete(out, status)
+    assert data["safety"][0]["ok"] is stop_ok
+    if fault.kind in ("fault_flag", "unplug"):
+        # stopped part-way: the sweep did not reach its end
+        assert dev.model.position(time.monotonic()) != plan.end_steps
+
+
+@pytest.mark.parametrize("fault, error, status", [
+    (Fault("fault_flag", at_fraction=0.5), DeviceFault, "fault"),
+    (Fault("no_reply", command="move"), ReplyTimeout, "timeout"),
+    (Fault("garbage", command="move"), ProtocolError, "error"),
+    (Fault("unplug", at_fraction=0.5), PortLost, "port lost"),
+], ids=lambda x: x.kind if isinstance(x, Fault) else None)
+def test_zaber_fault_releases_shutter_and_records_incomplete(sphere_zaber, tmp_path, fault,
+                                                             error, status):
+    plan = plan_capture(sphere_zaber, stage="zaber")
+    out = tmp_path / "capture.json"
+    lo, hi = (round(x * plan.steps_per_mm) for x in (plan.soft_limit_min_mm,
+                                                      plan.soft_limit_max_mm))
+    zaber = ZaberModel([fault], homed=True, position=plan.approach_steps,
+                       max_position=int(26 * ZABER_STEPS_PER_MM))
+    with PtyDevice(ArduinoModel(homed=True)) as board, PtyDevice(zaber) as stage:
+        with pytest.raises(error):
+            run_capture(sphere_zaber, RigPorts(arduino=board.port, zaber=stage.port), out=out)
+        assert not board.model.shutter_open
+        data = assert_incomplete(out, status)
+        actions = [(a["device"], a["ok"]) for a in data["safety"]]
+        # the shutter is released first, then the stage is stopped
+        assert actions[0] == ("arduino", True)
+        assert actions[1] == ("zaber", fault.kind != "unplug")
+        if fault.kind == "unplug":
+            # the link is gone but the stage finishes the commanded move on its own
+            # supply: it ends inside the limits the driver set on the device itself
+            time.sleep(plan.sweep_duration_s)
+        assert_safe(stage.model, plan, lo, hi)
+
+
+class _InterruptingBoard(ArduinoModel):
+    """Presses Ctrl-C (SIGINT to the main thread) 0.2 s into the sweep."""
+
+    def _cmd_sweep(self, nums, now):
+        threading.Timer(0.2, _thread.interrupt_main).start()
+        return super()._cmd_sweep(nums, now)
+
+
+def test_ctrl_c_during_sweep_stops_and_records_interrupted(sphere, tmp_path):
+    plan = plan_capture(sphere)
+    out = tmp_path / "capture.json"
+    with PtyDevice(_InterruptingBoard(homed=True, position=plan.approach_steps)) as dev:
+        with pytest.raises(KeyboardInterrupt):
+            run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+        assert_safe(dev.model, plan, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
+        assert dev.model.stopped
+    data = assert_incomplete(out, "interrupted")
+    assert data["safety"][0]["ok"]
+    # the record holds the partial sweep: the start of it was seen
+    assert any(e["name"] == "START" for e in data["events"])
+
+
+def test_record_marked_running_before_motion(sphere, tmp_path):
+    """A process killed mid-capture still leaves a record saying it is incomplete."""
+    plan = plan_capture(sphere)
+    out = tmp_path / "capture.json"
+    seen = {}
+
+    class Spy(ArduinoModel):
+        def _cmd_sweep(self, nums, now):
+            seen.update(load_capture_record(out))
+            return super()._cmd_sweep(nums, now)
+
+    with PtyDevice(Spy(homed=True, position=plan.approach_steps)) as dev:
+        run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+    assert seen["status"] == "running" and seen["complete"] is False
+    assert load_capture_record(out)["complete"] is True
