@@ -19,6 +19,7 @@ COMMANDS = [
     "ipsf",
     "table1",
     "dataset",
+    "deconvolve",
     "evaluate",
     "bench",
     "capture",

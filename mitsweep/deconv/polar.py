@@ -198,8 +198,12 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
     """``from_polar`` given the rfft along angle: (n_radii, n_angles//2+1, C) complex."""
     H, W = int(shape[0]), int(shape[1])
     C = spec.shape[2]
+    # only the rows that pixels within r_max read (plus the spline's reach)
+    r0 = max(0, int(math.floor(grid.row_of(-_SPLINE_PX))))
+    r1 = min(grid.n_radii, int(math.ceil(grid.row_of(grid.r_max + _SPLINE_PX))) + 1)
     n2 = sfft.next_fast_len(int(math.ceil(grid.n_angles * max(1.0, upsample))))
-    up = sfft.irfft(spec, n=n2, axis=1, workers=-1) * (n2 / grid.n_angles)
+    up = sfft.irfft(spec[r0:r1], n=n2, axis=1, workers=-1)
+    up *= n2 / grid.n_angles
     up = np.concatenate([up[:, -_WRAP:], up, up[:, :_WRAP]], axis=1).astype(dtype, copy=False)
     cy, cx = grid.center
     yy, xx = np.mgrid[0:H, 0:W]
@@ -207,7 +211,7 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
     rr = np.hypot(dy, dx)
     inside = rr <= grid.r_max
     th = np.mod(np.arctan2(dy[inside], dx[inside]), 2 * math.pi)
-    coords = [grid.row_of(rr[inside]), th * (n2 / (2 * math.pi)) + _WRAP]
+    coords = [grid.row_of(rr[inside]) - r0, th * (n2 / (2 * math.pi)) + _WRAP]
     if outside is None:
         out = np.zeros((H, W, C), dtype=dtype)
     else:
@@ -216,7 +220,10 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
         if out.shape != (H, W, C):
             raise ValueError(f"outside must be {(H, W, C)}, got {o.shape}")
     for c in range(C):
-        out[inside, c] = ndi.map_coordinates(up[..., c], coords, order=order, mode="nearest")
+        coef = ndi.spline_filter(up[..., c], order=order, output=dtype,
+                                 mode="mirror") if order > 1 else up[..., c]
+        out[inside, c] = ndi.map_coordinates(coef, coords, order=order, mode="mirror",
+                                             prefilter=False)
     return out
 
 
@@ -257,10 +264,10 @@ def _band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
     if h:
         big[-h:] = T[:h]
     H_px = sfft.fft(big, axis=0, workers=-1)
+    H_px = (H_px / H_px[0, 0].real).astype(cdt)
     p = np.rint(sfft.fftfreq(L) * L).astype(int)             # signed numerator: ν = p / L_px
     q = np.clip(p, -(L_px // 2), (L_px - 1) // 2) % L_px
-    Hb = H_px[q]
-    return (Hb / Hb[0, 0].real).astype(cdt)
+    return H_px[q]
 
 
 def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
@@ -334,7 +341,7 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     m_px = 3 * K if margin is None else int(margin)
     grid = polar_grid(img.shape, center=center, r_max=r_max,
                       radial_oversampling=radial_oversampling,
-                      angular_oversampling=angular_oversampling, inner_px=m_px + _SPLINE_PX,
+                      angular_oversampling=angular_oversampling, inner_px=_SPLINE_PX,
                       outer_px=m_px + _SPLINE_PX)
     step = grid.radial_step
     pol = to_polar(img, grid)                                          # (n_r, n_th, C)
@@ -354,20 +361,25 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     keep0 = int(math.floor(grid.row_of(-_SPLINE_PX)))
     keep1 = int(math.ceil(grid.row_of(grid.r_max + _SPLINE_PX))) + 1
     acc = np.zeros_like(spec)
-    nu = None
     for b, rb in enumerate(centres):
         nz = np.flatnonzero(weights[b] > 0)
         lo, hi = max(int(nz[0]), keep0), min(int(nz[-1]) + 1, keep1)
         if hi <= lo:
             continue
+        # below row 0 the symmetric extension stands in for the centre's context (the
+        # disk r < r_in is restored in Cartesian coordinates anyway)
         s0, s1 = max(0, lo - m_rows), min(n_r, hi + m_rows)
         L = _band_length(s1 - s0, step)
         k_b = interpolate_radial(kernels, rad, rb)
         Hb = _band_transfer(k_b, rb, step, L, M, cdt)
-        nu = sfft.fftfreq(L, d=step)[:, None]                         # cycles / px
-        ft = (np.arange(M) / (2 * math.pi * rb))[None, :]              # cycles / px
-        Gb = wiener_filter(Hb, regulariser((L, M), float(nsr), prior, dtype=dt,
-                                           freqs=(nu, ft))).astype(cdt, copy=False)
+        if prior == "constant":
+            Gb = wiener_filter(Hb, dt.type(nsr))
+            Gb[0, 0] = 1.0 / Hb[0, 0]          # DC exempt, as in regulariser()
+        else:
+            nu = sfft.fftfreq(L, d=step)[:, None]                     # cycles / px
+            ft = (np.arange(M) / (2 * math.pi * rb))[None, :]          # cycles / px
+            Gb = wiener_filter(Hb, regulariser((L, M), float(nsr), prior, dtype=dt,
+                                               freqs=(nu.astype(dt), ft.astype(dt))))
         # symmetric extension to the FFT length (as in wiener_deconvolve): no step at the
         # slice ends, so smooth content, a constant above all, passes without ringing
         a = (L - (s1 - s0)) // 2

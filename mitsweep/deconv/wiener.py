@@ -101,17 +101,21 @@ def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64
     return np.where(f2 == 0, 0.0, nsr).astype(dtype)
 
 
-def wiener_filter(H: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """G = conj(H) / (|H|² + R), with G = 1/H where both R and |H| vanish nowhere else.
+def wiener_filter(H: np.ndarray, R) -> np.ndarray:
+    """G = conj(H) / (|H|² + R); ``R`` an array broadcastable to ``H`` or a scalar.
 
     Where |H|² + R is exactly zero (a kernel spectral zero with no regularisation) G is
     set to 0: nothing can be recovered there, and 0 is the Wiener limit for R → 0⁺
     taken jointly with H → 0.
     """
-    den = H.real * H.real + H.imag * H.imag + R
+    den = H.real * H.real + H.imag * H.imag
+    den += R
     with np.errstate(divide="ignore", invalid="ignore"):
-        G = np.conj(H) / den
-    G[~(den > 0)] = 0
+        G = np.conj(H)
+        G /= den
+    bad = ~(den > 0)
+    if bad.any():
+        G[bad] = 0
     return G
 
 
