@@ -154,9 +154,10 @@ def test_regulariser_priors():
     assert R[0, 0] == 0 and np.all(R.ravel()[1:] == 1e-2)
     Rn = regulariser((256, 256), 1e-2, "natural")
     assert Rn[0, 0] == 0
-    # the natural prior's mean over the full frequency cell equals nsr (by its scale)
-    full = np.concatenate([Rn, Rn[:, 1:-1]], axis=1)
-    assert full.mean() == pytest.approx(1e-2, rel=0.02)
+    # a 1/|f|^2 spectrum from 1/256 to 1/2 cycles/px holding the variance: at f the
+    # NSR is nsr * 2 pi ln(128) |f|^2 (regulariser docstring)
+    assert Rn[0, 128] == pytest.approx(1e-2 * 2 * np.pi * np.log(128) * 0.25, rel=1e-6)
+    assert Rn[3, 4] == pytest.approx(1e-2 * 2 * np.pi * np.log(128) * 25 / 256 ** 2, rel=1e-6)
     with pytest.raises(ValueError, match="prior"):
         regulariser((8, 8), 1e-2, "laplacian")
 

@@ -172,6 +172,8 @@ class SensorNoise:
               *, info: dict | None = None) -> np.ndarray:
         """A noisy copy of ``image`` (relative exposure, any shape; float32 stays float32).
 
+        Negative pixels (filter ringing, round-off) receive no light: they read as 0.
+
         Parameters
         ----------
         rng : numpy.random.Generator or int
@@ -195,7 +197,10 @@ class SensorNoise:
         if not np.all(np.isfinite(xf)):
             raise ValueError("image holds NaN or inf values")
         if np.any(xf < 0):
-            raise ValueError("relative exposure must be >= 0 (got negative pixels)")
+            # no light is negative: negatives come from reconstruction-filter ringing
+            # (Mitchell, Lanczos) or FFT round-off; they expose the sensor to nothing
+            log.debug("%d negative pixels treated as 0", int(np.sum(xf < 0)))
+            xf = np.clip(xf, 0, None)
         J = self.electrons_per_unit
         if J == 0:
             raise ValueError("no light (illuminance 0): the image would be undefined")

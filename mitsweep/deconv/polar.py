@@ -379,7 +379,8 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
             nu = sfft.fftfreq(L, d=step)[:, None]                     # cycles / px
             ft = (np.arange(M) / (2 * math.pi * rb))[None, :]          # cycles / px
             Gb = wiener_filter(Hb, regulariser((L, M), float(nsr), prior, dtype=dt,
-                                               freqs=(nu.astype(dt), ft.astype(dt))))
+                                               freqs=(nu.astype(dt), ft.astype(dt)),
+                                               n_px=float(np.sqrt(H * W))))
         # symmetric extension to the FFT length (as in wiener_deconvolve): no step at the
         # slice ends, so smooth content, a constant above all, passes without ringing
         a = (L - (s1 - s0)) // 2
@@ -400,7 +401,8 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     x0, x1 = max(0, int(cx) - half), min(W, int(cx) + half + 2)
     if y1 - y0 > K and x1 - x0 > K:
         k0 = interpolate_radial(kernels, rad, 0.0)
-        cart = wiener_deconvolve(img[y0:y1, x0:x1], k0, nsr=nsr, prior=prior)
+        cart = wiener_deconvolve(img[y0:y1, x0:x1], k0, nsr=nsr, prior=prior,
+                                 n_px=float(np.sqrt(H * W)))
         yy, xx = np.mgrid[y0:y1, x0:x1]
         rr = np.hypot(yy - cy, xx - cx)
         blend = np.clip((r_in - rr) / (r_in - centres[0]), 0, 1).astype(dt)[..., None]

@@ -218,7 +218,8 @@ def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
         for j in range(n_c):
             x0, x1 = _support(wx[j])
             tile = padded[y0:y1 + 2 * m, x0:x1 + 2 * m]
-            rest = wiener_deconvolve(tile, kernels[i * n_c + j], nsr=nsr, prior=prior, pad=0)
+            rest = wiener_deconvolve(tile, kernels[i * n_c + j], nsr=nsr, prior=prior, pad=0,
+                                     n_px=float(np.sqrt(H * W)))
             win = (wy[i, y0:y1, None] * wx[j, None, x0:x1]).astype(dt)
             if img.ndim == 3:
                 win = win[..., None]

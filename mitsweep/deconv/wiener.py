@@ -15,7 +15,7 @@ import numpy as np
 import scipy.fft as sfft
 
 __all__ = ["wiener_deconvolve", "wiener_filter", "kernel_spectrum", "regulariser",
-           "estimate_nsr", "estimate_noise_sigma", "fast_shape", "working_dtype", "PRIORS", "DEFAULT_NSR_FLOOR"]
+           "estimate_nsr", "estimate_noise_sigma", "natural_prior_scale", "fast_shape", "working_dtype", "PRIORS", "DEFAULT_NSR_FLOOR"]
 
 log = logging.getLogger(__name__)
 
@@ -26,10 +26,15 @@ PRIORS = ("constant", "natural")
 #: inverse filter at 1 / (2 sqrt(1e-4)) = 50.
 DEFAULT_NSR_FLOOR = 1e-4
 
-# Mean of 6 |f|² over the unit frequency cell [-1/2, 1/2]² (|f| in cycles/pixel) is 1:
-# with this scale a natural prior and a constant prior of equal ``nsr`` regularise
-# with the same mean strength.
-_NATURAL_SCALE = 6.0
+
+def natural_prior_scale(n_px: float) -> float:
+    """2π ln(n_px / 2): R(f) = nsr · scale · |f|² for a 1/|f|² signal spectrum.
+
+    A power spectrum S(f) = A / |f|² between the lowest frequency 1/n_px and the Nyquist
+    1/2 (cycles/pixel) holds the variance σ_s² = 2π A ln(n_px / 2); so with
+    nsr = σ_n² / σ_s² the noise-to-signal ratio at frequency f is nsr · 2π ln(n_px/2) |f|².
+    """
+    return 2 * np.pi * np.log(max(float(n_px) / 2, 2.0))
 
 
 def working_dtype(image: np.ndarray) -> np.dtype:
@@ -74,17 +79,25 @@ def kernel_spectrum(psf: np.ndarray, shape: tuple[int, int], dtype=np.float64) -
 
 
 def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64,
-                *, freqs: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                *, freqs: tuple[np.ndarray, np.ndarray] | None = None,
+                n_px: float | None = None) -> np.ndarray:
     """Noise-to-signal power ratio R(f) on an rfft2 grid of ``shape``.
 
-    ``prior="constant"``: R = nsr for every f except DC, where R = 0 (the image mean is
-    known to 1/N of the noise variance, so a constant image passes unchanged).
-    ``prior="natural"``: R = nsr · 6 |f|² (|f| in cycles/pixel), i.e. a signal power
-    spectrum falling as 1/|f|² (amplitude 1/|f|, the natural-image weight W of the
-    V metric, paper Eq. 2); the factor 6 makes its mean over the frequency cell equal
-    ``nsr``.
+    ``nsr`` is always σ_n² / σ_s², noise variance over signal variance (what
+    :meth:`mitsweep.deconv.noise.SensorNoise.nsr` gives); the prior says how the
+    signal's variance is spread over frequency:
 
-    ``freqs`` optionally gives the two frequency arrays (cycles/pixel), broadcastable.
+    - ``"constant"``: flat (white) signal, R = nsr at every f except DC, where R = 0 (the
+      image mean is known to 1/N of the noise variance, so a constant image passes
+      unchanged). Textbook, but natural images hold far less than their variance at
+      high frequencies, so this under-regularises noisy images.
+    - ``"natural"``: signal power falling as 1/|f|² (amplitude 1/|f|, the natural-image
+      weight W of the V metric, paper Eq. 2): R = nsr · 2π ln(n/2) · |f|²
+      (:func:`natural_prior_scale`), |f| in cycles/pixel; R = 0 at DC.
+
+    ``freqs`` optionally gives the two frequency arrays (cycles/pixel), broadcastable;
+    ``n_px`` the image size that sets the spectrum's lowest frequency (default the
+    geometric mean of ``shape``).
     """
     if prior not in PRIORS:
         raise ValueError(f"prior must be one of {PRIORS}, got {prior!r}")
@@ -97,7 +110,8 @@ def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64
         fy, fx = freqs
     f2 = fy * fy + fx * fx
     if prior == "natural":
-        return (nsr * _NATURAL_SCALE) * f2
+        n = float(np.sqrt(shape[0] * shape[1])) if n_px is None else float(n_px)
+        return ((nsr * natural_prior_scale(n)) * f2).astype(dtype, copy=False)
     return np.where(f2 == 0, 0.0, nsr).astype(dtype)
 
 
@@ -161,7 +175,7 @@ def estimate_nsr(image: np.ndarray, *, floor: float = DEFAULT_NSR_FLOOR,
 
 def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None = None,
                       prior: str = "constant", pad: int | str = "auto",
-                      pad_mode: str = "symmetric") -> np.ndarray:
+                      pad_mode: str = "symmetric", n_px: float | None = None) -> np.ndarray:
     r"""Deconvolve ``image`` by the shift-invariant ``psf`` with a Wiener filter.
 
     Parameters
@@ -178,14 +192,18 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None =
         from the image (:func:`estimate_nsr`); from a sensor model use
         :meth:`mitsweep.deconv.noise.SensorNoise.nsr`.
     prior : {"constant", "natural"}
-        Signal power spectrum: flat (classic constant-NSR Wiener, DC exempt) or the
-        natural-image 1/|f|² fall-off; see :func:`regulariser`.
+        How the signal's variance spreads over frequency: flat (classic constant-NSR
+        Wiener, DC exempt) or the natural-image 1/|f|² fall-off, which is the right
+        choice for noisy photographs; see :func:`regulariser`.
     pad : int or "auto"
         Pixels of padding on each side against circular wrap-around; ``"auto"`` is twice
         the kernel size. The padded size is rounded up to a fast FFT length.
     pad_mode : str
         :func:`numpy.pad` mode for the padding; ``"symmetric"`` keeps the padded image
         continuous at the border.
+    n_px : float, optional
+        Size of the whole image for the natural prior's scale (default this image's
+        size; tiles of a larger image pass the larger size).
 
     Returns
     -------
@@ -244,7 +262,8 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None =
     widths = [(pad_y0, M - H_ - pad_y0), (pad_x0, N - W_ - pad_x0)] + [(0, 0)] * (img.ndim - 2)
     padded = np.pad(img, widths, mode=pad_mode) if (M, N) != (H_, W_) else img
     Hk = kernel_spectrum(k, (M, N), dtype=dt)
-    G = wiener_filter(Hk, regulariser((M, N), float(nsr), prior, dtype=dt))
+    G = wiener_filter(Hk, regulariser((M, N), float(nsr), prior, dtype=dt,
+                                      n_px=float(np.sqrt(H_ * W_)) if n_px is None else n_px))
     if img.ndim == 3:
         G = G[..., None]
     out = sfft.irfft2(sfft.rfft2(padded, axes=(0, 1), workers=-1) * G, s=(M, N), axes=(0, 1),
