@@ -48,8 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="continuous sweep (stratified time) or the paper's N-plane sum")
     p.add_argument("--planes", type=positive_int, default=16,
                    help="focal planes of --method planes (16, at most 64)")
-    p.add_argument("--time-samples", type=positive_int, default=8,
-                   help="stratified times per ray of --method continuous (8, at most 64)")
+    p.add_argument("--time-samples", type=positive_int, default=4,
+                   help="stratified times per ray of --method continuous (4, at most 64)")
     p.add_argument("--motion-table", metavar="CSV",
                    help="measured stage motion (two columns: time, sensor distance mm) for "
                         "sweep.profile = 'tabulated'")

@@ -19,7 +19,7 @@ from ..config import setup_to_dict
 from ..io.bank import IPSFBank
 from ..optics import chief_ray, image_point, optimal_sweep_range, placement_of
 from ..optics.motion import motion_for
-from .psf import DEFAULT_KERNEL_SIZE, integrated_psf
+from .psf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, integrated_psf
 from .source import check_depth
 
 __all__ = ["ipsf_bank", "field_radius", "grid_points"]
@@ -54,7 +54,7 @@ def grid_points(setup, grid: tuple[int, int]) -> np.ndarray:
 def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
               grid: tuple[int, int] = (9, 9), depths=(500.0,), rays: int = BANK_RAYS,
               kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0, motion=None,
-              sweep=None, method: str = "continuous", time_samples: int = 8,
+              sweep=None, method: str = "continuous", time_samples: int = DEFAULT_TIME_SAMPLES,
               n_planes: int = 16, progress=None) -> IPSFBank:
     """A bank of IPSFs for a setup.
 
