@@ -93,3 +93,89 @@ def test_firmware_boots_under_simavr_and_greets_driver(firmware):
                            [(None, lines[0].encode() + b"\n")]) as board:
         assert board.wait_ready(0.1)
     assert board.ready_line == f"READY {driver.FIRMWARE_NAME} 1.0 {driver.PROTOCOL_VERSION}"
+
+
+# -- the sketch's own code on the host, against the Python driver ------------------------
+HOST_DIR = SKETCH_DIR.parent / "host"
+# The host build's steps happen when the OS schedules the polling loop (it naps 20 µs
+# per turn): a step, and so the shutter edge and its event, can be late by a scheduling
+# delay, which on this shared 2-core machine reaches several ms (a real Uno's loop
+# jitter is ~20 µs). The step *positions* of the edges are exact; times get this bound.
+HOST_TIMING_TOLERANCE_S = 25e-3
+# Events and the pin trace are stamped in the same loop turn: within 200 µs.
+SAME_TURN_S = 200e-6
+
+
+@pytest.fixture(scope="module")
+def host_firmware(tmp_path_factory):
+    cxx = shutil.which("g++")
+    if cxx is None:
+        pytest.skip("no C++ compiler (g++) for the host build of the sketch")
+    out = tmp_path_factory.mktemp("fwhost") / "mitsweep_sweep_host"
+    proc = subprocess.run([cxx, "-O2", "-std=c++11", "-Wall", "-Wextra", "-Werror",
+                           "-I", str(HOST_DIR), "-x", "c++", str(SKETCH), "-x", "none",
+                           str(HOST_DIR / "host_main.cpp"), "-o", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out
+
+
+class HostBoard:
+    """The host-built sketch on the master side of a pty; ``port`` is the slave path."""
+
+    def __init__(self, binary: Path, trace: Path, start_steps: int) -> None:
+        import os
+        import tty
+
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)
+        self.port = os.ttyname(self.slave)
+        self.trace = trace
+        env = dict(os.environ, MITSWEEP_FW_START_STEPS=str(start_steps),
+                   MITSWEEP_FW_TRACE=str(trace))
+        self.proc = subprocess.Popen([str(binary)], stdin=self.master, stdout=self.master,
+                                     env=env)
+
+    def close(self) -> None:
+        import os
+
+        self.proc.kill()
+        self.proc.wait(timeout=5)
+        os.close(self.master)
+        os.close(self.slave)
+
+    def pin_changes(self, pin: int) -> list[tuple[int, int, int]]:
+        """(micros, value, axis steps) for each change of ``pin``."""
+        rows = [tuple(int(v) for v in ln.split()) for ln in self.trace.read_text().splitlines()]
+        return [(t, v, a) for t, p, v, a in rows if p == pin]
+
+
+def test_sketch_runs_a_capture_with_the_python_driver(host_firmware, tmp_path):
+    """The firmware's own parsing, ramps, shutter window and events, driven by
+    run_capture over a real pty: the record is complete, the shutter pin was high once,
+    exactly between the planned steps, for the planned time."""
+    from mitsweep.config import load_setup
+    from mitsweep.rig import RigPorts, load_capture_record, plan_capture, run_capture
+    from mitsweep.rig.testing import fast_rig_setup
+
+    setup = fast_rig_setup(load_setup(SKETCH_DIR.parents[2] / "scenes" / "sphere.toml"))
+    plan = plan_capture(setup)
+    board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
+    out = tmp_path / "capture.json"
+    try:
+        run_capture(setup, RigPorts(arduino=board.port, checksums=True), out=out)
+    finally:
+        board.close()
+    data = load_capture_record(out)
+    assert data["complete"] and data["homed"]
+    exp = data["measured"]["exposure"]
+    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
+                                                       abs=HOST_TIMING_TOLERANCE_S)
+    shutter = board.pin_changes(6)   # PIN_SHUTTER
+    assert [v for _, v, _ in shutter] == [1, 0]
+    (t_open, _, x_open), (t_close, _, x_close) = shutter
+    assert (x_open, x_close) == (plan.open_steps, plan.close_steps)
+    # the board's events report the shutter edges it drove
+    assert exp["measured_exposure_s"] == pytest.approx((t_close - t_open) * 1e-6,
+                                                       abs=SAME_TURN_S)
+    assert [e["name"] for e in data["events"]].count("POS") >= 10
