@@ -1,0 +1,38 @@
+"""mitsweep bench tracer: JSON keys, the peer's presence or absence, agreement with batoid."""
+
+import builtins
+import json
+import types
+
+import pytest
+
+from mitsweep.cli.main import main
+
+
+def test_bench_tracer_quick_json(capsys):
+    assert main(["bench", "tracer", "--quick", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["rays_per_s"] > 0 and res["rays_landed"] > 0.5 * res["rays"]
+    if res["peer_rays_per_s"] is None:
+        assert "batoid" in res["peer_note"] and res["ratio"] is None
+    else:
+        assert res["ratio"] == pytest.approx(res["rays_per_s"] / res["peer_rays_per_s"])
+        # Where batoid's root is right (rays along the axis) both traces agree to
+        # float64 rounding.
+        assert res["peer_center_landed_mismatch"] <= 2
+        assert res["peer_center_max_slope_diff"] < 1e-9
+
+
+def test_bench_without_batoid_reports_null(monkeypatch):
+    from mitsweep.tracer import bench
+
+    real_import = builtins.__import__
+
+    def fake_import(name, *a, **kw):
+        if name.startswith("batoid"):
+            raise ImportError("no batoid here")
+        return real_import(name, *a, **kw)
+
+    monkeypatch.setattr(builtins, "__import__", fake_import)
+    res = bench._batoid_rate(None, None, None, 10, 1)
+    assert res["peer_rays_per_s"] is None and "not installed" in res["peer_note"]
