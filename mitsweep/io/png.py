@@ -1,0 +1,45 @@
+"""PNG previews of linear images (sRGB-encoded, 8 bit, written atomically)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_path
+
+__all__ = ["linear_to_srgb", "write_png"]
+
+
+def linear_to_srgb(x: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 sRGB encoding of linear values in [0, 1] (clipped)."""
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+def write_png(path: str | Path, image: np.ndarray, *, white: float | None = None) -> Path:
+    """Write a linear (H, W) or (H, W, 3) image as an 8-bit sRGB PNG.
+
+    ``white`` is the linear value shown as full white (default: the 99.5th percentile,
+    so that a few bright pixels do not darken the preview).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if white is None:
+        finite = img[np.isfinite(img)]
+        white = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+    white = white if white > 0 else 1.0
+    srgb = (linear_to_srgb(np.nan_to_num(img / white)) * 255 + 0.5).astype(np.uint8)
+    p = Path(path)
+    with atomic_path(p, suffix=".png") as tmp:
+        if srgb.ndim == 2:
+            plt.imsave(tmp, srgb, cmap="gray", vmin=0, vmax=255, format="png")
+        else:
+            plt.imsave(tmp, srgb, format="png")
+    return p

@@ -1,0 +1,143 @@
+"""Dataset runner: real renders, real EXR files, resumable and atomic; evaluation."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from conftest import run_cli
+from mitsweep import pipeline
+from mitsweep.config import DEFAULT_SETUP, Sensor
+from mitsweep.pipeline import (DatasetError, DatasetOptions, build_dataset, evaluate_dataset,
+                               load_manifest)
+
+# A tiny frame (48 px, the mirror's image ~36 px across) and a few samples per pixel:
+# enough to exercise every task for real in a few seconds.
+TINY = replace(DEFAULT_SETUP, sensor=Sensor(resolution=(48, 48), pixel_pitch=0.18))
+TINY_OPTS = DatasetOptions(scenes=1, spp={"pinhole": 2, "focused": 2, "sweep": 4, "stopped": 2},
+                           bank_rays=1 << 14)
+EXPECTED = {"bank.npz", "scene_000/pinhole.exr", "scene_000/focused.exr",
+            "scene_000/sweep.exr", "scene_000/stopped.exr", "scene_000/edof.exr",
+            "scene_000/sweep_50lux.exr", "scene_000/stopped_50lux.exr",
+            "scene_000/edof_50lux.exr"}
+
+
+@pytest.fixture(scope="module")
+def tiny_dataset(tmp_path_factory):
+    root = tmp_path_factory.mktemp("ds")
+    manifest = build_dataset(TINY, root, TINY_OPTS, progress=False)
+    return root, manifest
+
+
+def test_dataset_holds_every_item_with_checksums(tiny_dataset):
+    root, manifest = tiny_dataset
+    assert set(manifest["items"]) == EXPECTED
+    assert manifest["complete"] is True
+    for name, item in manifest["items"].items():
+        assert (root / name).is_file()
+        assert item["sha256"] == pipeline._sha256(root / name)
+    assert manifest["versions"]["mitsuba"] and manifest["setup"]["name"] == "sphere"
+
+
+def test_rerun_skips_complete_items(tiny_dataset, monkeypatch):
+    root, manifest = tiny_dataset
+    calls = []
+    for fn in ("_task_render", "_task_bank", "_task_noisy", "_task_deconvolve"):
+        monkeypatch.setattr(pipeline, fn, lambda *a, _fn=fn: calls.append(_fn))
+    again = build_dataset(TINY, root, TINY_OPTS, progress=False)
+    assert calls == []
+    assert again["items"] == manifest["items"]
+
+
+def test_corrupt_or_missing_items_are_redone(tmp_path):
+    root = tmp_path / "ds"
+    build_dataset(TINY, root, TINY_OPTS, progress=False)
+    before = load_manifest(root)["items"]
+    edof = pipeline._read_rgb(root / "scene_000" / "edof.exr")[0]
+    (root / "scene_000" / "edof.exr").write_bytes(b"garbage")   # corrupted
+    (root / "scene_000" / "stopped_50lux.exr").unlink()         # lost
+    after = build_dataset(TINY, root, TINY_OPTS, progress=False)["items"]
+    # Redone from the same inputs: the same pixels (the header holds a timing).
+    np.testing.assert_array_equal(pipeline._read_rgb(root / "scene_000" / "edof.exr")[0], edof)
+    assert (root / "scene_000" / "stopped_50lux.exr").is_file()
+    # Everything else was kept as it was (same checksums, renders not redone).
+    for name in EXPECTED - {"scene_000/edof.exr", "scene_000/stopped_50lux.exr"}:
+        assert after[name] == before[name]
+
+
+def test_interrupted_run_keeps_finished_items_and_resumes(tmp_path, monkeypatch):
+    root = tmp_path / "ds"
+    real = pipeline._task_noisy
+
+    def boom(*args):
+        raise KeyboardInterrupt  # as if Ctrl-C arrived during this task
+
+    monkeypatch.setattr(pipeline, "_task_noisy", boom)
+    with pytest.raises(KeyboardInterrupt):
+        build_dataset(TINY, root, TINY_OPTS, progress=False)
+    partial = load_manifest(root)
+    assert "complete" not in partial
+    done = set(partial["items"])
+    assert {"bank.npz", "scene_000/sweep.exr"} <= done
+    assert not any(p.name.startswith(".") for p in root.rglob("*"))  # no temp files left
+    monkeypatch.setattr(pipeline, "_task_noisy", real)
+    redone = []
+    orig_render = pipeline._task_render
+    monkeypatch.setattr(pipeline, "_task_render",
+                        lambda *a: (redone.append(a[2]), orig_render(*a))[1])
+    final = build_dataset(TINY, root, TINY_OPTS, progress=False)
+    assert set(final["items"]) == EXPECTED
+    assert redone == []  # the finished renders were not redone
+    for name in done:
+        assert final["items"][name]["sha256"] == partial["items"][name]["sha256"]
+
+
+def test_dataset_of_another_setup_is_refused(tiny_dataset):
+    root, _ = tiny_dataset
+    other = replace(TINY, lens=replace(TINY.lens, f_number=4.0))
+    with pytest.raises(DatasetError, match="holds a dataset of another setup"):
+        build_dataset(other, root, TINY_OPTS, progress=False)
+
+
+def test_evaluate_scores_every_image(tiny_dataset):
+    root, _ = tiny_dataset
+    res = evaluate_dataset(root)
+    scene = res["scenes"]["scene_000"]
+    for name in ("focused", "sweep", "edof", "stopped", "edof_50lux", "stopped_50lux"):
+        assert np.isfinite(scene[name]["psnr"]) and -1 <= scene[name]["ssim"] <= 1
+        assert len(scene[name]["per_radius"]["psnr"]) == 8
+    # The ground truth scored against itself would be inf: it is the reference, not scored.
+    assert "pinhole" not in scene
+
+
+def test_process_executor_gives_the_same_files(tiny_dataset, tmp_path):
+    root, manifest = tiny_dataset
+    other = build_dataset(TINY, tmp_path / "p", TINY_OPTS, executor="process", jobs=2,
+                          progress=False)
+    # Same seeds → the same renders, bank and noise, whichever process ran them.
+    for name in ("scene_000/sweep.exr", "bank.npz", "scene_000/sweep_50lux.exr"):
+        a = pipeline._read_rgb(root / name)[0] if name.endswith(".exr") else None
+        if a is not None:
+            b = pipeline._read_rgb(tmp_path / "p" / name)[0]
+            np.testing.assert_array_equal(a, b)
+
+
+def test_cli_evaluate_json_and_bad_directory(tiny_dataset, tmp_path):
+    root, _ = tiny_dataset
+    rc, out, err = run_cli("evaluate", root, "--json", "--plot", tmp_path / "pr.png")
+    assert rc == 0, err
+    assert "edof" in json.loads(out)["mean"]
+    assert (tmp_path / "pr.png").is_file()
+    rc, _, err = run_cli("evaluate", tmp_path)
+    assert rc == 2 and "not a mitsweep dataset" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--scenes", "0"], "--scenes: must be > 0"),
+    (["--lux", "-5"], "--lux: must be > 0"),
+    (["--executor", "cluster"], "invalid choice"),
+])
+def test_cli_dataset_bad_input(tmp_path, scenes_dir, args, message):
+    rc, _, err = run_cli("dataset", scenes_dir / "sphere.toml", "--out", tmp_path / "d", *args)
+    assert rc == 2 and message in err
