@@ -32,8 +32,8 @@ log = logging.getLogger(__name__)
 
 #: Far clip of every camera, mm (Mitsuba's default, 1e4 scene units, would cut at 10 m).
 FAR_CLIP = 1.0e6
-_WALL_TILE_MM = 400.0
-_BOARD_HALF_ANGLE_DEG = 9.0
+_WALL_TILE_MM = 1000.0
+_BOARD_HALF_ANGLE_DEG = 14.0
 
 
 def integrator_depth(setup) -> int:
@@ -85,7 +85,7 @@ def _room(setup) -> dict:
         # rectangle: [-1, 1]², normal +z; each faces the room's inside.
         "floor": (T().translate([0, 0, z_floor]).scale([X / 2, Y / 2, 1]), "gravel", X),
         "ceiling": (T().translate([0, 0, z_ceil]).rotate([1, 0, 0], 180)
-                    .scale([X / 2, Y / 2, 1]), "checker", X),
+                    .scale([X / 2, Y / 2, 1]), "text", X),
         "wall_px": (T().translate([X / 2, 0, zc]).rotate([0, 1, 0], -90)
                     .scale([Z / 2, Y / 2, 1]), "brick", Y),
         "wall_nx": (T().translate([-X / 2, 0, zc]).rotate([0, 1, 0], 90)

@@ -147,9 +147,11 @@ def _make_class():
                 raise ValueError("focalsweep: a moving sensor needs shutter_close > "
                                  "shutter_open (the exposure interval)")
             film = self.film()
-            self.size = np.array(film.size(), dtype=float)
-            self.crop_offset = np.array(film.crop_offset(), dtype=float)
-            self.crop_size = np.array(film.crop_size(), dtype=float)
+            # Plain Python floats: NumPy scalars would pull symbolic Dr.Jit values into
+            # NumPy (an evaluation, refused inside the integrators' recorded loops).
+            self.size = tuple(float(x) for x in film.size())
+            self.crop_offset = tuple(float(x) for x in film.crop_offset())
+            self.crop_size = tuple(float(x) for x in film.crop_size())
             self._make_opaque()
 
         # -- parameters --------------------------------------------------------------
