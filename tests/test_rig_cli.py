@@ -85,3 +85,12 @@ def test_cli_fault_exits_1_with_incomplete_record(tmp_path):
     assert rc == 1
     assert "capture incomplete (fault)" in err and str(out) in err
     assert load_capture_record(out)["status"] == "fault"
+
+
+def test_unwritable_record_path_exits_2_before_opening_ports(tmp_path):
+    setup = setup_file(tmp_path)
+    with PtyDevice(ArduinoModel()) as dev:
+        rc, out, err = run_cli("capture", setup, "--port", dev.port,
+                               "--out", tmp_path / "missing_dir" / "rec.json", timeout=120)
+        assert not [line for _, d, line in dev.model.log if d == "rx"], "port was used"
+    assert rc == 2 and "does not exist" in err

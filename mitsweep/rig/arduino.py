@@ -125,6 +125,8 @@ class ArduinoSweepController(Stage, Shutter):
         self.events: list[BoardEvent] = []   # every event received, in order
         self._unread: list[BoardEvent] = []  # events not yet consumed by wait_event
         self.ready_line: str | None = None
+        self.shutter_open: bool | None = None   # as last reported by STATE
+        self.stopped_at: int | None = None      # step position of the last STOP
 
     # -- link ---------------------------------------------------------------------------
     def wait_ready(self, timeout_s: float = 3.0) -> bool:

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .arduino import ArduinoSweepController
-from .errors import DeviceFault, PortLost, RigError, ReplyTimeout
+from .errors import DeviceFault, PlanError, PortLost, ReplyTimeout, RigError
 from .plan import CapturePlan, plan_capture
 from .record import CaptureRecord
 from .transport import CommandLog, LineTransport, open_port
@@ -267,7 +267,10 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
     if out is not None:
         from ..io.atomic import check_writable
 
-        check_writable(out)
+        try:
+            check_writable(out)
+        except OSError as exc:
+            raise PlanError(f"capture record: {exc}") from None
     log = CommandLog()
     record = CaptureRecord(setup=setup, plan=plan, log=log, ports=ports, path=out)
     dev = _open_devices(ports, plan, setup, log)   # PortUnavailable: nothing moved
@@ -279,6 +282,7 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
                 _sweep_zaber(dev, plan, record)
             else:
                 _sweep_arduino(dev, plan, record)
+            record.finish(complete=True, status="complete")   # checks the measurement
         except BaseException as exc:
             logger.error("capture failed (%s): stopping the stage, releasing the shutter",
                          exc or type(exc).__name__)
@@ -290,7 +294,6 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
                           error=str(exc) or type(exc).__name__)
             record.save()
             raise
-        record.finish(complete=True, status="complete")
         record.save()
         return record
     finally:
