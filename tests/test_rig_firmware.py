@@ -179,3 +179,76 @@ def test_sketch_runs_a_capture_with_the_python_driver(host_firmware, tmp_path):
     assert exp["measured_exposure_s"] == pytest.approx((t_close - t_open) * 1e-6,
                                                        abs=SAME_TURN_S)
     assert [e["name"] for e in data["events"]].count("POS") >= 10
+
+
+# -- the simulator and the firmware answer alike ------------------------------------------
+# (command, expected reply, events that must follow before the next command). Replies are
+# compared on their first words (OK <CMD> / ERR <CODE>); events by name. ramp for rate
+# 400 and accel 4000 is ceil(400² / (2·4000)) = 20 steps.
+CONFORMANCE = [
+    ("MOVE 100 400 4000", "ERR HOME", []),
+    ("LIMITS 0 10000", "OK LIMITS 0 10000", []),
+    ("HOME 4000", "OK HOME", ["HOMED"]),
+    ("MOVE 20000 400 4000", "ERR LIMIT", []),
+    ("MOVE 100 5000 4000", "ERR RANGE", []),
+    ("MOVE 200 4000 40000", "OK MOVE", ["DONE"]),
+    ("SWEEP 0 400 4000 190 10", "ERR RANGE", []),          # opens inside the ramp
+    ("SWEEP 0 400 4000 170 30", "OK SWEEP", ["START", "OPEN", "CLOSE", "DONE"]),
+    ("STATE", "OK STATE", []),
+    ("BOGUS 1", "ERR SYNTAX", []),
+    ("SHUTTER 1000 20000", "OK SHUTTER", ["OPEN", "CLOSE"]),
+    ("STOP", "OK STOP", []),
+]
+
+
+@pytest.fixture(params=["simulator", "firmware"])
+def board_port(request, tmp_path):
+    from mitsweep.rig.simulator import ArduinoModel, PtyDevice
+
+    if request.param == "simulator":
+        with PtyDevice(ArduinoModel(position=300)) as dev:
+            yield dev.port, request.param
+    else:
+        binary = request.getfixturevalue("host_firmware")
+        board = HostBoard(binary, tmp_path / "pins.txt", start_steps=300)
+        try:
+            yield board.port, request.param
+        finally:
+            board.close()
+
+
+def test_simulator_and_firmware_answer_alike(board_port):
+    from mitsweep.rig.arduino import ArduinoSweepController
+    from mitsweep.rig.transport import LineTransport, open_port
+
+    port, kind = board_port
+    t = LineTransport(open_port(port), name=kind, timeout_s=1.0)
+    try:
+        board = ArduinoSweepController(t, steps_per_mm=400)
+        assert board.wait_ready(3.0)
+        for command, reply, events in CONFORMANCE:
+            t.write_line(command)
+            line = t.read_line()
+            while line.startswith("EV POS"):
+                line = t.read_line()
+            assert line.startswith(reply), (command, line)
+            seen = []
+            while len(seen) < len(events):
+                board._take_event(t.read_line(timeout_s=3.0))
+                ev = board._unread.pop(0)
+                assert ev.name != "FAULT", (command, ev)
+                if ev.name != "POS":
+                    seen.append(ev)
+            assert [e.name for e in seen] == events, command
+            if command.startswith("SWEEP") and reply.startswith("OK"):
+                opened, closed = seen[1], seen[2]
+                assert (opened.position, closed.position, seen[-1].position) == (170, 30, 0)
+                # 140 steps at 400 steps/s; the host build's steps may be late by a
+                # scheduling delay (HOST_TIMING_TOLERANCE_S), the simulator's are exact
+                tol = HOST_TIMING_TOLERANCE_S if kind == "firmware" else 2e-6
+                assert (closed.t_us - opened.t_us) * 1e-6 == pytest.approx(0.35, abs=tol)
+            if command.startswith("SHUTTER"):
+                tol = HOST_TIMING_TOLERANCE_S if kind == "firmware" else 2e-6
+                assert (seen[1].t_us - seen[0].t_us) * 1e-6 == pytest.approx(0.02, abs=tol)
+    finally:
+        t.close()

@@ -188,7 +188,10 @@ static void stepOnce(uint32_t now) {
 static void runMotion() {
   if (mode == IDLE) return;
   uint32_t now = micros();
-  if (mode != HOMING && homed && digitalRead(PIN_HOME) == LOW && moveDir < 0 && pos <= 0) {
+  // the home switch closing while a move still has steps to go toward it: a lost
+  // reference or a bad limit; stop (arriving exactly at 0 is fine)
+  if (mode != HOMING && homed && moveDir < 0 && moveDone < moveLength && pos <= 0 &&
+      digitalRead(PIN_HOME) == LOW) {
     fault("LIMIT");
     return;
   }
