@@ -54,7 +54,7 @@ def test_sweep_matches_average_of_thinlens_renders_over_the_sweep():
     mm at f/2.8 and this pitch).
     """
     register()
-    setup = small_sphere()
+    setup = small_sphere(32)
     kw, _ = _mode_camera(setup, "sweep", None, None)
     motion = kw["motion"]
     n_planes, passes, spp = 16, 8, 64
