@@ -275,7 +275,7 @@ def trace_arrays(geom: Geometry, params: TraceParams, n: int, *, offset: int = 0
 def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_size: int,
             pitch: float, center_uv: tuple[float, float], times: list | None,
             sensor_table: np.ndarray | None, linear: tuple[float, float] | None,
-            jitter: bool, buffer=None, double: bool = False):
+            time_samples: int, buffer=None, double: bool = False):
     """Trace ``n`` rays and add their sensor hits to a (K·K + 2) Dr.Jit buffer.
 
     Each landed ray deposits its weight, split equally over ``M`` time samples: fixed
@@ -310,18 +310,18 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
         M = len(times)
         dists = [op(x) for x in times]
     else:
-        M = int(jitter)
+        M = int(time_samples)
         assert M >= 1
         xi = out["xi_t"]
+        if linear is None:
+            tab = Float(np.asarray(sensor_table, dtype=np.float64 if double else np.float32))
+            nt = len(sensor_table) - 1
         dists = []
         for j in range(M):
             tt = (xi + j) * (1.0 / M)
             if linear is not None:
                 dists.append(op(linear[0]) + (op(linear[1]) - op(linear[0])) * tt)
             else:
-                tab = m.Float(sensor_table.astype(np.float32)) if not double else \
-                    m.Float64(sensor_table)
-                nt = len(sensor_table) - 1
                 x = tt * nt
                 k0 = UInt32(dr.minimum(dr.floor(x), nt - 1))
                 fr = x - Float(k0)

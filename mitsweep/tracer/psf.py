@@ -159,7 +159,7 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         n = min(_CHUNK, rays - done)
         buffer = deposit(geom, params, n, offset=done, kernel_size=K, pitch=pitch,
                          center_uv=source.image_uv, times=times, sensor_table=table,
-                         linear=linear, jitter=int(time_samples), buffer=buffer,
+                         linear=linear, time_samples=int(time_samples), buffer=buffer,
                          double=double)
         dr.eval(buffer)
         done += n
