@@ -224,3 +224,47 @@ def test_light_tracing_through_sample_direction_matches_path_tracing(kw):
     noise = np.mean((blocks(b1) - blocks(b2)) ** 2) / 2
     assert err < 2.5 * noise, (err, noise)
     assert 0.5 * (b1.mean() + b2.mean()) == pytest.approx(a.mean(), rel=0.03)
+
+
+def test_plugin_loads_from_mitsuba_xml_with_a_tabulated_motion():
+    xml = f"""<scene version="3.0.0">
+      <sensor type="focalsweep">
+        <float name="focal_length" value="{F}"/>
+        <float name="f_number" value="4"/>
+        <float name="pixel_pitch" value="{PITCH}"/>
+        <float name="sensor_start" value="58.9"/>
+        <float name="sensor_end" value="58.2"/>
+        <string name="profile" value="tabulated"/>
+        <string name="times" value="0, 0.5, 2"/>
+        <string name="positions" value="58.9 58.8 58.2"/>
+        <float name="shutter_open" value="0"/>
+        <float name="shutter_close" value="1"/>
+        <transform name="to_world"><lookat origin="0,0,0" target="0,0,-1" up="0,1,0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film>
+      </sensor>
+    </scene>"""
+    scene = mi.load_string(xml)
+    sensor = scene.sensors()[0]
+    got = np.array(sensor._sensor_distance(mi.Float([0.0, 0.25, 1.0])))
+    np.testing.assert_allclose(got, [58.9, 58.8, 58.2], atol=1e-5)
+
+
+def test_register_again_after_a_variant_change(tmp_path):
+    """Registration is per variant: a new variant needs (and gets) its own."""
+    import subprocess
+    import sys
+
+    code = (
+        "import mitsuba as mi\n"
+        "from mitsweep.render import register\n"
+        "register()\n"
+        "mi.set_variant('scalar_rgb')\n"
+        "register()\n"
+        "s = mi.load_dict({'type': 'focalsweep', 'focal_length': 50.0, 'pixel_pitch': 0.02,"
+        " 'sensor_distance': 58.0, 'film': {'type': 'hdrfilm', 'width': 4, 'height': 4}})\n"
+        "ray, w = s.sample_ray(0.0, 0.5, mi.Point2f(0.5, 0.5), mi.Point2f(0.5, 0.5))\n"
+        "print(mi.variant(), abs(ray.d[2] - 1.0) < 1e-6)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["scalar_rgb", "True"]

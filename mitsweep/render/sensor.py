@@ -195,6 +195,12 @@ def _make_class():
 
         def _make_opaque(self):
             kind, vals = self.motion
+            self._scalar = mi.variant().startswith("scalar")
+            if self._scalar:  # per-sample Python calls: plain floats and NumPy
+                self.m_table = vals.astype(float)
+                self.m_aperture, self.m_pitch = self.aperture_radius, self.pixel_pitch
+                self.m_f = self.focal_length
+                return
             self.m_table = mi.Float(vals.astype(np.float32))
             self.m_aperture = mi.Float(self.aperture_radius)
             self.m_pitch = mi.Float(self.pixel_pitch)
@@ -204,6 +210,12 @@ def _make_class():
         # -- geometry -----------------------------------------------------------------
         def _sensor_distance(self, time):
             kind, vals = self.motion
+            if self._scalar:
+                if kind == "fixed":
+                    return float(vals[0])
+                t = min(max((float(time) - self.shutter_open()) / self.shutter_open_time(),
+                            0.0), 1.0)
+                return float(np.interp(t, np.linspace(0.0, 1.0, len(vals)), vals))
             if kind == "fixed":
                 return dr.gather(mi.Float, self.m_table, mi.UInt32(0))
             t = dr.clip((time - self.shutter_open()) / self.shutter_open_time(), 0.0, 1.0)
@@ -308,6 +320,8 @@ def _make_class():
 
         def traverse(self, callback):
             callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)
+            if self._scalar:
+                return
             callback.put("aperture_radius", self.m_aperture, mi.ParamFlags.NonDifferentiable)
             callback.put("pixel_pitch", self.m_pitch, mi.ParamFlags.NonDifferentiable)
             callback.put("focal_length", self.m_f, mi.ParamFlags.NonDifferentiable)
@@ -315,6 +329,8 @@ def _make_class():
 
         def parameters_changed(self, keys):
             super().parameters_changed(keys)
+            if self._scalar:
+                return
             # Keep the Python-side copies (used for validation and repr) in step.
             self.aperture_radius = float(dr.slice(self.m_aperture, 0))
             self.pixel_pitch = float(dr.slice(self.m_pitch, 0))
