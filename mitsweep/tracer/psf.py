@@ -167,8 +167,9 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
     buf = np.asarray(buffer.numpy(), dtype=np.float64)
     KK = K * K
     img = buf[:KK].reshape(K, K)
-    landed_w, free_w = buf[KK], buf[KK + 1]
     in_w = img.sum()
+    landed_w = in_w + buf[KK]
+    free_w = landed_w + buf[KK + 1]
     elapsed = time.perf_counter() - t_start
     if not landed_w > 0:
         raise ValueError("no traced ray landed on the sensor: the point is fully vignetted")
