@@ -100,7 +100,8 @@ def _delta_bank(shape, K=9):
     k = np.zeros((1, 5, K, K), np.float32)
     k[..., K // 2, K // 2] = 1
     radii = np.linspace(0, 0.018 * shape[0] / 2, 5)
-    return IPSFBank(kernels=k, points_uv=np.stack([radii, 0 * radii], 1), depths_mm=np.array([500.]),
+    return IPSFBank(kernels=k, points_uv=np.stack([radii, 0 * radii], 1),
+                    depths_mm=np.array([500.]),
                     pixel_pitch=0.018, reference_sensor_distance=30.0, kind="radial",
                     radii_mm=radii)
 

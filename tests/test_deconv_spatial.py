@@ -11,7 +11,7 @@ from mitsweep.deconv.kernels import (grid_bank_from_radial, interpolate_radial, 
                                      select_depth)
 from mitsweep.deconv.metrics import psnr
 from mitsweep.deconv.spatial import (grid_axes_px, grid_kernel_field, grid_windows,
-                                     hat_weights, product_convolve, scatter_blur,
+                                     hat_weights, scatter_blur,
                                      spatially_varying_blur, spatially_varying_deconvolve)
 from mitsweep.deconv.synthetic import (synthetic_grid_bank, synthetic_kernel_field,
                                        synthetic_radial_bank)

@@ -114,6 +114,9 @@ def test_padding_prevents_circular_wrap_around():
     assert np.abs(wrapped[right]).max() > 1e-2
 
 
+N_PAD = 128   # upper bound of the padded FFT size of a 64 px image with a 15 px kernel
+
+
 def _two_point(size=15, sep=6):
     k = np.zeros((size, size))
     k[size // 2, size // 2 - sep // 2] = k[size // 2, size // 2 + sep // 2] = 0.5
@@ -139,7 +142,10 @@ def test_stable_for_kernels_with_spectral_zeros(kernel, scene, nsr, prior):
         np.testing.assert_allclose(out, 1.0, atol=1e-9)
     elif nsr > 0:
         # the Wiener gain is bounded by 1/(2 sqrt(R)); energy can grow at most that much
-        gain = 1 / (2 * np.sqrt(nsr * (1 if prior == "constant" else 6 / 64 ** 2)))
+        # (for the natural prior the smallest R, at the lowest non-zero frequency 1/N)
+        from mitsweep.deconv.wiener import natural_prior_scale
+        r_min = nsr * (1 if prior == "constant" else natural_prior_scale(64) / N_PAD ** 2)
+        gain = 1 / (2 * np.sqrt(r_min))
         assert np.linalg.norm(out) <= max(1.0, gain) * np.linalg.norm(y) * 1.01
 
 

@@ -1,8 +1,9 @@
 """``mitsweep bench deconv``: polar and spatially varying deconvolution against a baseline.
 
 One run, one process, side by side: the same synthetic focal-sweep image (a mosaic of
-photographs at their native resolution inside the mirror's disk, blurred by the exact analytic IPSF field of
-:mod:`mitsweep.deconv.synthetic`, with the paper's 50 lux sensor noise) is restored by
+photographs at their native resolution inside the mirror's disk, blurred by the
+analytic IPSF field of :mod:`mitsweep.deconv.synthetic`, with the paper's 50 lux
+sensor noise) is restored by
 
 - ``polar``: :func:`~mitsweep.deconv.polar.polar_deconvolve` with a 19-radius bank
   (the paper's Fig. 8 pipeline), resampling included in the time;
@@ -50,7 +51,10 @@ def mosaic(size: int, tile: int = 512) -> np.ndarray:
         for x in range(0, size, tile):
             img = getattr(data, MOSAIC[n % len(MOSAIC)])()
             n += 1
-            img = color.rgb2gray(img) if img.ndim == 3 else img / (255.0 if img.dtype == np.uint8 else 1.0)
+            if img.ndim == 3:
+                img = color.rgb2gray(img[..., :3])
+            elif img.dtype == np.uint8:
+                img = img / 255.0
             img = img[:tile, :tile]
             if img.shape != (tile, tile):
                 img = transform.resize(img, (tile, tile), anti_aliasing=True)

@@ -90,7 +90,7 @@ def disk_mask(shape: tuple[int, ...], radius_px: float, *,
 
 def radial_bins(shape: tuple[int, ...], edges_px, *,
                 center: tuple[float, float] | None = None) -> np.ndarray:
-    """(H, W) int: index of the radial bin ``[edges[i], edges[i+1])`` of each pixel, −1 outside."""
+    """(H, W) int: radial bin ``[edges[i], edges[i+1])`` of each pixel; −1 outside."""
     edges = np.asarray(edges_px, dtype=np.float64)
     if edges.ndim != 1 or len(edges) < 2 or np.any(np.diff(edges) <= 0):
         raise ValueError("edges_px must be at least two increasing radii")

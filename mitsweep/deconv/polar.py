@@ -260,10 +260,13 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
     n2 = _fast_multiple(int(math.ceil(n * max(1.0, upsample))), 4)
     cy, cx = grid.center
     # only the box around the disk r <= r_max
-    by0, by1 = max(0, int(math.floor(cy - grid.r_max))), min(H, int(math.ceil(cy + grid.r_max)) + 1)
-    bx0, bx1 = max(0, int(math.floor(cx - grid.r_max))), min(W, int(math.ceil(cx + grid.r_max)) + 1)
-    dy = (cy - np.arange(by0, by1, dtype=np.float64))[:, None]
-    dx = (np.arange(bx0, bx1, dtype=np.float64) - cx)[None, :]
+    R = grid.r_max
+    by0, by1 = max(0, int(math.floor(cy - R))), min(H, int(math.ceil(cy + R)) + 1)
+    bx0, bx1 = max(0, int(math.floor(cx - R))), min(W, int(math.ceil(cx + R)) + 1)
+    # float32 geometry for float32 images: 6e-8 relative is 1e-4 px at r = 1000 px
+    gdt = np.float32 if np.dtype(dtype) == np.float32 else np.float64
+    dy = (cy - np.arange(by0, by1, dtype=gdt))[:, None]
+    dx = (np.arange(bx0, bx1, dtype=gdt) - cx)[None, :]
     rr = np.hypot(dy, dx)
     inside_box = rr <= grid.r_max
     inside = np.zeros((H, W), dtype=bool)
@@ -271,7 +274,7 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
     r_in = rr[inside_box]
     th = np.arctan2(np.broadcast_to(dy, rr.shape)[inside_box],
                     np.broadcast_to(dx, rr.shape)[inside_box])
-    th[th < 0] += 2 * math.pi
+    th[th < 0] += gdt(2 * math.pi)
     if outside is None:
         out = np.zeros((H, W, C), dtype=dtype)
     else:
@@ -294,7 +297,7 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
         up = sfft.irfft(spec[r0:r1, :mq], n=nq, axis=1, workers=-1)
         up *= nq / n
         up = np.concatenate([up[:, -_WRAP:], up, up[:, :_WRAP]], axis=1).astype(dtype, copy=False)
-        coords = np.empty((2, sel.size), dtype=np.float64)
+        coords = np.empty((2, sel.size), dtype=gdt)
         coords[0] = grid.row_of(r_in[sel]) - r0
         coords[1] = th[sel] * (nq / (2 * math.pi)) + _WRAP
         for c in range(C):

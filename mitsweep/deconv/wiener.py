@@ -15,7 +15,8 @@ import numpy as np
 import scipy.fft as sfft
 
 __all__ = ["wiener_deconvolve", "wiener_filter", "kernel_spectrum", "regulariser",
-           "estimate_nsr", "estimate_noise_sigma", "natural_prior_scale", "fast_shape", "working_dtype", "PRIORS", "DEFAULT_NSR_FLOOR"]
+           "estimate_nsr", "estimate_noise_sigma", "natural_prior_scale", "fast_shape",
+           "working_dtype", "PRIORS", "DEFAULT_NSR_FLOOR"]
 
 log = logging.getLogger(__name__)
 
