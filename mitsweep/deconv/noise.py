@@ -85,8 +85,12 @@ class SensorNoise:
     bits : int
         ADC bit depth.
 
-    Defaults describe a DSLR of the paper's era (Canon EOS class: 14 bit, ~40 000 e⁻
-    full well, 0.4 DN/e⁻ at ISO 100, 3 e⁻ read noise, 2 DN ADC noise).
+    Defaults describe a full-frame DSLR of the paper's era (Canon EOS 5D Mark II class:
+    6.4 µm pixels, 14 bit, ~60 000 e⁻ full well, so 0.27 DN/e⁻ at ISO 100, 3 e⁻ read
+    noise, 2 DN ADC noise). Check: at ISO 100 the ISO 12232 saturation exposure is
+    78/100 = 0.78 lux·s; at 50 lux, F2.8, 0.6 s a reflectance-ρ surface gives
+    ρ · 50 / (4 · 2.8²) · 0.6 = 0.96 ρ lux·s, saturating at ρ ≈ 0.8. This model
+    (R = 0.5, q = 0.5) saturates at 1.53 · 0.5 ≈ 0.77.
     """
 
     illuminance_lux: float
@@ -97,9 +101,9 @@ class SensorNoise:
     quantum_efficiency: float = 0.5
     read_noise_e: float = 3.0
     iso: float = 100.0
-    gain_dn_per_e_at_iso100: float = 0.4
+    gain_dn_per_e_at_iso100: float = 0.27
     adc_noise_dn: float = 2.0
-    full_well_e: float = 40000.0
+    full_well_e: float = 60000.0
     bits: int = 14
 
     def __post_init__(self) -> None:
