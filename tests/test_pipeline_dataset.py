@@ -16,7 +16,7 @@ from mitsweep.pipeline import (DatasetError, DatasetOptions, build_dataset, eval
 # enough to exercise every task for real in a few seconds.
 TINY = replace(DEFAULT_SETUP, sensor=Sensor(resolution=(48, 48), pixel_pitch=0.18))
 TINY_OPTS = DatasetOptions(scenes=1, spp={"pinhole": 2, "focused": 2, "sweep": 4, "stopped": 2},
-                           bank_rays=1 << 14)
+                           bank_rays=1 << 14, light_levels_lux=(50.0,))
 EXPECTED = {"bank.npz", "scene_000/pinhole.exr", "scene_000/focused.exr",
             "scene_000/sweep.exr", "scene_000/stopped.exr", "scene_000/edof.exr",
             "scene_000/sweep_50lux.exr", "scene_000/stopped_50lux.exr",

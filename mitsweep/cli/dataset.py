@@ -18,8 +18,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--spp", type=positive_int, nargs=4, metavar=("PINHOLE", "FOCUSED", "SWEEP", "STOPPED"),
                    default=[16, 64, 128, 64], help="samples per pixel per mode (default 16 64 128 64)")
-    p.add_argument("--lux", type=positive_float, nargs="*", default=[50.0],
-                   help="light levels for the noisy images, lux (default 50)")
+    p.add_argument("--lux", type=positive_float, nargs="*", default=[50.0, 2.0, 0.5],
+                   help="light levels for the noisy images, lux (default 50 2 0.5)")
     p.add_argument("--executor", choices=["serial", "process"], default="serial")
     p.add_argument("--jobs", type=positive_int, default=2, help="processes for --executor process")
     p.add_argument("--json", action="store_true", help="print the manifest as JSON")

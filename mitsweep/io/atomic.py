@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import os
 import tempfile
+import threading
 from pathlib import Path
 from typing import Iterator
 
@@ -28,6 +29,18 @@ def check_writable(path: str | Path) -> Path:
     return p
 
 
+_UMASK_LOCK = threading.Lock()
+
+
+def _default_file_mode() -> int:
+    """0o666 less the process umask: the mode ``open()`` would have given the file
+    (``mkstemp`` creates 0o600, which would hide results from other users)."""
+    with _UMASK_LOCK:
+        mask = os.umask(0)
+        os.umask(mask)
+    return 0o666 & ~mask
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path to write; on success it replaces ``path`` atomically.
@@ -41,6 +54,7 @@ def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        os.chmod(tmp_path, _default_file_mode())
         os.replace(tmp_path, p)
     finally:
         if tmp_path.exists():
