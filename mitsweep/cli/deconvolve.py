@@ -23,9 +23,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, metavar="OUT.exr", help="restored image (EXR)")
     p.add_argument("--nsr", type=positive_float, metavar="X",
                    help="Wiener noise-to-signal power ratio (default: estimated from the image)")
-    p.add_argument("--prior", choices=["constant", "natural"], default="constant",
-                   help="regulariser: constant NSR, or natural-image 1/f^2 spectrum "
-                        "(default constant)")
+    p.add_argument("--prior", choices=["natural", "constant"], default="natural",
+                   help="regulariser: natural-image 1/f^2 spectrum (default) or a flat one "
+                        "(constant NSR)")
     p.add_argument("--depth", metavar="MM|mean", default=None,
                    help="bank depth to deconvolve with, mm, or 'mean' (default 500 mm, "
                         "as in the paper)")

@@ -359,7 +359,7 @@ def _band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
 
 def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
                      center: tuple[float, float] | None = None, nsr: float | None = None,
-                     prior: str = "constant", depth_mm: float | str | None = None,
+                     prior: str = "natural", depth_mm: float | str | None = None,
                      r_max: float | None = None, radial_oversampling: float = 1.5,
                      angular_oversampling: float = 1.25, band_spacing: float = 0.25,
                      margin: int | None = None) -> np.ndarray:

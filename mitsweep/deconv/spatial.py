@@ -164,7 +164,7 @@ def spatially_varying_blur(image: np.ndarray, bank: IPSFBank, *,
 
 
 def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
-                                 nsr: float | None = None, prior: str = "constant",
+                                 nsr: float | None = None, prior: str = "natural",
                                  depth_mm: float | str | None = None,
                                  margin: int | None = None) -> np.ndarray:
     r"""Deconvolve a spatially varying blur given by a grid bank.
