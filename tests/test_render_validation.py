@@ -12,9 +12,9 @@ import pytest
 mi = pytest.importorskip("mitsuba")
 
 from mitsweep.config import load_setup  # noqa: E402
-from mitsweep.optics import image_distance, object_distance  # noqa: E402
-from mitsweep.render import camera_dict, reference_sensor_distance  # noqa: E402
-from mitsweep.render.api import _mode_camera  # noqa: E402
+from mitsweep.optics import object_distance  # noqa: E402
+from mitsweep.render import camera_dict  # noqa: E402
+from mitsweep.render.api import mode_camera  # noqa: E402
 from mitsweep.render.scene import build_scene, camera_transform  # noqa: E402
 from mitsweep.render.sensor import register  # noqa: E402
 
@@ -55,7 +55,7 @@ def test_sweep_matches_average_of_thinlens_renders_over_the_sweep():
     """
     register()
     setup = small_sphere(32)
-    kw, _ = _mode_camera(setup, "sweep", None, None)
+    kw, _ = mode_camera(setup, "sweep", None, None)
     motion = kw["motion"]
     n_planes, passes, spp = 16, 8, 64
     sweep_scene = mi.load_dict(build_scene(setup, camera_dict(setup, spp=spp, **kw))[0])

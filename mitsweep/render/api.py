@@ -36,13 +36,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..optics import (focal_image_axial_distances, image_distance, image_point,
+from ..optics import (chief_ray, focal_image_axial_distances, image_distance, image_point,
                       mirror_point_from_image, optimal_sweep_range, placement_of)
 from ..optics.motion import MotionProfile, motion_for
 
 __all__ = ["MODES", "RenderResult", "render_image", "render_to_exr", "render_point_source",
-           "camera_dict", "reference_sensor_distance", "focus_distance_mirror_centre",
-           "mirror_image_bbox", "AOV_NAMES", "FOCUS_REFERENCE_DEPTH_MM"]
+           "camera_dict", "mode_camera", "reference_sensor_distance",
+           "focus_distance_mirror_centre", "mirror_image_bbox", "AOV_NAMES",
+           "FOCUS_REFERENCE_DEPTH_MM"]
 
 log = logging.getLogger(__name__)
 
@@ -133,8 +134,13 @@ def camera_dict(setup, *, sensor_distance: float | None = None, motion: MotionPr
     return d
 
 
-def _mode_camera(setup, mode, sweep, f_number):
-    """(camera kwargs, description) of a mode on the reference grid."""
+def mode_camera(setup, mode, sweep=None, f_number=None):
+    """Camera of a mode on the reference grid: (kwargs of :func:`camera_dict`, description).
+
+    The description holds the reference sensor distance, the sweep and motion, and for
+    ``focused``/``stopped`` the focus distance, sensor distance, f-number and the pitch
+    scale ``i_f / i_ref`` that puts the image on the reference grid.
+    """
     if mode not in MODES:
         raise ValueError(f"mode: must be one of {', '.join(MODES)}, got {mode!r}")
     sr, motion = _sweep_of(setup, sweep)
@@ -169,8 +175,6 @@ def mirror_image_bbox(setup, sensor_distance: float, margin_px: int = 8):
     for frac in (1.0, 0.75, 0.5, 0.25, 0.0):
         r = setup.mirror.rim_radius * frac
         surf = placement.surface(r * np.cos(phi), r * np.sin(phi))
-        from ..optics import chief_ray
-
         u, v = image_point(chief_ray(placement, surf), sensor_distance)
         rims.append((u, v))
     u = np.concatenate([a for a, _ in rims])
@@ -293,7 +297,7 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
     if unknown:
         raise ValueError(f"aovs: unknown {unknown[0]!r}; allowed: {', '.join(AOV_NAMES)}")
     variant = register()
-    kwargs, desc = _mode_camera(setup, mode, sweep, f_number)
+    kwargs, desc = mode_camera(setup, mode, sweep, f_number)
     i_ref = desc["reference_sensor_distance_mm"]
     W, H = setup.sensor.resolution
     crop = mirror_image_bbox(setup, i_ref, margin_px=8) if mirror_only else (0, 0, W, H)
@@ -373,7 +377,7 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
                       aperture_radius=setup.lens.aperture_radius,
                       pixel_pitch=setup.sensor.pixel_pitch)
     else:
-        kwargs, _ = _mode_camera(setup, mode, sweep, f_number)
+        kwargs, _ = mode_camera(setup, mode, sweep, f_number)
     W, H = setup.sensor.resolution
     col = W / 2 + u / setup.sensor.pixel_pitch - 0.5
     row = H / 2 - v / setup.sensor.pixel_pitch - 0.5

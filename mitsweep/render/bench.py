@@ -63,13 +63,13 @@ def _best(fn, repeats=3):
 def _plugin_vs_thinlens(setup, spp):
     import mitsuba as mi
 
-    from .api import _mode_camera, camera_dict
+    from .api import camera_dict, mode_camera
     from .scene import build_scene, camera_transform
     from ..optics import object_distance
 
     W, H = setup.sensor.resolution
     p = setup.sensor.pixel_pitch
-    kw, _ = _mode_camera(setup, "focused", None, None)
+    kw, _ = mode_camera(setup, "focused", None, None)
     i = kw["sensor_distance"]
     ours = mi.load_dict(build_scene(setup, camera_dict(
         setup, spp=spp, sensor_distance=i, aperture_radius=kw["aperture_radius"]))[0])
@@ -81,7 +81,7 @@ def _plugin_vs_thinlens(setup, spp):
                    "pixel_format": "rgb", "sample_border": False},
           "sampler": {"type": "independent", "sample_count": spp}}
     theirs = mi.load_dict(build_scene(setup, tl)[0])
-    kws, _ = _mode_camera(setup, "sweep", None, None)
+    kws, _ = mode_camera(setup, "sweep", None, None)
     sweep = mi.load_dict(build_scene(setup, camera_dict(setup, spp=spp, **kws))[0])
     for sc in (ours, theirs, sweep):   # compile once
         _timed(sc, 0)
@@ -100,10 +100,10 @@ def _plugin_vs_thinlens(setup, spp):
 def _error_vs_time(setup, budgets, n_planes):
     import mitsuba as mi
 
-    from .api import _mode_camera, camera_dict
+    from .api import camera_dict, mode_camera
     from .scene import build_scene
 
-    kws, _ = _mode_camera(setup, "sweep", None, None)
+    kws, _ = mode_camera(setup, "sweep", None, None)
     motion = kws["motion"]
     sweep = mi.load_dict(build_scene(setup, camera_dict(setup, spp=4, **kws))[0])
     ref_spp = 16 * max(budgets)
