@@ -53,6 +53,9 @@ def run(args) -> int:
                                     depth_max=result.depth_max_mm)
         out["traced_focus_min_mm"] = traced.focus_min_mm
         out["traced_focus_max_mm"] = traced.focus_max_mm
+        if not setup.mirror.is_symmetric:  # the whole 2-D field, beyond the tilt plane
+            out["traced_field_focus_min_mm"] = traced.field_focus_min_mm
+            out["traced_field_focus_max_mm"] = traced.field_focus_max_mm
     if args.plot:
         from ..plots import plot_focal_surfaces
 
@@ -76,6 +79,10 @@ def run(args) -> int:
         if "traced_focus_min_mm" in out:
             lines.append(f"traced focus     {out['traced_focus_min_mm']:.3f} .. "
                          f"{out['traced_focus_max_mm']:.3f} mm")
+        if "traced_field_focus_min_mm" in out:
+            lines.append(f"traced 2-D field {out['traced_field_focus_min_mm']:.3f} .. "
+                         f"{out['traced_field_focus_max_mm']:.3f} mm (whole mirror, off the "
+                         f"tilt plane too)")
         if args.plot:
             lines.append(f"plot             {args.plot}")
         sys.stdout.write("\n".join(lines) + "\n")

@@ -85,11 +85,12 @@ def intersect_mirror(placement: Placement, origin, direction, *, newton_iters: i
         t1 = np.where(lin, -c / b, t1)
         t2 = np.where(lin, np.inf, t2)
     best = np.full(a.shape, np.inf)
-    for t in (t1, t2):
-        z = o[..., 2] + t * d[..., 2]
-        on_branch = (R + ok * z) >= -1e-9 * R
-        good = np.isfinite(t) & (t > 0) & on_branch
-        best = np.where(good & (t < best), t, best)
+    with np.errstate(invalid="ignore"):  # NaN roots (misses) compare False
+        for t in (t1, t2):
+            z = o[..., 2] + t * d[..., 2]
+            on_branch = (R + ok * z) >= -1e-9 * R
+            good = np.isfinite(t) & (t > 0) & on_branch
+            best = np.where(good & (t < best), t, best)
     if any(placement.profile.aspheric):
         prof = placement.profile
         t = np.where(np.isfinite(best), best, 0.0)
