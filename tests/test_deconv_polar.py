@@ -29,7 +29,8 @@ def test_polar_round_trip_above_50_db_inside_the_disk(name, dtype):
     grid = polar_grid(img.shape, r_max=250)
     back = from_polar(to_polar(img, grid), grid, img.shape)
     assert back.dtype == dtype
-    # measured 56-58 dB with the default sampling (1.5 rows/px, 1.25 angles/px at the rim)
+    # measured 54.0 (camera) and 56.7 dB (astronaut) with the default sampling (1.5
+    # rows/px, 1.25 angles/px at the rim, no angular upsampling on the way back)
     assert psnr(back, img, mask=disk_mask(img.shape, 248)) > 50
 
 

@@ -113,7 +113,9 @@ def polar_grid(shape: tuple[int, ...], *, center: tuple[float, float] | None = N
     -----
     The defaults were chosen by measuring the round trip (:func:`to_polar` then
     :func:`from_polar`) on scikit-image's camera and astronaut photographs (sharp to the
-    pixel): 56–58 dB PSNR inside the disk; ``radial_oversampling=1`` gives 43–45 dB.
+    pixel, 512², disk of radius 248 px): 54.0 and 56.7 dB PSNR inside the disk;
+    ``angular_oversampling=1`` gives 48.9 and 51.9 dB, ``radial_oversampling=1.25``
+    49.7 and 51.9 dB.
     """
     if len(shape) < 2 or shape[0] < 2 or shape[1] < 2:
         raise ValueError(f"image shape must be (H, W[, C]) with H, W >= 2, got {tuple(shape)}")
@@ -174,7 +176,7 @@ def to_polar(image: np.ndarray, grid: PolarGrid, *, order: int = 3) -> np.ndarra
 
 
 def from_polar(polar: np.ndarray, grid: PolarGrid, shape: tuple[int, int], *,
-               order: int = 3, upsample: float = 1.5,
+               order: int = 3, upsample: float = 1.0,
                outside: np.ndarray | None = None) -> np.ndarray:
     """Map a polar image back to Cartesian pixels of ``shape`` (H, W).
 
@@ -183,8 +185,9 @@ def from_polar(polar: np.ndarray, grid: PolarGrid, shape: tuple[int, int], *,
     polar : (n_radii, n_angles[, C]) ndarray
     upsample : float
         Angle samples are first multiplied by this factor by zero-padding their FFT
-        (exact for the band-limited periodic signal), so that the spline's error in angle
-        stays small at the rim.
+        (exact for the band-limited periodic signal), which lowers the spline's error in
+        angle at the rim: 1.25 adds ~1.5 dB to the round trip (measured), at 25 % more
+        prefiltering; 1 (default) already gives 54-57 dB.
     outside : (H, W[, C]) ndarray, optional
         Values for pixels farther than ``grid.r_max`` from the pole (default 0).
 
@@ -486,7 +489,7 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
         if mc < M:
             acc[lo:hi, mc:] += w * spec[lo:hi, mc:]
     del spec
-    out = _from_angle_spectrum(acc, grid, (H, W), order=3, upsample=1.5, outside=img,
+    out = _from_angle_spectrum(acc, grid, (H, W), order=3, upsample=1.0, outside=img,
                                dtype=dt)
     del acc
 
