@@ -47,7 +47,7 @@ def test_deconvolve_writes_a_restored_exr_with_provenance(files, capsys, bank, m
     assert meta["bank"].endswith(f"{bank}.npz") and meta["nsr"] == 1e-4
     assert meta["method"] == method and "version" in meta
     m = disk_mask(sharp.shape, 40)
-    # restoration gains >= 6 dB over the blurred image inside the disk (measured 9-12 dB
+    # restoration gains >= 6 dB over the blurred image inside the disk (measured 9.4-10.8 dB
     # on this small image; float32 EXR storage costs nothing at this level)
     assert psnr(restored, sharp, mask=m) > psnr(blurred, sharp, mask=m) + 6
 
