@@ -69,6 +69,8 @@ def test_colour_exr_round_trips(files, capsys):
     (["--bank", "{d}/sweep.exr"], "not an IPSF bank"),
     (["--bank", "{d}/radial.npz", "--depth", "near"], "--depth"),
     (["--bank", "{d}/radial.npz", "--method", "polar", "--out", "{d}/x.png"], ".exr"),
+    (["--bank", "{d}/radial.npz", "--center", "200", "10"], "outside"),
+    (["--bank", "{d}/grid.npz", "--center", "40", "40"], "(radial banks) only"),
 ])
 def test_bad_inputs_get_one_clear_line_and_status_2(files, capsys, args, message):
     d, _, _ = files
@@ -78,6 +80,19 @@ def test_bad_inputs_get_one_clear_line_and_status_2(files, capsys, args, message
     err = capsys.readouterr().err.strip()
     assert err.startswith("mitsweep: error:") and message in err and "\n" not in err
     assert not (d / "never.exr").exists()
+
+
+def test_center_option_moves_the_pole(files, capsys):
+    d, _, _ = files
+    a, b = d / "c_default.exr", d / "c_shifted.exr"
+    assert main(["deconvolve", str(d / "sweep.exr"), "--bank", str(d / "radial.npz"),
+                 "--out", str(a), "--nsr", "1e-3"]) == 0
+    assert main(["deconvolve", str(d / "sweep.exr"), "--bank", str(d / "radial.npz"),
+                 "--out", str(b), "--nsr", "1e-3", "--center", "47.5", "47.5"]) == 0
+    ya, ma = read_exr(a)
+    yb, mb = read_exr(b)
+    np.testing.assert_array_equal(ya["Y"], yb["Y"])      # 47.5 is this image's centre
+    assert ma["center_rc"] is None and mb["center_rc"] == [47.5, 47.5]
 
 
 def test_missing_image_is_reported(files, capsys):

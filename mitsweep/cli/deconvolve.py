@@ -35,6 +35,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--grid", type=positive_int, default=16, metavar="N",
                    help="grid size N x N when --method grid converts a radial bank "
                         "(default 16)")
+    p.add_argument("--center", type=float, nargs=2, metavar=("ROW", "COL"),
+                   help="pixel position of the mirror axis for polar deconvolution of a real "
+                        "capture (default the image centre, H/2-0.5, W/2-0.5)")
     p.add_argument("--pixel-pitch", type=positive_float, metavar="MM",
                    help="the image's pixel pitch, mm, when its metadata does not say")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -93,10 +96,19 @@ def run(args) -> int:
                     src, bank.pixel_pitch)
     check_bank_matches(bank, image.shape, pixel_pitch=pitch)
 
+    center = None
+    if args.center is not None:
+        row, col = args.center
+        if not (0 <= row < image.shape[0] and 0 <= col < image.shape[1]):
+            raise UsageError(f"--center {row:g} {col:g} lies outside the "
+                             f"{image.shape[1]}x{image.shape[0]} image")
+        if args.method == "grid" or (args.method == "auto" and bank.kind == "grid"):
+            raise UsageError("--center applies to polar deconvolution (radial banks) only")
+        center = (row, col)
     t0 = time.perf_counter()
     kw = dict(nsr=args.nsr, prior=args.prior, depth_mm=depth)
-    if args.method == "polar":
-        restored = polar_deconvolve(image, bank, **kw)
+    if args.method == "polar" or center is not None:
+        restored = polar_deconvolve(image, bank, center=center, **kw)
     elif args.method == "grid" and bank.kind == "radial":
         grid = grid_bank_from_radial(bank, (args.grid, args.grid), image.shape[:2])
         restored = spatially_varying_deconvolve(image, grid, **kw)
@@ -111,6 +123,7 @@ def run(args) -> int:
         "bank": str(args.bank), "bank_kind": bank.kind, "method": method,
         "nsr": args.nsr if args.nsr is not None else "estimated", "prior": args.prior,
         "depth_mm": depth if depth is not None else 500.0,
+        "center_rc": list(center) if center is not None else None,
         "pixel_pitch": float(bank.pixel_pitch),
         "reference_sensor_distance": float(bank.reference_sensor_distance),
         "input_metadata": meta,
