@@ -105,7 +105,7 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
             continue
         na0, na1 = lo_a - 3 * ga, hi_a + 3 * ga
         nb0, nb1 = lo_b - 3 * gb, hi_b + 3 * gb
-        tight = (na1 - na0) > 0.6 * wa and (nb1 - nb0) > 0.6 * wb
+        tight = (na1 - na0) > 0.9 * wa and (nb1 - nb0) > 0.9 * wb
         if tight:
             # Keep the box this pass validated (no landed ray near its edges); a shrunk
             # box would be returned untested, and a footprint thinner than the pilot's
