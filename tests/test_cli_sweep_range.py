@@ -90,3 +90,9 @@ def test_bad_setup_files_exit_2(tmp_path, text, message):
 def test_missing_file_exits_2(tmp_path):
     rc, _, err = run_cli("sweep-range", tmp_path / "none.toml")
     assert rc == 2 and "no such setup file" in err
+
+
+def test_unwritable_plot_path_exits_2(scenes_dir, tmp_path):
+    rc, _, err = run_cli("sweep-range", scenes_dir / "sphere.toml", "--plot",
+                         tmp_path / "no" / "such" / "dir" / "f.png")
+    assert rc == 2 and "does not exist" in err and "Traceback" not in err

@@ -9,7 +9,6 @@ residual is O(δ²): with δ = 1e-4 mm it is far below the 1e-4 relative toleran
 for by the issue.
 """
 
-import math
 
 import numpy as np
 import pytest

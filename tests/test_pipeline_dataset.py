@@ -113,7 +113,7 @@ def test_evaluate_scores_every_image(tiny_dataset):
 
 def test_process_executor_gives_the_same_files(tiny_dataset, tmp_path):
     root, manifest = tiny_dataset
-    other = build_dataset(TINY, tmp_path / "p", TINY_OPTS, executor="process", jobs=2,
+    build_dataset(TINY, tmp_path / "p", TINY_OPTS, executor="process", jobs=2,
                           progress=False)
     # Same seeds → the same renders, bank and noise, whichever process ran them.
     for name in ("scene_000/sweep.exr", "bank.npz", "scene_000/sweep_50lux.exr"):
@@ -141,3 +141,12 @@ def test_cli_evaluate_json_and_bad_directory(tiny_dataset, tmp_path):
 def test_cli_dataset_bad_input(tmp_path, scenes_dir, args, message):
     rc, _, err = run_cli("dataset", scenes_dir / "sphere.toml", "--out", tmp_path / "d", *args)
     assert rc == 2 and message in err
+
+
+def test_bank_that_is_not_npz_is_named(tmp_path):
+    from mitsweep.io.bank import BankError, load_bank
+
+    bad = tmp_path / "bank.npz"
+    bad.write_text("hello")
+    with pytest.raises(BankError, match="not an IPSF bank"):
+        load_bank(bad)

@@ -63,7 +63,6 @@ def test_marker_lands_where_image_point_predicts(name, frac_u, frac_v):
 def test_modes_share_the_pinhole_reference_grid(mode):
     """A point's blurred image is centred where the pinhole puts it (same chief rays)."""
     s = small("sphere", 96)
-    p = s.sensor.pixel_pitch
     u, v = 1.6, -0.9
     ref = render_point_source(s, u, v, 500.0, spp=64, seed=2, mode="pinhole", window=24,
                               radius_px=1.5)

@@ -34,7 +34,7 @@ def test_arduino_capture_measures_planned_exposure(sphere, tmp_path, checksums):
     plan = plan_capture(sphere)
     out = tmp_path / "capture.json"
     with PtyDevice(ArduinoModel()) as dev:        # unhomed, like a board after power-up
-        record = run_capture(sphere, RigPorts(arduino=dev.port, checksums=checksums), out=out)
+        run_capture(sphere, RigPorts(arduino=dev.port, checksums=checksums), out=out)
         model = dev.model
         now = time.monotonic()
         assert not model.moving(now) and not model.shutter_open

@@ -2,7 +2,6 @@
 
 import builtins
 import json
-import types
 
 import pytest
 

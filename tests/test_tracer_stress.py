@@ -2,7 +2,6 @@
 inf). No NaN, unit-sum kernels, no energy lost outside the fitted sampling box, and
 float32 within a stated tolerance of float64."""
 
-import dataclasses
 import math
 
 import numpy as np
@@ -10,7 +9,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from mitsweep.config import Lens, Mirror, Sensor, Setup, Sweep
-from mitsweep.optics import image_distance
 from mitsweep.tracer.focus import numeric_focus
 from mitsweep.tracer.kernel import TraceParams, trace_arrays
 from mitsweep.tracer.psf import fit_sampling_box, render_source

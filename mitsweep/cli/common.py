@@ -20,8 +20,8 @@ class UsageError(ValueError):
 
 
 def _user_errors() -> tuple[type[BaseException], ...]:
-    errors: list[type[BaseException]] = [UsageError, SetupError, FileNotFoundError,
-                                         PermissionError, IsADirectoryError, ValueError]
+    # OSError covers unwritable outputs, full disks and missing ports: the user's to fix.
+    errors: list[type[BaseException]] = [UsageError, SetupError, OSError, ValueError]
     try:
         from ..backend import BackendError
         errors.append(BackendError)

@@ -119,6 +119,11 @@ def load_bank(path: str | Path) -> IPSFBank:
     p = Path(path)
     if not p.is_file():
         raise BankError(f"{p}: no such bank file")
+    with open(p, "rb") as f:
+        magic = f.read(4)
+    if magic != b"PK\x03\x04":  # NPZ files are zip archives
+        raise BankError(f"{p}: not an IPSF bank (expected a .npz file written by "
+                        f"`mitsweep ipsf --bank` or mitsweep.io.bank.save_bank)")
     try:
         with np.load(p, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}

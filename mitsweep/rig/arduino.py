@@ -252,25 +252,20 @@ class ArduinoSweepController(Stage, Shutter):
         """Safety path: ``STOP`` (the board releases the shutter first, then stops the
         motor), tolerant of stray lines from an interrupted exchange. Returns the step
         position the board stopped at."""
-        try:
-            self.transport.drain()
-        except Exception:  # noqa: BLE001 - garbage in the buffer must not block the stop
-            logger.debug("%s: drain before STOP failed", self.name, exc_info=True)
-        self.transport.write_line("STOP")
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                line = self.transport.read_line(deadline=deadline)
-            except ProtocolError:
-                continue
+        def stopped_at(line: str):
             if line.startswith("OK STOP "):
-                t, pos = self._ints(line.split()[2:], "STOP")
-                return pos
+                return self._ints(line.split()[2:], "STOP")[1]
+            return None
+
+        def keep_event(line: str) -> None:
             if line.startswith("EV "):
                 try:
                     self._take_event(line)
                 except ProtocolError:
                     pass
+
+        return self.transport.send_on_safety_path("STOP", stopped_at, timeout_s=timeout_s,
+                                                  on_other=keep_event)
 
     # -- units --------------------------------------------------------------------------
     def steps(self, mm: float) -> int:

@@ -178,6 +178,19 @@ class _Model:
     def on_unplug(self, now: float) -> None:
         pass
 
+    # -- motion bookkeeping shared by the stage models (``move``: the Move under way,
+    # ``_pos``: the position at rest, in device units) ----------------------------------
+    move: "Move | None" = None
+    _pos: int = 0
+
+    def moving(self, now: float) -> bool:
+        return self.move is not None and now < self.move.end_time
+
+    def _settle(self, now: float) -> None:
+        if self.move is not None and now >= self.move.end_time:
+            self._pos = int(round(self.move.x1))
+            self.move = None
+
 
 class ArduinoModel(_Model):
     """The sweep controller's firmware, in Python (see :mod:`mitsweep.rig.arduino`).
@@ -223,13 +236,6 @@ class ArduinoModel(_Model):
             return int(round(self.move.x0 + self.move.sign * math.floor(d + 1e-9)))
         return self._pos
 
-    def moving(self, now: float) -> bool:
-        return self.move is not None and now < self.move.end_time
-
-    def _settle(self, now: float) -> None:
-        if self.move is not None and now >= self.move.end_time:
-            self._pos = int(round(self.move.x1))
-            self.move = None
 
     # -- output -------------------------------------------------------------------------
     def _line(self, text: str) -> bytes:
@@ -517,13 +523,6 @@ class ZaberModel(_Model):
             return int(round(self.move.position(now)))
         return self._pos
 
-    def moving(self, now: float) -> bool:
-        return self.move is not None and now < self.move.end_time
-
-    def _settle(self, now: float) -> None:
-        if self.move is not None and now >= self.move.end_time:
-            self._pos = int(round(self.move.x1))
-            self.move = None
 
     def tick(self, now: float) -> list[bytes]:
         if self._fault_at is not None and now >= self._fault_at:

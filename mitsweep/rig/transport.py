@@ -249,6 +249,32 @@ class LineTransport:
         self._fill(0.0)
         return self._has_line()
 
+    def send_on_safety_path(self, line: str, until, *, timeout_s: float, on_other=None):
+        """Send ``line`` after discarding whatever is buffered, then read until
+        ``until(reply)`` returns something other than None, and return that.
+
+        For stop commands after an interrupted exchange: garbage and stray lines in the
+        buffer must not block the stop, so unparseable lines are skipped and other lines
+        go to ``on_other`` (e.g. to keep the board's events). Raises ``ReplyTimeout``
+        when ``timeout_s`` passes without the awaited reply.
+        """
+        try:
+            self.drain()
+        except Exception:  # noqa: BLE001 - garbage in the buffer must not block the stop
+            logger.debug("%s: drain before %r failed", self.name, line, exc_info=True)
+        self.write_line(line)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                reply = self.read_line(deadline=deadline)
+            except ProtocolError:
+                continue
+            result = until(reply)
+            if result is not None:
+                return result
+            if on_other is not None:
+                on_other(reply)
+
     def drain(self) -> list[str]:
         """Read and log whatever is waiting now (used after a reset); returns raw texts."""
         out = []

@@ -222,20 +222,10 @@ class ZaberStage(Stage):
 
     def safe_stop(self, *, timeout_s: float = 1.0) -> None:
         """Safety path: ``stop``, tolerant of stray lines from an interrupted exchange."""
-        try:
-            self.transport.drain()
-        except Exception:  # noqa: BLE001
-            logger.debug("%s: drain before stop failed", self.name, exc_info=True)
-        wire = f"/{self.device} {self.axis} stop"
-        self.transport.write_line(wire)
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                line = self.transport.read_line(deadline=deadline)
-            except ProtocolError:
-                continue
-            if line.startswith(f"@{self.device:02d} {self.axis} "):
-                return
+        prefix = f"@{self.device:02d} {self.axis} "
+        self.transport.send_on_safety_path(
+            f"/{self.device} {self.axis} stop", lambda line: True if line.startswith(prefix) else None,
+            timeout_s=timeout_s)
 
     def warnings(self) -> list[str]:
         """Active warning flags (``warnings`` command)."""

@@ -31,7 +31,7 @@ from ..optics import object_distance, optimal_sweep_range
 from ..optics.sweep import mirror_zone
 from .kernel import trace_arrays
 from .psf import fit_sampling_box
-from .source import PointSource, source_from_image, source_from_mirror
+from .source import PointSource, source_from_mirror
 
 __all__ = ["FocusResult", "numeric_focus", "TracedSweepRange", "traced_sweep_range",
            "PROBE_APERTURE_MM"]
