@@ -1,0 +1,56 @@
+"""Diffraction of a circular aperture: the Airy PSF integrated over square pixels.
+
+Renders are geometric; the lens's diffraction blur is nearly shift-invariant over the
+field, so it is added by convolving with this kernel. It matters for stopped-down
+apertures (the paper's argument against F11, Sec. 2.1): the first dark ring has radius
+``1.22 λ N`` (7.4 µm at F11 and 550 nm, against 1.9 µm at F2.8).
+
+.. math:: I(r) \\propto \\left( \\frac{2 J_1(x)}{x} \\right)^2, \\quad x = \\frac{\\pi r}{\\lambda N}
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.special import j1
+
+__all__ = ["airy_kernel", "WAVELENGTH_MM"]
+
+#: Default wavelength, mm (green, the peak of photopic sensitivity).
+WAVELENGTH_MM = 550e-6
+
+
+def airy_kernel(f_number: float, pixel_pitch: float, *, wavelength: float = WAVELENGTH_MM,
+                rings: float = 10.0, oversample: int = 9) -> np.ndarray:
+    """Pixel-integrated Airy PSF, (K, K) float64, unit sum, K odd.
+
+    Parameters
+    ----------
+    f_number : float
+        Working f-number N (> 0).
+    pixel_pitch : float
+        Pixel size, mm (> 0).
+    wavelength : float
+        Wavelength λ, mm.
+    rings : float
+        Support radius in units of λN (10 λN holds ~98 % of the energy; the rest, in
+        the r⁻³ tail, is renormalised into the kernel).
+    oversample : int
+        Sub-samples per pixel side for the pixel integration.
+    """
+    for name, v in (("f_number", f_number), ("pixel_pitch", pixel_pitch),
+                    ("wavelength", wavelength)):
+        if not (v > 0 and math.isfinite(v)):
+            raise ValueError(f"{name}: must be > 0, got {v!r}")
+    lam_n = wavelength * f_number
+    half = max(1, int(math.ceil(rings * lam_n / pixel_pitch)))
+    k = 2 * half + 1
+    sub = (np.arange(k * oversample) + 0.5) / oversample - k / 2.0  # pixel units
+    xx, yy = np.meshgrid(sub, sub)
+    x = math.pi * np.hypot(xx, yy) * pixel_pitch / lam_n
+    with np.errstate(invalid="ignore", divide="ignore"):
+        amp = np.where(x > 1e-12, 2.0 * j1(x) / x, 1.0)
+    fine = amp * amp
+    kernel = fine.reshape(k, oversample, k, oversample).sum(axis=(1, 3))
+    return kernel / kernel.sum()
