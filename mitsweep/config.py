@@ -71,6 +71,12 @@ def _finite(value: Any, key: str) -> float:
     return x
 
 
+def _assign(obj: Any, **values: Any) -> None:
+    """Store normalised values on a frozen dataclass from its ``__post_init__``."""
+    for name, value in values.items():
+        object.__setattr__(obj, name, value)
+
+
 def _positive(value: Any, key: str) -> float:
     x = _finite(value, key)
     _require(x > 0, key, f"must be > 0, got {value!r}")
@@ -124,12 +130,8 @@ class Mirror:
             _require(rim <= rho_lim, "mirror.rim_radius",
                      f"must be <= {rho_lim:.6g} mm, where a conic of radius {R:g} and "
                      f"conic constant {k:g} ends (got {rim:g})")
-        object.__setattr__(self, "radius", R)
-        object.__setattr__(self, "conic", k)
-        object.__setattr__(self, "rim_radius", rim)
-        object.__setattr__(self, "vertex_distance", vd)
-        object.__setattr__(self, "tilt_deg", tilt)
-        object.__setattr__(self, "aspheric", coeffs)
+        _assign(self, radius=R, conic=k, rim_radius=rim, vertex_distance=vd, tilt_deg=tilt,
+                aspheric=coeffs)
 
     @property
     def tilt(self) -> float:
@@ -230,12 +232,8 @@ class Sweep:
             fmax = _positive(self.focus_max, "sweep.focus_max")
             _require(fmin < fmax, "sweep.focus_min",
                      f"must be < sweep.focus_max ({fmax:g}), got {fmin:g}")
-            object.__setattr__(self, "focus_min", fmin)
-            object.__setattr__(self, "focus_max", fmax)
-        object.__setattr__(self, "fov_deg", fov)
-        object.__setattr__(self, "depth_min", dmin)
-        object.__setattr__(self, "depth_max", dmax)
-        object.__setattr__(self, "velocity", vel)
+            _assign(self, focus_min=fmin, focus_max=fmax)
+        _assign(self, fov_deg=fov, depth_min=dmin, depth_max=dmax, velocity=vel)
 
     @property
     def fov(self) -> float:
