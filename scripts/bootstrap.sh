@@ -56,8 +56,12 @@ if [ ! -x .venv/bin/python ]; then
 fi
 stamp=".venv/.mitsweep-installed"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-    echo "bootstrap: installing mitsweep and its dependencies into .venv" >&2
-    .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-    .venv/bin/python -m pip install -q -e ".[dev]"
+    echo "bootstrap: installing mitsweep and its dependencies into .venv (log: .venv/pip-install.log)" >&2
+    if ! { .venv/bin/python -m pip install -q --upgrade pip &&
+           .venv/bin/python -m pip install -q -e ".[dev]"; } >.venv/pip-install.log 2>&1; then
+        tail -n 30 .venv/pip-install.log >&2
+        echo "bootstrap: pip install failed (full log: .venv/pip-install.log)" >&2
+        exit 1
+    fi
     touch "$stamp"
 fi
