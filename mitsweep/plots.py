@@ -34,17 +34,17 @@ def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     return p
 
 
-def plot_focal_surfaces(setup, sweep, path, depths=(0.0, 20.0, None, None, np.inf)) -> Path:
+def plot_focal_surfaces(setup, sweep, path, depths=(0.0, 20.0, np.inf)) -> Path:
     """Meridional and sagittal focal surfaces in the meridional plane (paper Fig. 6).
 
-    Depths: 0 mm (on the mirror), 20 mm, the setup's depth range ends and infinity.
+    Drawn for ``depths`` (mm; 0 is the mirror itself) plus the two ends of the sweep's
+    depth range.
     """
     from .optics import chief_ray, placement_of
     from .optics.coddington import focal_distances
 
     placement = placement_of(setup.mirror)
-    ds = [d for d in depths if d is not None] + [sweep.depth_min_mm, sweep.depth_max_mm]
-    ds = sorted(set(ds))
+    ds = sorted(set(depths) | {sweep.depth_min_mm, sweep.depth_max_mm})
     lo = -setup.mirror.rim_radius if not setup.mirror.is_symmetric else -sweep.rho_max_mm
     xs = np.linspace(min(lo, sweep.rho_start_mm), max(sweep.rho_end_mm, sweep.rho_max_mm), 801)
     ray = chief_ray(placement, placement.surface(xs, np.zeros_like(xs)))

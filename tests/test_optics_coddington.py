@@ -156,9 +156,16 @@ def test_focal_distances_reject_nonpositive_depth(bad):
         focal_distances(_setup(25.0, 0.0, 25.0), 1.0, bad)
 
 
-def test_hemisphere_rim_is_finite():
-    """At a hemisphere's rim the slope is infinite; the radii and distances stay finite."""
+def test_hemisphere_rim_is_finite_and_continuous():
+    """At a hemisphere's rim the slope is infinite; the radii and distances stay finite,
+    and approaching the rim converges to the rim's value (no 0/0, no inf). Near q = 0
+    the distances vary like the square root of the gap, so each 100x smaller gap must
+    shrink the difference by about 10x (asserted: by more than 5x)."""
     setup = _setup(25.0, 0.0, 25.0, tilt=25.0)
-    d_m, d_s = focal_distances(setup, np.array([-25.0, -24.999999]), 300.0)
+    gaps = np.array([1e-4, 1e-6, 1e-8])
+    xs = np.concatenate([[-25.0], -25.0 + gaps])
+    d_m, d_s = focal_distances(setup, xs, 300.0)
     assert np.all(np.isfinite(d_m)) and np.all(np.isfinite(d_s))
-    np.testing.assert_allclose(d_m[0], d_m[1], rtol=1e-3)
+    for d in (d_m, d_s):
+        diffs = np.abs(d[1:] - d[0])
+        assert np.all(diffs[1:] < diffs[:-1] / 5), diffs

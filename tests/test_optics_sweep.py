@@ -128,6 +128,9 @@ def test_sweep_range_stress(radius, conic, rim_frac, vd, tilt, fov_frac, dmin, d
     r_m, r_s = placement.profile.principal_radii(np.abs(xs))
     c = ray.cos_incidence
     far = np.maximum(r_m * c / 2, r_s / (2 * c)) * ray.to_lens[:, 2]
+    # The bounds are evaluated on a 513-point grid while the range is refined between
+    # grid points: allow a float64 rounding margin well below any physical difference
+    # (1e-6 of the lens–mirror distance is a nanometre-scale slack at 1 m).
     tol = 1e-6 * vd
     assert r.focus_min_mm >= base_d.min() - tol
     assert r.focus_max_mm <= (base_d + far).max() + tol

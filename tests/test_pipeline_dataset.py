@@ -112,15 +112,18 @@ def test_evaluate_scores_every_image(tiny_dataset):
 
 
 def test_process_executor_gives_the_same_files(tiny_dataset, tmp_path):
-    root, manifest = tiny_dataset
-    build_dataset(TINY, tmp_path / "p", TINY_OPTS, executor="process", jobs=2,
-                          progress=False)
-    # Same seeds → the same renders, bank and noise, whichever process ran them.
-    for name in ("scene_000/sweep.exr", "bank.npz", "scene_000/sweep_50lux.exr"):
-        a = pipeline._read_rgb(root / name)[0] if name.endswith(".exr") else None
-        if a is not None:
-            b = pipeline._read_rgb(tmp_path / "p" / name)[0]
-            np.testing.assert_array_equal(a, b)
+    """Same seeds → the same renders, bank and noise, whichever process ran them."""
+    from mitsweep.io.bank import load_bank
+
+    root, _ = tiny_dataset
+    other = tmp_path / "p"
+    build_dataset(TINY, other, TINY_OPTS, executor="process", jobs=2, progress=False)
+    for name in ("scene_000/pinhole.exr", "scene_000/sweep.exr", "scene_000/sweep_50lux.exr",
+                 "scene_000/edof.exr"):
+        np.testing.assert_array_equal(pipeline._read_rgb(root / name)[0],
+                                      pipeline._read_rgb(other / name)[0])
+    np.testing.assert_array_equal(load_bank(root / "bank.npz").kernels,
+                                  load_bank(other / "bank.npz").kernels)
 
 
 def test_cli_evaluate_json_and_bad_directory(tiny_dataset, tmp_path):

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("mitsuba")
+import mitsuba  # noqa: E402,F401  (a declared dependency: a missing one must fail)
 
 from mitsweep.config import load_setup  # noqa: E402
 from mitsweep.optics import mirror_point_from_image, placement_of  # noqa: E402

@@ -64,7 +64,6 @@ def test_unknown_lighting_is_a_setup_error():
 
 def test_emissive_scene_needs_no_more_than_two_bounces():
     """Depth 2 gives the same image as unlimited depth (surfaces are black emitters)."""
-    pytest.importorskip("mitsuba")
     from mitsweep.render import render_image
 
     s = _with_scene("paraboloid", objects=3)
@@ -76,7 +75,6 @@ def test_emissive_scene_needs_no_more_than_two_bounces():
 
 
 def test_lit_scene_renders_with_light_on_the_walls():
-    pytest.importorskip("mitsuba")
     from mitsweep.render import render_image
 
     s = _with_scene("sphere", lighting="lit", objects=2)

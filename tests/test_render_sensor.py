@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-mi = pytest.importorskip("mitsuba")
+import mitsuba as mi  # noqa: E402
 
 from mitsweep.optics.motion import MotionProfile  # noqa: E402
 from mitsweep.render.sensor import motion_table, register  # noqa: E402

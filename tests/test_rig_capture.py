@@ -79,7 +79,8 @@ def test_arduino_capture_motion_profile_is_constant_velocity(sphere, tmp_path):
 
 
 def test_measured_motion_feeds_tabulated_profile(sphere, tmp_path):
-    motion = pytest.importorskip("mitsweep.optics.motion")
+    from mitsweep.optics import motion
+
     out = tmp_path / "capture.json"
     plan = plan_capture(sphere)
     with PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps)) as dev:

@@ -3,11 +3,15 @@ protocol constants, and (slow) the compiled firmware boots under simavr and gree
 driver.
 
 Needs the Debian packages gcc-avr, avr-libc, arduino-core-avr, arduino-mk (compile) and
-simavr (run); the tests skip with the reason when they are absent.
+simavr (run). On a developer's machine the tests skip, with the reason, when they are
+absent; under CI (``CI`` set) they run regardless and fail, because the test command
+(``scripts/test.sh`` → ``bootstrap.sh --test``) installs them: a failed install must not
+pass as a skip.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -25,8 +29,10 @@ ARDUINO_MK = Path("/usr/share/arduino/Arduino.mk")
 UNO_FLASH_BYTES = 32256
 UNO_SRAM_BYTES = 2048
 
+IN_CI = bool(os.environ.get("CI"))
+
 needs_toolchain = pytest.mark.skipif(
-    shutil.which("avr-gcc") is None or not ARDUINO_MK.exists(),
+    not IN_CI and (shutil.which("avr-gcc") is None or not ARDUINO_MK.exists()),
     reason="AVR toolchain absent: apt-get install gcc-avr avr-libc arduino-core-avr arduino-mk")
 
 
@@ -80,7 +86,8 @@ def test_sketch_speaks_the_drivers_protocol():
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(shutil.which("simavr") is None, reason="simavr absent: apt-get install simavr")
+@pytest.mark.skipif(not IN_CI and shutil.which("simavr") is None,
+                    reason="simavr absent: apt-get install simavr")
 def test_firmware_boots_under_simavr_and_greets_driver(firmware):
     # simavr's command line prints UART0 output (it offers no input); the firmware's
     # first line must be the READY line the driver waits for after a reset
@@ -110,6 +117,8 @@ SAME_TURN_S = 200e-6
 def host_firmware(tmp_path_factory):
     cxx = shutil.which("g++")
     if cxx is None:
+        if IN_CI:
+            pytest.fail("no C++ compiler (g++) for the host build of the sketch")
         pytest.skip("no C++ compiler (g++) for the host build of the sketch")
     out = tmp_path_factory.mktemp("fwhost") / "mitsweep_sweep_host"
     proc = subprocess.run([cxx, "-O2", "-std=c++11", "-Wall", "-Wextra", "-Werror",

@@ -7,6 +7,7 @@ Each subcommand module exposes ``NAME``, ``HELP``, ``add_arguments(parser)`` and
 from __future__ import annotations
 
 import importlib
+import logging
 import sys
 
 from .common import USER_ERRORS, ArgumentParser, configure_logging, user_error_message
@@ -56,6 +57,8 @@ def main(argv: list[str] | None = None) -> int:
         print("mitsweep: interrupted", file=sys.stderr)
         return 130
     except USER_ERRORS as exc:
+        # ValueError is broad: keep the traceback one `-vv` away for bug reports.
+        logging.getLogger("mitsweep").debug("user error", exc_info=True)
         print(user_error_message(exc), file=sys.stderr)
         return 2
 

@@ -46,33 +46,6 @@ def _check_out(path: str, suffix: str) -> None:
         raise UsageError(str(exc)) from None
 
 
-def write_preview(path: str, image, max_width: int | None = None) -> None:
-    """sRGB-encoded 8-bit PNG of a linear image (exposure: 99.5th percentile → white).
-
-    ``max_width`` shrinks by the smallest integer factor that fits (box average of the
-    linear values, before tone mapping).
-    """
-    import numpy as np
-
-    from ..io.atomic import atomic_path
-
-    img = np.asarray(image, dtype=np.float64)
-    if max_width is not None and img.shape[1] > max_width:
-        k = math.ceil(img.shape[1] / max_width)
-        h, w = (img.shape[0] // k) * k, (img.shape[1] // k) * k
-        img = img[:h, :w].reshape(h // k, k, w // k, k, -1).mean(axis=(1, 3))
-    scale = float(np.percentile(img, 99.5)) or 1.0
-    x = np.clip(img / scale, 0.0, 1.0)
-    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    with atomic_path(path, suffix=".png") as tmp:
-        plt.imsave(tmp, (srgb * 255 + 0.5).astype(np.uint8))
-
-
 def run(args) -> int:
     from ..render import render_image, render_to_exr
 
@@ -90,7 +63,9 @@ def run(args) -> int:
                           mirror_only=not args.full_frame, progress=sys.stderr.isatty())
     render_to_exr(args.out, result)
     if args.preview:
-        write_preview(args.preview, result.image, args.preview_size)
+        from ..io.png import write_png
+
+        write_png(args.preview, result.image, max_width=args.preview_size)
     m = result.metadata
     summary = {"out": args.out, "mode": args.mode, "spp": args.spp, "seed": args.seed,
                "render_s": m["render_s"], "aovs": sorted(result.aovs),

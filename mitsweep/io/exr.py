@@ -15,7 +15,8 @@ import numpy as np
 
 from .atomic import atomic_path
 
-__all__ = ["ExrError", "write_exr", "read_exr", "read_exr_header", "channel_names_for"]
+__all__ = ["ExrError", "write_exr", "read_exr", "read_exr_header", "channel_names_for",
+           "stack_channels"]
 
 _PREFIX = "mitsweep:"
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -17,11 +18,14 @@ def linear_to_srgb(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
-def write_png(path: str | Path, image: np.ndarray, *, white: float | None = None) -> Path:
+def write_png(path: str | Path, image: np.ndarray, *, white: float | None = None,
+              max_width: int | None = None) -> Path:
     """Write a linear (H, W) or (H, W, 3) image as an 8-bit sRGB PNG.
 
     ``white`` is the linear value shown as full white (default: the 99.5th percentile,
-    so that a few bright pixels do not darken the preview).
+    so that a few bright pixels do not darken the preview). ``max_width`` shrinks the
+    image by the smallest integer factor that fits (box average of the linear values,
+    before encoding).
     """
     import matplotlib
 
@@ -31,6 +35,10 @@ def write_png(path: str | Path, image: np.ndarray, *, white: float | None = None
     img = np.asarray(image, dtype=np.float64)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
+    if max_width is not None and img.shape[1] > max_width:
+        k = math.ceil(img.shape[1] / max_width)
+        h, w = (img.shape[0] // k) * k, (img.shape[1] // k) * k
+        img = img[:h, :w].reshape(h // k, k, w // k, k, *img.shape[2:]).mean(axis=(1, 3))
     if white is None:
         finite = img[np.isfinite(img)]
         white = float(np.percentile(finite, 99.5)) if finite.size else 1.0

@@ -8,7 +8,7 @@ from .chief_ray import ChiefRay, chief_ray, image_point, intersect_mirror, mirro
 from .coddington import coddington_reflection, focal_distances, focal_image_axial_distances
 from .placement import Placement, SurfacePoints, placement_of
 from .profiles import Profile, conic_sag, profile_of
-from .sweep import MirrorZone, SweepRange, max_fov_deg, mirror_zone, optimal_sweep_range, sweep_range
+from .sweep import MirrorZone, SweepRange, max_fov_deg, mirror_zone, optimal_sweep_range
 from .thinlens import image_distance, magnification, object_distance
 
 __all__ = [
@@ -16,5 +16,5 @@ __all__ = [
     "coddington_reflection", "focal_distances", "focal_image_axial_distances",
     "Placement", "SurfacePoints", "placement_of", "Profile", "conic_sag", "profile_of",
     "MirrorZone", "SweepRange", "max_fov_deg", "mirror_zone", "optimal_sweep_range",
-    "sweep_range", "image_distance", "magnification", "object_distance",
+    "image_distance", "magnification", "object_distance",
 ]

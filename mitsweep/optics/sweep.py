@@ -27,7 +27,7 @@ from .placement import placement_of
 from .thinlens import image_distance
 
 __all__ = ["MirrorZone", "SweepRange", "mirror_zone", "optimal_sweep_range",
-           "sweep_range", "max_fov_deg"]
+           "max_fov_deg"]
 
 _GRID = 4097
 
@@ -272,6 +272,3 @@ def optimal_sweep_range(setup, *, fov_deg: float | None = None,
         depth_min_mm=float(dmin), depth_max_mm=float(dmax),
         source=source, min_at=at_min, max_at=at_max)
 
-
-#: Short alias: the sweep a setup asks for (its given range, or the optimal one).
-sweep_range = optimal_sweep_range

@@ -95,11 +95,39 @@ class Checksum(Protocol):
     def strip(self, text: str) -> str: ...
 
 
-class XorChecksum:
+class _HexSuffixChecksum:
+    """A checksum sent as ``BODY<separator>HH`` (two upper-case hex digits); subclasses
+    give the separator and ``value(body)``."""
+
+    separator = "*"
+    form = "TEXT*HH"
+
+    @staticmethod
+    def value(text: str) -> int:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def append(self, text: str) -> str:
+        return f"{text}{self.separator}{self.value(text):02X}"
+
+    def strip(self, text: str) -> str:
+        body, sep, tail = text.rpartition(self.separator)
+        if not sep or len(tail) != 2:
+            raise ProtocolError(f"missing checksum in {text!r} (expected {self.form})")
+        try:
+            got = int(tail, 16)
+        except ValueError:
+            raise ProtocolError(f"malformed checksum in {text!r}") from None
+        if got != self.value(body):
+            raise ProtocolError(f"bad checksum in {text!r}: expected {self.value(body):02X}")
+        return body
+
+
+class XorChecksum(_HexSuffixChecksum):
     """NMEA-style checksum: ``TEXT*HH``, HH = XOR of every byte of TEXT, two upper-case
     hex digits. Used by the project's Arduino sweep controller (``CHK 1``)."""
 
     separator = "*"
+    form = "TEXT*HH"
 
     @staticmethod
     def value(text: str) -> int:
@@ -108,50 +136,23 @@ class XorChecksum:
             x ^= b
         return x
 
-    def append(self, text: str) -> str:
-        return f"{text}*{self.value(text):02X}"
 
-    def strip(self, text: str) -> str:
-        body, sep, tail = text.rpartition("*")
-        if not sep or len(tail) != 2:
-            raise ProtocolError(f"missing checksum in {text!r} (expected TEXT*HH)")
-        try:
-            got = int(tail, 16)
-        except ValueError:
-            raise ProtocolError(f"malformed checksum in {text!r}") from None
-        if got != self.value(body):
-            raise ProtocolError(f"bad checksum in {text!r}: expected "
-                                f"{self.value(body):02X}")
-        return body
-
-
-class ZaberChecksum:
+class ZaberChecksum(_HexSuffixChecksum):
     """Zaber ASCII message checksum: ``/1 1 move abs 10000:HH``.
 
     HH (two upper-case hex digits) is the 8-bit two's complement of the sum of the
     message's bytes after the leading type character (``/``, ``@``, ``#`` or ``!``) and
-    before the colon, so that the bytes and the checksum sum to 0 modulo 256 (Zaber
-    ASCII protocol manual, "Checksumming").
+    before the colon, so that the bytes and the checksum sum to 0 modulo 256. The
+    algorithm agrees with zproto's LRC (a Zaber client library); the byte range is
+    the protocol's as publicly documented, not checked on a device.
     """
+
+    separator = ":"
+    form = "MESSAGE:HH"
 
     @staticmethod
     def value(text: str) -> int:
         return (-sum(text[1:].encode("ascii"))) & 0xFF
-
-    def append(self, text: str) -> str:
-        return f"{text}:{self.value(text):02X}"
-
-    def strip(self, text: str) -> str:
-        body, sep, tail = text.rpartition(":")
-        if not sep or len(tail) != 2:
-            raise ProtocolError(f"missing checksum in {text!r} (expected MESSAGE:HH)")
-        try:
-            got = int(tail, 16)
-        except ValueError:
-            raise ProtocolError(f"malformed checksum in {text!r}") from None
-        if got != self.value(body):
-            raise ProtocolError(f"bad checksum in {text!r}: expected {self.value(body):02X}")
-        return body
 
 
 def open_port(port: str, *, baudrate: int = 115200, name: str | None = None):
