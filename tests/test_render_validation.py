@@ -81,7 +81,7 @@ def test_sweep_matches_average_of_thinlens_renders_over_the_sweep():
 @pytest.mark.slow
 def test_point_source_ipsf_matches_tracer_within_noise():
     """Rendered IPSF (focalsweep, continuous time) = tracer IPSF (mitsweep.tracer)."""
-    from mitsweep.tracer import psf as tracer
+    from mitsweep import tracer
 
     from mitsweep.render import render_point_source
 
