@@ -6,13 +6,15 @@ import argparse
 import json
 import logging
 import math
+import os
 import sys
-from typing import Any
+from pathlib import Path
+from typing import Any, Iterable, Union
 
 from ..config import SetupError, load_setup
 
-__all__ = ["UsageError", "USER_ERRORS", "ArgumentParser", "load_setup_arg", "print_json",
-           "positive_float", "positive_int", "user_error_message"]
+__all__ = ["UsageError", "USER_ERRORS", "ArgumentParser", "check_outputs", "load_setup_arg",
+           "print_json", "positive_float", "positive_int", "user_error_message"]
 
 
 class UsageError(ValueError):
@@ -43,6 +45,53 @@ class ArgumentParser(argparse.ArgumentParser):
 
     def error(self, message: str):  # noqa: D401
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+PathArg = Union[str, os.PathLike, None]
+
+
+def _same_path(a: Path, b: Path) -> bool:
+    """Whether two paths name one file: equal once resolved (symlinks, ``..``), or the
+    same inode (hard links, case-insensitive file systems)."""
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet): not the same file
+        return False
+
+
+def check_outputs(inputs: Iterable[PathArg], outputs: Iterable[PathArg]) -> None:
+    """Refuse a command line whose output would overwrite one of its inputs.
+
+    The one output policy of every command: an output never names the same file as an
+    input (``render setup.toml --out setup.toml``, ``deconvolve IMG --out IMG``, a plot
+    path equal to the setup), nor the same file as another output. Paths compare once
+    resolved and by inode (``os.path.samefile``), so symlinks and hard links are caught.
+    Overwriting an existing output of an earlier run stays allowed (writes are atomic).
+
+    Parameters
+    ----------
+    inputs, outputs : iterables of path-like or None
+        Every file the command reads, and every file it will write; ``None`` entries
+        (an option not given) are skipped.
+
+    Raises
+    ------
+    UsageError
+        Naming both paths.
+    """
+    ins = [Path(p) for p in inputs if p is not None and str(p) != ""]
+    outs = [Path(p) for p in outputs if p is not None and str(p) != ""]
+    for k, out in enumerate(outs):
+        for inp in ins:
+            if _same_path(out, inp):
+                raise UsageError(f"output {out} is the input {inp}: refusing to overwrite an "
+                                 f"input; choose another output path")
+        for other in outs[:k]:
+            if _same_path(out, other):
+                raise UsageError(f"output {out} and output {other} are the same file: give "
+                                 f"each output its own path")
 
 
 def load_setup_arg(path: str):
