@@ -296,6 +296,8 @@ class Rig:
     d(sensor distance)/d(stage position); when ``sensor_distance_at_zero`` is absent
     (an uncalibrated rig) the sweep is centred within the soft limits. ``baudrate`` and
     ``reply_timeout_s`` (deadline on every reply) set the serial links.
+    ``watchdog_s`` (0 < x <= 60) is how long the firmware waits without host traffic
+    during a motion before it stops the stage.
     """
 
     travel: float = 25.0
@@ -311,11 +313,14 @@ class Rig:
     sensor_direction: int = 1
     baudrate: int = 115200
     reply_timeout_s: float = 1.0
+    watchdog_s: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("travel", "max_velocity", "acceleration", "min_exposure_s", "max_exposure_s",
-                     "steps_per_mm", "reply_timeout_s"):
+                     "steps_per_mm", "reply_timeout_s", "watchdog_s"):
             object.__setattr__(self, name, _positive(getattr(self, name), f"rig.{name}"))
+        _require(self.watchdog_s <= 60.0, "rig.watchdog_s",
+                 f"must be in (0, 60] s, got {self.watchdog_s:g}")
         sd = _finite(self.settle_distance, "rig.settle_distance")
         _require(sd >= 0, "rig.settle_distance", f"must be >= 0, got {sd}")
         object.__setattr__(self, "settle_distance", sd)

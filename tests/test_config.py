@@ -17,7 +17,7 @@ BASE = {
 
 def _with(section, **changes):
     data = {k: dict(v) for k, v in BASE.items()}
-    data[section].update(changes)
+    data.setdefault(section, {}).update(changes)
     return data
 
 
@@ -58,10 +58,17 @@ def test_round_trip_through_dict():
     ("mirror", "vertex_distance", 40.0, r"must be > lens.focal_length"),
     ("mirror", "rim_radius", 30.0, r"mirror.rim_radius: must be <= 25"),
     ("mirror", "radius", "big", r"mirror.radius: expected a number"),
+    ("rig", "watchdog_s", 0.0, r"rig.watchdog_s: must be > 0"),
+    ("rig", "watchdog_s", 61.0, r"rig.watchdog_s: must be in \(0, 60\] s"),
 ])
 def test_bad_values_name_key_and_range(section, key, value, message):
     with pytest.raises(SetupError, match=message):
         setup_from_dict(_with(section, **{key: value}))
+
+
+def test_rig_watchdog_defaults_to_one_second_and_is_read():
+    assert setup_from_dict(BASE).rig.watchdog_s == 1.0
+    assert setup_from_dict(dict(BASE, rig={"watchdog_s": 2.5})).rig.watchdog_s == 2.5
 
 
 def test_unknown_key_is_rejected_with_the_allowed_ones():
