@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -44,10 +45,15 @@ __all__ = [
     "Setup",
     "load_setup",
     "setup_from_dict",
+    "toml_nesting",
     "setup_to_dict",
     "DEFAULT_SETUP",
 ]
 
+#: Largest sensor side, pixels: a 32768² RGB float32 image alone is 12 GiB.
+MAX_RESOLUTION = 32768
+#: Deepest nesting of arrays and inline tables a setup file may hold (a setup needs 2).
+MAX_NESTING = 8
 MIRROR_KINDS = ("conic", "sphere", "paraboloid", "asphere")
 MOTION_PROFILES = ("linear", "trapezoidal", "tabulated")
 SCENE_LIGHTING = ("emissive", "lit")
@@ -62,13 +68,40 @@ def _require(ok: bool, key: str, message: str) -> None:
         raise SetupError(f"{key}: {message}")
 
 
-def _finite(value: Any, key: str) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise SetupError(f"{key}: expected a number, got {value!r}") from None
-    _require(math.isfinite(x), key, f"must be finite, got {value!r}")
+def _is_number(value: Any) -> bool:
+    """A real number (NumPy scalars too), not a bool (``True`` is an ``int`` in Python)
+    and not a string."""
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def _number(value: Any, key: str, *, allow_inf: bool = False) -> float:
+    """``value`` as a float; strings, booleans and NaN are refused, naming ``key``."""
+    _require(_is_number(value), key, f"expected a number, got {value!r}")
+    x = float(value)
+    if allow_inf:
+        _require(not math.isnan(x), key, f"must be a number (inf allowed), got {value!r}")
+    else:
+        _require(math.isfinite(x), key, f"must be finite, got {value!r}")
     return x
+
+
+def _finite(value: Any, key: str) -> float:
+    return _number(value, key)
+
+
+def _integer(value: Any, key: str, lo: int, hi: int | None = None) -> int:
+    """``value`` as an int in ``[lo, hi]``; floats (even 2.0), strings and booleans are refused."""
+    allowed = f"an integer in [{lo}, {hi}]" if hi is not None else f"an integer >= {lo}"
+    ok = isinstance(value, numbers.Integral) and not isinstance(value, bool) \
+        and lo <= int(value) and (hi is None or int(value) <= hi)
+    _require(ok, key, f"must be {allowed}, got {value!r}")
+    return int(value)
+
+
+def _choice(value: Any, key: str, choices: tuple[str, ...]) -> str:
+    _require(isinstance(value, str) and value in choices, key,
+             f"must be one of {', '.join(choices)}, got {value!r}")
+    return value
 
 
 def _assign(obj: Any, **values: Any) -> None:
@@ -116,14 +149,15 @@ class Mirror:
     kind: str = field(default="conic", compare=False)
 
     def __post_init__(self) -> None:
-        _require(self.kind in MIRROR_KINDS, "mirror.kind",
-                 f"must be one of {', '.join(MIRROR_KINDS)}, got {self.kind!r}")
+        _choice(self.kind, "mirror.kind", MIRROR_KINDS)
         R = _positive(self.radius, "mirror.radius")
         k = _finite(self.conic, "mirror.conic")
         rim = _positive(self.rim_radius, "mirror.rim_radius")
         vd = _positive(self.vertex_distance, "mirror.vertex_distance")
         tilt = _finite(self.tilt_deg, "mirror.tilt_deg")
         _require(-90.0 < tilt < 90.0, "mirror.tilt_deg", f"must be in (-90, 90), got {tilt}")
+        _require(isinstance(self.aspheric, (tuple, list)), "mirror.aspheric",
+                 f"must be a list of numbers [a4, a6, ...], got {self.aspheric!r}")
         coeffs = tuple(_finite(a, f"mirror.aspheric[{i}]") for i, a in enumerate(self.aspheric))
         if 1.0 + k > 0:
             rho_lim = R / math.sqrt(1.0 + k)
@@ -167,7 +201,8 @@ class Lens:
 
 @dataclass(frozen=True, kw_only=True)
 class Sensor:
-    """Image sensor: ``resolution = [width, height]`` in pixels, ``pixel_pitch`` in mm."""
+    """Image sensor: ``resolution = [width, height]`` in pixels (each at most
+    :data:`MAX_RESOLUTION`), ``pixel_pitch`` in mm."""
 
     resolution: tuple[int, int] = (512, 512)
     pixel_pitch: float = 0.018
@@ -176,11 +211,9 @@ class Sensor:
         res = self.resolution
         _require(isinstance(res, (tuple, list)) and len(res) == 2, "sensor.resolution",
                  f"must be [width, height], got {res!r}")
-        w, h = res
-        for name, v in (("width", w), ("height", h)):
-            _require(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 65536,
-                     "sensor.resolution", f"{name} must be an integer in [1, 65536], got {v!r}")
-        object.__setattr__(self, "resolution", (int(w), int(h)))
+        w, h = (_integer(v, f"sensor.resolution {name}", 1, MAX_RESOLUTION)
+                for name, v in zip(("width", "height"), res))
+        object.__setattr__(self, "resolution", (w, h))
         object.__setattr__(self, "pixel_pitch", _positive(self.pixel_pitch, "sensor.pixel_pitch"))
 
     @property
@@ -217,14 +250,12 @@ class Sweep:
         fov = _finite(self.fov_deg, "sweep.fov_deg")
         _require(0.0 < fov < 360.0, "sweep.fov_deg", f"must be in (0, 360), got {fov}")
         dmin = _positive(self.depth_min, "sweep.depth_min")
-        dmax = float(self.depth_max)
-        _require(not math.isnan(dmax) and dmax > 0, "sweep.depth_max",
-                 f"must be > 0 (inf allowed), got {self.depth_max!r}")
+        dmax = _number(self.depth_max, "sweep.depth_max", allow_inf=True)
+        _require(dmax > 0, "sweep.depth_max", f"must be > 0 (inf allowed), got {self.depth_max!r}")
         _require(dmin <= dmax, "sweep.depth_min",
                  f"must be <= sweep.depth_max ({dmax:g}), got {dmin:g}")
         vel = _positive(self.velocity, "sweep.velocity")
-        _require(self.profile in MOTION_PROFILES, "sweep.profile",
-                 f"must be one of {', '.join(MOTION_PROFILES)}, got {self.profile!r}")
+        _choice(self.profile, "sweep.profile", MOTION_PROFILES)
         _require((self.focus_min is None) == (self.focus_max is None), "sweep.focus_min",
                  "give both focus_min and focus_max, or neither")
         if self.focus_min is not None:
@@ -267,14 +298,10 @@ class Scene:
                  f"must be [x, y, z] in mm, got {rs!r}")
         object.__setattr__(self, "room_size",
                            tuple(_positive(v, "scene.room_size") for v in rs))
-        _require(isinstance(self.objects, int) and 0 <= self.objects <= 64, "scene.objects",
-                 f"must be an integer in [0, 64], got {self.objects!r}")
-        _require(isinstance(self.texture_seed, int), "scene.texture_seed",
-                 f"must be an integer, got {self.texture_seed!r}")
-        _require(isinstance(self.max_depth, int) and 0 <= self.max_depth <= 64,
-                 "scene.max_depth", f"must be an integer in [0, 64], got {self.max_depth!r}")
-        _require(self.lighting in SCENE_LIGHTING, "scene.lighting",
-                 f"must be one of {', '.join(SCENE_LIGHTING)}, got {self.lighting!r}")
+        _assign(self, objects=_integer(self.objects, "scene.objects", 0, 64),
+                texture_seed=_integer(self.texture_seed, "scene.texture_seed", 0),
+                max_depth=_integer(self.max_depth, "scene.max_depth", 0, 64))
+        _choice(self.lighting, "scene.lighting", SCENE_LIGHTING)
         for name in ("mesh_sag_tol", "mesh_normal_tol"):
             object.__setattr__(self, name, _positive(getattr(self, name), f"scene.{name}"))
 
@@ -340,11 +367,12 @@ class Rig:
             object.__setattr__(self, "sensor_distance_at_zero",
                                _positive(self.sensor_distance_at_zero,
                                          "rig.sensor_distance_at_zero"))
-        _require(self.sensor_direction in (1, -1) and not isinstance(self.sensor_direction, bool),
-                 "rig.sensor_direction", f"must be 1 or -1, got {self.sensor_direction!r}")
-        _require(isinstance(self.baudrate, int) and not isinstance(self.baudrate, bool)
-                 and 300 <= self.baudrate <= 4_000_000, "rig.baudrate",
-                 f"must be an integer in [300, 4000000], got {self.baudrate!r}")
+        direction = self.sensor_direction
+        _require(isinstance(direction, numbers.Integral) and not isinstance(direction, bool)
+                 and direction in (1, -1), "rig.sensor_direction",
+                 f"must be 1 or -1, got {direction!r}")
+        _assign(self, sensor_direction=int(direction),
+                baudrate=_integer(self.baudrate, "rig.baudrate", 300, 4_000_000))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -412,12 +440,9 @@ def _mirror_from_table(table: Mapping[str, Any]) -> Mirror:
         _reject_unknown(t, allowed, "mirror")
         for key in ("radius", "rim_radius", "vertex_distance"):
             _require(key in t, f"mirror.{key}", "missing (required)")
-        asph = t.get("aspheric", ())
-        _require(isinstance(asph, (list, tuple)), "mirror.aspheric",
-                 f"must be a list of numbers [a4, a6, ...], got {asph!r}")
         return Mirror(kind=kind, radius=t["radius"], conic=t.get("conic", 0.0),
                       rim_radius=t["rim_radius"], vertex_distance=t["vertex_distance"],
-                      tilt_deg=t.get("tilt_deg", 0.0), aspheric=tuple(asph))
+                      tilt_deg=t.get("tilt_deg", 0.0), aspheric=t.get("aspheric", ()))
     raise SetupError(f"mirror.kind: must be one of {', '.join(MIRROR_KINDS)}, got {kind!r}")
 
 
@@ -453,7 +478,9 @@ def setup_from_dict(data: Mapping[str, Any], *, name: str = "setup") -> Setup:
     _reject_unknown(data, allowed, "setup")
     _require("mirror" in data, "mirror", "missing section [mirror]")
     _require("sweep" in data, "sweep", "missing section [sweep]")
-    kwargs: dict[str, Any] = {"name": str(data.get("name", name))}
+    setup_name = data.get("name", name)
+    _require(isinstance(setup_name, str), "name", f"must be a string, got {setup_name!r}")
+    kwargs: dict[str, Any] = {"name": setup_name}
     mirror_table = data["mirror"]
     _require(isinstance(mirror_table, Mapping), "mirror", "must be a table")
     kwargs["mirror"] = _mirror_from_table(mirror_table)
@@ -480,10 +507,67 @@ def load_setup(path: str | Path) -> Setup:
     except OSError as exc:
         raise SetupError(f"{p}: cannot read ({exc.strerror})") from None
     try:
-        data = tomllib.loads(text.decode("utf-8"))
-    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        source = text.decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise SetupError(f"{p}: not a valid TOML file ({exc})") from None
+    depth, line = toml_nesting(source)
+    if depth > MAX_NESTING:
+        raise SetupError(f"{p}: line {line}: arrays or inline tables nested deeper than "
+                         f"{MAX_NESTING} levels; a setup file needs at most 2")
+    try:
+        data = tomllib.loads(source)
+    except tomllib.TOMLDecodeError as exc:
+        raise SetupError(f"{p}: not a valid TOML file ({exc})") from None
+    except RecursionError:  # the scan above should have caught it; tomllib recurses
+        raise SetupError(f"{p}: arrays or inline tables nested deeper than {MAX_NESTING} "
+                         f"levels") from None
     return setup_from_dict(data, name=p.stem)
+
+
+def toml_nesting(source: str) -> tuple[int, int]:
+    """Deepest nesting of ``[`` / ``{`` outside strings and comments, and its line.
+
+    A linear scan that runs before :mod:`tomllib`, which parses nested arrays by
+    recursion (a 5000-deep array is a RecursionError). It knows TOML's four string
+    forms and comments well enough to skip them; table headers count as one or two
+    levels. A malformed file gets whatever depth the scan sees: tomllib reports it.
+    """
+    depth = deepest = 0
+    line = deepest_line = 1
+    i, n = 0, len(source)
+    while i < n:
+        c = source[i]
+        if c == "\n":
+            line += 1
+        elif c == "#":
+            j = source.find("\n", i)
+            i = n if j < 0 else j
+            continue
+        elif c in "\"'":
+            triple = source.startswith(c * 3, i)
+            close = c * 3 if triple else c
+            j = i + len(close)
+            while j < n:
+                if c == '"' and source[j] == "\\":
+                    j += 2
+                    continue
+                if source.startswith(close, j) or (not triple and source[j] == "\n"):
+                    break
+                j += 1
+            end = j + len(close)
+            while triple and end < n and source[end] == c:   # """a"""" ends in a quote
+                end += 1
+            line += source.count("\n", i, min(end, n))
+            i = end
+            continue
+        elif c in "[{":
+            depth += 1
+            if depth > deepest:
+                deepest, deepest_line = depth, line
+        elif c in "]}":
+            depth = max(0, depth - 1)
+        i += 1
+    return deepest, deepest_line
 
 
 def setup_to_dict(setup: Setup) -> dict[str, Any]:
