@@ -10,6 +10,9 @@ SSIM overall, per radius and per depth band.
 
 Files are written atomically; ``manifest.json`` records every finished item with its
 parameters and SHA-256, so a rerun skips what is complete and valid and redoes the rest.
+A run holds an advisory lock on its directory (``.mitsweep.lock``): a second run on the
+same directory is refused, or waits. A manifest is validated whenever it is read
+(:func:`validate_manifest`), by ``dataset`` and ``evaluate`` alike.
 Independent tasks run through a pluggable executor (``serial`` or local ``process``es).
 
 Diffraction: the renders are geometric; the thin-lens images (focused, sweep, stopped)
@@ -30,9 +33,10 @@ import json
 import logging
 import math
 import multiprocessing
+import numbers
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass, field, fields
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any, Callable
 
 import numpy as np
@@ -41,12 +45,14 @@ from .config import Setup, setup_from_dict, setup_to_dict
 from .io import read_exr, write_exr, write_text_atomic
 from .io.exr import stack_channels
 
-__all__ = ["DatasetOptions", "build_dataset", "evaluate_dataset", "load_manifest",
-           "MANIFEST", "DatasetError"]
+__all__ = ["DatasetOptions", "options_from_dict", "build_dataset", "evaluate_dataset",
+           "load_manifest", "validate_manifest", "item_names", "dataset_inputs", "MANIFEST",
+           "MAX_SCENES", "DatasetError"]
 
 log = logging.getLogger(__name__)
 
 MANIFEST = "manifest.json"
+FORMAT = "mitsweep-dataset/1"
 MODES = ("pinhole", "focused", "sweep", "stopped")
 WHITE_PERCENTILE = 99.0
 #: Pixel of the camera whose noise the noisy images carry, mm: a DSLR of the paper's
@@ -63,10 +69,49 @@ class DatasetError(ValueError):
     """A dataset directory is missing, inconsistent, or was made for another setup."""
 
 
+#: Most scene variations a dataset may hold (``DatasetOptions.scenes``); a manifest that
+#: claims more is refused before any work starts.
+MAX_SCENES = 10_000
+#: Most light levels and bank depths a dataset may hold.
+MAX_LIGHT_LEVELS = 32
+MAX_BANK_DEPTHS = 64
+#: Mitsuba's sampler seeds are 32-bit: scene i renders with seed + i.
+MAX_SEED = 2**32 - 1
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+
+def _is_real(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _require(ok: bool, key: str, message: str) -> None:
+    if not ok:
+        raise DatasetError(f"{key}: {message}")
+
+
+def _positive_reals(values: Any, key: str, lo_count: int, hi_count: int) -> tuple[float, ...]:
+    _require(isinstance(values, (list, tuple)) and lo_count <= len(values) <= hi_count, key,
+             f"must be a list of {lo_count} to {hi_count} numbers, got {values!r}")
+    for v in values:
+        _require(_is_real(v) and math.isfinite(v) and v > 0, key,
+                 f"every value must be a finite number > 0, got {v!r}")
+    return tuple(float(v) for v in values)
+
+
 @dataclass(frozen=True, kw_only=True)
 class DatasetOptions:
     """What a dataset holds. Seeds: scene i renders with ``seed + i`` (texture layout
-    ``scene.texture_seed + i``); noise of scene i at level j uses ``(seed, i, j)``."""
+    ``scene.texture_seed + i``); noise of scene i at level j uses ``(seed, i, j)``.
+
+    Every field is validated here, for the command line and for a manifest read back
+    alike (:func:`options_from_dict`): ``scenes`` in [1, ``MAX_SCENES``], ``seed`` >= 0
+    with ``seed + scenes - 1`` <= ``MAX_SEED``, ``spp`` a positive integer per mode,
+    light levels (at most ``MAX_LIGHT_LEVELS``, distinct as file names) and bank depths
+    (1 to ``MAX_BANK_DEPTHS``) finite and > 0.
+    """
 
     scenes: int = 1
     seed: int = 0
@@ -80,15 +125,37 @@ class DatasetOptions:
     diffraction: bool = True
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.scenes, int) and 1 <= self.scenes <= 10000):
-            raise DatasetError(f"scenes: must be an integer in [1, 10000], got {self.scenes!r}")
+        _require(_is_int(self.scenes) and 1 <= self.scenes <= MAX_SCENES, "scenes",
+                 f"must be an integer in [1, {MAX_SCENES}], got {self.scenes!r}")
+        _require(_is_int(self.seed) and 0 <= self.seed <= MAX_SEED - (self.scenes - 1), "seed",
+                 f"must be an integer in [0, {MAX_SEED - (self.scenes - 1)}] (scene i uses "
+                 f"seed + i, a 32-bit seed), got {self.seed!r}")
+        _require(isinstance(self.spp, dict) and set(self.spp) == set(MODES), "spp",
+                 f"must give samples per pixel for exactly {', '.join(MODES)}, got "
+                 f"{self.spp!r}")
         for mode in MODES:
-            v = self.spp.get(mode)
-            if not (isinstance(v, int) and v > 0):
-                raise DatasetError(f"spp[{mode!r}]: must be a positive integer, got {v!r}")
-        for lux in self.light_levels_lux:
-            if not (lux > 0 and math.isfinite(lux)):
-                raise DatasetError(f"light level: must be > 0 lux, got {lux!r}")
+            v = self.spp[mode]
+            _require(_is_int(v) and v > 0, f"spp[{mode!r}]",
+                     f"must be a positive integer, got {v!r}")
+        lux = _positive_reals(self.light_levels_lux, "light_levels_lux", 0, MAX_LIGHT_LEVELS)
+        names = [f"{x:g}" for x in lux]
+        _require(len(set(names)) == len(names), "light_levels_lux",
+                 f"levels must differ (as file names: {', '.join(names)})")
+        depths = _positive_reals(self.bank_depths_mm, "bank_depths_mm", 1, MAX_BANK_DEPTHS)
+        _require(self.bank_rays is None or (_is_int(self.bank_rays) and self.bank_rays > 0),
+                 "bank_rays", f"must be a positive integer or null, got {self.bank_rays!r}")
+        _require(isinstance(self.grid, (list, tuple)) and len(self.grid) == 2
+                 and all(_is_int(g) and 1 <= g <= 256 for g in self.grid), "grid",
+                 f"must be two integers in [1, 256], got {self.grid!r}")
+        _require(_is_real(self.stopped_f_number) and math.isfinite(self.stopped_f_number)
+                 and self.stopped_f_number > 0, "stopped_f_number",
+                 f"must be a finite number > 0, got {self.stopped_f_number!r}")
+        _require(isinstance(self.diffraction, bool), "diffraction",
+                 f"must be true or false, got {self.diffraction!r}")
+        object.__setattr__(self, "spp", {m: int(self.spp[m]) for m in MODES})
+        object.__setattr__(self, "light_levels_lux", lux)
+        object.__setattr__(self, "bank_depths_mm", depths)
+        object.__setattr__(self, "grid", tuple(int(g) for g in self.grid))
 
     def as_dict(self) -> dict:
         return {"scenes": self.scenes, "seed": self.seed, "spp": dict(self.spp),
@@ -96,6 +163,22 @@ class DatasetOptions:
                 "bank_depths_mm": list(self.bank_depths_mm), "bank_rays": self.bank_rays,
                 "grid": list(self.grid), "stopped_f_number": self.stopped_f_number,
                 "diffraction": self.diffraction}
+
+
+def options_from_dict(d: Any) -> DatasetOptions:
+    """:class:`DatasetOptions` from a manifest's ``options`` (the keys of
+    :meth:`DatasetOptions.as_dict`, all required, no others); raises
+    :class:`DatasetError` naming the field."""
+    names = [f.name for f in fields(DatasetOptions)]
+    _require(isinstance(d, dict), "options", f"must be an object, got {type(d).__name__}")
+    unknown = sorted(set(d) - set(names))
+    missing = [k for k in names if k not in d]
+    _require(not unknown, "options", f"unknown keys {unknown}")
+    _require(not missing, "options", f"missing keys {missing}")
+    try:
+        return DatasetOptions(**d)
+    except DatasetError as exc:
+        raise DatasetError(f"options.{exc}") from None
 
 
 # -- tasks (top-level functions: picklable for process executors) ---------------------
@@ -237,13 +320,74 @@ def _sha256(path: Path) -> str:
 
 
 def load_manifest(directory: str | Path) -> dict:
+    """Read and validate ``directory/manifest.json`` (see :func:`validate_manifest`)."""
     p = Path(directory) / MANIFEST
     if not p.is_file():
         raise DatasetError(f"{directory}: no {MANIFEST} (not a mitsweep dataset)")
     try:
-        return json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
+        manifest = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise DatasetError(f"{p}: corrupt manifest ({exc})") from None
+    try:
+        validate_manifest(manifest, directory)
+    except DatasetError as exc:
+        raise DatasetError(f"{p}: invalid manifest: {exc}") from None
+    return manifest
+
+
+def validate_manifest(manifest: Any, directory: str | Path) -> DatasetOptions:
+    """Check a manifest's schema before anything trusts it; return its options.
+
+    The top level is an object with ``format`` (``mitsweep-dataset/1``), ``setup`` (an
+    object), ``options`` (validated as :class:`DatasetOptions`, the limits of the
+    command line) and ``items``: an object whose keys are items of a dataset with those
+    options (relative paths such as ``scene_000/sweep.exr``, never absolute, never with
+    ``..``, never resolving outside ``directory`` through a symlink) and whose values
+    hold ``params`` (object), ``sha256`` (64 hex digits), ``bytes`` (integer >= 0) and
+    ``seconds`` (number >= 0). ``complete``, when present, is ``true`` and then every
+    item of the dataset is listed. Raises :class:`DatasetError` naming the field.
+    """
+    _require(isinstance(manifest, dict), "manifest",
+             f"must be a JSON object, got {type(manifest).__name__}")
+    _require(manifest.get("format") == FORMAT, "format",
+             f"must be {FORMAT!r}, got {manifest.get('format')!r}")
+    _require(isinstance(manifest.get("setup"), dict), "setup",
+             f"must be an object, got {type(manifest.get('setup')).__name__}")
+    opts = options_from_dict(manifest.get("options"))
+    items = manifest.get("items")
+    _require(isinstance(items, dict), "items", f"must be an object, got {type(items).__name__}")
+    root = Path(directory).resolve()
+    expected = set(item_names(opts))
+    for name, item in items.items():
+        key = f"items[{name!r}]"
+        posix = PurePosixPath(name)
+        _require(name != "" and not posix.is_absolute() and "\\" not in name
+                 and not PureWindowsPath(name).drive, key, "must be a relative path")
+        _require(".." not in posix.parts, key, "must stay inside the dataset directory")
+        _require(name in expected, key, f"is not an item of a dataset with these options "
+                                        f"({opts.scenes} scenes)")
+        _require((root / name).resolve().is_relative_to(root), key,
+                 "resolves outside the dataset directory (symlink)")
+        _require(isinstance(item, dict), key, f"must be an object, got {type(item).__name__}")
+        _require(isinstance(item.get("params"), dict), f"{key}.params", "must be an object")
+        sha = item.get("sha256")
+        _require(isinstance(sha, str) and len(sha) == 64
+                 and all(c in "0123456789abcdef" for c in sha), f"{key}.sha256",
+                 f"must be 64 lowercase hex digits, got {sha!r}")
+        _require(_is_int(item.get("bytes")) and item["bytes"] >= 0, f"{key}.bytes",
+                 f"must be an integer >= 0, got {item.get('bytes')!r}")
+        _require(_is_real(item.get("seconds")) and math.isfinite(item["seconds"])
+                 and item["seconds"] >= 0, f"{key}.seconds",
+                 f"must be a finite number >= 0, got {item.get('seconds')!r}")
+    if "complete" in manifest:
+        _require(manifest["complete"] is True, "complete",
+                 f"must be true when present, got {manifest['complete']!r}")
+        missing = sorted(expected - set(items))
+        if missing:
+            more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+            raise DatasetError(f"items: a complete dataset lists every item; missing "
+                               f"{missing[0]}{more}")
+    return opts
 
 
 def _versions() -> dict:
@@ -267,16 +411,18 @@ class _Task:
     deps: tuple = ()
 
 
-def _plan(setup: Setup, opts: DatasetOptions, root: Path) -> list[_Task]:
+def _plan(sd: dict, opts: DatasetOptions, root: Path) -> list[_Task]:
+    """Every task of a dataset of setup ``sd`` (a setup dict) with ``opts``, in
+    dependency order; task names are the items' paths relative to ``root``."""
     from .deconv import paper_fig10_settings
 
-    sd = setup_to_dict(setup)
     tasks = [_Task("bank.npz", _task_bank,
                    (sd, opts.bank_depths_mm, opts.bank_rays, opts.grid, opts.seed,
                     str(root / "bank.npz")),
                    {"depths": list(opts.bank_depths_mm), "rays": opts.bank_rays,
                     "grid": list(opts.grid), "seed": opts.seed})]
     pitch = NOISE_PIXEL_MM
+    settings = [paper_fig10_settings(pitch, lux) for lux in opts.light_levels_lux]
     for i in range(opts.scenes):
         d = f"scene_{i:03d}"
         seed = opts.seed + i
@@ -293,9 +439,8 @@ def _plan(setup: Setup, opts: DatasetOptions, root: Path) -> list[_Task]:
                            {"nsr": None, "prior": DECONV_PRIOR},
                            deps=(f"{d}/sweep.exr", "bank.npz")))
         for j, lux in enumerate(opts.light_levels_lux):
-            settings = paper_fig10_settings(pitch, lux)
             for mode in ("sweep", "stopped"):
-                s = settings[mode]
+                s = settings[j][mode]
                 name = f"{d}/{mode}_{lux:g}lux.exr"
                 tasks.append(_Task(name, _task_noisy,
                                    (str(root / d / "pinhole.exr"), str(root / d / f"{mode}.exr"),
@@ -304,7 +449,7 @@ def _plan(setup: Setup, opts: DatasetOptions, root: Path) -> list[_Task]:
                                    {"lux": lux, "f_number": s.f_number, "iso": s.iso,
                                     "exposure_s": s.exposure_s, "seed": [opts.seed, i, j]},
                                    deps=(f"{d}/pinhole.exr", f"{d}/{mode}.exr")))
-            nsr = settings["sweep"].nsr(0.5)
+            nsr = settings[j]["sweep"].nsr(0.5)
             tasks.append(_Task(f"{d}/edof_{lux:g}lux.exr", _task_deconvolve,
                                (str(root / d / f"sweep_{lux:g}lux.exr"), str(root / "bank.npz"),
                                 nsr, str(root / d / f"edof_{lux:g}lux.exr")),
@@ -313,8 +458,22 @@ def _plan(setup: Setup, opts: DatasetOptions, root: Path) -> list[_Task]:
     return tasks
 
 
+def item_names(opts: DatasetOptions) -> list[str]:
+    """The items (paths relative to the dataset directory) of a dataset with ``opts``."""
+    return [t.name for t in _plan({}, opts, Path("."))]
+
+
+def _run_task(fn: Callable, args: tuple, path: str) -> tuple[str, int]:
+    """Run one task and checksum its output where it was written (in the worker): the
+    SHA-256 and size recorded in the manifest are those of the file as written."""
+    fn(*args)
+    p = Path(path)
+    return _sha256(p), p.stat().st_size
+
+
 def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | None = None, *,
-                  executor: str = "serial", jobs: int = 2, progress: bool = True) -> dict:
+                  executor: str = "serial", jobs: int = 2, progress: bool = True,
+                  wait: float | None = None) -> dict:
     """Render, trace, add noise and deconvolve a synthetic dataset (resumable).
 
     Parameters
@@ -327,32 +486,49 @@ def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | N
         Run independent tasks in this process, or in ``jobs`` local processes.
     progress : bool
         A tqdm bar on stderr.
+    wait : float or None
+        The directory is locked for the run (:class:`~mitsweep.io.lock.DirectoryLock`):
+        another run on it is refused at once (``None``) or after waiting this many
+        seconds for it (``math.inf``: for ever).
 
     Returns
     -------
     dict
-        The manifest (also written to ``out_dir/manifest.json``).
+        The manifest (also written to ``out_dir/manifest.json``): ``complete`` only once
+        every item's file matches the SHA-256 recorded when it was written.
     """
+    from .io.lock import DirectoryLock
+
     if executor not in ("serial", "process"):
         raise DatasetError(f"executor: must be 'serial' or 'process', got {executor!r}")
     if not (isinstance(jobs, int) and jobs >= 1):
         raise DatasetError(f"jobs: must be a positive integer, got {jobs!r}")
+    if wait is not None and not (wait >= 0):
+        raise DatasetError(f"wait: must be >= 0 seconds, got {wait!r}")
     opts = options or DatasetOptions()
     root = Path(out_dir)
     try:
         root.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DatasetError(f"{root}: cannot create the dataset directory ({exc.strerror})") from None
+    with DirectoryLock(root, wait=wait):  # before anything is written into the directory
+        return _build_locked(setup, root, opts, executor, jobs, progress)
+
+
+def _build_locked(setup: Setup, root: Path, opts: DatasetOptions, executor: str, jobs: int,
+                  progress: bool) -> dict:
     sd = setup_to_dict(setup)
-    manifest = {"format": "mitsweep-dataset/1", "setup": sd, "options": opts.as_dict(),
+    tasks = _plan(sd, opts, root)
+    by_name = {t.name: t for t in tasks}
+    manifest = {"format": FORMAT, "setup": sd, "options": opts.as_dict(),
                 "versions": _versions(), "items": {}}
     if (root / MANIFEST).is_file():
         old = load_manifest(root)
-        if old.get("setup") != sd:
+        if old["setup"] != sd:
             raise DatasetError(f"{root}: holds a dataset of another setup "
-                               f"({old.get('setup', {}).get('name')!r}); use a new directory")
-        manifest["items"] = old.get("items", {})
-    tasks = _plan(setup, opts, root)
+                               f"({old['setup'].get('name')!r}); use a new directory")
+        # Items of other options (fewer scenes, other light levels) are not ours to keep.
+        manifest["items"] = {k: v for k, v in old["items"].items() if k in by_name}
     for i in range(opts.scenes):
         (root / f"scene_{i:03d}").mkdir(exist_ok=True)
 
@@ -385,20 +561,19 @@ def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | N
                                    + ", ".join(t.name for t in pending))
             t0 = time.perf_counter()
             if pool is None:
-                results = []
                 for t in ready:
-                    t.fn(*t.args)
-                    results.append(t)
-                    _record(root, manifest, t, time.perf_counter() - t0)
+                    sha, size = _run_task(t.fn, t.args, str(root / t.name))
+                    _record(root, manifest, t, sha, size, time.perf_counter() - t0)
                     bar.update(1)
                     done_names.add(t.name)
                     t0 = time.perf_counter()
             else:
-                futures = {pool.submit(t.fn, *t.args): t for t in ready}
+                futures = {pool.submit(_run_task, t.fn, t.args, str(root / t.name)): t
+                           for t in ready}
                 for fut in cf.as_completed(futures):
                     t = futures[fut]
-                    fut.result()
-                    _record(root, manifest, t, time.perf_counter() - t0)
+                    sha, size = fut.result()
+                    _record(root, manifest, t, sha, size, time.perf_counter() - t0)
                     bar.update(1)
                     done_names.add(t.name)
             pending = [t for t in pending if t.name not in done_names]
@@ -406,19 +581,35 @@ def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | N
         bar.close()
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
+    _verify_items(root, manifest, tasks)
     manifest["complete"] = True
     _write_manifest(root, manifest)
     return manifest
+
+
+def _verify_items(root: Path, manifest: dict, tasks: list[_Task]) -> None:
+    """Every item's file still matches its recorded SHA-256, or the dataset is not
+    complete: a mismatching item is dropped from the manifest (a rerun redoes it)."""
+    bad = [t.name for t in tasks if not (root / t.name).is_file()
+           or _sha256(root / t.name) != manifest["items"][t.name]["sha256"]]
+    if bad:
+        for name in bad:
+            manifest["items"].pop(name, None)
+        _write_manifest(root, manifest)
+        raise DatasetError(f"{root / bad[0]}: changed after it was written (its SHA-256 no "
+                           f"longer matches the manifest"
+                           + (f"; {len(bad) - 1} more items too" if len(bad) > 1 else "")
+                           + "); rerun `mitsweep dataset` to redo it")
 
 
 def _jsonable(obj):
     return json.loads(json.dumps(obj, default=str))
 
 
-def _record(root: Path, manifest: dict, task: _Task, seconds: float) -> None:
-    p = root / task.name
-    manifest["items"][task.name] = {"params": _jsonable(task.params), "sha256": _sha256(p),
-                                    "bytes": p.stat().st_size, "seconds": round(seconds, 3)}
+def _record(root: Path, manifest: dict, task: _Task, sha256: str, size: int,
+            seconds: float) -> None:
+    manifest["items"][task.name] = {"params": _jsonable(task.params), "sha256": sha256,
+                                    "bytes": size, "seconds": round(seconds, 3)}
     _write_manifest(root, manifest)
 
 
@@ -447,14 +638,39 @@ def _progress(total: int, enabled: bool):
 DEPTH_BANDS_MM = (0.0, 300.0, 1000.0, 3000.0, math.inf)
 
 
-def _scene_dirs(root: Path, manifest: dict) -> list[Path]:
-    n = int(manifest.get("options", {}).get("scenes", 0))
-    dirs = [root / f"scene_{i:03d}" for i in range(n)]
-    missing = [d.name for d in dirs if not (d / "pinhole.exr").is_file()]
-    if missing:
-        raise DatasetError(f"{root}: incomplete dataset, no pinhole.exr in {missing[0]} "
-                           f"(rerun `mitsweep dataset` to finish it)")
-    return dirs
+def _checked_items(root: Path, manifest: dict) -> dict[str, Path]:
+    """The items of a complete dataset, each file present and unchanged since written."""
+    if manifest.get("complete") is not True:
+        raise DatasetError(f"{root}: incomplete dataset (rerun `mitsweep dataset` with the "
+                           f"same options to finish it)")
+    files = {}
+    for name, item in sorted(manifest["items"].items()):
+        p = root / name
+        if not p.is_file():
+            raise DatasetError(f"{p}: listed in the manifest but missing (rerun `mitsweep "
+                               f"dataset` to redo it)")
+        if p.stat().st_size != item["bytes"] or _sha256(p) != item["sha256"]:
+            raise DatasetError(f"{p}: changed since it was written (size or SHA-256 differs "
+                               f"from the manifest; rerun `mitsweep dataset` to redo it)")
+        files[name] = p
+    return files
+
+
+def _read_finite(path: Path) -> tuple[np.ndarray, dict, dict]:
+    img, chans, meta = _read_rgb(path)
+    for name, arr in {"image": img, **chans}.items():
+        if not np.all(np.isfinite(arr)):
+            raise DatasetError(f"{path}: holds NaN or inf pixels (channel {name}); cannot "
+                               f"score it (rerun `mitsweep dataset` to redo it)")
+    return img, chans, meta
+
+
+def dataset_inputs(directory: str | Path) -> list[Path]:
+    """Every file of a dataset that evaluating it reads: the manifest and the items (for
+    :func:`~mitsweep.cli.common.check_outputs`)."""
+    root = Path(directory)
+    manifest = load_manifest(root)
+    return [root / MANIFEST] + [root / name for name in manifest["items"]]
 
 
 def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
@@ -463,18 +679,26 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
     Returns per scene and averaged: PSNR (dB) and SSIM inside the mirror's image, per
     radial bin (pixels from the optical axis) and per depth band (mm), for ``edof``,
     ``focused``, ``stopped``, ``sweep`` (not deconvolved) and the noisy variants.
+
+    The manifest is validated (:func:`load_manifest`); the dataset must be complete,
+    with every item's file present and unchanged, and every image finite.
     """
     from .deconv import per_depth_band, per_radius, psnr, ssim
 
     root = Path(directory)
     manifest = load_manifest(root)
+    files = _checked_items(root, manifest)
+    n_scenes = manifest["options"]["scenes"]
     results: dict[str, Any] = {"dataset": str(root), "scenes": {}}
-    for d in _scene_dirs(root, manifest):
-        gt, chans, _ = _read_rgb(d / "pinhole.exr")
+    for i in range(n_scenes):
+        d = root / f"scene_{i:03d}"
+        gt, chans, _ = _read_finite(d / "pinhole.exr")
         mask = chans.get("mask.Y")
         if mask is None:
             raise DatasetError(f"{d}/pinhole.exr: no mask.Y channel (mirror mask AOV)")
         m = mask > 0.5
+        if not np.any(m):
+            raise DatasetError(f"{d}/pinhole.exr: the mirror mask is empty (nothing to score)")
         depth = chans.get("depth.Z", np.full(mask.shape, np.nan, dtype=np.float32))
         depth = np.where(m & (depth > 0), depth, np.nan)
         level = white_level(gt, mask)
@@ -485,17 +709,20 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
         r_max = float(np.max(np.hypot(ys - cy, xs - cx))) + 0.5
         edges = np.linspace(0.0, r_max, n_radial_bins + 1)
         scene_res: dict[str, Any] = {"white_level": level, "mirror_radius_px": r_max}
-        for path in sorted(d.glob("*.exr")):
-            name = path.stem
-            if name == "pinhole":
+        for name, path in files.items():
+            if not name.startswith(f"{d.name}/") or path.suffix != ".exr" \
+                    or path.stem == "pinhole":
                 continue
-            img = _read_rgb(path)[0] / level
+            img = _read_finite(path)[0] / level
+            if img.shape != ref.shape:
+                raise DatasetError(f"{path}: shape {img.shape} differs from the ground "
+                                   f"truth's {ref.shape}")
             # An image leaves the mirror's disc alone outside the mask: score inside only.
             entry = {"psnr": psnr(img, ref, mask=m), "ssim": ssim(img, ref, mask=m),
                      "per_radius": _listify(per_radius(img, ref, edges, mask=m)),
                      "per_depth_band": _listify(per_depth_band(img, ref, depth,
                                                                list(DEPTH_BANDS_MM), mask=m))}
-            scene_res[name] = entry
+            scene_res[path.stem] = entry
         results["scenes"][d.name] = scene_res
     names = sorted({k for s in results["scenes"].values() for k, v in s.items()
                     if isinstance(v, dict)})

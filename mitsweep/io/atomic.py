@@ -1,31 +1,54 @@
 """Atomic file writes: write to a temporary file beside the target, then rename.
 
-An interrupted write never leaves a half-written file at the target, and never removes
-what was there before.
+An interrupted or failed write never leaves a half-written file at the target, never
+leaves the temporary behind, and never removes what was there before. Every failure to
+write is a :class:`WriteError`: an ``OSError`` with the cause's errno whose message names
+the target (``cannot write out.exr: No space left on device``), not the temporary.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 import threading
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "check_writable"]
+__all__ = ["WriteError", "atomic_path", "write_bytes_atomic", "write_text_atomic",
+           "check_writable"]
+
+
+class WriteError(OSError):
+    """An output file could not be written.
+
+    Constructed like ``OSError(errno, strerror, filename)`` (so it pickles across
+    processes); its message is one line naming the file and the cause.
+    """
+
+    def __str__(self) -> str:
+        return f"cannot write {self.filename}: {self.strerror}"
+
+
+def _write_error(path: Path, exc: OSError) -> WriteError:
+    if isinstance(exc, WriteError):
+        return exc
+    code = exc.errno if exc.errno is not None else errno.EIO
+    cause = exc.strerror or str(exc) or os.strerror(code)
+    return WriteError(code, cause, str(path))
 
 
 def check_writable(path: str | Path) -> Path:
-    """Raise ``OSError`` with a clear message unless ``path`` can be created."""
+    """Raise :class:`WriteError` with a clear cause unless ``path`` can be created."""
     p = Path(path)
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
-        raise OSError(f"{p}: directory {parent} does not exist")
+        raise WriteError(errno.ENOENT, f"directory {parent} does not exist", str(p))
     if not os.access(parent, os.W_OK):
-        raise OSError(f"{p}: directory {parent} is not writable")
+        raise WriteError(errno.EACCES, f"directory {parent} is not writable", str(p))
     if p.is_dir():
-        raise OSError(f"{p}: is a directory")
+        raise WriteError(errno.EISDIR, "it is a directory", str(p))
     return p
 
 
@@ -41,23 +64,42 @@ def _default_file_mode() -> int:
     return 0o666 & ~mask
 
 
+def _fsync(path: Path) -> None:
+    # Some file systems (delayed allocation, NFS, quotas) report a full disk only when
+    # the data is flushed: flush before the rename so that the error is ours to report.
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
     """Yield a temporary path to write; on success it replaces ``path`` atomically.
 
-    The temporary keeps the target's suffix (some writers pick the format from it).
+    The temporary keeps the target's suffix (some writers pick the format from it). Any
+    ``OSError`` raised while writing, flushing or renaming becomes a :class:`WriteError`
+    naming ``path``; the temporary is removed.
     """
     p = check_writable(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=suffix or "".join(p.suffixes[-1:]),
-                               dir=p.parent if str(p.parent) else ".")
-    os.close(fd)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.",
+                                   suffix=suffix or "".join(p.suffixes[-1:]),
+                                   dir=p.parent if str(p.parent) else ".")
+        os.close(fd)
+    except OSError as exc:
+        raise _write_error(p, exc) from exc
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        _fsync(tmp_path)
         os.chmod(tmp_path, _default_file_mode())
         os.replace(tmp_path, p)
+    except OSError as exc:
+        raise _write_error(p, exc) from exc
     finally:
-        if tmp_path.exists():
+        with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
 
 

@@ -7,7 +7,9 @@ string attributes prefixed ``mitsweep:`` so that other tools show them and leave
 
 from __future__ import annotations
 
+import errno
 import json
+import os
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -78,9 +80,33 @@ def write_exr(path: str | Path, image=None, *, channels: Mapping[str, np.ndarray
     for key, value in (metadata or {}).items():
         header[_PREFIX + str(key)] = json.dumps(value, default=_json_default)
     with atomic_path(path, suffix=".exr") as tmp:
-        with OpenEXR.File(header, out) as f:
-            f.write(str(tmp))
+        try:
+            with OpenEXR.File(header, out) as f:
+                f.write(str(tmp))
+        except RuntimeError as exc:  # OpenEXR reports I/O failures as RuntimeError
+            code = _errno_of(str(exc), tmp.parent)
+            raise OSError(code, os.strerror(code)) from exc
     return Path(path)
+
+
+#: Causes of a failed write that OpenEXR names in its message by their strerror text.
+_WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES,
+                 errno.EPERM, errno.ENOENT, errno.EIO)
+
+
+def _errno_of(message: str, directory: Path) -> int:
+    """The errno behind OpenEXR's RuntimeError: from the strerror text its message
+    quotes (``... No space left on device.``), else a full file system, else EIO."""
+    for code in _WRITE_ERRNOS:
+        if os.strerror(code) in message:
+            return code
+    try:
+        st = os.statvfs(directory)
+    except OSError:
+        return errno.EIO
+    if st.f_bavail == 0 or (st.f_files > 0 and st.f_favail == 0):
+        return errno.ENOSPC
+    return errno.EIO
 
 
 def _json_default(o):
