@@ -16,6 +16,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..io.bank import BankError, IPSFBank
+from ..resources import check_allocation
 
 __all__ = ["PAPER_DECONV_DEPTH_MM", "optical_center", "select_depth", "radii_px",
            "interpolate_radial", "rotate_kernel", "grid_bank_from_radial",
@@ -128,6 +129,10 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
     xs = np.linspace(0, W - 1, cols_n) if cols_n > 1 else np.array([cx])
     pitch = float(bank.pixel_pitch)
     rad = radii_px(bank)
+    n_d, K0, K1 = bank.kernels.shape[0], bank.kernels.shape[2], bank.kernels.shape[3]
+    # float64 kernels, then their float32 copy in the bank
+    check_allocation(f"grid bank of {cols_n}x{rows_n} points from a radial bank "
+                     f"({K1}x{K0} px kernels)", float(n_d) * rows_n * cols_n * K0 * K1 * 12)
     kernels = np.asarray(bank.kernels, dtype=np.float64)
     out = np.empty((kernels.shape[0], rows_n * cols_n) + kernels.shape[2:])
     pts = np.empty((rows_n * cols_n, 2))

@@ -32,10 +32,12 @@ from ..io.bank import IPSFBank
 from .kernels import (check_bank_matches, interpolate_radial, optical_center, radii_px,
                       select_depth)
 from .spatial import hat_weights
-from .wiener import (estimate_nsr, regulariser, wiener_deconvolve, wiener_filter,
-                     working_dtype)
+from ..resources import check_allocation
+from .wiener import (check_image_values, check_nsr, estimate_nsr, regulariser,
+                     wiener_deconvolve, wiener_filter, working_dtype)
 
-__all__ = ["PolarGrid", "polar_grid", "to_polar", "from_polar", "polar_deconvolve"]
+__all__ = ["PolarGrid", "polar_grid", "to_polar", "from_polar", "polar_deconvolve",
+           "polar_memory_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -312,6 +314,18 @@ def _from_angle_spectrum(spec, grid, shape, *, order, upsample, outside, dtype):
     return out
 
 
+def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype) -> float:
+    """Peak bytes of :func:`polar_deconvolve` on ``grid``: the angle spectrum and its
+    filtered accumulator (complex, half-length: one real array each per channel), the
+    spline coefficients and coordinates of the sampling, the angle-upsampled rows and
+    their spline on the way back, and three copies of the image."""
+    it = np.dtype(dtype).itemsize
+    C = image_shape[2] if len(image_shape) == 3 else 1
+    H, W = image_shape[0], image_shape[1]
+    cells = float(grid.n_radii) * float(grid.n_angles)
+    return cells * it * (2 * C + 2 + 3 * C) + float(H) * W * it * (3 * C + 4)
+
+
 def _band_length(n: int, step: float) -> int:
     """Smallest fast FFT length L >= n with L * step an integer (see _band_transfer)."""
     L = sfft.next_fast_len(n)
@@ -415,14 +429,14 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     dt = working_dtype(img)
     cdt = np.complex64 if dt == np.float32 else np.complex128
     img = img.astype(dt, copy=False)
-    if not np.all(np.isfinite(img)):
-        raise ValueError("image holds NaN or inf values")
+    check_image_values(img)
     kernels = select_depth(bank, depth_mm)
     rad = radii_px(bank)
     K = kernels.shape[-1]
     if nsr is None:
         nsr = estimate_nsr(img)
         log.info("estimated NSR %.3g", nsr)
+    nsr = check_nsr(nsr)
     H, W = img.shape[:2]
     corner = polar_grid(img.shape).r_max if center is None else None
     if r_max is None:
@@ -434,6 +448,8 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
                       angular_oversampling=angular_oversampling, inner_px=_SPLINE_PX,
                       outer_px=_SPLINE_PX)
     step = grid.radial_step
+    check_allocation(f"polar deconvolution of {W}x{H} px on {grid.n_radii} radii x "
+                     f"{grid.n_angles} angles", polar_memory_bytes(grid, img.shape, dt))
     spec = _angle_spectrum(img, grid, cdt)                             # (n_r, M, C)
     n_r, M = spec.shape[:2]
 

@@ -24,7 +24,9 @@ import scipy.signal as ssig
 
 from ..io.bank import BankError, IPSFBank
 from .kernels import check_bank_matches, optical_center, select_depth
-from .wiener import estimate_nsr, wiener_deconvolve, working_dtype
+from ..resources import check_allocation
+from .wiener import (check_image_values, check_nsr, estimate_nsr, wiener_deconvolve,
+                     wiener_memory_bytes, working_dtype)
 
 __all__ = ["hat_weights", "grid_axes_px", "grid_windows", "product_convolve",
            "scatter_blur", "grid_kernel_field", "spatially_varying_blur",
@@ -201,14 +203,24 @@ def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     img, kernels, wy, wx = _grid_setup(image, bank, depth_mm)
     dt = working_dtype(img)
     img = img.astype(dt, copy=False)
+    check_image_values(img)
     if nsr is None:
         nsr = estimate_nsr(img)
         log.info("estimated NSR %.3g", nsr)
+    nsr = check_nsr(nsr)
     K = kernels.shape[-1]
     m = 3 * K if margin is None else int(margin)
     if m < 0:
         raise ValueError(f"margin must be >= 0, got {margin}")
     H, W = img.shape[:2]
+    C = img.shape[2] if img.ndim == 3 else 1
+    # the padded image and the output, plus the largest tile's Wiener deconvolution
+    tile = (max(_support(w)[1] - _support(w)[0] for w in wy) + 2 * m,
+            max(_support(w)[1] - _support(w)[0] for w in wx) + 2 * m)
+    check_allocation(f"spatially varying deconvolution of {W}x{H} px with "
+                     f"{wy.shape[0]}x{wx.shape[0]} grid cells",
+                     (float(H + 2 * m) * (W + 2 * m) + float(H) * W) * C * dt.itemsize
+                     + wiener_memory_bytes(tile, C, dt))
     widths = [(m, m), (m, m)] + [(0, 0)] * (img.ndim - 2)
     padded = np.pad(img, widths, mode="symmetric")
     out = np.zeros(img.shape, dtype=dt)

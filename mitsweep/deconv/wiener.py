@@ -14,9 +14,12 @@ import logging
 import numpy as np
 import scipy.fft as sfft
 
+from ..resources import check_allocation
+
 __all__ = ["wiener_deconvolve", "wiener_filter", "kernel_spectrum", "regulariser",
            "estimate_nsr", "estimate_noise_sigma", "natural_prior_scale", "fast_shape",
-           "working_dtype", "PRIORS", "DEFAULT_NSR_FLOOR"]
+           "working_dtype", "check_image_values", "check_nsr", "wiener_memory_bytes",
+           "PRIORS", "DEFAULT_NSR_FLOOR", "MAX_NSR", "MAX_ABS_VALUE"]
 
 log = logging.getLogger(__name__)
 
@@ -26,6 +29,42 @@ PRIORS = ("constant", "natural")
 #: carries ~1e-4 relative error (Monte Carlo, 16-bit EXR), and 1e-4 bounds the gain of the
 #: inverse filter at 1 / (2 sqrt(1e-4)) = 50.
 DEFAULT_NSR_FLOOR = 1e-4
+#: Largest NSR accepted: at 1e6 the filter's gain is below 1e-3 at every frequency the
+#: prior regularises, so the output is the image's mean; beyond, R overflows float32.
+MAX_NSR = 1e6
+#: Largest |value| of an image to deconvolve. An FFT coefficient is at most the sum of
+#: |values| (<= 2^31 pixels of a padded 32768² image: 2e29 at 1e20), which leaves the
+#: filter's gain a factor 1e9 below float32's 3.4e38; beyond, float32 FFTs overflow.
+MAX_ABS_VALUE = 1e20
+
+
+def check_image_values(image: np.ndarray) -> None:
+    """Raise ValueError if ``image`` holds NaN, inf, or values beyond :data:`MAX_ABS_VALUE`."""
+    if not np.all(np.isfinite(image)):
+        raise ValueError("image holds NaN or inf values")
+    peak = float(np.max(np.abs(image))) if np.size(image) else 0.0
+    if peak > MAX_ABS_VALUE:
+        raise ValueError(f"image values reach {peak:.3g}; deconvolution takes linear values up "
+                         f"to {MAX_ABS_VALUE:g} in magnitude (float32 FFTs overflow beyond): "
+                         f"rescale the image")
+
+
+def check_nsr(nsr) -> float:
+    """``nsr`` as a float in [0, :data:`MAX_NSR`]; ValueError otherwise."""
+    x = float(nsr)
+    if not (np.isfinite(x) and 0 <= x <= MAX_NSR):
+        raise ValueError(f"nsr must be a number in [0, {MAX_NSR:g}], got {nsr!r}")
+    return x
+
+
+def wiener_memory_bytes(shape: tuple[int, int], channels: int, dtype) -> float:
+    """Peak bytes of one :func:`wiener_deconvolve` on an FFT grid of ``shape``: the padded
+    image, its spectrum and the filtered product (complex, half-length), the filter,
+    the regulariser's frequency grid and the inverse transform."""
+    M, N = (float(x) for x in shape)
+    it = np.dtype(dtype).itemsize
+    half = M * (N / 2 + 1)
+    return M * N * channels * it * 2 + half * (2 * channels + 1) * 2 * it + half * it * 3
 
 
 def natural_prior_scale(n_px: float) -> float:
@@ -102,8 +141,7 @@ def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64
     """
     if prior not in PRIORS:
         raise ValueError(f"prior must be one of {PRIORS}, got {prior!r}")
-    if not (np.isfinite(nsr) and nsr >= 0):
-        raise ValueError(f"nsr must be a finite number >= 0, got {nsr!r}")
+    nsr = check_nsr(nsr)
     if freqs is None:
         fy = sfft.fftfreq(shape[0]).astype(dtype)[:, None]
         fx = sfft.rfftfreq(shape[1]).astype(dtype)[None, :]
@@ -244,14 +282,14 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None =
         raise ValueError(f"image is empty: shape {img.shape}")
     dt = working_dtype(img)
     img = img.astype(dt, copy=False)
-    if not np.all(np.isfinite(img)):
-        raise ValueError("image holds NaN or inf values")
+    check_image_values(img)
     k = np.asarray(psf)
     if k.ndim != 2:
         raise ValueError(f"psf must be (K, L), got shape {k.shape}")
     if nsr is None:
         nsr = estimate_nsr(img)
         log.info("estimated NSR %.3g", nsr)
+    nsr = check_nsr(nsr)
     if pad == "auto":
         pads = (2 * k.shape[0], 2 * k.shape[1])
     else:
@@ -260,6 +298,8 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None =
         pads = (int(pad), int(pad))
     H_, W_ = img.shape[:2]
     M, N = fast_shape((H_, W_), pads)
+    check_allocation(f"Wiener deconvolution of {W_}x{H_} px on a {N}x{M} FFT grid",
+                     wiener_memory_bytes((M, N), img.shape[2] if img.ndim == 3 else 1, dt))
     pad_y0, pad_x0 = (M - H_) // 2, (N - W_) // 2
     widths = [(pad_y0, M - H_ - pad_y0), (pad_x0, N - W_ - pad_x0)] + [(0, 0)] * (img.ndim - 2)
     padded = np.pad(img, widths, mode=pad_mode) if (M, N) != (H_, W_) else img

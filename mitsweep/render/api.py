@@ -39,6 +39,7 @@ import numpy as np
 from ..optics import (chief_ray, focal_image_axial_distances, image_distance, image_point,
                       mirror_point_from_image, optimal_sweep_range, placement_of)
 from ..optics.motion import MotionProfile, motion_for
+from ..resources import check_allocation
 
 __all__ = ["MODES", "RenderResult", "render_image", "render_to_exr", "render_point_source",
            "camera_dict", "mode_camera", "reference_sensor_distance",
@@ -192,6 +193,32 @@ def mirror_image_bbox(setup, sensor_distance: float, margin_px: int = 8):
     return (x0, y0, x1 - x0, y1 - y0)
 
 
+#: Bytes per lane of a render wavefront (ray, sampler state, interaction, spectra) on
+#: the LLVM backend: an estimate with headroom, for the memory check only.
+_LANE_BYTES = 256
+#: Bytes per pixel of the depth and mask AOVs: NumPy grids and directions (float64) and
+#: the Dr.Jit rays and interactions of two intersections (float32).
+_AOV_PIXEL_BYTES = 320
+
+
+def render_memory_bytes(resolution: tuple[int, int], film: tuple[int, int], spp: int, *,
+                        aovs: bool = False) -> float:
+    """Estimated peak memory (bytes) of :func:`render_image`.
+
+    The full RGB float32 image (W·H·3·4), Mitsuba's film on the rendered window (RGB,
+    alpha and weight, float32) and its developed copy, the NumPy accumulators of the
+    passes (two float64 RGB images), the wavefront of one pass (at most 2^24 lanes of
+    :data:`_LANE_BYTES`) and, with AOVs, :data:`_AOV_PIXEL_BYTES` per pixel.
+    """
+    W, H = (float(x) for x in resolution)
+    w, h = (float(x) for x in film)
+    lanes = min(float(spp) * w * h, float(_MAX_LANES))
+    total = W * H * 3 * 4 + w * h * (5 * 4 + 3 * 4 + 2 * 3 * 8) + lanes * _LANE_BYTES
+    if aovs:
+        total += W * H * _AOV_PIXEL_BYTES
+    return total
+
+
 def _pass_seeds(seed: int, n: int) -> list[int]:
     return [int((seed * 1_000_003 + k) % (1 << 32)) for k in range(n)]
 
@@ -296,11 +323,13 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
     unknown = sorted(set(aovs) - set(AOV_NAMES))
     if unknown:
         raise ValueError(f"aovs: unknown {unknown[0]!r}; allowed: {', '.join(AOV_NAMES)}")
-    variant = register()
     kwargs, desc = mode_camera(setup, mode, sweep, f_number)
     i_ref = desc["reference_sensor_distance_mm"]
     W, H = setup.sensor.resolution
     crop = mirror_image_bbox(setup, i_ref, margin_px=8) if mirror_only else (0, 0, W, H)
+    check_allocation(f"render of {W}x{H} px ({crop[2]}x{crop[3]} px film, {spp} spp)",
+                     render_memory_bytes((W, H), crop[2:], spp, aovs=bool(aovs)))
+    variant = register()
     cam = camera_dict(setup, spp=spp, crop=crop, **kwargs)
     scene_dict, info = build_scene(setup, cam, max_depth=max_depth)
     t0 = _time.perf_counter()

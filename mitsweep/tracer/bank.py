@@ -19,7 +19,8 @@ from ..config import setup_to_dict
 from ..io.bank import IPSFBank
 from ..optics import chief_ray, image_point, optimal_sweep_range, placement_of
 from ..optics.motion import motion_for
-from .psf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, integrated_psf
+from ..resources import check_allocation
+from .psf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, KERNEL_PIXEL_BYTES, integrated_psf
 from .source import check_depth
 
 __all__ = ["ipsf_bank", "field_radius", "grid_points"]
@@ -87,6 +88,15 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     ref = sweep.reference_sensor_distance
     radii = None
     grid_shape = None
+    K = int(kernel_size)
+    if K < 3 or K % 2 == 0:
+        raise ValueError(f"kernel_size: must be an odd integer >= 3, got {kernel_size!r}")
+    n_points = float(n_radii) if kind == "radial" else float(grid[0]) * float(grid[1])
+    # kernels (float32), per-point bookkeeping (3 float64 arrays, the grid's points) and
+    # one IPSF being traced
+    check_allocation(f"IPSF bank of {n_points:.0f} points x {len(depths)} depths, {K}x{K} px "
+                     f"kernels", len(depths) * n_points * (K * K * 4 + 3 * 8 + 4 * 8)
+                     + K * K * KERNEL_PIXEL_BYTES)
     if kind == "radial":
         if not setup.mirror.is_symmetric:
             raise ValueError(f"kind='radial' needs a rotationally symmetric setup; this mirror "
@@ -98,7 +108,6 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     else:
         grid_shape = (int(grid[0]), int(grid[1]))
         points = grid_points(setup, grid_shape)
-    K = int(kernel_size)
     kernels = np.zeros((len(depths), len(points), K, K), np.float32)
     vign = np.zeros((len(depths), len(points)))
     outside = np.zeros((len(depths), len(points)))

@@ -29,6 +29,7 @@ import numpy as np
 
 from ..optics import optimal_sweep_range
 from ..optics.motion import MotionProfile, motion_for
+from ..resources import check_allocation
 from .kernel import TraceParams, deposit, trace_arrays
 from .source import PointSource, source_from_image
 
@@ -47,6 +48,9 @@ DEFAULT_TIME_SAMPLES = 4
 _CHUNK = 1 << 22
 _PILOT = 1 << 14
 _SENSOR_TABLE = 4097
+#: Bytes per kernel pixel while an IPSF is binned: the Dr.Jit buffer (float32), its
+#: float64 copy, the normalised kernel, the index grids and centroid products.
+KERNEL_PIXEL_BYTES = 64
 
 
 def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
@@ -151,6 +155,7 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
     K = int(kernel_size)
     if K < 3 or K % 2 == 0:
         raise ValueError(f"kernel_size: must be an odd integer >= 3, got {kernel_size!r}")
+    check_allocation(f"{K}x{K} px kernel", K * K * KERNEL_PIXEL_BYTES)
     rays = int(rays)
     if rays < 1:
         raise ValueError(f"rays: must be >= 1, got {rays!r}")

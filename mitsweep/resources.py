@@ -1,0 +1,106 @@
+"""Memory estimates checked before large arrays are made.
+
+Every step that allocates in proportion to a user-given size (a render's film, an IPSF
+bank, a kernel, a deconvolution's FFT grids) states what it needs and calls
+:func:`check_allocation` first, so that a size that cannot fit is refused in one line
+(``render film 30000x30000: needs 48.0 GiB, 21.3 GiB available``) instead of ending in
+a ``MemoryError`` or a Dr.Jit abort halfway through.
+
+The limit is the smaller of the memory available now (``MemAvailable`` in
+``/proc/meminfo``, else physical pages × page size from :func:`os.sysconf`) and a hard
+cap: ``$MITSWEEP_MAX_MEMORY_GB`` GiB, default :data:`DEFAULT_MAX_MEMORY_GB`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+
+__all__ = ["ResourceError", "check_allocation", "available_memory_bytes", "memory_cap_bytes",
+           "format_bytes", "DEFAULT_MAX_MEMORY_GB", "MAX_MEMORY_ENV"]
+
+log = logging.getLogger(__name__)
+
+GIB = 1 << 30
+#: Hard cap on one step's memory, GiB, unless ``$MITSWEEP_MAX_MEMORY_GB`` says otherwise.
+DEFAULT_MAX_MEMORY_GB = 64.0
+MAX_MEMORY_ENV = "MITSWEEP_MAX_MEMORY_GB"
+
+
+class ResourceError(ValueError):
+    """A requested size needs more memory than is available or allowed."""
+
+
+def format_bytes(nbytes: float) -> str:
+    """``1.5 GiB``, ``12.0 MiB``: binary units, one decimal."""
+    for unit, scale in (("TiB", GIB << 10), ("GiB", GIB), ("MiB", 1 << 20), ("KiB", 1 << 10)):
+        if nbytes >= scale:
+            return f"{nbytes / scale:.1f} {unit}"
+    return f"{int(nbytes)} B"
+
+
+def available_memory_bytes() -> int:
+    """Memory the system can give now without swapping: MemAvailable (Linux), else the
+    physical memory (``os.sysconf``), else 0 when neither can be read."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024  # reported in kB
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, OSError, ValueError):
+        return 0
+
+
+def memory_cap_bytes() -> int:
+    """The hard cap, bytes: ``$MITSWEEP_MAX_MEMORY_GB`` (a positive number of GiB) or 64 GiB.
+
+    Raises
+    ------
+    ResourceError
+        If the environment variable is set to something that is not a positive number.
+    """
+    text = os.environ.get(MAX_MEMORY_ENV)
+    if text is None or text.strip() == "":
+        return int(DEFAULT_MAX_MEMORY_GB * GIB)
+    try:
+        gb = float(text)
+    except ValueError:
+        gb = math.nan
+    if not (math.isfinite(gb) and gb > 0):
+        raise ResourceError(f"${MAX_MEMORY_ENV}: expected a positive number of GiB, got {text!r}")
+    return int(gb * GIB)
+
+
+def check_allocation(what: str, nbytes: float) -> None:
+    """Refuse ``what`` if it needs more than ``nbytes`` allow: the available memory or the cap.
+
+    Parameters
+    ----------
+    what : str
+        What is being made, as the user would name it (``"IPSF bank 9x9 points x 2
+        depths, 31x31 px kernels"``); the message starts with it.
+    nbytes : float
+        The estimated peak memory of that step, bytes (a float: products of user sizes
+        can exceed any integer type NumPy would use).
+
+    Raises
+    ------
+    ResourceError
+        ``WHAT: needs 48.0 GiB, 21.3 GiB available`` (or ``..., over the 64.0 GiB cap
+        ($MITSWEEP_MAX_MEMORY_GB)``).
+    """
+    need = float(nbytes)
+    cap = memory_cap_bytes()
+    if need > cap:
+        raise ResourceError(f"{what}: needs {format_bytes(need)}, over the "
+                            f"{format_bytes(cap)} cap (${MAX_MEMORY_ENV}); use smaller sizes")
+    avail = available_memory_bytes()
+    if avail and need > avail:
+        raise ResourceError(f"{what}: needs {format_bytes(need)}, {format_bytes(avail)} "
+                            f"available; use smaller sizes or free memory")
+    log.debug("%s: %s of %s available", what, format_bytes(need), format_bytes(avail))
