@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import sys
 
-from .common import UsageError, load_setup_arg, positive_float, print_json
+from .common import UsageError, check_outputs, load_setup_arg, positive_float, print_json
+
+logger = logging.getLogger(__name__)
 
 NAME = "sweep-range"
 HELP = ("optimal focal-sweep range, sensor travel and exposure for a setup "
@@ -23,6 +26,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", metavar="FILE", help="draw the focal surfaces (paper Fig. 6)")
     p.add_argument("--verify", action="store_true",
                    help="also trace the sweep range numerically (needs the tracer)")
+    p.add_argument("--field", choices=("plane", "mirror"), default=None,
+                   help="with --verify, the field the traced range covers: 'plane' "
+                        "(default), the paper's FOV zone: untilted, the disc from the axis "
+                        "out to where the reflected chief ray makes FOV/2 with the axis; "
+                        "tilted, the tilt-plane segment from the rim nearest the camera "
+                        "over which the reflected chief rays span the FOV. 'mirror', the "
+                        "whole mirror out to its rim (rim included), which must all face "
+                        "the lens; for a tilted mirror its whole disc, not only the tilt "
+                        "plane")
 
 
 def compute(args) -> tuple[object, dict]:
@@ -44,18 +56,50 @@ def compute(args) -> tuple[object, dict]:
     return setup, result, out
 
 
+def _traced_keys(traced) -> dict:
+    return {"traced_field": traced.field,
+            "traced_focus_min_mm": traced.focus_min_mm,
+            "traced_focus_max_mm": traced.focus_max_mm,
+            "traced_focus_min_at": traced.min_at,
+            "traced_focus_max_at": traced.max_at,
+            "traced_convergence": traced.convergence,
+            "traced_points": traced.points}
+
+
+def _where(at: dict) -> str:
+    return (f"mirror ({at['x_mm']:.3f}, {at['y_mm']:.3f}) mm{' (rim)' if at['on_rim'] else ''}"
+            f", depth {at['depth_mm']:g} mm, image ({at['image_uv_mm'][0]:.3f}, "
+            f"{at['image_uv_mm'][1]:.3f}) mm")
+
+
 def run(args) -> int:
+    if args.field is not None and not args.verify:
+        raise UsageError("--field: chooses the field of the traced range; give it with "
+                         "--verify")
+    if args.plot:
+        check_outputs([args.setup], [args.plot])
     setup, result, out = compute(args)
     if args.verify:
-        from ..tracer.focus import traced_sweep_range  # provided by the tracer
+        from ..config import SetupError
+        from ..tracer.focus import traced_sweep_range
 
-        traced = traced_sweep_range(setup, fov_deg=args.fov, depth_min=result.depth_min_mm,
-                                    depth_max=result.depth_max_mm)
-        out["traced_focus_min_mm"] = traced.focus_min_mm
-        out["traced_focus_max_mm"] = traced.focus_max_mm
-        if not setup.mirror.is_symmetric:  # the whole 2-D field, beyond the tilt plane
-            out["traced_field_focus_min_mm"] = traced.field_focus_min_mm
-            out["traced_field_focus_max_mm"] = traced.field_focus_max_mm
+        field = args.field or "plane"
+        trace = lambda f: traced_sweep_range(  # noqa: E731
+            setup, fov_deg=args.fov, depth_min=result.depth_min_mm,
+            depth_max=result.depth_max_mm, field=f)
+        traced = trace(field)
+        out.update(_traced_keys(traced))
+        # traced_field_focus_*: the whole mirror (field "mirror"), as before for a tilted
+        # mirror, whose tilt plane is not all of it; omitted where that field is undefined.
+        whole = traced if field == "mirror" else None
+        if whole is None and not setup.mirror.is_symmetric:
+            try:
+                whole = trace("mirror")
+            except SetupError as exc:
+                logger.info("no whole-mirror traced range: %s", exc)
+        if whole is not None:
+            out["traced_field_focus_min_mm"] = whole.focus_min_mm
+            out["traced_field_focus_max_mm"] = whole.focus_max_mm
     if args.plot:
         from ..plots import plot_focal_surfaces
 
@@ -77,12 +121,16 @@ def run(args) -> int:
             f"exposure         {r.exposure_s:.4f} s at {r.velocity_mm_s:g} mm/s",
         ]
         if "traced_focus_min_mm" in out:
-            lines.append(f"traced focus     {out['traced_focus_min_mm']:.3f} .. "
-                         f"{out['traced_focus_max_mm']:.3f} mm")
-        if "traced_field_focus_min_mm" in out:
-            lines.append(f"traced 2-D field {out['traced_field_focus_min_mm']:.3f} .. "
-                         f"{out['traced_field_focus_max_mm']:.3f} mm (whole mirror, off the "
-                         f"tilt plane too)")
+            lines += [
+                f"traced focus     {out['traced_focus_min_mm']:.3f} .. "
+                f"{out['traced_focus_max_mm']:.3f} mm (field {out['traced_field']}, "
+                f"{out['traced_points']} traced points)",
+                f"  nearest at     {_where(out['traced_focus_min_at'])}",
+                f"  farthest at    {_where(out['traced_focus_max_at'])}"]
+        if "traced_field_focus_min_mm" in out and out.get("traced_field") != "mirror":
+            lines.append(f"traced mirror    {out['traced_field_focus_min_mm']:.3f} .. "
+                         f"{out['traced_field_focus_max_mm']:.3f} mm (field mirror: the whole "
+                         f"mirror out to its rim)")
         if args.plot:
             lines.append(f"plot             {args.plot}")
         sys.stdout.write("\n".join(lines) + "\n")
