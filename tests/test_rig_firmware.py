@@ -82,7 +82,9 @@ def test_sketch_speaks_the_drivers_protocol():
     assert sent_events == set(driver.EVENT_NAMES)
     commands = set(re.findall(r'!strcmp\(text, "([A-Z]+)"\)', src))
     assert commands == {"ID", "STATE", "CHK", "LIMITS", "HOME", "MOVE", "SWEEP", "SHUTTER",
-                        "CLOSE", "STOP"}
+                        "CLOSE", "STOP", "WATCHDOG", "PING"}
+    assert f"const long MAX_WATCHDOG_MS = {driver.MAX_WATCHDOG_MS}L;" in src
+    assert 'fault("WATCHDOG")' in src
 
 
 @pytest.mark.slow
@@ -99,7 +101,7 @@ def test_firmware_boots_under_simavr_and_greets_driver(firmware):
     with expected_protocol(lambda t: driver.ArduinoSweepController(t, steps_per_mm=400),
                            [(None, lines[0].encode() + b"\n")]) as board:
         assert board.wait_ready(0.1)
-    assert board.ready_line == f"READY {driver.FIRMWARE_NAME} 1.0 {driver.PROTOCOL_VERSION}"
+    assert board.ready_line == f"READY {driver.FIRMWARE_NAME} 1.1 {driver.PROTOCOL_VERSION}"
 
 
 # -- the sketch's own code on the host, against the Python driver ------------------------

@@ -1,21 +1,50 @@
 """``mitsweep capture``: run a focal-sweep capture on the rig over serial.
 
 The sensor travel and exposure come from the setup's sweep range and velocity; the rig
-section of the setup gives the stage limits, acceleration, settle distance and sensor
-mapping. ``--dry-run`` prints the plan without opening a port.
+section of the setup gives the stage limits, acceleration, settle distance, sensor
+mapping and the board's watchdog. ``--dry-run`` prints the plan without opening a port.
+
+``--out`` (default ``capture_<setup>_<UTC time>.json``) is never the setup file, and an
+existing file is replaced only with ``--force``.
+
+Stopping a capture: Ctrl-C (SIGINT), ``kill`` (SIGTERM) and a closed terminal (SIGHUP)
+release the shutter and stop the stage, then write the record marked incomplete
+(``status: "interrupted"``, ``signal``); a second signal does not cut that short. What
+cannot be caught (SIGKILL, a crash) is left to the board's watchdog (``rig.watchdog_s``).
+
+Exit status
+-----------
+===  =========================================================================
+0    capture complete
+1    incomplete (fault, timeout, lost link, ...); every safety step confirmed
+2    bad input, refused before any motion
+3    incomplete and some safety step NOT confirmed: the rig may be unsafe
+130  interrupted by SIGINT, every safety step confirmed (143: SIGTERM,
+     129: SIGHUP; 128 + the signal's number, as a shell reports it)
+===  =========================================================================
+
+Status 3 takes precedence over the signal's status. stderr says which safety steps the
+devices confirmed, e.g. ``shutter released: confirmed; stage stopped: NOT confirmed
+(port lost)``.
 """
 
 from __future__ import annotations
 
 import argparse
 import datetime as _dt
+import os
 import sys
 
-from .common import UsageError, load_setup_arg, print_json
+from .common import UsageError, check_outputs, load_setup_arg, print_json
 
 NAME = "capture"
 HELP = ("drive the linear stage and the shutter over serial for one focal-sweep "
         "capture, and write its record")
+
+#: Exit statuses (see the module docstring).
+EXIT_COMPLETE = 0
+EXIT_INCOMPLETE_SAFE = 1
+EXIT_MAYBE_UNSAFE = 3
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,7 +55,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="what moves the stage: the Arduino on --port (default), or a Zaber "
                         "ASCII-protocol stage on PORT with the Arduino only firing the shutter")
     p.add_argument("--out", metavar="RECORD.json",
-                   help="capture record (default: capture_<setup>_<UTC time>.json)")
+                   help="capture record (default: capture_<setup>_<UTC time>.json); an "
+                        "existing file only with --force, never the setup file")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing --out file")
     p.add_argument("--checksums", action="store_true",
                    help="checksum every line on the serial links")
     p.add_argument("--dry-run", action="store_true",
@@ -43,9 +75,41 @@ def _parse_stage(text: str) -> str | None:
     return port
 
 
+def _check_out(out: str, setup_path: str, force: bool) -> None:
+    check_outputs([setup_path], [out])          # never the setup, even with --force
+    if os.path.lexists(out) and not force:
+        raise UsageError(f"--out {out} exists: pass --force to replace it, or choose "
+                         f"another path")
+
+
+def exit_status(exc: BaseException, safe: bool) -> int:
+    """The exit status of an incomplete capture (table in the module docstring)."""
+    if not safe:
+        return EXIT_MAYBE_UNSAFE
+    if isinstance(exc, KeyboardInterrupt):
+        return 128 + getattr(exc, "signum", 2)   # SIGINT is 2
+    return EXIT_INCOMPLETE_SAFE
+
+
+def _report_incomplete(exc: BaseException, record, out: str) -> int:
+    from ..rig import safety_summary
+    from ..rig.capture import status_of
+
+    safe, steps = safety_summary(record)
+    if isinstance(exc, KeyboardInterrupt):
+        head = f"capture incomplete (interrupted by {record.signal})"
+    else:
+        head = f"capture incomplete ({status_of(exc)}): {exc or type(exc).__name__}"
+    tail = "" if safe else "; the rig may be unsafe: check the stage and the shutter"
+    try:
+        print(f"mitsweep: {head}; {steps}{tail}; record: {out}", file=sys.stderr)
+    except OSError:   # SIGHUP: the terminal may be gone; the record and status remain
+        pass
+    return exit_status(exc, safe)
+
+
 def run(args) -> int:
     from ..rig import RigError, RigPorts, plan_capture, run_capture
-    from ..rig.capture import status_of
 
     zaber_port = _parse_stage(args.stage)
     setup = load_setup_arg(args.setup)
@@ -60,13 +124,15 @@ def run(args) -> int:
         raise UsageError("--port is required (the Arduino's serial port) unless --dry-run")
     out = args.out or (f"capture_{setup.name}_"
                        f"{_dt.datetime.now(_dt.timezone.utc):%Y%m%dT%H%M%SZ}.json")
+    _check_out(out, args.setup, args.force)
     ports = RigPorts(arduino=args.port, zaber=zaber_port, checksums=args.checksums)
     try:
         record = run_capture(setup, ports, out=out, plan=plan)
-    except RigError as exc:
-        print(f"mitsweep: capture incomplete ({status_of(exc)}): {exc}; stage stopped, shutter "
-              f"released; record: {out}", file=sys.stderr)
-        return 1
+    except (RigError, KeyboardInterrupt) as exc:
+        record = getattr(exc, "capture_record", None)
+        if record is None:      # not from the device phase: nothing was moved
+            raise
+        return _report_incomplete(exc, record, out)
     m = record.measurement()
     if args.json:
         print_json({"setup": setup.name, "record": str(out), "complete": record.complete,
@@ -80,5 +146,4 @@ def run(args) -> int:
             f"sensor distance    {e['open_sensor_distance_mm']:.4f} -> "
             f"{e['close_sensor_distance_mm']:.4f} mm",
         ]) + "\n")
-    return 0
-
+    return EXIT_COMPLETE

@@ -6,7 +6,7 @@ optocoupler across the camera's remote-release lines, and speaks a line protocol
 accelerations steps/s², times the board's ``micros()`` (32-bit, wraps every ~71.6 min;
 the driver unwraps them).
 
-Protocol (version 1)
+Protocol (version 2)
 --------------------
 On reset (opening the port resets an Uno) the board prints
 ``READY mitsweep-sweep <firmware-version> <protocol>``.
@@ -29,6 +29,10 @@ host → board                                board → host
 ``CLOSE``                                   ``OK CLOSE`` (shutter released now)
 ``STOP``                                    ``OK STOP <t_us> <pos>`` (shutter released
                                             first, then the motor stopped)
+``WATCHDOG <ms>``                           ``OK WATCHDOG <ms>``: 0 (the default after a
+                                            reset) turns it off; at most 600000
+``PING``                                    ``OK PING <t_us>`` (a heartbeat; any line
+                                            counts as one)
 ==========================================  ==============================================
 
 ``SWEEP`` ramps at ``accel`` to ``rate`` and back to rest at ``target``; the shutter is
@@ -37,6 +41,15 @@ must lie in the constant-velocity part (the board checks: ``ERR RANGE``). Errors
 ``ERR <CODE> <text>`` with CODE in SYNTAX, RANGE, LIMIT, BUSY, HOME, CHECKSUM. Events are
 ``EV <NAME> <t_us> <pos> [<detail>]``; ``EV FAULT <t> <pos> <CODE>`` (e.g. HOME_SWITCH,
 LIMIT) means the board has already released the shutter and stopped the motor.
+
+Watchdog (new in protocol 2): with ``WATCHDOG <ms>`` set, while the stage moves (HOME,
+MOVE, SWEEP) or a ``SHUTTER`` exposure is pending or open, the board releases the
+shutter, stops the motor and sends ``EV FAULT <t> <pos> WATCHDOG`` when no line has come
+from the host for ``<ms>`` milliseconds: a host that was killed, crashed or hung cannot
+leave the rig moving with the shutter held. The driver enables it
+(:meth:`ArduinoSweepController.set_watchdog`) and sends ``PING`` every quarter of the
+timeout while it waits for events (:meth:`ArduinoSweepController.keep_alive`); ``OK
+PING`` replies are skipped wherever they arrive.
 """
 
 from __future__ import annotations
@@ -49,26 +62,31 @@ from typing import Callable, Iterable
 
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
 from .interfaces import Shutter, Stage, StageState
-from .transport import LineTransport, XorChecksum
+from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, XorChecksum
 
 __all__ = ["ArduinoSweepController", "BoardEvent", "BoardClock", "FIRMWARE_NAME",
            "PROTOCOL_VERSION", "MAX_STEP_RATE", "EVENT_NAMES", "ERROR_CODES",
-           "POS_EVENT_PERIOD_US"]
+           "POS_EVENT_PERIOD_US", "MAX_WATCHDOG_MS", "HEARTBEATS_PER_TIMEOUT"]
 
 logger = logging.getLogger(__name__)
 
 FIRMWARE_NAME = "mitsweep-sweep"
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 #: Highest step rate the firmware generates reliably (steps/s), polling micros() on a 16 MHz Uno.
 MAX_STEP_RATE = 4000
 #: Period of ``EV POS`` samples during a SWEEP, µs.
 POS_EVENT_PERIOD_US = 50_000
+#: Longest watchdog timeout the firmware accepts, ms.
+MAX_WATCHDOG_MS = 600_000
+#: Heartbeats sent per watchdog timeout while waiting (a late one still leaves three).
+HEARTBEATS_PER_TIMEOUT = 4
 EVENT_NAMES = ("START", "OPEN", "POS", "CLOSE", "DONE", "HOMED", "FAULT")
 ERROR_CODES = ("SYNTAX", "RANGE", "LIMIT", "BUSY", "HOME", "CHECKSUM")
 
 _INT = r"-?\d+"
 _EVENT_RE = re.compile(rf"^EV ({'|'.join(EVENT_NAMES)}) (\d+) ({_INT})(?: ([A-Z_]+))?$")
 _ERR_RE = re.compile(rf"^ERR ({'|'.join(ERROR_CODES)})(?: (.*))?$")
+_PING_RE = re.compile(r"^OK PING \d+$")
 
 
 class BoardClock:
@@ -127,6 +145,7 @@ class ArduinoSweepController(Stage, Shutter):
         self.ready_line: str | None = None
         self.shutter_open: bool | None = None   # as last reported by STATE
         self.stopped_at: int | None = None      # step position of the last STOP
+        self.heartbeat_s: float | None = None   # PING period while waiting; None: off
 
     # -- link ---------------------------------------------------------------------------
     def wait_ready(self, timeout_s: float = 3.0) -> bool:
@@ -207,6 +226,26 @@ class ArduinoSweepController(Stage, Shutter):
                                       n_fields=1), "SHUTTER")
         return self.clock.unwrap(t)
 
+    def set_watchdog(self, timeout_s: float) -> None:
+        """``WATCHDOG <ms>``: the board stops and releases the shutter when the host is
+        silent for ``timeout_s`` during motion or an exposure (0 turns it off). From now
+        on :meth:`wait_event` and :meth:`keep_alive` send heartbeats."""
+        ms = int(round(timeout_s * 1000))
+        if not 0 <= ms <= MAX_WATCHDOG_MS or (ms and timeout_s < 0.1):
+            raise DeviceError(f"{self.name}: watchdog {timeout_s:g} s outside 0 (off) or "
+                              f"0.1..{MAX_WATCHDOG_MS / 1000:g} s")
+        (got,) = self._ints(self._query(f"WATCHDOG {ms}", n_fields=1), "WATCHDOG")
+        if got != ms:
+            raise ProtocolError(f"{self.name}: WATCHDOG echoed {got}, sent {ms}")
+        self.heartbeat_s = timeout_s / HEARTBEATS_PER_TIMEOUT if ms else None
+
+    def keep_alive(self) -> None:
+        """Send ``PING`` if the watchdog is on and nothing was sent for a heartbeat
+        period (the reply is skipped when it arrives)."""
+        if (self.heartbeat_s is not None
+                and time.monotonic() - self.transport.last_write_s >= self.heartbeat_s):
+            self.transport.write_line("PING")
+
     def close_shutter(self) -> None:
         self._query("CLOSE", n_fields=0)
 
@@ -233,9 +272,12 @@ class ArduinoSweepController(Stage, Shutter):
                 if ev.name == name:
                     return ev
             try:
-                line = self.transport.read_line(deadline=deadline)
+                line = self.transport.read_line(deadline=deadline,
+                                                keepalive=self._keepalive())
             except ReplyTimeout:
                 raise ReplyTimeout(f"{self.name}: no EV {name} before the deadline") from None
+            if _PING_RE.match(line):
+                continue
             if not self._take_event(line):
                 raise ProtocolError(f"{self.name}: unexpected line while waiting for "
                                     f"EV {name}: {line!r}")
@@ -245,10 +287,10 @@ class ArduinoSweepController(Stage, Shutter):
         :meth:`wait_event`)."""
         while self.transport.pending():
             line = self.transport.read_line(timeout_s=0.0)
-            if not self._take_event(line):
+            if not _PING_RE.match(line) and not self._take_event(line):
                 raise ProtocolError(f"{self.name}: unexpected line {line!r}")
 
-    def safe_stop(self, *, timeout_s: float = 1.0) -> int | None:
+    def safe_stop(self, *, timeout_s: float = SAFETY_REPLY_TIMEOUT_S) -> int | None:
         """Safety path: ``STOP`` (the board releases the shutter first, then stops the
         motor), tolerant of stray lines from an interrupted exchange. Returns the step
         position the board stopped at."""
@@ -282,6 +324,11 @@ class ArduinoSweepController(Stage, Shutter):
         return max(1, int(round(mm_s2 * self.steps_per_mm)))
 
     # -- internals ----------------------------------------------------------------------
+    def _keepalive(self):
+        if self.heartbeat_s is None:
+            return None
+        return self.heartbeat_s, lambda: self.transport.write_line("PING")
+
     def _take_event(self, line: str) -> bool:
         m = _EVENT_RE.match(line)
         if not m:
@@ -301,7 +348,7 @@ class ArduinoSweepController(Stage, Shutter):
                 line = self.transport.read_line(deadline=deadline)
             except ReplyTimeout:
                 raise ReplyTimeout(f"{self.name}: no reply to {command!r}") from None
-            if line.startswith("EV ") and self._take_event(line):
+            if (line.startswith("EV ") and self._take_event(line)) or _PING_RE.match(line):
                 continue
             return self._expect_ok(word, line, n_fields=n_fields, command=command)
 

@@ -16,10 +16,28 @@ Two rig configurations:
   ``get pos`` polls of the stage interpolated at those times (the board clock is mapped
   onto the host clock at the ``SHUTTER`` exchange; uncertainty = half its round trip).
 
-Safety: any exception — Ctrl-C, a timeout, a lost port, a device fault, a protocol
-error — during the device phase first releases the shutter and stops the stage, then
-writes the record marked incomplete with the reason, then propagates. A record marked
-``"running"`` is written before any motion, so even a killed process leaves one.
+Safety: any exception — a timeout, a lost port, a device fault, a protocol error — and
+the signals SIGINT (Ctrl-C), SIGTERM (``kill``) and SIGHUP (the terminal closed) during
+the device phase first release the shutter and stop the stage, then write the record
+marked incomplete with the reason (a signal: status ``"interrupted"``, ``"signal":
+"SIGTERM"``), then propagate (a signal as :class:`~mitsweep.rig.errors.CaptureInterrupted`,
+a ``KeyboardInterrupt``). The signal handlers are installed only when
+:func:`run_capture` runs on the main thread, and the previous ones are restored after
+it; a second signal while the safety path runs is recorded (``signals_during_safety``)
+but does not cut it short. Each safety step is recorded with whether the device
+confirmed it (:func:`safety_summary`); the exception carries the record as
+``exc.capture_record``.
+
+What the host cannot catch — SIGKILL, a crash, a hung host — the board handles itself:
+the driver turns on the firmware's watchdog (``WATCHDOG``, ``setup.rig.watchdog_s``,
+default 1 s, or ``RigPorts.watchdog_s``) and sends heartbeats while it waits, so a silent host gets the
+shutter released and the motor stopped within that time (``EV FAULT ... WATCHDOG``), in
+both configurations (in ``zaber`` mode the board guards its pending exposure). A Zaber
+stage has no such watchdog here: a move it was already given runs to its target, which
+lies inside the soft limits set on the device itself (a limitation of this driver).
+
+A record marked ``"running"`` is written before any motion, so even a killed process
+leaves one.
 """
 
 from __future__ import annotations
@@ -28,18 +46,19 @@ import logging
 import signal
 import threading
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .arduino import ArduinoSweepController
-from .errors import DeviceFault, PlanError, PortLost, ReplyTimeout, RigError
+from .arduino import MAX_WATCHDOG_MS, ArduinoSweepController
+from .errors import (CaptureInterrupted, DeviceFault, PlanError, PortLost, ReplyTimeout,
+                     RigError)
 from .plan import CapturePlan, plan_capture
 from .record import CaptureRecord
 from .transport import CommandLog, LineTransport, open_port
 from .zaber import ZaberStage
 
-__all__ = ["RigPorts", "run_capture", "capture"]
+__all__ = ["RigPorts", "run_capture", "capture", "safety_summary", "status_of",
+           "CAPTURE_SIGNALS"]
 
 logger = logging.getLogger(__name__)
 
@@ -49,17 +68,28 @@ DEADLINE_SLACK_S = 0.5
 DEADLINE_FRACTION = 0.25
 #: Zaber position polling period during the sweep, s.
 POLL_PERIOD_S = 0.01
+#: Signals that run the safety path (those that exist on this platform).
+CAPTURE_SIGNALS = tuple(name for name in ("SIGINT", "SIGTERM", "SIGHUP")
+                        if hasattr(signal, name))
 
 
 @dataclass
 class RigPorts:
     """Serial ports of the rig: ``arduino`` (always: the shutter, and the stepper when no
-    Zaber stage is given) and ``zaber`` (optional stage)."""
+    Zaber stage is given) and ``zaber`` (optional stage). ``watchdog_s``: the board's
+    watchdog, s (None: ``setup.rig.watchdog_s``; 0 turns it off; else 0.1 .. 600)."""
 
     arduino: str
     zaber: str | None = None
     checksums: bool = False
     ready_timeout_s: float = 3.0
+    watchdog_s: float | None = None
+
+    def __post_init__(self) -> None:
+        w = self.watchdog_s
+        if w is not None and not (w == 0 or 0.1 <= w <= MAX_WATCHDOG_MS / 1000):
+            raise PlanError(f"watchdog_s must be 0 (off) or in [0.1, "
+                            f"{MAX_WATCHDOG_MS / 1000:g}] s, got {w!r}")
 
     @property
     def stage_kind(self) -> str:
@@ -101,35 +131,77 @@ def _open_devices(ports: RigPorts, plan: CapturePlan, setup, log: CommandLog) ->
     return _Devices(arduino=arduino, zaber=zaber, transports=transports)
 
 
-@contextmanager
-def _sigint_deferred():
-    """Ignore Ctrl-C while the safety path runs (a second Ctrl-C must not cut it short)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
+class _SignalGuard:
+    """SIGINT, SIGTERM and SIGHUP raise :class:`CaptureInterrupted` while ``armed``;
+    once disarmed (the safety path runs) they are only noted in :attr:`during_safety`.
+
+    The first signal disarms the guard before it raises, so a second one arriving at
+    any point of the safety path cannot interrupt it. Installed on the main thread only
+    (Python runs signal handlers there); :meth:`restore` puts the previous handlers back.
+    """
+
+    def __init__(self) -> None:
+        self.armed = True
+        self.during_safety: list[str] = []
+        self._previous: dict[int, object] = {}
+
+    def install(self) -> "_SignalGuard":
+        if threading.current_thread() is threading.main_thread():
+            for name in CAPTURE_SIGNALS:
+                signum = getattr(signal, name)
+                self._previous[signum] = signal.signal(signum, self._handle)
+        return self
+
+    def restore(self) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+        self._previous.clear()
+
+    def _handle(self, signum, frame) -> None:
+        name = signal.Signals(signum).name
+        if self.armed:
+            self.armed = False
+            raise CaptureInterrupted(signum, name)
+        self.during_safety.append(name)   # no logging here: the handler may interrupt it
 
 
 def _safe_stop(dev: _Devices, record: CaptureRecord) -> None:
     """Release the shutter, then stop the stage; every step is recorded, none raises."""
-    with _sigint_deferred():
-        if dev.zaber is not None:
-            steps = [("arduino", "release shutter", lambda: dev.arduino.safe_stop()),
-                     ("zaber", "stop stage", lambda: dev.zaber.safe_stop())]
-        else:
-            steps = [("arduino", "release shutter and stop stage (STOP)",
-                      lambda: dev.arduino.safe_stop())]
-        for device, action, fn in steps:
-            try:
-                fn()
-                record.safety(device, action, ok=True)
-            except Exception as exc:  # noqa: BLE001 - the safety path reports, never raises
-                record.safety(device, action, ok=False, detail=str(exc))
-                logger.error("safety: %s: %s failed: %s", device, action, exc)
+    if dev.zaber is not None:
+        steps = [("arduino", "release shutter (STOP)", "shutter released",
+                  lambda: dev.arduino.safe_stop()),
+                 ("zaber", "stop stage", "stage stopped", lambda: dev.zaber.safe_stop())]
+    else:
+        steps = [("arduino", "release shutter and stop stage (STOP)",
+                  "shutter released and stage stopped", lambda: dev.arduino.safe_stop())]
+    for device, action, confirms, fn in steps:
+        try:
+            fn()
+            record.safety(device, action, ok=True, confirms=confirms)
+        except Exception as exc:  # noqa: BLE001 - the safety path reports, never raises
+            record.safety(device, action, ok=False, detail=str(exc), confirms=confirms,
+                          reason=_failure_reason(exc))
+            logger.error("safety: %s: %s failed: %s", device, action, exc)
+
+
+def _failure_reason(exc: BaseException) -> str:
+    if isinstance(exc, PortLost):
+        return "port lost"
+    if isinstance(exc, ReplyTimeout):
+        return "no reply"
+    return str(exc) or type(exc).__name__
+
+
+def safety_summary(record: CaptureRecord) -> tuple[bool, str]:
+    """Whether every step of the safety path was confirmed by its device, and one line
+    saying which were and which were not, e.g. ``"shutter released: confirmed; stage
+    stopped: NOT confirmed (port lost)"``."""
+    steps = record.safety_actions
+    if not steps:
+        return False, "safety path not run: state of the stage and shutter unknown"
+    parts = [f"{a['confirms']}: confirmed" if a["ok"] else
+             f"{a['confirms']}: NOT confirmed ({a['reason']})" for a in steps]
+    return all(a["ok"] for a in steps), "; ".join(parts)
 
 
 def status_of(exc: BaseException) -> str:
@@ -167,6 +239,9 @@ def _prepare(dev: _Devices, plan: CapturePlan, setup, ports: RigPorts,
     stage = dev.stage
     lo, hi = plan.soft_limit_min_mm, plan.soft_limit_max_mm
     stage.set_soft_limits(lo, hi)
+    watchdog_s = setup.rig.watchdog_s if ports.watchdog_s is None else ports.watchdog_s
+    if watchdog_s:
+        a.set_watchdog(watchdog_s)          # from here on a silent host stops the board
     state = stage.state()
     if state.fault:
         raise DeviceFault(f"{stage.name}: fault {state.fault} before the capture; clear it "
@@ -219,6 +294,7 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
     record.mark("sweep started")
     deadline = _deadline(plan.sweep_duration_s)
     while True:
+        a.keep_alive()
         a.poll_events()
         pos, reply = z.get_position()
         if not reply.busy:
@@ -256,8 +332,11 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
         Before any port is opened (bad sweep for this rig), or when a port cannot be
         opened (:class:`~mitsweep.rig.errors.PortUnavailable`).
     RigError, KeyboardInterrupt
-        During the capture, after the stage was stopped, the shutter released and the
-        record written incomplete.
+        During the capture, after the safety path tried to release the shutter and stop
+        the stage and the record was written incomplete; ``exc.capture_record`` is the
+        record (:func:`safety_summary` says which steps the devices confirmed). SIGINT,
+        SIGTERM and SIGHUP raise :class:`~mitsweep.rig.errors.CaptureInterrupted` (a
+        ``KeyboardInterrupt``) when running on the main thread.
     """
     if plan is None:
         plan = plan_capture(setup, stage=ports.stage_kind)
@@ -273,31 +352,55 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
             raise PlanError(f"capture record: {exc}") from None
     log = CommandLog()
     record = CaptureRecord(setup=setup, plan=plan, log=log, ports=ports, path=out)
+    guard = _SignalGuard()
     dev = _open_devices(ports, plan, setup, log)   # PortUnavailable: nothing moved
     try:
-        record.save()                              # "running": never lost
+        guard.install()
         try:
+            record.save()                          # "running": never lost
             _prepare(dev, plan, setup, ports, record)
             if dev.zaber is not None:
                 _sweep_zaber(dev, plan, record)
             else:
                 _sweep_arduino(dev, plan, record)
+            guard.armed = False                    # a signal now can wait for the record
             record.finish(complete=True, status="complete")   # checks the measurement
         except BaseException as exc:
-            logger.error("capture failed (%s): stopping the stage, releasing the shutter",
-                         exc or type(exc).__name__)
-            _safe_stop(dev, record)
-            record.set_board_events(dev.arduino.events)
-            if dev.zaber is not None:
-                record.set_stage_samples(dev.zaber.samples)
-            record.finish(complete=False, status=status_of(exc),
-                          error=str(exc) or type(exc).__name__)
-            record.save()
+            guard.armed = False                    # nothing may cut the safety path short
+            _stop_and_record(dev, record, exc, guard)
+            exc.capture_record = record
             raise
         record.save()
+        if guard.during_safety:
+            logger.warning("%s received after the sweep had finished: capture complete",
+                           ", ".join(guard.during_safety))
         return record
     finally:
+        guard.restore()
         dev.close()
+
+
+def _stop_and_record(dev: _Devices, record: CaptureRecord, exc: BaseException,
+                     guard: _SignalGuard) -> None:
+    """The safety path: stop everything, then write the incomplete record."""
+    logger.error("capture failed (%s): releasing the shutter, stopping the stage",
+                 exc or type(exc).__name__)
+    _safe_stop(dev, record)
+    record.set_board_events(dev.arduino.events)
+    if dev.zaber is not None:
+        record.set_stage_samples(dev.zaber.samples)
+    if isinstance(exc, KeyboardInterrupt):
+        record.signal = getattr(exc, "signal_name", "SIGINT")
+    record.signals_during_safety = list(guard.during_safety)
+    record.finish(complete=False, status=status_of(exc),
+                  error=str(exc) or type(exc).__name__)
+    try:
+        record.save()
+    except OSError as save_exc:
+        logger.error("could not write the capture record: %s", save_exc)
+    if guard.during_safety:
+        logger.warning("%s received during the safety path: it ran to its end",
+                       ", ".join(guard.during_safety))
 
 
 def capture(setup, *, port: str, zaber_port: str | None = None, out=None,

@@ -8,12 +8,15 @@ Two families, because the command line treats them differently:
 - :class:`RigError` (a ``RuntimeError``): something went wrong while talking to the
   devices or during motion. The capture stops the stage, closes the shutter and writes
   its record marked incomplete before the error propagates.
+
+A third, :class:`CaptureInterrupted` (a ``KeyboardInterrupt``), is a signal (SIGINT,
+SIGTERM, SIGHUP) that stopped a capture: it runs the same safety path.
 """
 
 from __future__ import annotations
 
 __all__ = ["PlanError", "PortUnavailable", "RigError", "ProtocolError", "ReplyTimeout",
-           "PortLost", "DeviceError", "DeviceFault"]
+           "PortLost", "DeviceError", "DeviceFault", "CaptureInterrupted"]
 
 
 class PlanError(ValueError):
@@ -47,3 +50,14 @@ class DeviceError(RigError):
 
 class DeviceFault(RigError):
     """The device reported a fault (Arduino ``EV FAULT``, Zaber ``F*`` warning flag)."""
+
+
+class CaptureInterrupted(KeyboardInterrupt):
+    """A signal stopped the capture: ``signal_name`` (``"SIGINT"``, ``"SIGTERM"``,
+    ``"SIGHUP"``) and ``signum``. A ``KeyboardInterrupt``, so that code which handles
+    Ctrl-C handles the other two alike."""
+
+    def __init__(self, signum: int, signal_name: str) -> None:
+        super().__init__(f"interrupted by {signal_name}")
+        self.signum = signum
+        self.signal_name = signal_name

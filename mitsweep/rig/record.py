@@ -6,6 +6,9 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
     status          "running" | "complete" | "interrupted" | "timeout" | "port lost" |
                     "fault" | "error"
     error           the reason, one line (null when complete)
+    signal          the signal that interrupted the capture ("SIGINT", "SIGTERM",
+                    "SIGHUP"), else null; signals_during_safety: those that arrived
+                    while the safety path ran (and did not stop it)
     setup           the setup (normalised, as setup_to_dict)
     plan            the CapturePlan (positions, rates, planned exposure, sensor mapping)
     ports, devices  what was opened and how the devices identified themselves
@@ -14,7 +17,9 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
                     capture started), device, dir ("tx"/"rx"), text
     events          the Arduino's events (board µs clock, unwrapped)
     stage_samples   Zaber position polls (host t_s, microsteps), zaber mode only
-    safety          what the safety path did (device, action, ok, detail)
+    safety          what the safety path did: device, action, confirms (what the step
+                    makes safe), ok (the device confirmed it), reason and detail (why
+                    not)
     measured        exposure: open/close times and positions, measured exposure;
                     motion: time_s (from shutter open), position_mm, sensor_distance_mm
 
@@ -55,6 +60,8 @@ class CaptureRecord:
         self.status = "running"
         self.complete = False
         self.error: str | None = None
+        self.signal: str | None = None
+        self.signals_during_safety: list[str] = []
         self.devices: dict[str, str] = {}
         self.homed = False
         self.marks: list[dict] = []
@@ -68,9 +75,11 @@ class CaptureRecord:
     def mark(self, what: str) -> None:
         self.marks.append({"t_s": round(self.log.now(), 6), "what": what})
 
-    def safety(self, device: str, action: str, *, ok: bool, detail: str = "") -> None:
+    def safety(self, device: str, action: str, *, ok: bool, confirms: str, detail: str = "",
+               reason: str = "") -> None:
         self.safety_actions.append({"t_s": round(self.log.now(), 6), "device": device,
-                                    "action": action, "ok": ok, "detail": detail})
+                                    "action": action, "confirms": confirms, "ok": ok,
+                                    "reason": reason, "detail": detail})
 
     def set_board_events(self, events) -> None:
         self.board_events = list(events)
@@ -152,10 +161,11 @@ class CaptureRecord:
         ports = None
         if self.ports is not None:
             ports = {"arduino": self.ports.arduino, "zaber": self.ports.zaber,
-                     "checksums": self.ports.checksums}
+                     "checksums": self.ports.checksums, "watchdog_s": self.ports.watchdog_s}
         return {
             "format": FORMAT, "version": VERSION,
             "complete": self.complete, "status": self.status, "error": self.error,
+            "signal": self.signal, "signals_during_safety": list(self.signals_during_safety),
             "created_utc": self.created_utc, "mitsweep_version": __version__,
             "host": platform.node(),
             "setup": setup_to_dict(self.setup), "plan": self.plan.as_dict(),

@@ -22,7 +22,13 @@ quantisation of ``micros()``. Emission lags the timestamp by the loop's ~1 ms po
 Faults (:class:`Fault`): ``no_reply`` (a command is swallowed), ``garbage`` (answered
 with non-ASCII bytes), ``fault_flag`` (the stage stalls part-way through the next move:
 Arduino ``EV FAULT``, Zaber ``FS``), ``unplug`` (the port vanishes part-way through the
-next move), ``late_event`` (the end-of-exposure events arrive ``delay_s`` late).
+next move), ``late_event`` (the end-of-exposure events arrive ``delay_s`` late),
+``slow_reply`` (Arduino: a command acts at once but its reply comes ``delay_s`` late).
+
+The Arduino model has the firmware's watchdog (``WATCHDOG <ms>``): while it moves or an
+exposure is pending or open, a host silent for that long gets ``EV FAULT ... WATCHDOG``
+after the shutter was released and the motor stopped. The Zaber model has none (see
+:mod:`mitsweep.rig.capture`).
 
 Run ``python -m mitsweep.rig.simulator arduino|zaber`` to serve one by hand.
 """
@@ -42,15 +48,16 @@ import time
 import tty
 from dataclasses import dataclass
 
-from .arduino import FIRMWARE_NAME, MAX_STEP_RATE, POS_EVENT_PERIOD_US, PROTOCOL_VERSION
+from .arduino import (FIRMWARE_NAME, MAX_STEP_RATE, MAX_WATCHDOG_MS, POS_EVENT_PERIOD_US,
+                      PROTOCOL_VERSION)
 from .transport import XorChecksum, ZaberChecksum
 
 __all__ = ["Fault", "FAULT_KINDS", "Move", "ArduinoModel", "ZaberModel", "PtyDevice"]
 
 logger = logging.getLogger(__name__)
 
-FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event")
-FIRMWARE_VERSION = "1.0"
+FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event", "slow_reply")
+FIRMWARE_VERSION = "1.1"
 
 
 @dataclass(frozen=True)
@@ -58,11 +65,12 @@ class Fault:
     """One injected fault.
 
     kind : one of :data:`FAULT_KINDS`.
-    command : for ``no_reply`` / ``garbage``: the command word it hits (``"SWEEP"``,
-        ``"STATE"``, ``"move"``, ...); the first such command only.
+    command : for ``no_reply`` / ``garbage`` / ``slow_reply``: the command word it hits
+        (``"SWEEP"``, ``"STATE"``, ``"move"``, ...); the first such command only.
     at_fraction : for ``fault_flag`` / ``unplug``: fraction of the next long move
         (SWEEP, or a Zaber ``move``) at which it happens.
-    delay_s : for ``late_event``: how late the end-of-exposure events are.
+    delay_s : for ``late_event``: how late the end-of-exposure events are; for
+        ``slow_reply``: how late the reply is.
     """
 
     kind: str
@@ -73,7 +81,7 @@ class Fault:
     def __post_init__(self) -> None:
         if self.kind not in FAULT_KINDS:
             raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {self.kind!r}")
-        if self.kind in ("no_reply", "garbage") and not self.command:
+        if self.kind in ("no_reply", "garbage", "slow_reply") and not self.command:
             raise ValueError(f"fault {self.kind!r} needs the command word it hits")
         if not 0.0 <= self.at_fraction <= 1.0:
             raise ValueError(f"fault at_fraction must be in [0, 1], got {self.at_fraction}")
@@ -225,6 +233,9 @@ class ArduinoModel(_Model):
         self.boot_t = 0.0
         self.stopped = False
         self._fault_at: float | None = None
+        self.watchdog_s = 0.0                   # 0: off (the firmware's default)
+        self.last_rx = 0.0                      # when the last line came from the host
+        self.faults_seen: list[str] = []        # codes of the EV FAULTs sent
 
     # -- clock, position ----------------------------------------------------------------
     def micros(self, t: float) -> int:
@@ -268,11 +279,13 @@ class ArduinoModel(_Model):
         self.shutter_open = False
         self.checksums = False
         self._fault_at = None
+        self.watchdog_s = 0.0
         self.boot(now)
 
     # -- input --------------------------------------------------------------------------
     def handle(self, line: bytes, now: float) -> list[bytes]:
         self._settle(now)
+        self.last_rx = now      # any line feeds the watchdog
         try:
             text = line.decode("ascii")
         except UnicodeDecodeError:
@@ -297,7 +310,13 @@ class ArduinoModel(_Model):
         handler = getattr(self, f"_cmd_{word.lower()}", None) if word.isupper() else None
         if handler is None:
             return [self._line(f"ERR SYNTAX unknown command {word}")]
-        return handler(nums, now)
+        replies = handler(nums, now)
+        slow = self.take_fault("slow_reply", word)
+        if slow:
+            for data in replies:
+                self.schedule(now + slow.delay_s, data)
+            return []
+        return replies
 
     def _nargs(self, nums, n, word):
         if len(nums) != n:
@@ -313,6 +332,22 @@ class ArduinoModel(_Model):
             return err
         self.checksums = bool(nums[0])
         return [self._line(f"OK CHK {int(self.checksums)}")]
+
+    def _cmd_ping(self, nums, now):
+        return self._nargs(nums, 0, "PING") or [self._line(f"OK PING {self.micros(now)}")]
+
+    def _cmd_watchdog(self, nums, now):
+        if err := self._nargs(nums, 1, "WATCHDOG"):
+            return err
+        if not 0 <= nums[0] <= MAX_WATCHDOG_MS:
+            return [self._line("ERR RANGE watchdog ms")]
+        self.watchdog_s = nums[0] * 1e-3
+        return [self._line(f"OK WATCHDOG {nums[0]}")]
+
+    def watchdog_armed(self, now: float) -> bool:
+        """Motion, or an exposure pending or open: what the watchdog guards."""
+        return (self.moving(now) or self._shutter_plan is not None or self.shutter_open
+                or any(tag == "homing" for _, _, tag in self._scheduled))
 
     def _cmd_state(self, nums, now):
         return self._nargs(nums, 0, "STATE") or [self._line(
@@ -345,7 +380,7 @@ class ArduinoModel(_Model):
         if self.moving(now):
             return [self._line("ERR BUSY moving")]
         self.homed, self._pos = True, 0
-        self.schedule(*self._event(now + self.home_time_s, "HOMED", 0))
+        self.schedule(*self._event(now + self.home_time_s, "HOMED", 0), "homing")
         return [self._line("OK HOME")]
 
     def _start_move(self, target, rate, accel, now):
@@ -463,14 +498,22 @@ class ArduinoModel(_Model):
                 self.shutter_history.append(("close", t_close))
                 self._shutter_plan = None
         if self._fault_at is not None and now >= self._fault_at:
-            pos = self.position(self._fault_at)
-            self._close_now(self._fault_at)
-            self.cancel_scheduled()
-            self.move, self._pos, self.stopped = None, pos, True
-            out.append(self._event(self._fault_at, "FAULT", pos, "STALL")[1])
-            self._fault_at = None
+            out.append(self._fault(self._fault_at, "STALL"))
+        expiry = self.last_rx + self.watchdog_s
+        if self.watchdog_s and now >= expiry and self.watchdog_armed(expiry):
+            out.append(self._fault(expiry, "WATCHDOG"))
         self._settle(now)
         return out
+
+    def _fault(self, t: float, code: str) -> bytes:
+        """Release the shutter, stop the motor (at time ``t``), then the ``EV FAULT``."""
+        pos = self.position(t)
+        self._close_now(t)
+        self.cancel_scheduled()
+        self.move, self._pos, self.stopped = None, pos, True
+        self._fault_at = None
+        self.faults_seen.append(code)
+        return self._event(t, "FAULT", pos, code)[1]
 
     def on_unplug(self, now: float) -> None:
         # USB-powered board: power goes, the motor stops and the opto releases

@@ -24,14 +24,20 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import Callable, Protocol
 
 from .errors import PortLost, PortUnavailable, ProtocolError, ReplyTimeout  # noqa: F401
 
 __all__ = ["LogEntry", "CommandLog", "Checksum", "XorChecksum", "ZaberChecksum",
-           "LineTransport", "open_port"]
+           "LineTransport", "open_port", "SAFETY_REPLY_TIMEOUT_S"]
 
 logger = logging.getLogger(__name__)
+
+#: Deadline of a stop command's reply on the safety path, s. Generous: a device that
+#: answers at all answers within milliseconds, but a host whose cores are busy may read
+#: the reply late, and a stop reported "not confirmed" because of the host's own load
+#: would be a false alarm (seen at 1.0 s with two busy processes on two cores).
+SAFETY_REPLY_TIMEOUT_S = 3.0
 
 try:
     import termios as _termios
@@ -205,6 +211,8 @@ class LineTransport:
         self.timeout_s = float(timeout_s)
         self._buffer = bytearray()
         self._lost: str | None = None
+        #: ``time.monotonic()`` of the last line sent (a device's watchdog counts from it).
+        self.last_write_s = time.monotonic()
 
     # -- output -------------------------------------------------------------------------
     def write_line(self, text: str) -> None:
@@ -219,14 +227,19 @@ class LineTransport:
                 flush()
         except _PORT_ERRORS as exc:  # SerialException and SerialTimeoutException are OSErrors
             self._mark_lost(exc)
+        self.last_write_s = time.monotonic()
         self.log.add(self.name, "tx", wire)
 
     # -- input --------------------------------------------------------------------------
-    def read_line(self, timeout_s: float | None = None, *, deadline: float | None = None) -> str:
+    def read_line(self, timeout_s: float | None = None, *, deadline: float | None = None,
+                  keepalive: tuple[float, Callable[[], None]] | None = None) -> str:
         """The next whole line (terminator and checksum stripped), waiting at most
         ``timeout_s`` (default :attr:`timeout_s`) or until the monotonic ``deadline``.
 
         Accepts ``\\n``, ``\\r\\n`` and ``\\r`` line ends (Zaber devices send CR LF).
+        ``keepalive = (period_s, send)``: while waiting, call ``send()`` (which writes a
+        line) whenever nothing was sent for ``period_s`` — a heartbeat for a device's
+        watchdog.
         """
         if deadline is None:
             deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
@@ -234,6 +247,8 @@ class LineTransport:
             line = self._pop_line()
             if line is not None:
                 return self._accept(line)
+            if keepalive is not None and time.monotonic() - self.last_write_s >= keepalive[0]:
+                keepalive[1]()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
                 if self._buffer:

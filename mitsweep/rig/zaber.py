@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
 from .interfaces import Stage, StageState
-from .transport import LineTransport, ZaberChecksum
+from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, ZaberChecksum
 
 __all__ = ["ZaberStage", "ZaberReply", "SPEED_UNIT", "ACCEL_UNIT", "FAULT_FLAGS",
            "parse_reply", "speed_data", "accel_data"]
@@ -220,7 +220,7 @@ class ZaberStage(Stage):
         # the safety path: a fault flag must not prevent the stop from being sent
         self.command("stop", check_faults=False, allow_rejection=True)
 
-    def safe_stop(self, *, timeout_s: float = 1.0) -> None:
+    def safe_stop(self, *, timeout_s: float = SAFETY_REPLY_TIMEOUT_S) -> None:
         """Safety path: ``stop``, tolerant of stray lines from an interrupted exchange."""
         prefix = f"@{self.device:02d} {self.axis} "
         self.transport.send_on_safety_path(

@@ -18,12 +18,17 @@
 //   SHUTTER <delay_us> <duration_us>    -> OK SHUTTER <t>; EV OPEN <t> <pos>; EV CLOSE ...
 //   CLOSE                               -> OK CLOSE
 //   STOP                                -> OK STOP <t> <pos> (shutter released first)
+//   WATCHDOG <ms>                       -> OK WATCHDOG <ms>  (0 = off, the default)
+//   PING                                -> OK PING <t>  (heartbeat; any line counts)
 //   errors: ERR <SYNTAX|RANGE|LIMIT|BUSY|HOME|CHECKSUM> <text>
-//   faults: EV FAULT <t> <pos> <HOME_SWITCH|LIMIT>  (shutter released, motor stopped)
+//   faults: EV FAULT <t> <pos> <HOME_SWITCH|LIMIT|WATCHDOG>  (shutter released, motor
+//           stopped)
 //
 // Safety: the shutter is released and the motor stopped on STOP, on any fault, and when
 // the home switch closes during any move other than homing. Targets outside the soft
-// limits are refused; motion is refused until homed.
+// limits are refused; motion is refused until homed. Watchdog: with WATCHDOG <ms> set,
+// a host silent for <ms> while the motor runs or a SHUTTER exposure is pending or open
+// (a killed or crashed host cannot stop anything) is a WATCHDOG fault.
 
 #include <Arduino.h>
 #include <math.h>
@@ -31,8 +36,8 @@
 #include <string.h>
 
 #define FW_NAME "mitsweep-sweep"
-#define FW_VERSION "1.0"
-#define PROTOCOL_VERSION 1
+#define FW_VERSION "1.1"
+#define PROTOCOL_VERSION 2
 
 // Pins (change to match the wiring).
 const uint8_t PIN_STEP = 2;
@@ -46,6 +51,7 @@ const long MAX_STEP_RATE = 4000;          // steps/s the polling loop generates 
 const uint32_t POS_PERIOD_US = 50000UL;   // EV POS period during a sweep
 const long MAX_HOME_STEPS = 2000000L;     // give up homing after this many steps
 const uint8_t LINE_MAX = 80;
+const long MAX_WATCHDOG_MS = 600000L;     // longest watchdog timeout accepted
 
 enum Mode { IDLE, MOVING, SWEEPING, HOMING };
 
@@ -69,6 +75,10 @@ static bool shutterOpen = false;
 static bool shutterTimed = false;      // SHUTTER command pending / running
 static uint32_t shutterOpenUs = 0, shutterCloseUs = 0;
 static bool shutterOpened = false;
+
+// watchdog: 0 = off; lastRxUs = when the last whole line came from the host
+static uint32_t watchdogUs = 0;
+static uint32_t lastRxUs = 0;
 
 static char line[LINE_MAX + 1];
 static uint8_t lineLen = 0;
@@ -237,6 +247,12 @@ static void runShutter() {
   }
 }
 
+static void runWatchdog() {
+  if (watchdogUs == 0) return;
+  if (mode == IDLE && !shutterTimed && !shutterOpen) return;  // nothing to guard
+  if ((uint32_t)(micros() - lastRxUs) >= watchdogUs) fault("WATCHDOG");
+}
+
 // ---------------------------------------------------------------------------------------
 // commands
 
@@ -342,6 +358,16 @@ static void handleLine(char *text) {
     stopMotor();
     snprintf(buf, sizeof buf, "OK STOP %lu %ld", (unsigned long)micros(), pos);
     sendLine(buf);
+  } else if (!strcmp(text, "WATCHDOG")) {
+    if (!parseLongs(args, v, 1)) { sendErr("SYNTAX", "WATCHDOG"); return; }
+    if (v[0] < 0 || v[0] > MAX_WATCHDOG_MS) { sendErr("RANGE", "watchdog ms"); return; }
+    watchdogUs = (uint32_t)v[0] * 1000UL;
+    snprintf(buf, sizeof buf, "OK WATCHDOG %ld", v[0]);
+    sendLine(buf);
+  } else if (!strcmp(text, "PING")) {
+    if (!parseLongs(args, v, 0)) { sendErr("SYNTAX", "PING"); return; }
+    snprintf(buf, sizeof buf, "OK PING %lu", (unsigned long)micros());
+    sendLine(buf);
   } else {
     sendErr("SYNTAX", "unknown command");
   }
@@ -352,6 +378,7 @@ static void readSerial() {
     char c = (char)Serial.read();
     if (c == '\r') continue;
     if (c == '\n') {
+      lastRxUs = micros();   // any line feeds the watchdog
       line[lineLen] = 0;
       if (lineOverflow) sendErr("SYNTAX", "line too long");
       else if (lineLen > 0) handleLine(line);
@@ -383,4 +410,5 @@ void loop() {
   runMotion();
   runShutter();
   readSerial();
+  runWatchdog();
 }
