@@ -89,10 +89,64 @@ def test_bad_setup_files_exit_2(tmp_path, text, message):
 
 def test_missing_file_exits_2(tmp_path):
     rc, _, err = run_cli("sweep-range", tmp_path / "none.toml")
-    assert rc == 2 and "no such setup file" in err
+    assert rc == 2 and "no such" in err and "none.toml" in err and "Traceback" not in err
 
 
 def test_unwritable_plot_path_exits_2(scenes_dir, tmp_path):
     rc, _, err = run_cli("sweep-range", scenes_dir / "sphere.toml", "--plot",
                          tmp_path / "no" / "such" / "dir" / "f.png")
     assert rc == 2 and "does not exist" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--field", "mirror"], "--field: chooses the field of the traced range; give it with --verify"),
+    (["--verify", "--field", "disc"], "argument --field: invalid choice: 'disc'"),
+    (["--verify", "--field", "mirror"], "does not see this mirror out to its rim"),
+])
+def test_bad_field_exits_2_with_one_line(scenes_dir, args, message):
+    rc, _, err = run_cli("sweep-range", scenes_dir / "sphere.toml", *args)
+    assert rc == 2 and message in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1, err
+
+
+def test_plot_onto_the_setup_file_is_refused(scenes_dir, tmp_path):
+    setup = tmp_path / "s.toml"
+    setup.write_text((scenes_dir / "sphere.toml").read_text())
+    rc, _, err = run_cli("sweep-range", setup, "--plot", setup)
+    assert rc == 2 and "refusing to overwrite an input" in err
+    assert setup.read_text() == (scenes_dir / "sphere.toml").read_text()
+
+
+TRACED_KEYS = {"traced_field", "traced_focus_min_mm", "traced_focus_max_mm",
+               "traced_focus_min_at", "traced_focus_max_at", "traced_convergence"}
+
+
+@pytest.mark.slow
+def test_verify_reports_the_field_and_where(scenes_dir):
+    rc, out, err = run_cli("sweep-range", scenes_dir / "paraboloid_tilted.toml", "--verify",
+                           "--field", "mirror", "--json")
+    assert rc == 0, err
+    data = json.loads(out)
+    assert TRACED_KEYS <= set(data) and data["traced_field"] == "mirror"
+    # The whole mirror reaches past the paper's tilt-plane range (362.84-389.52 mm).
+    assert data["traced_focus_min_mm"] == pytest.approx(362.835, abs=0.005)
+    assert data["traced_focus_max_mm"] > 450.0
+    at = data["traced_focus_max_at"]
+    assert at["on_rim"] and at["depth_mm"] == 10000.0 and len(at["image_uv_mm"]) == 2
+    # The keys of earlier versions: the whole 2-D field of a tilted mirror.
+    assert data["traced_field_focus_max_mm"] == data["traced_focus_max_mm"]
+    assert data["traced_field_focus_min_mm"] == data["traced_focus_min_mm"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("scene,lo,hi", [("sphere", 339.00, 364.25),
+                                         ("paraboloid", 365.47, 387.11),
+                                         ("paraboloid_tilted", 362.84, 389.52)])
+def test_verify_default_field_is_the_papers(scenes_dir, scene, lo, hi):
+    rc, out, err = run_cli("sweep-range", scenes_dir / f"{scene}.toml", "--verify", "--json")
+    assert rc == 0, err
+    data = json.loads(out)
+    assert data["traced_field"] == "plane"
+    assert round(data["traced_focus_min_mm"], 2) == lo
+    assert round(data["traced_focus_max_mm"], 2) == hi
+    assert ("traced_field_focus_max_mm" in data) == (scene == "paraboloid_tilted")
