@@ -474,8 +474,10 @@ def setup_from_dict(data: Mapping[str, Any], *, name: str = "setup") -> Setup:
     """Build a validated :class:`Setup` from a TOML-like nested mapping."""
     if not isinstance(data, Mapping):
         raise SetupError(f"setup: must be a table, got {type(data).__name__}")
-    allowed = set(_SECTIONS) | {"name"}
-    _reject_unknown(data, allowed, "setup")
+    unknown = sorted(set(data) - set(_SECTIONS) - {"name"})
+    if unknown:
+        raise SetupError(f"[{unknown[0]}]: unknown section; allowed sections: "
+                         f"{', '.join(_SECTIONS)} (and a top-level name)")
     _require("mirror" in data, "mirror", "missing section [mirror]")
     _require("sweep" in data, "sweep", "missing section [sweep]")
     setup_name = data.get("name", name)
@@ -502,8 +504,8 @@ def load_setup(path: str | Path) -> Setup:
     p = Path(path)
     try:
         text = p.read_bytes()
-    except FileNotFoundError:
-        raise SetupError(f"{p}: no such setup file") from None
+    except FileNotFoundError as exc:
+        raise SetupError(f"{p}: no such setup file ({exc.strerror})") from None
     except OSError as exc:
         raise SetupError(f"{p}: cannot read ({exc.strerror})") from None
     try:

@@ -7,7 +7,8 @@ import math
 import sys
 from pathlib import Path
 
-from .common import UsageError, load_setup_arg, positive_float, positive_int, print_json
+from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
+                     print_json)
 
 NAME = "ipsf"
 HELP = ("trace the integrated PSF of a point source over the focal sweep (or a PSF at one "
@@ -25,15 +26,32 @@ def _depth(text: str) -> float:
     return x
 
 
+def _finite(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return x
+
+
+def _radius(text: str) -> float:
+    x = _finite(text)
+    if x < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0 mm, got {text}")
+    return x
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("setup", help="setup TOML file (see scenes/)")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--point", type=float, nargs=2, metavar=("U", "V"),
+    where.add_argument("--point", type=_finite, nargs=2, metavar=("U", "V"),
                        help="image point, upright mm at the reference (mid-sweep) sensor "
                             "distance (default: the image centre)")
-    where.add_argument("--radius", type=float, metavar="MM",
+    where.add_argument("--radius", type=_radius, metavar="MM",
                        help="image point at this radius (mm) and --angle")
-    p.add_argument("--angle", type=float, default=0.0, metavar="DEG",
+    p.add_argument("--angle", type=_finite, default=0.0, metavar="DEG",
                    help="polar angle of --radius, degrees counter-clockwise from +u (0)")
     p.add_argument("--bank", choices=["radial", "grid"],
                    help="compute a bank instead of one IPSF (radial: untilted mirrors)")
@@ -56,7 +74,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rays", type=positive_int, default=1_000_000,
                    help="rays per IPSF (1000000)")
     p.add_argument("--kernel-size", type=positive_int, default=31,
-                   help="kernel size K, odd (31)")
+                   help="kernel size K, odd, smaller than the sensor's smaller side (31)")
     p.add_argument("--seed", type=int, default=0, help="sample-stream seed (0)")
     p.add_argument("--float64", action="store_true", help="trace in float64 (reference)")
     p.add_argument("-o", "--output", metavar="FILE",
@@ -68,7 +86,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def _motion(setup, table_path):
     from ..optics import optimal_sweep_range
-    from ..optics.motion import motion_for
+    from ..config import SetupError
+    from ..optics.motion import MotionProfile, motion_for
 
     sweep = optimal_sweep_range(setup)
     table = None
@@ -84,8 +103,13 @@ def _motion(setup, table_path):
             raise UsageError(f"--motion-table {table_path}: expected 2 columns, got "
                              f"{data.shape[1]}")
         table = (data[:, 0], data[:, 1])
+        try:  # the profile's own checks: finite, >= 2 rows, increasing times
+            MotionProfile.tabulated(*table)
+        except SetupError as exc:
+            raise UsageError(f"--motion-table {table_path}: {exc}") from None
         if setup.sweep.profile != "tabulated":
-            raise UsageError("--motion-table needs sweep.profile = 'tabulated' in the setup")
+            raise UsageError(f"--motion-table {table_path} needs sweep.profile = 'tabulated' "
+                             f"in the setup")
     return sweep, motion_for(setup, sweep, table=table)
 
 
@@ -100,12 +124,21 @@ def run(args) -> int:
     from .. import __version__
     from ..config import setup_to_dict
     from ..io import write_exr
-    from ..io.bank import IPSFBank, save_bank
+    from ..io.bank import IPSFBank, optics_sections, save_bank
     from ..tracer import integrated_psf, ipsf_bank, psf
+    from ..tracer.source import source_from_image
 
+    check_outputs([args.setup, args.motion_table], [args.output, args.plot])
     setup = load_setup_arg(args.setup)
-    if args.kernel_size % 2 == 0 or args.kernel_size < 3:
-        raise UsageError(f"--kernel-size: must be odd and >= 3, got {args.kernel_size}")
+    W, H = setup.sensor.resolution
+    if args.kernel_size % 2 == 0 or not 3 <= args.kernel_size < min(W, H):
+        raise UsageError(f"--kernel-size: must be odd, >= 3 and smaller than the {W}x{H} "
+                         f"sensor, got {args.kernel_size}")
+    if args.bank == "grid" and (args.grid[0] > H or args.grid[1] > W):
+        raise UsageError(f"--grid {args.grid[0]} {args.grid[1]}: at most {H} {W} for the "
+                         f"{W}x{H} sensor (one point per pixel)")
+    if args.bank == "radial" and args.radii > max(W, H):
+        raise UsageError(f"--radii {args.radii}: at most {max(W, H)} for the {W}x{H} sensor")
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
     sweep, motion = _motion(setup, args.motion_table)
@@ -144,7 +177,7 @@ def run(args) -> int:
                             reference_sensor_distance=bank.reference_sensor_distance,
                             vignetted=bank.vignetted.tolist(),
                             radii_mm=None if bank.radii_mm is None else bank.radii_mm.tolist(),
-                            grid_shape=bank.grid_shape)
+                            grid_shape=bank.grid_shape, optics=bank.optics)
                 write_exr(args.output, channels=chans, metadata=meta)
             out["output"] = args.output
         if args.plot:
@@ -165,6 +198,13 @@ def run(args) -> int:
     else:
         u = v = 0.0
     depth = args.depth[0]
+    where = (f"--radius {args.radius:g} --angle {args.angle:g}" if args.radius is not None
+             else f"--point {u:g} {v:g}")
+    try:  # the image point must see the mirror: say which flag put it elsewhere
+        source_from_image(setup, u, v, depth,
+                          reference_sensor_distance=sweep.reference_sensor_distance)
+    except ValueError as exc:
+        raise UsageError(f"{where}: {exc}") from None
     if args.sensor_distance is not None:
         kernel, info = psf(setup, u, v, depth, args.sensor_distance, double=args.float64,
                            reference_sensor_distance=sweep.reference_sensor_distance, **common)
@@ -174,7 +214,8 @@ def run(args) -> int:
                                       n_planes=args.planes, double=args.float64, **common)
     out.update({k: v for k, v in info.items()})
     if args.output:
-        meta = {"setup": setup_to_dict(setup), "sweep_range": sweep.as_dict(), **info}
+        setup_dict = setup_to_dict(setup)
+        meta = {"setup": setup_dict, "sweep_range": sweep.as_dict(), **info}
         if args.output.lower().endswith(".exr"):
             write_exr(args.output, kernel, metadata=meta)
         else:
@@ -183,7 +224,8 @@ def run(args) -> int:
                             depths_mm=depths, pixel_pitch=setup.sensor.pixel_pitch,
                             reference_sensor_distance=info["reference_sensor_distance_mm"],
                             kind="grid", grid_shape=(1, 1),
-                            vignetted=np.array([[info["vignetted_fraction"]]]), metadata=meta)
+                            vignetted=np.array([[info["vignetted_fraction"]]]), metadata=meta,
+                            optics=optics_sections(setup_dict, motion.as_dict()))
             save_bank(args.output, bank)
         out["output"] = args.output
     if args.plot:

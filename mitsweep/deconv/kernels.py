@@ -10,17 +10,18 @@ at ``[K // 2, K // 2]``; the optical axis images at pixel ``(H/2 âˆ’ 0.5, W/2 âˆ
 from __future__ import annotations
 
 import logging
-from typing import Any
+import math
+from typing import Any, Mapping
 
 import numpy as np
 import scipy.ndimage as ndi
 
-from ..io.bank import BankError, IPSFBank
+from ..io.bank import OPTICS_SECTIONS, BankError, IPSFBank, optics_fingerprint, optics_sections
 from ..resources import check_allocation
 
 __all__ = ["PAPER_DECONV_DEPTH_MM", "optical_center", "select_depth", "radii_px",
            "interpolate_radial", "rotate_kernel", "grid_bank_from_radial",
-           "check_bank_matches", "normalise"]
+           "check_bank_matches", "bank_identity_problem", "check_bank_identity", "normalise"]
 
 log = logging.getLogger(__name__)
 
@@ -148,7 +149,8 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
     return IPSFBank(kernels=out.astype(np.float32), points_uv=pts, depths_mm=bank.depths_mm,
                     pixel_pitch=pitch, reference_sensor_distance=bank.reference_sensor_distance,
                     kind="grid", grid_shape=(rows_n, cols_n),
-                    metadata={**bank.metadata, "derived_from": "radial bank, rotated"})
+                    metadata={**bank.metadata, "derived_from": "radial bank, rotated"},
+                    optics=bank.optics, fingerprinted=bank.fingerprinted)
 
 
 def _setup_resolution(meta: dict[str, Any]) -> tuple[int, int] | None:
@@ -181,3 +183,104 @@ def check_bank_matches(bank: IPSFBank, image_shape: tuple[int, ...], *,
         raise BankError(f"bank was made for a {res[0]}x{res[1]} sensor, the image is {W}x{H}")
     if bank.kernel_size >= min(H, W):
         raise BankError(f"bank kernels ({bank.kernel_size} px) do not fit in a {W}x{H} image")
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal values, floats to 1e-9 relative (recomputed sweeps may differ in the last bit)."""
+    if isinstance(a, bool) or isinstance(b, bool):
+        return a == b
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    return a == b
+
+
+def _shown(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:g}"
+    if isinstance(v, list):
+        inner = ",".join(_shown(x) for x in v[:4])
+        return f"[{inner}{',...' if len(v) > 4 else ''}]"
+    return "(absent)" if v is None else str(v)
+
+
+def _mirror_shape(mirror: Mapping[str, Any]) -> str:
+    k = mirror.get("conic")
+    if not isinstance(k, (int, float)) or mirror.get("aspheric"):
+        return "asphere" if mirror.get("aspheric") else "conic"
+    if k == 0:
+        return "sphere"
+    if k == -1:
+        return "paraboloid"
+    return "hyperboloid" if k < -1 else ("prolate ellipsoid" if k < 0 else "oblate ellipsoid")
+
+
+def _describe(optics: Mapping[str, Any], keys: dict[str, list[str]]) -> str:
+    parts = []
+    for section, names in keys.items():
+        table = optics.get(section) or {}
+        label = f"mirror ({_mirror_shape(table)})" if section == "mirror" else section
+        parts.append(label + " " + " ".join(f"{k}={_shown(table.get(k))}" for k in names))
+    return "; ".join(parts)
+
+
+def bank_identity_problem(bank: IPSFBank, optics: Mapping[str, Any] | None, *,
+                          image: str = "the image") -> str | None:
+    """Why ``bank`` may not belong to an image of ``optics``, or None when it does.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+    optics : mapping or None
+        :func:`mitsweep.io.bank.optics_sections` of the image's setup (from its
+        provenance, or the setup it was captured with); sections it lacks (``motion``
+        when unknown) are not compared. ``None``: the image's optics are unknown.
+    image : str
+        How to name the image in the message.
+
+    Returns
+    -------
+    str or None
+        ``"bank was traced for mirror (sphere) conic=0 radius=25, IMAGE has mirror
+        (paraboloid) conic=-1 radius=28.2"``, or why no comparison is possible: the bank
+        predates fingerprints, the bank is synthetic and the image is not, or the image's
+        optics are unknown.
+    """
+    if not bank.fingerprinted:
+        return ("the bank predates optics fingerprints (bank format 1), so nothing says "
+                f"which optics it was traced for; trace it again with `mitsweep ipsf --bank`")
+    if bank.optics is None:
+        if optics is None:
+            return None          # a synthetic bank on an image that claims no optics
+        return (f"the bank was traced for no optics (synthetic), {image} has "
+                f"{_describe(optics, {'mirror': ['conic', 'radius']})}")
+    if optics is None:
+        return (f"{image} carries no setup to check the bank against (the bank was traced "
+                f"for {_describe(bank.optics, {'mirror': ['conic', 'radius']})})")
+    theirs = optics_sections(optics, optics.get("motion"))
+    mine = {k: v for k, v in bank.optics.items() if k in theirs}
+    if optics_fingerprint(mine) == optics_fingerprint(theirs):
+        return None
+    differ: dict[str, list[str]] = {}
+    for section in OPTICS_SECTIONS:
+        a, b = mine.get(section), theirs.get(section)
+        if a is None or b is None:
+            continue
+        names = sorted(k for k in set(a) | set(b) if not _same(a.get(k), b.get(k)))
+        if names:
+            differ[section] = names
+    if not differ:
+        return None
+    return (f"bank was traced for {_describe(mine, differ)}, {image} has "
+            f"{_describe(theirs, differ)}")
+
+
+def check_bank_identity(bank: IPSFBank, optics: Mapping[str, Any] | None, *,
+                        image: str = "the image") -> None:
+    """Raise :class:`BankError` with :func:`bank_identity_problem`'s sentence, if any."""
+    problem = bank_identity_problem(bank, optics, image=image)
+    if problem is not None:
+        raise BankError(problem)

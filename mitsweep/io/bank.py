@@ -18,24 +18,82 @@ Layout conventions
 - ``depths_mm``: (n_depths,) depth l of the point source (inf allowed).
 - ``vignetted``: (n_depths, n_points) fraction of the source's traced energy lost.
 - ``metadata``: provenance (setup dict, sweep range, rays, seed, version, motion profile).
+- ``optics``: the sections of the setup the bank was traced for (``mirror``, ``lens``,
+  ``sensor``, ``sweep`` as :func:`mitsweep.config.setup_to_dict` writes them, and the
+  stage ``motion``), stored with their SHA-256 fingerprint (:func:`optics_fingerprint`)
+  so that a bank is never used on an image from other optics without saying so.
+  ``None`` for banks traced for no optics (synthetic ones, ``metadata["synthetic"]``).
 
-Stored as NPZ (``.npz``; arrays plus the metadata as a JSON string), written atomically.
+Stored as NPZ (``.npz``; arrays plus a JSON header as a 0-d string array), written
+atomically. Format 2 adds the optics and their fingerprint; format 1 banks still load,
+with ``fingerprinted = False``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
 from .atomic import atomic_path
 
-__all__ = ["IPSFBank", "save_bank", "load_bank", "BankError"]
+__all__ = ["IPSFBank", "save_bank", "load_bank", "BankError", "optics_sections",
+           "optics_fingerprint", "OPTICS_SECTIONS"]
 
-BANK_FORMAT = "mitsweep-ipsf-bank/1"
+BANK_FORMAT = "mitsweep-ipsf-bank/2"
+#: Formats :func:`load_bank` reads; /1 predates the optics fingerprint.
+READABLE_FORMATS = ("mitsweep-ipsf-bank/1", BANK_FORMAT)
+#: The setup sections (and the stage motion) whose values shape the IPSFs.
+OPTICS_SECTIONS = ("mirror", "lens", "sensor", "sweep", "motion")
+
+
+def _plain(o: Any) -> Any:
+    """JSON-ready copy: tuples → lists, NumPy scalars → Python, non-finite floats → "inf"."""
+    if isinstance(o, Mapping):
+        return {str(k): _plain(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple, np.ndarray)):
+        return [_plain(v) for v in o]
+    if isinstance(o, np.generic):
+        o = o.item()
+    if isinstance(o, float) and not math.isfinite(o):
+        return "nan" if math.isnan(o) else ("inf" if o > 0 else "-inf")
+    return o
+
+
+def optics_sections(setup_dict: Mapping[str, Any], motion: Mapping[str, Any] | None = None
+                    ) -> dict[str, Any]:
+    """The optics of a setup as a bank records them.
+
+    Parameters
+    ----------
+    setup_dict : mapping
+        :func:`mitsweep.config.setup_to_dict` of the setup (or the ``setup`` of an image's
+        provenance, which is the same dict).
+    motion : mapping, optional
+        :meth:`mitsweep.optics.motion.MotionProfile.as_dict` of the stage motion.
+
+    Returns
+    -------
+    dict
+        ``mirror``, ``lens``, ``sensor``, ``sweep`` (those present) and ``motion``
+        (when given), JSON-ready (infinite depths as ``"inf"``).
+    """
+    out = {k: _plain(setup_dict[k]) for k in OPTICS_SECTIONS[:-1] if k in setup_dict}
+    if motion is not None:
+        out["motion"] = _plain(motion)
+    return out
+
+
+def optics_fingerprint(optics: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of the canonical JSON of :func:`optics_sections` (sorted keys, no
+    spaces): equal for equal optics, whatever the dict order or tuple/list spelling."""
+    text = json.dumps(_plain(optics), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 class BankError(ValueError):
@@ -44,6 +102,13 @@ class BankError(ValueError):
 
 @dataclass(frozen=True)
 class IPSFBank:
+    """IPSF kernels over image points and depths; see the module docstring for the layout.
+
+    ``optics`` is the dict of :func:`optics_sections` the bank was traced for (``None``:
+    no optics, or a format-1 file that predates fingerprints: ``fingerprinted`` is then
+    False).
+    """
+
     kernels: np.ndarray           # (n_depths, n_points, K, K) float32
     points_uv: np.ndarray         # (n_points, 2) mm
     depths_mm: np.ndarray         # (n_depths,)
@@ -54,11 +119,27 @@ class IPSFBank:
     grid_shape: tuple[int, int] | None = None
     vignetted: np.ndarray | None = None    # (n_depths, n_points)
     metadata: dict[str, Any] = field(default_factory=dict)
+    optics: dict[str, Any] | None = None
+    fingerprinted: bool = True
 
     def __post_init__(self) -> None:
         k = np.asarray(self.kernels)
         if k.ndim != 4 or k.shape[2] != k.shape[3] or k.shape[2] % 2 == 0:
             raise BankError(f"kernels must be (n_depths, n_points, K, K) with K odd, got {k.shape}")
+        if k.shape[0] < 1 or k.shape[1] < 1:
+            raise BankError(f"the bank holds no kernels: shape {k.shape}")
+        if not np.issubdtype(k.dtype, np.floating):
+            raise BankError(f"kernels must be floating point, got {k.dtype}")
+        for name in ("pixel_pitch", "reference_sensor_distance"):
+            value = getattr(self, name)
+            ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) \
+                and math.isfinite(float(value)) and float(value) > 0
+            if not ok:
+                raise BankError(f"{name} must be a positive number (mm), got {value!r}")
+        if not isinstance(self.metadata, dict):
+            raise BankError(f"metadata must be a JSON object, got {type(self.metadata).__name__}")
+        if self.optics is not None and not isinstance(self.optics, dict):
+            raise BankError(f"optics must be a JSON object, got {type(self.optics).__name__}")
         if np.asarray(self.points_uv).shape != (k.shape[1], 2):
             raise BankError(f"points_uv must be ({k.shape[1]}, 2), got {np.shape(self.points_uv)}")
         if np.asarray(self.depths_mm).shape != (k.shape[0],):
@@ -93,13 +174,19 @@ def save_bank(path: str | Path, bank: IPSFBank) -> Path:
         arrays["radii_mm"] = np.asarray(bank.radii_mm, dtype=np.float64)
     if bank.vignetted is not None:
         arrays["vignetted"] = np.asarray(bank.vignetted, dtype=np.float64)
+    if not bank.fingerprinted:
+        raise BankError(f"{p}: this bank predates optics fingerprints (format 1); trace it "
+                        f"again rather than re-save it")
+    optics = None if bank.optics is None else _plain(bank.optics)
     header = {
         "format": BANK_FORMAT, "kind": bank.kind, "pixel_pitch": float(bank.pixel_pitch),
         "reference_sensor_distance": float(bank.reference_sensor_distance),
         "grid_shape": list(bank.grid_shape) if bank.grid_shape else None,
+        "optics": optics,
+        "optics_sha256": None if optics is None else optics_fingerprint(optics),
         "metadata": bank.metadata,
     }
-    arrays["header"] = np.frombuffer(json.dumps(header, default=_default).encode(), dtype=np.uint8)
+    arrays["header"] = np.array(json.dumps(header, default=_default))
     with atomic_path(p, suffix=".npz") as tmp:
         with open(tmp, "wb") as f:
             np.savez_compressed(f, **arrays)
@@ -124,19 +211,57 @@ def load_bank(path: str | Path) -> IPSFBank:
     if magic != b"PK\x03\x04":  # NPZ files are zip archives
         raise BankError(f"{p}: not an IPSF bank (expected a .npz file written by "
                         f"`mitsweep ipsf --bank` or mitsweep.io.bank.save_bank)")
-    try:
-        with np.load(p, allow_pickle=False) as z:
+    try:  # our own handle: np.load leaves its file open when the archive is corrupt
+        with open(p, "rb") as f, np.load(f, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
-        header = json.loads(bytes(data.pop("header")).decode())
-    except Exception as exc:
+    except Exception as exc:  # zipfile, zlib and NumPy format errors alike
         raise BankError(f"{p}: not an IPSF bank ({exc})") from None
-    if header.get("format") != BANK_FORMAT:
-        raise BankError(f"{p}: unknown bank format {header.get('format')!r}, "
-                        f"expected {BANK_FORMAT!r}")
+    header = _header(p, data.pop("header", None))
+    fmt = header.get("format")
+    if fmt not in READABLE_FORMATS:
+        raise BankError(f"{p}: unknown bank format {fmt!r}, expected {BANK_FORMAT!r}")
+    for name in ("kind", "pixel_pitch", "reference_sensor_distance"):
+        if name not in header:
+            raise BankError(f"{p}: the bank header lacks {name!r}")
+    for name in ("kernels", "points_uv", "depths_mm"):
+        if name not in data:
+            raise BankError(f"{p}: the bank lacks the {name!r} array")
     gs = header.get("grid_shape")
-    return IPSFBank(kernels=data["kernels"], points_uv=data["points_uv"],
-                    depths_mm=data["depths_mm"], pixel_pitch=header["pixel_pitch"],
-                    reference_sensor_distance=header["reference_sensor_distance"],
-                    kind=header["kind"], radii_mm=data.get("radii_mm"),
-                    grid_shape=tuple(gs) if gs else None, vignetted=data.get("vignetted"),
-                    metadata=header.get("metadata", {}))
+    if gs is not None and not (isinstance(gs, list) and len(gs) == 2
+                               and all(isinstance(n, int) and n >= 1 for n in gs)):
+        raise BankError(f"{p}: grid_shape must be [rows, cols], got {gs!r}")
+    fingerprinted = fmt == BANK_FORMAT
+    optics = header.get("optics") if fingerprinted else None
+    if fingerprinted:
+        if "optics_sha256" not in header or "optics" not in header:
+            raise BankError(f"{p}: the bank header lacks 'optics' and 'optics_sha256'")
+        digest = header["optics_sha256"]
+        if (optics is None) != (digest is None) or (
+                optics is not None and (not isinstance(optics, dict)
+                                        or optics_fingerprint(optics) != digest)):
+            raise BankError(f"{p}: the bank's optics do not match their fingerprint "
+                            f"(the header was edited); trace the bank again")
+    try:
+        return IPSFBank(kernels=data["kernels"], points_uv=data["points_uv"],
+                        depths_mm=data["depths_mm"], pixel_pitch=header["pixel_pitch"],
+                        reference_sensor_distance=header["reference_sensor_distance"],
+                        kind=header["kind"], radii_mm=data.get("radii_mm"),
+                        grid_shape=tuple(gs) if gs else None, vignetted=data.get("vignetted"),
+                        metadata=header.get("metadata", {}), optics=optics,
+                        fingerprinted=fingerprinted)
+    except BankError as exc:
+        raise BankError(f"{p}: {exc}") from None
+
+
+def _header(p: Path, raw) -> dict:
+    """The JSON header: a 0-d string array (format 2) or UTF-8 bytes (format 1)."""
+    if raw is None:
+        raise BankError(f"{p}: not an IPSF bank (no header)")
+    try:
+        text = str(raw[()]) if raw.dtype.kind == "U" else bytes(raw).decode()
+        header = json.loads(text)
+    except (ValueError, TypeError) as exc:
+        raise BankError(f"{p}: the bank header is not JSON ({exc})") from None
+    if not isinstance(header, dict):
+        raise BankError(f"{p}: the bank header must be a JSON object")
+    return header

@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import __version__
 from ..config import setup_to_dict
-from ..io.bank import IPSFBank
+from ..io.bank import IPSFBank, optics_sections
 from ..optics import chief_ray, image_point, optimal_sweep_range, placement_of
 from ..optics.motion import motion_for
 from ..resources import check_allocation
@@ -77,6 +77,8 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     Returns
     -------
     mitsweep.io.bank.IPSFBank
+        With ``optics``: the setup's mirror, lens, sensor and sweep and the motion, the
+        identity :func:`mitsweep.deconv.kernels.check_bank_identity` checks images by.
     """
     if kind not in ("radial", "grid"):
         raise ValueError(f"kind: must be 'radial' or 'grid', got {kind!r}")
@@ -133,8 +135,9 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
                 valid[pi] = False
             if progress is not None:
                 progress()
+    setup_dict = setup_to_dict(setup)
     meta = {
-        "setup": setup_to_dict(setup), "sweep_range": sweep.as_dict(),
+        "setup": setup_dict, "sweep_range": sweep.as_dict(),
         "motion": motion.as_dict(), "method": method, "time_samples": int(time_samples),
         "n_planes": int(n_planes) if method == "planes" else None,
         "rays_per_ipsf": int(rays), "seed": int(seed), "version": __version__,
@@ -144,4 +147,4 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     return IPSFBank(kernels=kernels, points_uv=points, depths_mm=np.asarray(depths),
                     pixel_pitch=setup.sensor.pixel_pitch, reference_sensor_distance=ref,
                     kind=kind, radii_mm=radii, grid_shape=grid_shape, vignetted=vign,
-                    metadata=meta)
+                    metadata=meta, optics=optics_sections(setup_dict, motion.as_dict()))
