@@ -347,7 +347,7 @@ def validate_manifest(manifest: Any, directory: str | Path) -> DatasetOptions:
     ``seconds`` (number >= 0). ``complete``, when present, is ``true`` and then every
     item of the dataset is listed. Raises :class:`DatasetError` naming the field.
     """
-    _require(isinstance(manifest, dict), "manifest",
+    _require(isinstance(manifest, dict), "top level",
              f"must be a JSON object, got {type(manifest).__name__}")
     _require(manifest.get("format") == FORMAT, "format",
              f"must be {FORMAT!r}, got {manifest.get('format')!r}")

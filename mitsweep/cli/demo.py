@@ -11,11 +11,12 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import time
 from pathlib import Path
 
-from .common import UsageError, positive_int
+from .common import UsageError, check_outputs, positive_int
 
 NAME = "demo"
 HELP = "run the whole pipeline on the embedded default setup (the paper's spherical mirror)"
@@ -25,6 +26,9 @@ log = logging.getLogger(__name__)
 #: Samples per pixel of the demo's renders: enough that Monte Carlo noise stays below
 #: the blur differences being measured (see README, "Validation on ground truth").
 DEMO_SPP = {"pinhole": 256, "focused": 256, "sweep": 512, "stopped": 256}
+#: Files the demo writes under --out besides the dataset and the images' PNGs.
+_OUTPUTS = ("focal_surfaces.png", "evaluation.json", "psnr_per_radius.png", "report.json",
+            "report.md")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -47,14 +51,22 @@ def run(args) -> int:
     from ..io.exr import stack_channels
     from ..io.png import write_png
     from ..optics import optimal_sweep_range
-    from ..pipeline import DatasetOptions, build_dataset, evaluate_dataset, white_level
+    from ..pipeline import DatasetOptions, build_dataset, evaluate_dataset, item_names, white_level
     from ..plots import plot_focal_surfaces
+    from .dataset import check_dataset_outputs
     from .evaluate import plot_per_radius
 
-    if not (args.spp_scale > 0):
-        raise UsageError(f"--spp-scale: must be > 0, got {args.spp_scale:g}")
+    if not (0 < args.spp_scale < math.inf):
+        raise UsageError(f"--spp-scale: must be a finite number > 0, got {args.spp_scale:g}")
+
     setup = load_setup(args.setup) if args.setup else DEFAULT_SETUP
     out = Path(args.out)
+    spp = {k: max(1, int(round(v * args.spp_scale))) for k, v in DEMO_SPP.items()}
+    opts = DatasetOptions(scenes=args.scenes, seed=0, spp=spp)
+    check_outputs([args.setup], [out / name for name in _OUTPUTS]
+                  + [out / f"{Path(n).stem}.png" for n in item_names(opts)
+                     if n.startswith("scene_000/")])
+    check_dataset_outputs([args.setup], out / "dataset", opts)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -80,8 +92,6 @@ def run(args) -> int:
                                         "focus_max_mm": traced.focus_max_mm}
         _step(f"traced sweep range {traced.focus_min_mm:.2f}-{traced.focus_max_mm:.2f} mm")
 
-    spp = {k: max(1, int(round(v * args.spp_scale))) for k, v in DEMO_SPP.items()}
-    opts = DatasetOptions(scenes=args.scenes, seed=0, spp=spp)
     _step(f"rendering and deconvolving into {out / 'dataset'} (spp {spp})")
     t0 = time.perf_counter()
     build_dataset(setup, out / "dataset", opts)

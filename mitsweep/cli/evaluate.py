@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import print_json
+from .common import check_outputs, print_json
 
 NAME = "evaluate"
 HELP = "score a dataset: PSNR and SSIM inside the mirror's image, per radius and depth band"
@@ -47,8 +47,15 @@ def run(args) -> int:
     import json
 
     from ..io import write_text_atomic
-    from ..pipeline import evaluate_dataset
+    from ..io.atomic import check_writable
+    from ..pipeline import dataset_inputs, evaluate_dataset
 
+    # Before the (long) evaluation: the outputs overwrite none of the dataset's files,
+    # and can be written.
+    check_outputs(dataset_inputs(args.dataset), [args.plot, args.out])
+    for path in (args.plot, args.out):
+        if path:
+            check_writable(path)
     results = evaluate_dataset(args.dataset)
     if args.plot:
         plot_per_radius(results, args.plot)

@@ -6,9 +6,12 @@ Each subcommand module exposes ``NAME``, ``HELP``, ``add_arguments(parser)`` and
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import logging
+import signal
 import sys
+import threading
 
 from .common import USER_ERRORS, ArgumentParser, configure_logging, user_error_message
 
@@ -50,7 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     configure_logging(args.verbose)
     try:
-        return int(args._run(args) or 0)
+        with _terminate_cleanly():
+            return int(args._run(args) or 0)
     except BrokenPipeError:  # output piped into head & co.
         return 0
     except KeyboardInterrupt:
@@ -61,6 +65,24 @@ def main(argv: list[str] | None = None) -> int:
         logging.getLogger("mitsweep").debug("user error", exc_info=True)
         print(user_error_message(exc), file=sys.stderr)
         return 2
+
+
+@contextlib.contextmanager
+def _terminate_cleanly():
+    """SIGTERM unwinds like an exception (exit status 143), so that temporaries are
+    removed and locks released on the way out instead of being left by a hard stop."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum, frame):
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def entry() -> None:

@@ -6,7 +6,8 @@ import argparse
 import math
 import sys
 
-from .common import UsageError, load_setup_arg, positive_float, positive_int, print_json
+from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
+                     print_json)
 
 NAME = "render"
 HELP = ("render a setup's scene through the mirror (pinhole ground truth, focused, "
@@ -50,6 +51,7 @@ def run(args) -> int:
     from ..render import render_image, render_to_exr
 
     setup = load_setup_arg(args.setup)
+    check_outputs([args.setup], [args.out, args.preview])
     _check_out(args.out, ".exr")
     if args.preview:
         _check_out(args.preview, ".png")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import UsageError, load_setup_arg, positive_int, print_json
+from .common import UsageError, check_outputs, load_setup_arg, positive_int, print_json
 
 NAME = "table1"
 HELP = ("reproduce the paper's Table 1: depth variance V_avg (Eq. 3) and IPSF kurtosis at "
@@ -41,7 +41,12 @@ def run(args) -> int:
 
     from ..tracer.table1 import PAPER_DEPTHS_MM, default_ranges, table1
 
+    from ..io.atomic import check_writable
+
     setup = load_setup_arg(args.setup)
+    check_outputs([args.setup], [args.plot])
+    if args.plot:
+        check_writable(args.plot)  # before the traces, not after
     if args.kernel_size % 2 == 0 or args.kernel_size < 3:
         raise UsageError(f"--kernel-size: must be odd and >= 3, got {args.kernel_size}")
     ranges = args.ranges or default_ranges(setup)

@@ -46,6 +46,9 @@ def check_writable(path: str | Path) -> Path:
     if not parent.is_dir():
         raise WriteError(errno.ENOENT, f"directory {parent} does not exist", str(p))
     if not os.access(parent, os.W_OK):
+        if os.statvfs(parent).f_flag & os.ST_RDONLY:
+            raise WriteError(errno.EROFS, f"directory {parent} is on a read-only file system",
+                             str(p))
         raise WriteError(errno.EACCES, f"directory {parent} is not writable", str(p))
     if p.is_dir():
         raise WriteError(errno.EISDIR, "it is a directory", str(p))

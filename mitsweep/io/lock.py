@@ -23,6 +23,8 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
+from .atomic import WriteError
+
 __all__ = ["LOCK_FILE", "DirectoryLock", "DirectoryLocked"]
 
 logger = logging.getLogger(__name__)
@@ -121,8 +123,7 @@ class DirectoryLock:
         try:
             return os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
         except OSError as exc:
-            raise OSError(exc.errno, f"cannot create the lock file {self.path}: "
-                                     f"{exc.strerror}") from None
+            raise WriteError(exc.errno, exc.strerror, str(self.path)) from None
 
     def _busy(self, holder: dict) -> DirectoryLocked:
         what = _describe(holder) if holder else "another process (no details recorded)"
@@ -149,8 +150,11 @@ class DirectoryLock:
                   "since": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                   "command": self.command}
         data = (json.dumps(record) + "\n").encode()
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, data, 0)
+        try:
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, data, 0)
+        except OSError as exc:
+            raise WriteError(exc.errno, exc.strerror, str(self.path)) from None
 
     # -- releasing ------------------------------------------------------------------
     def release(self) -> None:
