@@ -1,54 +1,257 @@
-"""Dependency rules of DESIGN.md, checked on the source (AST), and the backend guard."""
+"""Dependency rules of DESIGN.md, checked on the source (AST), and the backend guard.
+
+DESIGN.md: ``optics`` ← ``tracer``, ``render``, ``deconv`` ← ``cli``; ``rig`` depends
+only on ``optics`` (and ``config``/``io``); ``optics`` and ``deconv`` never import
+``mitsuba`` or ``drjit``; only ``render`` imports ``mitsuba``. The checker sees every
+import a module can make from its source: ``import x``, ``from x import y``, relative
+imports resolved against the module's package (``from ..render import api``,
+``from .. import render``), imports inside functions and conditionals, and
+``importlib.import_module(...)`` / ``__import__(...)`` calls with a literal name (or an
+f-string with a literal head, ``f"drjit.{backend}"``). A dynamic import whose target it
+cannot read is itself an offence outside ``cli``. It is tested on planted bad imports
+in a copy of the tree (``test_checker_reports_planted_import``).
+"""
 
 import ast
+import shutil
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
 PKG = Path(__file__).resolve().parents[1] / "mitsweep"
+TOP = "mitsweep"
 
-# package → modules it must never import (directly or via `from X import`).
-FORBIDDEN = {
-    "optics": {"mitsuba", "drjit"},
-    "deconv": {"mitsuba", "drjit"},
-    "io": {"mitsuba", "drjit"},
-    "rig": {"mitsuba", "drjit"},
-    "tracer": {"mitsuba"},
+# The base every unit may import: the package itself (its __version__), the setup
+# dataclasses and the resource guard.
+BASE = {TOP, "config", "resources"}
+ANY = None  # marks a unit that may import every other unit
+
+# First-party units (subpackages and top-level modules) → the units each may import
+# besides BASE and itself. A unit missing here fails the test until its layer is given.
+LAYERS = {
+    "config": set(),
+    "resources": set(),
+    "io": set(),
+    "optics": set(),
+    "backend": set(),
+    "plots": {"optics", "io"},
+    # The tracer and the renderer are independent implementations (DESIGN.md): they
+    # share optics, never each other. Tracer figures use the shared plotting helpers.
+    "tracer": {"optics", "io", "backend", "plots"},
+    "render": {"optics", "io", "backend"},
+    "deconv": {"optics", "io"},
+    "rig": {"optics", "io"},
+    "pipeline": {"optics", "io", "backend", "plots", "tracer", "render", "deconv"},
+    "cli": ANY,
+    "__main__": {"cli"},
+}
+
+# External backends → the only units that may import them.
+BACKEND_OWNERS = {
+    "mitsuba": {"render", "backend"},
+    "drjit": {"tracer", "render", "backend"},
 }
 
 
-def _imports(path: Path):
-    tree = ast.parse(path.read_text(), filename=str(path))
-    for node in ast.walk(tree):
+@dataclass(frozen=True)
+class Import:
+    target: str | None   # absolute dotted name; None for a dynamic import it cannot read
+    line: int
+    how: str
+
+
+def _module_name(path: Path, root: Path) -> tuple[str, bool]:
+    """Dotted name of the module at ``path`` under ``root`` (the folder holding the
+    package), and whether it is a package's ``__init__``."""
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        return ".".join(parts[:-1]), True
+    return ".".join(parts), False
+
+
+def _resolve(name: str | None, level: int, module: str, is_package: bool) -> str:
+    """The absolute name of a relative import (``level`` dots) in ``module``."""
+    if level == 0:
+        return name or ""
+    package = module.split(".") if is_package else module.split(".")[:-1]
+    base = package[:len(package) - (level - 1)]
+    if len(base) != len(package) - (level - 1) or not base:
+        raise ImportError(f"relative import beyond the top of {module}")
+    return ".".join(base + ([name] if name else []))
+
+
+def _literal_head(node) -> str | None:
+    """A call argument's module name, if it is literal: a string, or the literal dotted
+    head of an f-string up to its last dot before the first replacement field
+    (``f"drjit.{b}"`` → ``drjit``; ``f"mitsu{b}"`` cannot be read)."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return node.value
+    if isinstance(node, ast.JoinedStr) and node.values \
+            and isinstance(node.values[0], ast.Constant) and "." in node.values[0].value:
+        return node.values[0].value.rsplit(".", 1)[0] or None
+    return None
+
+
+def imports_of(source: str, module: str, is_package: bool = False):
+    """Every import ``module`` (dotted name) makes in ``source``: a list of Import."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Import):
-            for alias in node.names:
-                yield alias.name.split(".")[0], node.lineno
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            yield node.module.split(".")[0], node.lineno
+            found += [Import(a.name, node.lineno, "import") for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = _resolve(node.module, node.level, module, is_package)
+            # `from pkg import name`: name may be a submodule (`from .. import render`).
+            found += [Import(f"{base}.{a.name}" if base else a.name, node.lineno, "from")
+                      for a in node.names if a.name != "*"]
+            found.append(Import(base, node.lineno, "from"))
+        elif isinstance(node, ast.Call):
+            f = node.func
+            fname = f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", None)
+            if fname not in ("import_module", "__import__"):
+                continue
+            arg = node.args[0] if node.args else next(
+                (k.value for k in node.keywords if k.arg == "name"), None)
+            name = _literal_head(arg) if arg is not None else None
+            if name is not None and name.startswith("."):
+                # import_module(".x", package): relative to `package` when it is literal,
+                # else (__package__, __name__) to the module's own package.
+                pkg = node.args[1] if len(node.args) > 1 else next(
+                    (k.value for k in node.keywords if k.arg == "package"), None)
+                pkg = _literal_head(pkg) if pkg is not None else None
+                level = len(name) - len(name.lstrip("."))
+                name = (_resolve(name.lstrip(".") or None, level, pkg, True) if pkg
+                        else _resolve(name.lstrip(".") or None, level, module, is_package))
+            found.append(Import(name, node.lineno, fname))
+    return found
 
 
-@pytest.mark.parametrize("package", sorted(FORBIDDEN))
+def _units(root: Path) -> set[str]:
+    """The first-party units under ``root``: subpackages and top-level modules."""
+    pkg = root / TOP
+    return ({p.stem for p in pkg.glob("*.py") if p.stem != "__init__"}
+            | {p.parent.name for p in pkg.glob("*/__init__.py")})
+
+
+def _unit(dotted: str, units: set[str]) -> str | None:
+    """The first-party unit of a dotted name (``mitsweep.optics.sweep`` → ``optics``),
+    ``TOP`` for the package itself or one of its attributes (``mitsweep.__version__``),
+    None for another distribution."""
+    parts = dotted.split(".")
+    if parts[0] != TOP:
+        return None
+    return parts[1] if len(parts) > 1 and parts[1] in units else TOP
+
+
+def check_tree(root: Path) -> list[str]:
+    """Offences against LAYERS and BACKEND_OWNERS in the package under ``root``."""
+    offences = []
+    units = _units(root)
+    for path in sorted((root / TOP).rglob("*.py")):
+        module, is_package = _module_name(path, root)
+        unit = _unit(module, units)
+        where = path.relative_to(root)
+        if unit != TOP and unit not in LAYERS:
+            offences.append(f"{where}: unit {unit!r} has no layer in LAYERS")
+            continue
+        allowed = LAYERS.get(unit, set())
+        for imp in imports_of(path.read_text(), module, is_package):
+            if imp.target is None:
+                if allowed is not ANY:
+                    offences.append(f"{where}:{imp.line} {imp.how}() of a name the checker "
+                                    f"cannot read")
+                continue
+            target = _unit(imp.target, units)
+            ext = imp.target.split(".")[0]
+            if ext in BACKEND_OWNERS and unit not in BACKEND_OWNERS[ext]:
+                offences.append(f"{where}:{imp.line} imports {imp.target} ({imp.how})")
+            if target is None or target in BASE or target == unit or allowed is ANY:
+                continue
+            if target not in allowed:
+                offences.append(f"{where}:{imp.line} {unit} imports {imp.target} ({imp.how})")
+    return offences
+
+
+def test_the_tree_keeps_the_layers():
+    offences = check_tree(PKG.parent)
+    assert not offences, "\n".join(offences)
+
+
+@pytest.mark.parametrize("package", ["optics", "deconv", "io", "rig"])
 def test_package_does_not_import_forbidden_backends(package):
-    offenders = []
+    """optics, deconv, io and rig never import mitsuba or drjit (any form of import)."""
     for path in sorted((PKG / package).rglob("*.py")):
-        for name, line in _imports(path):
-            if name in FORBIDDEN[package]:
-                offenders.append(f"{path.relative_to(PKG)}:{line} imports {name}")
-    assert not offenders, "\n".join(offenders)
+        module, is_package = _module_name(path, PKG.parent)
+        names = {i.target.split(".")[0] for i in imports_of(path.read_text(), module, is_package)
+                 if i.target}
+        assert not names & {"mitsuba", "drjit"}, path
 
 
 def test_only_render_imports_mitsuba():
-    offenders = []
+    owners = set()
     for path in sorted(PKG.rglob("*.py")):
-        rel = path.relative_to(PKG)
-        if rel.parts[0] in ("render", "backend.py"):
-            continue
-        for name, line in _imports(path):
-            if name == "mitsuba":
-                offenders.append(f"{rel}:{line}")
-    assert not offenders, offenders
+        module, is_package = _module_name(path, PKG.parent)
+        if any(i.target and i.target.split(".")[0] == "mitsuba"
+               for i in imports_of(path.read_text(), module, is_package)):
+            owners.add(_unit(module, _units(PKG.parent)))
+    assert owners <= {"render", "backend"}, owners
+    assert "render" in owners  # the checker sees the renderer's own imports
+
+
+# (file under mitsweep/, source planted there, text the offence must contain)
+PLANTED = [
+    ("optics/_bad.py", "from ..render import api\n", "optics imports mitsweep.render"),
+    ("optics/_bad.py", "from .. import tracer\n", "optics imports mitsweep.tracer"),
+    ("deconv/_bad.py", "def f():\n    import drjit\n", "imports drjit (import)"),
+    ("deconv/_bad.py", "import importlib\nm = importlib.import_module('mitsuba')\n",
+     "imports mitsuba (import_module)"),
+    ("optics/_bad.py", "__import__('mitsweep.cli.main')\n", "optics imports mitsweep.cli"),
+    ("io/_bad.py", "from importlib import import_module\nv = 'x'\n"
+                   "m = import_module(f'mitsuba.{v}')\n", "imports mitsuba (import_module)"),
+    ("rig/_bad.py", "import importlib\nm = importlib.import_module('..tracer', __package__)\n",
+     "rig imports mitsweep.tracer"),
+    ("rig/sub/__init__.py", "from ...render.api import render_scene\n",
+     "rig imports mitsweep.render.api"),
+    ("tracer/_bad.py", "if True:\n    from ..render import scene\n",
+     "tracer imports mitsweep.render"),
+    ("optics/_bad.py", "import importlib\nname = 'x'\nimportlib.import_module(name)\n",
+     "import_module() of a name the checker cannot read"),
+    ("optics/_bad.py", "import importlib\nv = 'x'\nimportlib.import_module(f'mitsu{v}')\n",
+     "import_module() of a name the checker cannot read"),
+    ("deconv/_bad.py", "import importlib\nimportlib.import_module('.api', 'mitsweep.render')\n",
+     "deconv imports mitsweep.render.api"),
+    ("newunit.py", "import numpy\n", "unit 'newunit' has no layer"),
+    ("optics/_bad.py", "import mitsweep.deconv.wiener as w\n", "optics imports mitsweep.deconv"),
+]
+
+
+@pytest.fixture(scope="module")
+def tree_copy(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tree")
+    shutil.copytree(PKG, root / TOP, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    return root
+
+
+@pytest.mark.parametrize("rel,source,message", PLANTED)
+def test_checker_reports_planted_import(tree_copy, tmp_path, rel, source, message):
+    root = tmp_path / "t"
+    shutil.copytree(tree_copy, root)
+    assert check_tree(root) == []  # the copy passes before the plant
+    target = root / TOP / rel
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(source)
+    offences = check_tree(root)
+    assert any(message in o for o in offences), offences
+
+
+def test_checker_accepts_allowed_imports():
+    src = ("from ..optics import chief_ray\nfrom .. import __version__\n"
+           "import importlib\nimportlib.import_module('numpy')\nfrom . import kernel\n")
+    targets = {i.target for i in imports_of(src, "mitsweep.tracer.psf")}
+    assert {"mitsweep.optics", "mitsweep.optics.chief_ray", "mitsweep.__version__",
+            "numpy", "mitsweep.tracer.kernel"} <= targets
 
 
 def test_old_llvm_is_refused_before_any_kernel(tmp_path):
