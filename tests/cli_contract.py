@@ -1,0 +1,30 @@
+"""The CLI's user-error contract, checked the same way by every test that needs it."""
+
+from __future__ import annotations
+
+import warnings
+
+from mitsweep.cli.main import main
+
+
+def refused(capsys, argv) -> str:
+    """Run ``mitsweep ARGV`` and assert a clean refusal; return the error line.
+
+    A clean refusal: exit status 2, exactly one line on stderr starting with
+    ``mitsweep: error:``, no traceback, no Python warning, nothing on stdout.
+    """
+    capsys.readouterr()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            rc = main([str(a) for a in argv])
+        except SystemExit as exc:  # argparse's own errors
+            rc = exc.code
+    out, err = capsys.readouterr()
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2, f"exit status {rc}; stderr: {err!r}"
+    assert len(lines) == 1, lines
+    assert "error:" in lines[0] and "Traceback" not in err
+    assert not caught, [str(w.message) for w in caught]
+    assert out == ""
+    return lines[0]
