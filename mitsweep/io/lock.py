@@ -35,7 +35,11 @@ POLL_S = 0.2
 
 
 class DirectoryLocked(OSError):
-    """Another live process holds the directory's lock."""
+    """Another live process holds the directory's lock (errno EBUSY); the message names
+    the holder."""
+
+    def __str__(self) -> str:
+        return str(self.strerror)
 
 
 def _describe(holder: dict) -> str:
