@@ -101,7 +101,7 @@ def test_unwritable_plot_path_exits_2(scenes_dir, tmp_path):
 @pytest.mark.parametrize("args,message", [
     (["--field", "mirror"], "--field: chooses the field of the traced range; give it with --verify"),
     (["--verify", "--field", "disc"], "argument --field: invalid choice: 'disc'"),
-    (["--verify", "--field", "mirror"], "does not see this mirror out to its rim"),
+    (["--verify", "--field", "mirror"], "the lens does not see all of this field"),
 ])
 def test_bad_field_exits_2_with_one_line(scenes_dir, args, message):
     rc, _, err = run_cli("sweep-range", scenes_dir / "sphere.toml", *args)

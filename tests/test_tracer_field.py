@@ -12,8 +12,9 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 from mitsweep.config import load_setup
-from mitsweep.optics import object_distance, optimal_sweep_range
-from mitsweep.tracer.focus import (FIELDS, PROBE_APERTURE_MM, numeric_focus,
+from mitsweep.optics import chief_ray, object_distance, optimal_sweep_range, placement_of
+from mitsweep.optics.sweep import mirror_zone
+from mitsweep.tracer.focus import (FIELDS, PROBE_APERTURE_MM, _fov_field, numeric_focus,
                                    traced_sweep_range)
 from mitsweep.tracer.kernel import trace_arrays
 from mitsweep.tracer.psf import fit_sampling_box
@@ -85,25 +86,88 @@ def test_in_the_tilt_plane_the_line_foci_are_the_radial_and_tangential_foci():
 
 
 def test_unknown_field_is_refused():
-    with pytest.raises(ValueError, match="field: must be one of plane, mirror"):
+    with pytest.raises(ValueError, match="field: must be one of plane, mirror, fov"):
         traced_sweep_range(TILTED, field="disc")
-    assert set(FIELDS) == {"plane", "mirror"}
+    assert set(FIELDS) == {"plane", "mirror", "fov"}
 
 
 def test_whole_mirror_field_needs_the_whole_mirror_visible():
     sphere = load_setup("scenes/sphere.toml")  # a hemisphere: its rim is beyond grazing
-    with pytest.raises(ValueError, match="does not see this mirror out to its rim"):
+    with pytest.raises(ValueError, match="the lens does not see all of this field"):
         traced_sweep_range(sphere, field="mirror")
 
 
-def _dense_grid_extremes(setup, spacing, rim_step_deg):
-    """Min and max line focus over a plain grid of the whole disc (both halves; no
-    symmetry assumed) plus rim points every ``rim_step_deg``, at the two end depths."""
-    sr = optimal_sweep_range(setup)
+def _fov_angle_in_test(setup):
+    """The angle of each reflected chief ray to the FOV's central direction, built here
+    from the tilt-plane zone's fan (the bisector of its in-plane angles), and FOV/2."""
+    pl = placement_of(setup.mirror)
+    zone = mirror_zone(setup)
+    xs = np.linspace(zone.rho_start, zone.rho_end, 20001)
+    w = chief_ray(pl, pl.surface(xs, 0 * xs)).world_dir
+    phi = np.unwrap(np.arctan2(w[:, 0], w[:, 2]))
+    mid = 0.5 * (phi.min() + phi.max())
+    c = np.array([math.sin(mid), 0.0, math.cos(mid)])
+
+    def angle(x, y):
+        wd = chief_ray(pl, pl.surface(np.asarray(x, float), np.asarray(y, float))).world_dir
+        return np.arccos(np.clip(wd @ c, -1.0, 1.0))
+    return angle, math.radians(zone.fov_deg) / 2, zone
+
+
+def test_fov_field_meets_the_tilt_plane_in_the_papers_zone():
+    """The 2-D FOV field's boundary: in the tilt plane, the ends of the paper's zone (the
+    near rim and the FOV's end); off it, reflected chief rays at FOV/2 or the rim."""
+    star, half = _fov_field(TILTED, None)
+    angle, half_here, zone = _fov_angle_in_test(TILTED)
+    assert half == pytest.approx(half_here, abs=1e-12)
+    x_far, _ = star.point(1.0, 0.0)
+    x_near, _ = star.point(1.0, math.pi)
+    assert x_far == pytest.approx(zone.rho_end, abs=1e-6)
+    assert x_near == pytest.approx(zone.rho_start, abs=1e-9)
+    for th in np.linspace(0.0, math.pi, 37):
+        x, y = star.point(1.0, th)
+        on_rim = math.hypot(x, y) >= RIM * (1 - 1e-12)
+        assert on_rim or float(angle(x, y)) == pytest.approx(half, abs=1e-9)
+        xi, yi = star.point(0.999, th)
+        assert float(angle(xi, yi)) < half  # just inside is inside
+
+
+def _fov_points(spacing, boundary_step_deg):
+    """A plain grid over the 2-D FOV field (both halves) and its boundary, found here by
+    bisection along rays from the middle of the zone (not the code's centre)."""
+    angle, half, zone = _fov_angle_in_test(TILTED)
     g = np.arange(-RIM, RIM + 1e-9, spacing)
-    pts = [(x, y) for x in g for y in g if math.hypot(x, y) < RIM]
-    pts += [(RIM * math.cos(t), RIM * math.sin(t))
-            for t in np.radians(np.arange(0.0, 360.0, rim_step_deg))]
+    pts = [(x, y) for x in g for y in g
+           if math.hypot(x, y) < RIM and float(angle(x, y)) <= half]
+    c = np.array([0.5 * (zone.rho_start + zone.rho_end), 0.0])
+    for th in np.radians(np.arange(0.0, 360.0, boundary_step_deg)):
+        u = np.array([math.cos(th), math.sin(th)])
+        b = c @ u
+        s_rim = -b + math.sqrt(b * b - (c @ c - RIM * RIM))
+        inside = lambda s: float(angle(*(c + s * u))) <= half  # noqa: E731
+        if inside(s_rim):
+            s = s_rim
+        else:
+            lo, hi = 0.0, s_rim
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if inside(mid) else (lo, mid)
+            s = lo
+        pts.append(tuple(c + s * u))
+    return pts
+
+
+def _dense_grid_extremes(setup, spacing, rim_step_deg, points=None):
+    """Min and max line focus over ``points``, by default a plain grid of the whole disc
+    (both halves; no symmetry assumed) plus rim points every ``rim_step_deg``, at the
+    two end depths."""
+    sr = optimal_sweep_range(setup)
+    if points is None:
+        g = np.arange(-RIM, RIM + 1e-9, spacing)
+        points = [(x, y) for x in g for y in g if math.hypot(x, y) < RIM]
+        points += [(RIM * math.cos(t), RIM * math.sin(t))
+                   for t in np.radians(np.arange(0.0, 360.0, rim_step_deg))]
+    pts = points
     lo = (math.inf, None)
     hi = (-math.inf, None)
     for depth in (sr.depth_min_mm, sr.depth_max_mm):
@@ -158,3 +222,34 @@ def test_whole_mirror_search_converges():
             assert [s["stage"] for s in stages] == ["grid", "refined"]
             sign = 1.0 if key == "min" else -1.0
             assert sign * stages[1]["focus_mm"] <= sign * stages[0]["focus_mm"]
+
+
+@pytest.mark.slow
+def test_fov_field_range_matches_a_dense_grid():
+    """The FOV in 2-D reaches past the paper's tilt-plane range (362.84-389.52 mm), off
+    the tilt plane, on the FOV's boundary."""
+    traced = traced_sweep_range(TILTED, field="fov")
+    (g_lo, at_lo), (g_hi, at_hi) = _dense_grid_extremes(
+        TILTED, 0, 0, points=_fov_points(spacing=2.0, boundary_step_deg=2.0))
+    # As for the whole mirror: at least as far as every grid point, and within the
+    # grid's discretisation (half a 2 mm cell; < 0.05 mm of focus) of it.
+    assert traced.focus_min_mm <= g_lo + 1e-4
+    assert traced.focus_max_mm >= g_hi - 1e-4
+    assert traced.focus_min_mm == pytest.approx(g_lo, abs=0.05)
+    assert traced.focus_max_mm == pytest.approx(g_hi, abs=0.05)
+    for at, (x, y, depth) in ((traced.min_at, at_lo), (traced.max_at, at_hi)):
+        assert math.hypot(at["x_mm"] - x, abs(at["y_mm"]) - abs(y)) <= 2.0 * math.sqrt(2)
+        assert at["depth_mm"] == depth
+    assert traced.max_at["on_boundary"] and abs(traced.max_at["y_mm"]) > 10.0
+    assert traced.focus_max_mm > 389.52 + 1.0
+
+
+@pytest.mark.slow
+def test_fov_field_search_converges_and_equals_plane_when_untilted():
+    runs = [traced_sweep_range(TILTED, field="fov", n_rings=n) for n in (4, 8)]
+    assert abs(runs[0].focus_min_mm - runs[1].focus_min_mm) < 1e-3
+    assert abs(runs[0].focus_max_mm - runs[1].focus_max_mm) < 1e-3
+    untilted = load_setup("scenes/paraboloid.toml")
+    fov = traced_sweep_range(untilted, field="fov", n_points=25)
+    plane = traced_sweep_range(untilted, field="plane", n_points=25)
+    assert (fov.focus_min_mm, fov.focus_max_mm) == (plane.focus_min_mm, plane.focus_max_mm)

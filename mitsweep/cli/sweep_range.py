@@ -26,15 +26,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--plot", metavar="FILE", help="draw the focal surfaces (paper Fig. 6)")
     p.add_argument("--verify", action="store_true",
                    help="also trace the sweep range numerically (needs the tracer)")
-    p.add_argument("--field", choices=("plane", "mirror"), default=None,
-                   help="with --verify, the field the traced range covers: 'plane' "
-                        "(default), the paper's FOV zone: untilted, the disc from the axis "
+    p.add_argument("--field", choices=("plane", "mirror", "fov"), default=None,
+                   help="with --verify, the field the traced range covers. 'plane' "
+                        "(default): the paper's FOV zone; untilted, the disc from the axis "
                         "out to where the reflected chief ray makes FOV/2 with the axis; "
                         "tilted, the tilt-plane segment from the rim nearest the camera "
-                        "over which the reflected chief rays span the FOV. 'mirror', the "
+                        "over which the reflected chief rays span the FOV. 'mirror': the "
                         "whole mirror out to its rim (rim included), which must all face "
-                        "the lens; for a tilted mirror its whole disc, not only the tilt "
-                        "plane")
+                        "the lens. 'fov': the FOV in 2-D, the mirror points whose "
+                        "reflected chief rays lie within FOV/2 of the FOV's central "
+                        "direction (the axis when untilted, where it equals 'plane'; the "
+                        "bisector of the tilt-plane fan when tilted)")
 
 
 def compute(args) -> tuple[object, dict]:

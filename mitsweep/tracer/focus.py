@@ -37,7 +37,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.optimize import minimize, minimize_scalar
+from scipy.optimize import brentq, minimize, minimize_scalar
 
 from ..config import SetupError
 from ..optics import chief_ray, object_distance, optimal_sweep_range, placement_of
@@ -69,11 +69,17 @@ FIELDS = {
               "x^2 + y^2 <= rim_radius^2 (rim included), all of which must face the lens "
               "(n.r > 0); untilted, searched along a radius by symmetry; tilted, over the "
               "disc (the half y >= 0: the setup is symmetric under y -> -y)",
+    "fov": "the FOV in 2-D: every mirror point within the rim whose world-bound reflected "
+           "chief ray lies within FOV/2 of the FOV's central direction, which is the "
+           "mirror axis when untilted (the disc of 'plane') and, tilted, the bisector of "
+           "the tilt-plane fan of 'plane' (so the field meets the tilt plane in exactly "
+           "the paper's zone); tilted, searched over the half y >= 0 in polar "
+           "coordinates about the bisector's mirror point, its boundary included",
 }
 
 #: Convergence of the field search: local refinement stops when the bracket or simplex
-#: is this small, in mm of mirror position and of focus distance (1 µm is the brief's
-#: bound; the refinement goes ten times finer so that the bound is met with margin).
+#: is this small, in mm of mirror position and of focus distance: ten times finer than
+#: the 1 µm to which the reported extremes are meant to be converged.
 FIELD_TOL_MM = 1e-4
 
 
@@ -164,8 +170,9 @@ class TracedSweepRange:
         The nearest and the farthest line focus over the field and the two end depths.
     min_at, max_at : dict
         Where they are reached: the mirror point ``x_mm``, ``y_mm`` (local frame),
-        ``depth_mm``, ``on_rim``, and the chief-ray image ``image_uv_mm`` on a sensor at
-        ``reference_sensor_mm`` (mid-sweep of the analytic range).
+        ``depth_mm``, ``on_boundary`` (of the field), ``on_rim``, and the chief-ray image
+        ``image_uv_mm`` on a sensor at ``reference_sensor_mm`` (mid-sweep of the
+        analytic range).
     convergence : dict
         ``{"min": [...], "max": [...]}``, the extreme after each stage of the search:
         ``stage`` ("grid", "refined"), ``evaluations`` (traced points so far), ``focus_mm``.
@@ -203,13 +210,6 @@ class _LineFoci:
         self._memo = {}
         self.samples = []
 
-    def point(self, r, theta):
-        """Local (x, y) at polar (r, θ), kept within the rim despite rounding."""
-        x, y = r * math.cos(theta), r * math.sin(theta)
-        h = math.hypot(x, y)
-        scale = min(1.0, self.rim / h) if h > 0 else 1.0
-        return x * scale, y * scale
-
     def __call__(self, x: float, y: float, depth: float) -> tuple:
         key = (float(x), float(y), float(depth))
         if key not in self._memo:
@@ -228,18 +228,21 @@ class _LineFoci:
     def evaluations(self) -> int:
         return len(self._memo)
 
-    def where(self, x, y, depth) -> dict:
+    def where(self, x, y, depth, *, on_boundary: bool) -> dict:
         uv = self._memo[(float(x), float(y), float(depth))][1]
         return {"x_mm": float(x), "y_mm": float(y), "depth_mm": float(depth),
+                "on_boundary": bool(on_boundary),
                 "on_rim": bool(math.hypot(x, y) >= self.rim * (1 - 1e-12)),
                 "image_uv_mm": [float(uv[0]), float(uv[1])],
                 "reference_sensor_mm": float(self.ref)}
 
 
-def _search_segment(foci: _LineFoci, xs, depths, which: int, sign: float):
+def _search_segment(foci: _LineFoci, xs, depths, which: int, sign: float, *,
+                    start_is_boundary: bool):
     """Extreme of line focus ``which`` (0 near, 1 far) along the tilt-plane points ``xs``
-    (ends included): the grid, then a bounded Brent search between the best point's
-    neighbours (stops on a bracket of :data:`FIELD_TOL_MM`)."""
+    (ends included; the last is the field's boundary, the first too unless it is the
+    axis of an untilted mirror): the grid, then a bounded Brent search between the best
+    point's neighbours (stops on a bracket of :data:`FIELD_TOL_MM`)."""
     best = min((sign * foci(x, 0.0, d)[which], j, d) for d in depths for j, x in enumerate(xs))
     v, j, depth = best
     history = [{"stage": "grid", "evaluations": foci.evaluations, "focus_mm": sign * v}]
@@ -251,68 +254,145 @@ def _search_segment(foci: _LineFoci, xs, depths, which: int, sign: float):
     if res.fun < v:
         x_best, v = float(res.x), float(res.fun)
     history.append({"stage": "refined", "evaluations": foci.evaluations, "focus_mm": sign * v})
-    return sign * v, foci.where(x_best, 0.0, depth), history
+    on_boundary = x_best == float(xs[-1]) or (start_is_boundary and x_best == float(xs[0]))
+    return sign * v, foci.where(x_best, 0.0, depth, on_boundary=on_boundary), history
 
 
-def _polar_grid(rim: float, n_rings: int):
-    """(r, θ) of the half disc y >= 0: rings ``r = rim k / n_rings`` (the last is the rim
-    itself) with ``3k + 1`` angles from 0 to π on ring k; returns points and spacings."""
+class _StarField:
+    """A 2-D field of mirror points star-shaped about a centre ``p0`` on the tilt plane:
+    ``(t, θ) ∈ [0, 1] × [0, π]`` maps to ``p0 + t s_b(θ) (cos θ, sin θ)``, with
+    ``s_b(θ)`` the distance to the field's boundary, so ``t = 1`` is the boundary itself
+    (the half ``y >= 0``: the setup is symmetric under ``y → −y``).
+
+    ``angle``, when given, is a function of local (x, y) arrays, zero at ``p0``, whose
+    level ``limit`` bounds the field inside the rim; without it the boundary is the rim.
+    """
+
+    def __init__(self, rim: float, p0=(0.0, 0.0), angle=None, limit: float | None = None):
+        self.rim = rim
+        self.p0 = np.asarray(p0, dtype=float)
+        self.angle = angle
+        self.limit = limit
+        self._s = {}
+
+    def _s_rim(self, u) -> float:
+        b = float(self.p0 @ u)
+        return -b + math.sqrt(max(b * b - (float(self.p0 @ self.p0) - self.rim ** 2), 0.0))
+
+    def boundary_distance(self, theta: float) -> float:
+        if theta not in self._s:
+            u = np.array([math.cos(theta), math.sin(theta)])
+            s_rim = self._s_rim(u)
+            s_b = s_rim
+            if self.angle is not None:
+                ss = np.linspace(0.0, s_rim, 513)
+                pts = self.p0 + ss[:, None] * u
+                g = self.angle(pts[:, 0], pts[:, 1]) - self.limit
+                out = np.nonzero(g > 0)[0]
+                if out.size:
+                    k = int(out[0])
+                    h = lambda s: float(self.angle(*(self.p0 + s * u)) - self.limit)  # noqa: E731
+                    s_b = brentq(h, ss[k - 1], ss[k], xtol=1e-12)
+            self._s[theta] = s_b
+        return self._s[theta]
+
+    def point(self, t: float, theta: float) -> tuple:
+        u = np.array([math.cos(theta), math.sin(theta)])
+        x, y = self.p0 + t * self.boundary_distance(theta) * u
+        h = math.hypot(x, y)
+        scale = min(1.0, self.rim / h) if h > 0 else 1.0  # rounding at the rim
+        return float(x * scale), float(y * scale)
+
+
+def _polar_grid(n_rings: int):
+    """(t, θ) of the half field: rings ``t = k / n_rings`` (the last is the boundary)
+    with ``3k + 1`` angles from 0 to π on ring k; returns points and spacings."""
     pts = [(0.0, 0.0)]
     for k in range(1, n_rings + 1):
-        r = rim * k / n_rings
-        pts += [(r, math.pi * j / (3 * k)) for j in range(3 * k + 1)]
-    return pts, rim / n_rings, math.pi / (3 * n_rings)
+        pts += [(k / n_rings, math.pi * j / (3 * k)) for j in range(3 * k + 1)]
+    return pts, 1.0 / n_rings, math.pi / (3 * n_rings)
 
 
-def _search_disc(foci: _LineFoci, rim, n_rings, depths, which: int, sign: float):
-    """Extreme of line focus ``which`` over the half disc: the polar grid of
-    :func:`_polar_grid`, then refinements from its best point and from its best rim point
-    (an extreme of a smooth function on a disc is inside or on the rim): Nelder–Mead in
-    (r, θ) inside, Brent along the rim; both stop at :data:`FIELD_TOL_MM`."""
-    pts, dr, dth = _polar_grid(rim, n_rings)
-    f = lambda r, th, d: sign * foci(*foci.point(r, th), d)[which]  # noqa: E731
-    scored = [(f(r, th, d), r, th, d) for d in depths for r, th in pts]
+def _search_disc(foci: _LineFoci, field: _StarField, n_rings, depths, which: int,
+                 sign: float):
+    """Extreme of line focus ``which`` over a 2-D field: the polar grid of
+    :func:`_polar_grid`, then refinements from its best point and from its best boundary
+    point (an extreme of a smooth function on a region is inside or on the boundary):
+    Nelder–Mead in (t, θ) inside, Brent along the boundary; both stop at
+    :data:`FIELD_TOL_MM` (of focus, and of t, θ times the field's size)."""
+    pts, dt, dth = _polar_grid(n_rings)
+    f = lambda t, th, d: sign * foci(*field.point(t, th), d)[which]  # noqa: E731
+    scored = [(f(t, th, d), t, th, d) for d in depths for t, th in pts]
     best = min(scored)
-    best_rim = min(s for s in scored if s[1] == rim)
+    best_edge = min(s for s in scored if s[1] == 1.0)
     history = [{"stage": "grid", "evaluations": foci.evaluations, "focus_mm": sign * best[0]}]
-    found = [best, best_rim]
-    for v, r, th, d in {best, best_rim}:
-        if r == rim:
-            res = minimize_scalar(lambda t, d=d: f(rim, t, d),
+    found = [best, best_edge]
+    xtol = FIELD_TOL_MM / field.rim
+    for v, t, th, d in {best, best_edge}:
+        if t == 1.0:
+            res = minimize_scalar(lambda a, d=d: f(1.0, a, d),
                                   bounds=(max(th - dth, 0.0), min(th + dth, math.pi)),
-                                  method="bounded", options={"xatol": FIELD_TOL_MM / rim})
-            found.append((float(res.fun), rim, float(res.x), d))
+                                  method="bounded", options={"xatol": xtol})
+            found.append((float(res.fun), 1.0, float(res.x), d))
         else:
-            p0 = np.array([r, th])
-            simplex = np.array([p0, p0 + [0.5 * dr, 0.0],
+            p0 = np.array([t, th])
+            simplex = np.array([p0, p0 + [0.5 * dt, 0.0],
                                 p0 + [0.0, 0.5 * dth if th + 0.5 * dth <= math.pi else -0.5 * dth]])
             res = minimize(lambda p, d=d: f(p[0], p[1], d), p0, method="Nelder-Mead",
-                           bounds=[(0.0, rim), (0.0, math.pi)],
-                           options={"initial_simplex": simplex, "xatol": FIELD_TOL_MM,
+                           bounds=[(0.0, 1.0), (0.0, math.pi)],
+                           options={"initial_simplex": simplex, "xatol": xtol,
                                     "fatol": FIELD_TOL_MM, "maxiter": 400})
             found.append((float(res.fun), float(res.x[0]), float(res.x[1]), d))
-    v, r, th, d = min(found)
+    v, t, th, d = min(found)
     history.append({"stage": "refined", "evaluations": foci.evaluations, "focus_mm": sign * v})
-    x, y = foci.point(r, th)
-    return sign * v, foci.where(x, y, d), history
+    x, y = field.point(t, th)
+    return sign * v, foci.where(x, y, d, on_boundary=t >= 1.0), history
 
 
-def _check_whole_mirror_visible(setup) -> None:
-    """Raise SetupError unless the lens sees every point of the mirror within the rim."""
+def _check_visible(setup, field: str, x, y) -> None:
+    """Raise SetupError unless the lens sees every mirror point (x, y) of ``field``."""
     pl = placement_of(setup.mirror)
-    rim = setup.mirror.rim_radius
-    r = np.linspace(0.0, rim, 257)[:, None]
-    th = np.linspace(0.0, 2.0 * math.pi, 721)[None, :]
-    x, y = r * np.cos(th), r * np.sin(th)
     cos_i = chief_ray(pl, pl.surface(x, y)).cos_incidence
     if not np.all(cos_i > 0):
         j = np.unravel_index(np.argmin(cos_i), cos_i.shape)
         raise SetupError(
-            f"field 'mirror': the lens does not see this mirror out to its rim "
-            f"({rim:g} mm): it is hidden beyond grazing incidence, e.g. at local "
-            f"(x, y) = ({x[j]:.2f}, {y[j]:.2f}) mm, and toward grazing incidence the "
-            f"focal images run out toward the depth, so the field has no bounded focus "
-            f"range; use field 'plane' (the FOV's zone; --field plane at the command line)")
+            f"field {field!r}: the lens does not see all of this field of the mirror: it "
+            f"is hidden beyond grazing incidence, e.g. at local (x, y) = "
+            f"({x[j]:.2f}, {y[j]:.2f}) mm (rim {setup.mirror.rim_radius:g} mm), and toward "
+            f"grazing incidence the focal images run out toward the depth, so the field "
+            f"has no bounded focus range; use field 'plane' (the FOV's zone; --field plane "
+            f"at the command line)")
+
+
+def _disc_samples(rim: float, p0=(0.0, 0.0), s_b=None):
+    """Local (x, y) arrays over a star-shaped field, its boundary included (for checks)."""
+    th = np.linspace(0.0, 2.0 * math.pi, 721)
+    t = np.linspace(0.0, 1.0, 257)[:, None]
+    s = np.full(th.shape, float(rim)) if s_b is None else np.array([s_b(a) for a in th])
+    return p0[0] + t * s * np.cos(th), p0[1] + t * s * np.sin(th)
+
+
+def _fov_field(setup, fov_deg) -> tuple[_StarField, float]:
+    """The 2-D FOV field of a tilted mirror (see :data:`FIELDS`), and its half angle."""
+    pl = placement_of(setup.mirror)
+    zone = mirror_zone(setup, fov_deg)
+    xs = zone.grid()
+    w = chief_ray(pl, pl.surface(xs, np.zeros_like(xs))).world_dir
+    phi = np.unwrap(np.arctan2(w[:, 0], w[:, 2]))
+    mid = 0.5 * (float(phi.min()) + float(phi.max()))
+    centre = np.array([math.sin(mid), 0.0, math.cos(mid)])
+    half = 0.5 * math.radians(zone.fov_deg)
+
+    def angle(x, y):
+        wd = chief_ray(pl, pl.surface(np.asarray(x, float), np.asarray(y, float))).world_dir
+        return np.arccos(np.clip(wd @ centre, -1.0, 1.0))
+
+    # The bisector's own mirror point (angle 0), on the zone: phi is monotonic there.
+    j = int(np.argmin(np.abs(phi - mid)))
+    lo, hi = xs[max(j - 1, 0)], xs[min(j + 1, len(xs) - 1)]
+    x0 = minimize_scalar(lambda x: float(angle(x, 0.0)), bounds=(min(lo, hi), max(lo, hi)),
+                         method="bounded", options={"xatol": 1e-10}).x
+    return _StarField(setup.mirror.rim_radius, (float(x0), 0.0), angle, half), half
 
 
 def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | None = None,
@@ -330,13 +410,14 @@ def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | N
 
     Parameters
     ----------
-    field : {"plane", "mirror"}
+    field : {"plane", "mirror", "fov"}
         See :data:`FIELDS`.
     n_points : int
         Grid points along a segment (the tilt-plane zone, or a radius when untilted).
     n_rings : int
-        Rings of the polar grid over a tilted mirror's disc (field "mirror"); the last
-        ring is the rim, and ring k carries 3k + 1 angles over the half disc.
+        Rings of the polar grid over a tilted mirror's 2-D field ("mirror", "fov"),
+        about its centre; the last ring is the field's boundary, and ring k carries
+        3k + 1 angles over the half field.
     rays, aperture_radius :
         Per traced point; see :func:`numeric_focus`.
 
@@ -347,8 +428,8 @@ def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | N
     Raises
     ------
     ValueError
-        For an unknown field; SetupError (a ValueError) for field "mirror" when part of
-        the mirror within its rim faces away from the lens.
+        For an unknown field; SetupError (a ValueError) for a 2-D field ("mirror",
+        "fov") part of which faces away from the lens.
     """
     if field not in FIELDS:
         raise ValueError(f"field: must be one of {', '.join(FIELDS)}, got {field!r}")
@@ -356,21 +437,27 @@ def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | N
     depths = tuple(sorted({sr.depth_min_mm, sr.depth_max_mm}))
     rim = setup.mirror.rim_radius
     tilted = not setup.mirror.is_symmetric
-    if field == "mirror":
-        _check_whole_mirror_visible(setup)
+    zone = mirror_zone(setup, fov_deg)
+    star = None
+    if field == "plane" or (field == "fov" and not tilted):
+        # Untilted, the FOV disc is searched along its radius (rotational symmetry).
+        xs = np.linspace(zone.rho_start, zone.rho_end, int(n_points))
+    elif field == "mirror":
+        _check_visible(setup, field, *_disc_samples(rim))
+        xs = np.linspace(0.0, rim, int(n_points))
+        star = _StarField(rim) if tilted else None
+    else:  # "fov", tilted
+        star, _ = _fov_field(setup, fov_deg)
+        _check_visible(setup, field, *_disc_samples(rim, star.p0, star.boundary_distance))
     foci = _LineFoci(setup, sr.reference_sensor_distance, rays=rays,
                      aperture_radius=aperture_radius)
     out = {}
     for key, which, sign in (("min", 0, 1.0), ("max", 1, -1.0)):
-        if field == "mirror" and tilted:
-            out[key] = _search_disc(foci, rim, int(n_rings), depths, which, sign)
+        if star is not None:
+            out[key] = _search_disc(foci, star, int(n_rings), depths, which, sign)
         else:
-            if field == "plane":
-                zone = mirror_zone(setup, fov_deg)
-                xs = np.linspace(zone.rho_start, zone.rho_end, int(n_points))
-            else:
-                xs = np.linspace(0.0, rim, int(n_points))
-            out[key] = _search_segment(foci, xs, depths, which, sign)
+            out[key] = _search_segment(foci, xs, depths, which, sign,
+                                       start_is_boundary=tilted)
     logger.info("traced sweep range over field %s: %.4f .. %.4f mm (%d points)", field,
                 out["min"][0], out["max"][0], foci.evaluations)
     return TracedSweepRange(
