@@ -1,0 +1,48 @@
+"""Pixels ↔ sensor millimetres: the image convention, written once.
+
+Sensor-plane coordinates ``(u, v)`` are millimetres from the optical axis, ``u`` to the
+right and ``v`` up in the upright image; pixel indices ``(row, col)`` count from the
+top-left pixel (0, 0), with integer indices at pixel centres. The optical axis meets the
+sensor at the image centre, pixel ``(H/2 − 1/2, W/2 − 1/2)``:
+
+.. math::
+
+    u = (c + \\tfrac12 - \\tfrac W2)\\,p, \\qquad v = (\\tfrac H2 - r - \\tfrac12)\\,p
+
+for pitch ``p`` (mm). Arrays broadcast; ``shape`` is an image's ``(H, W)`` (note that a
+setup's ``sensor.resolution`` is ``(W, H)``: use :func:`image_shape`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["image_shape", "optical_center_px", "pixel_to_sensor", "sensor_to_pixel"]
+
+
+def image_shape(setup) -> tuple[int, int]:
+    """``(H, W)`` of a setup's images (its ``sensor.resolution`` is ``(W, H)``)."""
+    W, H = setup.sensor.resolution
+    return int(H), int(W)
+
+
+def optical_center_px(shape) -> tuple[float, float]:
+    """``(row, col)`` of the optical axis on an image of ``shape = (H, W[, …])``."""
+    H, W = shape[0], shape[1]
+    return H / 2.0 - 0.5, W / 2.0 - 0.5
+
+
+def sensor_to_pixel(u, v, shape, pitch: float):
+    """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pitch ``pitch`` mm."""
+    r0, c0 = optical_center_px(shape)
+    u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
+    row, col = r0 - v / pitch, c0 + u / pitch
+    return (float(row), float(col)) if row.ndim == 0 else (row, col)
+
+
+def pixel_to_sensor(row, col, shape, pitch: float):
+    """Sensor point ``(u, v)`` mm of pixel ``(row, col)`` (centres at integers)."""
+    r0, c0 = optical_center_px(shape)
+    row, col = np.asarray(row, dtype=float), np.asarray(col, dtype=float)
+    u, v = (col - c0) * pitch, (r0 - row) * pitch
+    return (float(u), float(v)) if u.ndim == 0 else (u, v)
