@@ -12,6 +12,8 @@ import mitsuba  # noqa: E402,F401  (a declared dependency: a missing one must fa
 
 from mitsweep.config import load_setup  # noqa: E402
 from mitsweep.optics import mirror_point_from_image, placement_of  # noqa: E402
+from mitsweep.optics.reference import reference_geometry  # noqa: E402
+from mitsweep.optics.pixels import image_shape, pixel_to_sensor, sensor_to_pixel  # noqa: E402
 from mitsweep.render import (render_image, render_point_source,  # noqa: E402
                              render_to_exr, RenderResult)
 
@@ -47,10 +49,11 @@ def test_marker_lands_where_image_point_predicts(name, frac_u, frac_v):
     W, H = s.sensor.resolution
     p = s.sensor.pixel_pitch
     u, v = frac_u * W * p, frac_v * H * p
+    i_ref = reference_geometry(s).sensor_distance
     # The tilted mirror's image is off-centre: pull a point that misses it toward the
     # image centre (the camera axis always meets the vertex) until it sees the mirror.
     for _ in range(6):
-        if np.isfinite(mirror_point_from_image(placement_of(s.mirror), u, v, 58.0).surface.rho):
+        if np.isfinite(mirror_point_from_image(placement_of(s.mirror), u, v, i_ref).surface.rho):
             break
         u, v = 0.7 * u, 0.7 * v
     else:
@@ -61,8 +64,9 @@ def test_marker_lands_where_image_point_predicts(name, frac_u, frac_v):
     col, row = centroid(img)
     # The marker's image is a ~3 px disk sampled at 64 spp: its centroid scatters by
     # ~0.05 px; a flip of u or v would move it by 2|u|/p >= 12 px.
-    assert col == pytest.approx(W / 2 + u / p - 0.5, abs=0.3)
-    assert row == pytest.approx(H / 2 - v / p - 0.5, abs=0.3)
+    want_row, want_col = sensor_to_pixel(u, v, image_shape(s), p)
+    assert col == pytest.approx(want_col, abs=0.3)
+    assert row == pytest.approx(want_row, abs=0.3)
 
 
 @pytest.mark.parametrize("mode", ["focused", "stopped", "sweep"])
@@ -84,11 +88,9 @@ def test_aovs_give_mirror_mask_and_depth_on_room_walls():
     s = small("paraboloid", 48, objects=0)
     res = render_image(s, "pinhole", spp=4, seed=0, aovs=("depth", "mask"))
     mask, depth = res.aovs["mask"], res.aovs["depth"]
-    W, H = s.sensor.resolution
-    p = s.sensor.pixel_pitch
     i_ref = res.metadata["reference_sensor_distance_mm"]
-    cols, rows = np.meshgrid(np.arange(W), np.arange(H))
-    u, v = (cols + 0.5 - W / 2) * p, (H / 2 - rows - 0.5) * p
+    rows, cols = np.indices(image_shape(s))
+    u, v = pixel_to_sensor(rows, cols, image_shape(s), s.sensor.pixel_pitch)
     ray = mirror_point_from_image(placement_of(s.mirror), u, v, i_ref)
     hit = np.isfinite(ray.surface.rho)
     # The 1e-3 mm mesh may disagree with the exact conic only at the rim: < 2 % of pixels.

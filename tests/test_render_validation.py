@@ -13,6 +13,7 @@ import mitsuba as mi  # noqa: E402
 
 from mitsweep.config import load_setup  # noqa: E402
 from mitsweep.optics import object_distance  # noqa: E402
+from mitsweep.optics.pixels import image_shape, pixel_to_sensor  # noqa: E402
 from mitsweep.render import camera_dict  # noqa: E402
 from mitsweep.render.api import mode_camera  # noqa: E402
 from mitsweep.render.scene import build_scene, camera_transform  # noqa: E402
@@ -86,10 +87,8 @@ def test_point_source_ipsf_matches_tracer_within_noise():
     from mitsweep.render import render_point_source
 
     s = load_setup(SCENES / "sphere.toml")
-    W, H = s.sensor.resolution
-    p = s.sensor.pixel_pitch
     col, row, K = 336, 206, 31
-    u, v = (col + 0.5 - W / 2) * p, (H / 2 - row - 0.5) * p
+    u, v = pixel_to_sensor(row, col, image_shape(s), s.sensor.pixel_pitch)
     ker, _ = tracer.integrated_psf(s, u, v, 500.0, kernel_size=K, rays=4_000_000)
     crops = []
     for seed in (1, 2):

@@ -174,10 +174,11 @@ def _mesh_accuracy(setup, tols, spp):
     from .api import render_point_source
     from .mirror import cached_mesh_file
 
-    W, H = setup.sensor.resolution
-    p = setup.sensor.pixel_pitch
+    from ..optics.pixels import image_shape, pixel_to_sensor
+
+    H, W = image_shape(setup)
     col, row = int(W * 0.66), int(H * 0.4)
-    u, v = (col + 0.5 - W / 2) * p, (H / 2 - row - 0.5) * p
+    u, v = pixel_to_sensor(row, col, (H, W), setup.sensor.pixel_pitch)
     kw = dict(spp=spp, seed=4, mode="focused", window=31, radius_px=0.3)
     t0 = time.perf_counter()
     ref = render_point_source(setup, u, v, 500.0, **kw)
