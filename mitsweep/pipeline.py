@@ -42,7 +42,7 @@ from typing import Any, Callable
 import numpy as np
 
 from .config import Setup, setup_from_dict, setup_to_dict
-from .io import read_exr, write_exr, write_text_atomic
+from .io import WriteError, read_exr, write_exr, write_text_atomic
 from .io.exr import stack_channels
 
 __all__ = ["DatasetOptions", "options_from_dict", "build_dataset", "evaluate_dataset",
@@ -530,7 +530,11 @@ def _build_locked(setup: Setup, root: Path, opts: DatasetOptions, executor: str,
         # Items of other options (fewer scenes, other light levels) are not ours to keep.
         manifest["items"] = {k: v for k, v in old["items"].items() if k in by_name}
     for i in range(opts.scenes):
-        (root / f"scene_{i:03d}").mkdir(exist_ok=True)
+        scene_dir = root / f"scene_{i:03d}"
+        try:
+            scene_dir.mkdir(exist_ok=True)
+        except OSError as exc:
+            raise WriteError(exc.errno, exc.strerror, str(scene_dir)) from None
 
     def is_done(t: _Task) -> bool:
         item = manifest["items"].get(t.name)

@@ -139,21 +139,47 @@ def test_unrecognised_exr_failure_is_an_io_error(tmp_path, monkeypatch):
     assert _no_temporaries(tmp_path)
 
 
-@pytest.mark.parametrize("kind", ["png", "json"])
-def test_injected_enospc_at_flush_keeps_the_previous_file(tmp_path, monkeypatch, kind):
-    """Delayed-allocation file systems report a full disk when the data is flushed."""
+@pytest.mark.parametrize("code", [errno.ENOSPC, errno.EDQUOT, errno.EIO])
+@pytest.mark.parametrize("kind", sorted(WRITERS))
+def test_injected_error_at_flush_keeps_the_previous_file(tmp_path, monkeypatch, kind, code):
+    """Delayed-allocation file systems, quotas and failing disks report the error when the
+    data is flushed."""
     target = tmp_path / f"out.{kind}"
     target.write_bytes(b"previous")
 
-    def full(path):
-        raise OSError(errno.ENOSPC, ENOSPC_TEXT)
+    def fail(path):
+        raise OSError(code, os.strerror(code))
 
-    monkeypatch.setattr(atomic_mod, "_fsync", full)
+    monkeypatch.setattr(atomic_mod, "_fsync", fail)
     with pytest.raises(WriteError) as info:
         WRITERS[kind](target)
-    assert str(info.value) == f"cannot write {target}: {ENOSPC_TEXT}"
+    assert info.value.errno == code
+    assert str(info.value) == f"cannot write {target}: {os.strerror(code)}"
     assert target.read_bytes() == b"previous"
     assert _no_temporaries(tmp_path)
+
+
+def test_permission_denied_names_the_target(tmp_path, monkeypatch):
+    """EACCES where the temporary is created (root bypasses directory modes, so the
+    refusal is injected: an ACL or a security module would give the same)."""
+    import tempfile
+
+    def denied(*args, **kwargs):
+        raise PermissionError(errno.EACCES, os.strerror(errno.EACCES))
+
+    monkeypatch.setattr(tempfile, "mkstemp", denied)
+    with pytest.raises(WriteError) as info:
+        write_text_atomic(tmp_path / "x.json", "{}")
+    assert str(info.value) == f"cannot write {tmp_path / 'x.json'}: Permission denied"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes into read-only directories")
+def test_unwritable_directory_is_named(tmp_path):
+    d = tmp_path / "ro"
+    d.mkdir(mode=0o555)
+    with pytest.raises(WriteError, match=f"cannot write {d / 'x.json'}: directory .* is not "
+                                         f"writable"):
+        write_text_atomic(d / "x.json", "{}")
 
 
 def test_write_error_pickles_for_process_executors():

@@ -131,7 +131,8 @@ class DirectoryLock:
 
     def _busy(self, holder: dict) -> DirectoryLocked:
         what = _describe(holder) if holder else "another process (no details recorded)"
-        hint = ("" if self.wait else "; wait for it to finish or pass --wait")
+        hint = (f"; gave up after waiting {self.wait:g} s" if self.wait
+                else "; wait for it to finish or pass --wait")
         return DirectoryLocked(errno.EBUSY, f"{self.directory} is in use by another mitsweep "
                                             f"run: {what}{hint}")
 
