@@ -99,7 +99,8 @@ def test_unwritable_plot_path_exits_2(scenes_dir, tmp_path):
 
 
 @pytest.mark.parametrize("args,message", [
-    (["--field", "mirror"], "--field: chooses the field of the traced range; give it with --verify"),
+    (["--field", "mirror"], "--field: chooses the field of the traced range; give it "
+                            "with --verify"),
     (["--verify", "--field", "disc"], "argument --field: invalid choice: 'disc'"),
     (["--verify", "--field", "mirror"], "the lens does not see all of this field"),
 ])
@@ -122,20 +123,25 @@ TRACED_KEYS = {"traced_field", "traced_focus_min_mm", "traced_focus_max_mm",
 
 
 @pytest.mark.slow
-def test_verify_reports_the_field_and_where(scenes_dir):
+@pytest.mark.parametrize("field,farthest,on_rim", [("mirror", 470.979, True),
+                                                  ("fov", 391.409, False)])
+def test_verify_reports_the_field_and_where(scenes_dir, field, farthest, on_rim):
     rc, out, err = run_cli("sweep-range", scenes_dir / "paraboloid_tilted.toml", "--verify",
-                           "--field", "mirror", "--json")
+                           "--field", field, "--json")
     assert rc == 0, err
     data = json.loads(out)
-    assert TRACED_KEYS <= set(data) and data["traced_field"] == "mirror"
-    # The whole mirror reaches past the paper's tilt-plane range (362.84-389.52 mm).
+    assert TRACED_KEYS <= set(data) and data["traced_field"] == field
+    # Both reach past the paper's tilt-plane range (362.84-389.52 mm) at 10 m: the whole
+    # mirror at its far rim, the 2-D FOV off the tilt plane on its boundary (values
+    # measured with `--verify --field`, converged to < 1 µm; 5 µm allows the rounding).
     assert data["traced_focus_min_mm"] == pytest.approx(362.835, abs=0.005)
-    assert data["traced_focus_max_mm"] > 450.0
+    assert data["traced_focus_max_mm"] == pytest.approx(farthest, abs=0.005)
     at = data["traced_focus_max_at"]
-    assert at["on_rim"] and at["depth_mm"] == 10000.0 and len(at["image_uv_mm"]) == 2
+    assert at["on_boundary"] and at["on_rim"] == on_rim and at["depth_mm"] == 10000.0
+    assert len(at["image_uv_mm"]) == 2
     # The keys of earlier versions: the whole 2-D field of a tilted mirror.
-    assert data["traced_field_focus_max_mm"] == data["traced_focus_max_mm"]
-    assert data["traced_field_focus_min_mm"] == data["traced_focus_min_mm"]
+    assert data["traced_field_focus_max_mm"] == pytest.approx(470.979, abs=0.005)
+    assert data["traced_field_focus_min_mm"] == pytest.approx(362.835, abs=0.005)
 
 
 @pytest.mark.slow

@@ -433,6 +433,8 @@ def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | N
     """
     if field not in FIELDS:
         raise ValueError(f"field: must be one of {', '.join(FIELDS)}, got {field!r}")
+    if int(n_points) < 3 or int(n_rings) < 1:
+        raise ValueError(f"n_points must be >= 3 and n_rings >= 1, got {n_points}, {n_rings}")
     sr = optimal_sweep_range(setup, fov_deg=fov_deg, depth_min=depth_min, depth_max=depth_max)
     depths = tuple(sorted({sr.depth_min_mm, sr.depth_max_mm}))
     rim = setup.mirror.rim_radius
