@@ -7,9 +7,14 @@ string attributes prefixed ``mitsweep:`` so that other tools show them and leave
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import io
 import json
+import logging
 import os
+import sys
+import tempfile
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -21,6 +26,8 @@ __all__ = ["ExrError", "write_exr", "read_exr", "read_exr_header", "channel_name
            "stack_channels"]
 
 _PREFIX = "mitsweep:"
+
+logger = logging.getLogger(__name__)
 
 
 class ExrError(ValueError):
@@ -130,6 +137,41 @@ def _metadata(header: Mapping[str, Any]) -> dict[str, Any]:
     return meta
 
 
+
+@contextlib.contextmanager
+def _openexr_chatter():
+    """Collect what OpenEXR prints while reading a damaged file instead of letting it
+    reach the user's terminal: its Python binding prints warnings on ``sys.stdout`` and
+    the C library writes errors to file descriptor 2. Yields the list of lines said."""
+    said: list[str] = []
+    buf = io.StringIO()
+    try:
+        fd_saved = os.dup(2)
+    except OSError:  # no stderr descriptor (e.g. a daemon): nothing to divert
+        fd_saved = None
+    with tempfile.TemporaryFile(mode="w+b") as sink:
+        if fd_saved is not None:
+            sys.stderr.flush()
+            os.dup2(sink.fileno(), 2)
+        try:
+            with contextlib.redirect_stdout(buf):
+                yield said
+        finally:
+            if fd_saved is not None:
+                os.dup2(fd_saved, 2)
+                os.close(fd_saved)
+            sink.seek(0)
+            text = buf.getvalue() + sink.read().decode("utf-8", "replace")
+            said.extend(line.strip() for line in text.splitlines() if line.strip())
+
+
+def _first_cause(said: list[str], exc: BaseException) -> str:
+    """The most telling message of a failed read: the library's own words first."""
+    for line in said:
+        if "EXR_ERR" in line or "corrupt" in line.lower():
+            return line.split(": ", 1)[-1]
+    return str(exc) or type(exc).__name__
+
 def read_exr(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Read every channel (name → (H, W) float array) and the mitsweep metadata."""
     import OpenEXR
@@ -138,13 +180,16 @@ def read_exr(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     if not p.is_file():
         raise ExrError(f"{p}: no such file")
     try:
-        with OpenEXR.File(str(p), separate_channels=True) as f:
-            chans = {name: np.array(c.pixels) for name, c in f.channels().items()}
-            meta = _metadata(f.header())
+        with _openexr_chatter() as said:
+            with OpenEXR.File(str(p), separate_channels=True) as f:
+                chans = {name: np.array(c.pixels) for name, c in f.channels().items()}
+                meta = _metadata(f.header())
     except ExrError:
         raise
     except Exception as exc:  # OpenEXR raises plain RuntimeError/IOError
-        raise ExrError(f"{p}: not a readable EXR file ({exc})") from None
+        raise ExrError(f"{p}: not a readable EXR file ({_first_cause(said, exc)})") from None
+    if said:
+        logger.debug("%s: OpenEXR said: %s", p, " | ".join(said))
     return chans, meta
 
 
@@ -156,10 +201,11 @@ def read_exr_header(path: str | Path) -> dict[str, Any]:
     if not p.is_file():
         raise ExrError(f"{p}: no such file")
     try:
-        with OpenEXR.File(str(p), header_only=True) as f:
-            return _metadata(f.header())
+        with _openexr_chatter() as said:
+            with OpenEXR.File(str(p), header_only=True) as f:
+                return _metadata(f.header())
     except Exception as exc:
-        raise ExrError(f"{p}: not a readable EXR file ({exc})") from None
+        raise ExrError(f"{p}: not a readable EXR file ({_first_cause(said, exc)})") from None
 
 
 def stack_channels(chans: Mapping[str, np.ndarray], names=("R", "G", "B")) -> np.ndarray:
