@@ -107,9 +107,12 @@ def test_zaber_capture_with_arduino_shutter(tmp_path):
     assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
                                                        abs=TIMER_RESOLUTION_S)
     # positions come from polls interpolated at the shutter times; the host-board clock
-    # mapping is uncertain by half the SHUTTER round trip: allow that at the velocity,
-    # plus the 5 ms the host may take between starting the move and timing the shutter
-    tol = plan.velocity_actual_mm_s * (exp["timing_uncertainty_s"] + 5e-3)
+    # mapping is uncertain by half the SHUTTER round trip, and the host-timed shutter
+    # opens late or early by at most the host's latency from sending the move to the
+    # SHUTTER reply (a few ms when idle, more under load): allow both at the velocity
+    placement_s = data["clock_map"]["placement_uncertainty_s"]
+    assert 0 < placement_s < 0.5
+    tol = plan.velocity_actual_mm_s * (exp["timing_uncertainty_s"] + placement_s)
     assert exp["open_position_mm"] == pytest.approx(plan.open_mm, abs=tol)
     assert exp["close_position_mm"] == pytest.approx(plan.close_mm, abs=tol)
     assert record.devices["zaber"].startswith("zaber device id")

@@ -94,3 +94,48 @@ def test_unwritable_record_path_exits_2_before_opening_ports(tmp_path):
                                "--out", tmp_path / "missing_dir" / "rec.json", timeout=120)
         assert not [line for _, d, line in dev.model.log if d == "rx"], "port was used"
     assert rc == 2 and "does not exist" in err
+
+
+def test_out_refuses_an_existing_file_without_force(tmp_path):
+    setup = setup_file(tmp_path)
+    out = tmp_path / "rec.json"
+    out.write_text("an earlier capture\n")
+    with PtyDevice(ArduinoModel()) as dev:
+        rc, _, err = run_cli("capture", setup, "--port", dev.port, "--out", out, timeout=120)
+        assert not [line for _, d, line in dev.model.log if d == "rx"], "port was used"
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert err.startswith("mitsweep: error: --out") and "--force" in err
+    assert out.read_text() == "an earlier capture\n"
+
+
+def test_out_with_force_replaces_an_existing_file(tmp_path):
+    setup = setup_file(tmp_path)
+    out = tmp_path / "rec.json"
+    out.write_text("an earlier capture\n")
+    with PtyDevice(ArduinoModel()) as dev:
+        rc, _, err = run_cli("capture", setup, "--port", dev.port, "--out", out, "--force",
+                             timeout=120)
+    assert rc == 0, err
+    assert load_capture_record(out)["complete"]
+
+
+@pytest.mark.parametrize("alias", ["same", "relative", "symlink", "hardlink"])
+def test_out_is_never_the_setup_file_even_with_force(tmp_path, alias):
+    import os
+
+    setup = setup_file(tmp_path)
+    before = setup.read_text()
+    out = {"same": setup, "relative": tmp_path / "sub" / ".." / setup.name,
+           "symlink": tmp_path / "link.json", "hardlink": tmp_path / "hard.json"}[alias]
+    (tmp_path / "sub").mkdir()
+    if alias == "symlink":
+        out.symlink_to(setup)
+    elif alias == "hardlink":
+        os.link(setup, out)
+    with PtyDevice(ArduinoModel()) as dev:
+        rc, _, err = run_cli("capture", setup, "--port", dev.port, "--out", out, "--force",
+                             timeout=120)
+        assert not [line for _, d, line in dev.model.log if d == "rx"], "port was used"
+    assert rc == 2 and len(err.strip().splitlines()) == 1, err
+    assert "is the input" in err
+    assert setup.read_text() == before

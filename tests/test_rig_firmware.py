@@ -156,8 +156,10 @@ class HostBoard:
         os.close(self.slave)
 
     def pin_changes(self, pin: int) -> list[tuple[int, int, int]]:
-        """(micros, value, axis steps) for each change of ``pin``."""
-        rows = [tuple(int(v) for v in ln.split()) for ln in self.trace.read_text().splitlines()]
+        """(micros, value, axis steps) for each change of ``pin`` (none before the
+        program has opened its trace)."""
+        text = self.trace.read_text() if self.trace.exists() else ""
+        rows = [tuple(int(v) for v in ln.split()) for ln in text.splitlines()]
         return [(t, v, a) for t, p, v, a in rows if p == pin]
 
 

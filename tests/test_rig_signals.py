@@ -19,7 +19,8 @@ import pytest
 from conftest import ROOT
 from test_rig_cli import setup_file
 
-from mitsweep.rig import load_capture_record
+from mitsweep.config import load_setup
+from mitsweep.rig import load_capture_record, plan_capture
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
 
 ZABER_STEPS_PER_MM = 1 / 0.047625e-3
@@ -53,15 +54,22 @@ def received(model, prefix: str) -> bool:
 class Rig:
     """The simulated devices of one rig configuration and the capture's command line."""
 
-    def __init__(self, kind: str, tmp_path, board_faults=(), zaber_faults=()) -> None:
+    def __init__(self, kind: str, tmp_path, board_faults=(), zaber_faults=(), *,
+                 at_approach: bool = True) -> None:
+        """``at_approach``: the stage starts at the approach position (the sweep starts
+        at once), else at 0 (a ~1.2 s approach move first)."""
         self.kind = kind
         extra = ZABER_RIG if kind == "zaber" else ""
         self.setup = setup_file(tmp_path, extra, SWEEP_VELOCITY)
         self.out = tmp_path / "rec.json"
-        self.board = PtyDevice(ArduinoModel(list(board_faults), homed=True, position=0))
+        plan = plan_capture(load_setup(self.setup), stage=kind)
+        start = plan.approach_steps if at_approach else 0
+        board_start = start if kind == "arduino" else 0
+        self.board = PtyDevice(ArduinoModel(list(board_faults), homed=True,
+                                            position=board_start))
         self.stage = None
         if kind == "zaber":
-            self.stage = PtyDevice(ZaberModel(list(zaber_faults), homed=True, position=0,
+            self.stage = PtyDevice(ZaberModel(list(zaber_faults), homed=True, position=start,
                                               max_position=int(26 * ZABER_STEPS_PER_MM)))
 
     @property
@@ -111,11 +119,21 @@ def signal_exit_status(name: str) -> int:
     return 128 + getattr(signal, name)
 
 
-@pytest.mark.parametrize("rig_kind", ["arduino", "zaber"])
-@pytest.mark.parametrize("sig", SIGNALS)
-@pytest.mark.parametrize("when", ["approach", "sweep"])
+def matrix(cases, fast):
+    """``cases`` as params; those not in ``fast`` marked slow. The default run keeps
+    each signal, each rig and each point of the capture at least once; CI's full run
+    (``-m "slow or not slow"``) runs them all."""
+    return [pytest.param(*c, id="-".join(c),
+                         marks=() if c in fast else pytest.mark.slow) for c in cases]
+
+
+@pytest.mark.parametrize("when, sig, rig_kind", matrix(
+    [(w, s, r) for w in ("approach", "sweep") for s in SIGNALS for r in ("arduino", "zaber")],
+    fast={("sweep", "SIGINT", "arduino"), ("sweep", "SIGTERM", "zaber"),
+          ("sweep", "SIGHUP", "arduino"), ("approach", "SIGTERM", "arduino"),
+          ("approach", "SIGHUP", "zaber")}))
 def test_signal_stops_the_rig_and_records_interrupted(tmp_path, rig_kind, sig, when):
-    with Rig(rig_kind, tmp_path) as rig:
+    with Rig(rig_kind, tmp_path, at_approach=when != "approach") as rig:
         proc = rig.start_capture()
         try:
             if when == "approach":
@@ -142,9 +160,9 @@ def test_signal_stops_the_rig_and_records_interrupted(tmp_path, rig_kind, sig, w
         assert "shutter released and stage stopped: confirmed" in err
 
 
-@pytest.mark.parametrize("rig_kind", ["arduino", "zaber"])
-@pytest.mark.parametrize("first, second", [(SIGNALS[i], SIGNALS[(i + 1) % 3])
-                                           for i in range(3)])
+@pytest.mark.parametrize("first, second, rig_kind", matrix(
+    [(SIGNALS[i], SIGNALS[(i + 1) % 3], r) for i in range(3) for r in ("arduino", "zaber")],
+    fast={("SIGTERM", "SIGHUP", "arduino"), ("SIGHUP", "SIGINT", "zaber")}))
 def test_second_signal_does_not_cut_the_safety_path_short(tmp_path, rig_kind, first,
                                                           second):
     slow_stop = Fault("slow_reply", command="STOP", delay_s=SLOW_STOP_S)

@@ -89,3 +89,13 @@ def test_closed_far_end_is_port_lost(pty_link):
 def test_missing_port_is_port_unavailable(tmp_path):
     with pytest.raises(PortUnavailable, match="cannot open"):
         open_port(str(tmp_path / "ttyACM9"))
+
+
+def test_busy_cores_fixture_keeps_the_cpus_busy(busy_cores):
+    """The load the rig tests run under in CI: one spinning process per CPU."""
+    assert len(busy_cores) == (os.cpu_count() or 2)
+    for pid in busy_cores:
+        os.kill(pid, 0)   # alive (raises if not)
+    time.sleep(0.5)
+    ticks = [int(open(f"/proc/{pid}/stat").read().split()[13]) for pid in busy_cores]
+    assert all(t > 0 for t in ticks), ticks   # each got CPU time (user ticks)

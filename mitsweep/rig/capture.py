@@ -289,8 +289,11 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
     t_tx = record.log.now()
     board_t = a.fire(delay_us=delay_us, duration_us=duration_us)
     t_rx = record.log.now()
+    # the shutter opens t_to_open after the move started, up to the host's latency from
+    # sending the move to the SHUTTER reply (on a loaded host, more than a few ms)
     record.clock_map = {"board_t_us": board_t, "host_t_s": 0.5 * (t_tx + t_rx),
-                        "uncertainty_s": 0.5 * (t_rx - t_tx)}
+                        "uncertainty_s": 0.5 * (t_rx - t_tx),
+                        "placement_uncertainty_s": t_rx - t_move}
     record.mark("sweep started")
     deadline = _deadline(plan.sweep_duration_s)
     while True:

@@ -17,6 +17,9 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
                     capture started), device, dir ("tx"/"rx"), text
     events          the Arduino's events (board µs clock, unwrapped)
     stage_samples   Zaber position polls (host t_s, microsteps), zaber mode only
+    clock_map       zaber mode: board µs ↔ host s at the SHUTTER exchange (uncertainty_s:
+                    half its round trip); placement_uncertainty_s bounds how far from its
+                    planned time the host-timed shutter opened (move sent → SHUTTER reply)
     safety          what the safety path did: device, action, confirms (what the step
                     makes safe), ok (the device confirmed it), reason and detail (why
                     not)
