@@ -4,6 +4,8 @@ and a record marked incomplete (real pty I/O against the simulators)."""
 from __future__ import annotations
 
 import _thread
+import os
+import signal
 import threading
 import time
 from pathlib import Path
@@ -11,8 +13,9 @@ from pathlib import Path
 import pytest
 
 from mitsweep.config import load_setup
-from mitsweep.rig import (DeviceFault, PortLost, ProtocolError, ReplyTimeout, RigPorts,
-                          load_capture_record, plan_capture, run_capture)
+from mitsweep.rig import (CaptureInterrupted, DeviceFault, PortLost, ProtocolError,
+                          ReplyTimeout, RigPorts, load_capture_record, plan_capture,
+                          run_capture)
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
 from mitsweep.rig.testing import fast_rig_setup
 
@@ -141,3 +144,35 @@ def test_record_marked_running_before_motion(sphere, tmp_path):
         run_capture(sphere, RigPorts(arduino=dev.port), out=out)
     assert seen["status"] == "running" and seen["complete"] is False
     assert load_capture_record(out)["complete"] is True
+
+
+class _TerminatedBoard(ArduinoModel):
+    """Sends SIGTERM to this process (``kill PID``) 0.2 s into the sweep."""
+
+    def _cmd_sweep(self, nums, now):
+        threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGTERM)).start()
+        return super()._cmd_sweep(nums, now)
+
+
+def test_sigterm_during_sweep_runs_the_safety_path_and_restores_handlers(sphere, tmp_path):
+    """The API on the main thread: SIGTERM raises CaptureInterrupted after the safety
+    path, the record names the signal, and the caller's handler is back afterwards."""
+    plan = plan_capture(sphere)
+    out = tmp_path / "capture.json"
+    seen = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: seen.append(signum))
+    try:
+        with PtyDevice(_TerminatedBoard(homed=True, position=plan.approach_steps)) as dev:
+            with pytest.raises(CaptureInterrupted) as info:
+                run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+            assert_safe(dev.model, plan, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
+            assert dev.model.stopped
+        assert info.value.signal_name == "SIGTERM"
+        assert info.value.capture_record.signal == "SIGTERM"
+        os.kill(os.getpid(), signal.SIGTERM)   # the caller's handler again, not ours
+        time.sleep(0.05)
+        assert seen == [signal.SIGTERM]
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    data = assert_incomplete(out, "interrupted")
+    assert data["signal"] == "SIGTERM" and data["safety"][0]["ok"]

@@ -191,9 +191,9 @@ def test_second_signal_does_not_cut_the_safety_path_short(tmp_path, rig_kind, fi
 
 
 @pytest.mark.parametrize("rig_kind, board_faults, zaber_faults, expected", [
-    ("arduino", [Fault("unplug", at_fraction=0.5)], [],
+    ("arduino", [Fault("unplug", at_fraction=0.2)], [],
      "shutter released and stage stopped: NOT confirmed (port lost)"),
-    ("zaber", [], [Fault("unplug", at_fraction=0.5)],
+    ("zaber", [], [Fault("unplug", at_fraction=0.2)],
      "shutter released: confirmed; stage stopped: NOT confirmed (port lost)"),
 ], ids=["arduino-unplug", "zaber-unplug"])
 def test_unconfirmed_safety_step_exits_3_and_says_which(tmp_path, rig_kind, board_faults,

@@ -154,7 +154,9 @@ class _SignalGuard:
 
     def restore(self) -> None:
         for signum, handler in self._previous.items():
-            signal.signal(signum, handler)
+            # None: the previous handler was not installed from Python; SIG_DFL is
+            # the nearest Python can put back
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
         self._previous.clear()
 
     def _handle(self, signum, frame) -> None:

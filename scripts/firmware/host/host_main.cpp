@@ -2,7 +2,9 @@
 // axis driven by the sketch's STEP/DIR pins with a home switch at position <= 0, and a
 // trace of the shutter pin. Opening the port (the host flushing the pty, seen in packet
 // mode) re-executes the program, like an Uno's reset on DTR; the axis keeps its
-// physical position across the reset.
+// physical position across the reset. The program outlives a host that dies while
+// another process keeps the pty's slave open (as the tests do), like a board on its own
+// supply: its watchdog (WATCHDOG <ms>) then stops the axis and releases the shutter.
 //
 // Environment: MITSWEEP_FW_START_STEPS (axis position at start, steps, default 400),
 // MITSWEEP_FW_TRACE (file to append "<micros> <pin> <value> <axis>" pin changes to).
