@@ -44,6 +44,7 @@ import numpy as np
 from .config import Setup, setup_from_dict, setup_to_dict
 from .io import WriteError, read_exr, write_exr, write_text_atomic
 from .io.exr import stack_channels
+from .optics.pixels import optical_center_px
 
 __all__ = ["DatasetOptions", "options_from_dict", "build_dataset", "evaluate_dataset",
            "load_manifest", "validate_manifest", "item_names", "dataset_inputs", "MANIFEST",
@@ -708,8 +709,7 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
         level = white_level(gt, mask)
         ref = gt / level
         ys, xs = np.nonzero(m)
-        H, W = m.shape
-        cy, cx = (H - 1) / 2.0, (W - 1) / 2.0
+        cy, cx = optical_center_px(m.shape)
         r_max = float(np.max(np.hypot(ys - cy, xs - cx))) + 0.5
         edges = np.linspace(0.0, r_max, n_radial_bins + 1)
         scene_res: dict[str, Any] = {"white_level": level, "mirror_radius_px": r_max}

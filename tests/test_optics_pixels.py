@@ -45,6 +45,18 @@ def test_arrays_broadcast():
     assert u.shape == (3, 5) and np.allclose(u[:, 2], 0) and np.allclose(v[1], 0)
 
 
+def test_scalar_and_array_arguments_broadcast():
+    """A row of points at one v (a grid's axis) maps to one array each way."""
+    u = np.array([-0.25, 0.0, 0.25])
+    rows, cols = sensor_to_pixel(u, 0.0, (4, 6), 0.5)
+    assert rows.shape == cols.shape == (3,)
+    np.testing.assert_array_equal(rows, [1.5, 1.5, 1.5])
+    np.testing.assert_array_equal(cols, [2.0, 2.5, 3.0])
+    us, vs = pixel_to_sensor(1.5, cols, (4, 6), 0.5)
+    np.testing.assert_array_equal(us, u)
+    np.testing.assert_array_equal(vs, [0.0, 0.0, 0.0])
+
+
 def test_image_shape_is_rows_then_columns():
     from dataclasses import replace
 

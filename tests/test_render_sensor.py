@@ -61,7 +61,7 @@ def _focalsweep(spp=16, **kw):
 
 def _thinlens(i, aperture_radius, spp=16):
     o = F * i / (i - F)
-    return {"type": "thinlens", "fov": math.degrees(2 * math.atan(W * PITCH / 2 / i)),
+    return {"type": "thinlens", "fov": math.degrees(2 * math.atan(0.5 * W * PITCH / i)),
             "fov_axis": "x", "aperture_radius": aperture_radius, "focus_distance": o,
             "to_world": _look(), "film": _film(),
             "sampler": {"type": "independent", "sample_count": spp}, "far_clip": 1e5}
@@ -86,7 +86,7 @@ def test_collapsed_sweep_equals_thinlens_with_same_seed(sensor_distance, f_numbe
 
 def test_pinhole_equals_perspective_with_same_seed():
     i = 57.0
-    persp = {"type": "perspective", "fov": math.degrees(2 * math.atan(W * PITCH / 2 / i)),
+    persp = {"type": "perspective", "fov": math.degrees(2 * math.atan(0.5 * W * PITCH / i)),
              "fov_axis": "x", "to_world": _look(), "film": _film(),
              "sampler": {"type": "independent", "sample_count": 8}, "far_clip": 1e5}
     ours = _render(_scene(_focalsweep(spp=8, sensor_distance=i, aperture_radius=0.0)), 5)

@@ -133,7 +133,7 @@ def test_vignetting_is_reported_at_the_rim():
     (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, method="magic"), ValueError, "method"),
     (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, kernel_size=30), ValueError,
      "kernel_size"),
-    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, motion="linear"), ValueError,
+    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, motion="linear"), TypeError,
      "MotionProfile"),
     (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0,
                             motion=MotionProfile.linear(58.0, 58.0)), SetupError, "empty"),

@@ -111,10 +111,9 @@ def _setup_motion(setup) -> dict | None:
     if setup.sweep.profile == "tabulated":
         log.info("sweep.profile = 'tabulated': the bank's motion is not compared")
         return None
-    from ..optics import optimal_sweep_range
-    from ..optics.motion import motion_for
+    from ..optics.reference import reference_geometry
 
-    return motion_for(setup, optimal_sweep_range(setup)).as_dict()
+    return reference_geometry(setup).motion.as_dict()
 
 
 def run(args) -> int:

@@ -84,12 +84,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def _motion(setup, table_path):
-    from ..optics import optimal_sweep_range
+def _geometry(setup, table_path):
+    """The reference geometry of the run: the setup's sweep and motion (measured, from
+    ``--motion-table``, for ``sweep.profile = 'tabulated'``) and its reference distance."""
     from ..config import SetupError
+    from ..optics import optimal_sweep_range
     from ..optics.motion import MotionProfile, motion_for
+    from ..optics.reference import reference_geometry
 
-    sweep = optimal_sweep_range(setup)
     table = None
     if table_path is not None:
         import numpy as np
@@ -110,7 +112,8 @@ def _motion(setup, table_path):
         if setup.sweep.profile != "tabulated":
             raise UsageError(f"--motion-table {table_path} needs sweep.profile = 'tabulated' "
                              f"in the setup")
-    return sweep, motion_for(setup, sweep, table=table)
+    sweep = optimal_sweep_range(setup)
+    return reference_geometry(setup, sweep=sweep, motion=motion_for(setup, sweep, table=table))
 
 
 def _check_output(path: str | None, allowed: tuple[str, ...], what: str) -> None:
@@ -141,7 +144,8 @@ def run(args) -> int:
         raise UsageError(f"--radii {args.radii}: at most {max(W, H)} for the {W}x{H} sensor")
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
-    sweep, motion = _motion(setup, args.motion_table)
+    geometry = _geometry(setup, args.motion_table)
+    sweep, motion, i_ref = geometry.sweep, geometry.motion, geometry.sensor_distance
     common = dict(rays=args.rays, kernel_size=args.kernel_size, seed=args.seed)
     out: dict = {"setup": setup.name, "version": __version__}
 
@@ -201,13 +205,12 @@ def run(args) -> int:
     where = (f"--radius {args.radius:g} --angle {args.angle:g}" if args.radius is not None
              else f"--point {u:g} {v:g}")
     try:  # the image point must see the mirror: say which flag put it elsewhere
-        source_from_image(setup, u, v, depth,
-                          reference_sensor_distance=sweep.reference_sensor_distance)
+        source_from_image(setup, u, v, depth, reference_sensor_distance=i_ref)
     except ValueError as exc:
         raise UsageError(f"{where}: {exc}") from None
     if args.sensor_distance is not None:
         kernel, info = psf(setup, u, v, depth, args.sensor_distance, double=args.float64,
-                           reference_sensor_distance=sweep.reference_sensor_distance, **common)
+                           reference_sensor_distance=i_ref, **common)
     else:
         kernel, info = integrated_psf(setup, u, v, depth, sweep=sweep, motion=motion,
                                       method=args.method, time_samples=args.time_samples,

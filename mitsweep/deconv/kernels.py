@@ -4,7 +4,8 @@ Helpers to pick a depth slice of an :class:`~mitsweep.io.bank.IPSFBank`, interpo
 a radial bank at any radius, rotate a kernel to a polar angle, turn a radial bank into a
 grid bank, and check that a bank matches an image. Pixel conventions follow
 ``mitsweep/io/bank.py``: kernel rows go down the image (−v), columns right (+u), centre
-at ``[K // 2, K // 2]``; the optical axis images at pixel ``(H/2 − 0.5, W/2 − 0.5)``.
+at ``[K // 2, K // 2]``; pixels and sensor millimetres convert through
+:mod:`mitsweep.optics.pixels` (the optical axis at the image centre).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..io.bank import OPTICS_SECTIONS, BankError, IPSFBank, optics_fingerprint, optics_sections
+from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..resources import check_allocation
 
 __all__ = ["PAPER_DECONV_DEPTH_MM", "optical_center", "select_depth", "radii_px",
@@ -29,9 +31,9 @@ log = logging.getLogger(__name__)
 PAPER_DECONV_DEPTH_MM = 500.0
 
 
-def optical_center(shape: tuple[int, ...]) -> tuple[float, float]:
-    """(row, col) pixel coordinates of the optical axis: the image centre."""
-    return (shape[0] / 2 - 0.5, shape[1] / 2 - 0.5)
+#: (row, col) of the optical axis on an image of ``shape``: the image convention's, kept
+#: under the deconvolution's older name.
+optical_center = optical_center_px
 
 
 def normalise(k: np.ndarray) -> np.ndarray:
@@ -125,7 +127,7 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
     if rows_n < 1 or cols_n < 1:
         raise ValueError(f"grid_shape must be positive, got {grid_shape}")
     H, W = image_shape[:2]
-    cy, cx = optical_center((H, W))
+    cy, cx = optical_center_px((H, W))
     ys = np.linspace(0, H - 1, rows_n) if rows_n > 1 else np.array([cy])
     xs = np.linspace(0, W - 1, cols_n) if cols_n > 1 else np.array([cx])
     pitch = float(bank.pixel_pitch)
@@ -140,9 +142,9 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
     n = 0
     for y in ys:
         for x in xs:
-            u, v = (x - cx), (cy - y)
-            r, th = np.hypot(u, v), np.arctan2(v, u)
-            pts[n] = (u * pitch, v * pitch)
+            u, v = pixel_to_sensor(y, x, (H, W), pitch)
+            r, th = np.hypot(u, v) / pitch, np.arctan2(v, u)
+            pts[n] = (u, v)
             for d in range(kernels.shape[0]):
                 out[d, n] = rotate_kernel(interpolate_radial(kernels[d], rad, r), th)
             n += 1

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from .kernels import optical_center
+from ..optics.pixels import optical_center_px
 
 __all__ = ["psnr", "ssim_map", "ssim", "disk_mask", "radial_bins", "per_radius",
            "per_depth_band", "WANG_SSIM"]
@@ -83,7 +83,7 @@ def ssim(image: np.ndarray, reference: np.ndarray, *, mask: np.ndarray | None = 
 def disk_mask(shape: tuple[int, ...], radius_px: float, *,
               center: tuple[float, float] | None = None) -> np.ndarray:
     """(H, W) bool: pixels whose centre lies within ``radius_px`` of ``center``."""
-    cy, cx = optical_center(shape) if center is None else center
+    cy, cx = optical_center_px(shape) if center is None else center
     yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
     return np.hypot(yy - cy, xx - cx) <= radius_px
 
@@ -94,7 +94,7 @@ def radial_bins(shape: tuple[int, ...], edges_px, *,
     edges = np.asarray(edges_px, dtype=np.float64)
     if edges.ndim != 1 or len(edges) < 2 or np.any(np.diff(edges) <= 0):
         raise ValueError("edges_px must be at least two increasing radii")
-    cy, cx = optical_center(shape) if center is None else center
+    cy, cx = optical_center_px(shape) if center is None else center
     yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
     r = np.hypot(yy - cy, xx - cx)
     idx = np.searchsorted(edges, r, side="right") - 1

@@ -29,7 +29,8 @@ import scipy.fft as sfft
 import scipy.ndimage as ndi
 
 from ..io.bank import IPSFBank
-from .kernels import (check_bank_matches, interpolate_radial, optical_center, radii_px,
+from ..optics.pixels import optical_center_px
+from .kernels import (check_bank_matches, interpolate_radial, radii_px,
                       select_depth)
 from .spatial import hat_weights
 from ..resources import check_allocation
@@ -124,7 +125,7 @@ def polar_grid(shape: tuple[int, ...], *, center: tuple[float, float] | None = N
     if not radial_oversampling > 0 or not angular_oversampling >= 1:
         raise ValueError("radial_oversampling must be > 0 and angular_oversampling >= 1, got "
                          f"{radial_oversampling}, {angular_oversampling}")
-    cy, cx = optical_center(shape) if center is None else (float(center[0]), float(center[1]))
+    cy, cx = optical_center_px(shape) if center is None else (float(center[0]), float(center[1]))
     H, W = shape[:2]
     if r_max is None:
         r_max = max(math.hypot(y - cy, x - cx) for y in (-0.5, H - 0.5) for x in (-0.5, W - 0.5))

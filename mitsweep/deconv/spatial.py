@@ -23,8 +23,9 @@ import numpy as np
 import scipy.signal as ssig
 
 from ..io.bank import BankError, IPSFBank
-from .kernels import check_bank_matches, optical_center, select_depth
+from ..optics.pixels import sensor_to_pixel
 from ..resources import check_allocation
+from .kernels import check_bank_matches, select_depth
 from .wiener import (check_image_values, check_nsr, estimate_nsr, wiener_deconvolve,
                      wiener_memory_bytes, working_dtype)
 
@@ -62,10 +63,11 @@ def grid_axes_px(bank: IPSFBank, image_shape: tuple[int, int]) -> tuple[np.ndarr
     if bank.kind != "grid":
         raise BankError(f"a grid bank is needed here, got a {bank.kind!r} bank")
     rows_n, cols_n = bank.grid_shape
-    cy, cx = optical_center(image_shape)
-    uv = np.asarray(bank.points_uv, dtype=np.float64).reshape(rows_n, cols_n, 2) / bank.pixel_pitch
-    cols = cx + uv[0, :, 0]
-    rows = cy - uv[:, 0, 1]
+    pitch = float(bank.pixel_pitch)
+    pts = np.asarray(bank.points_uv, dtype=np.float64).reshape(rows_n, cols_n, 2)
+    rows, _ = sensor_to_pixel(0.0, pts[:, 0, 1], image_shape, pitch)
+    _, cols = sensor_to_pixel(pts[0, :, 0], 0.0, image_shape, pitch)
+    uv = pts / pitch
     # a regular grid: every row shares the column positions and vice versa
     if not (np.allclose(uv[:, :, 0], uv[0:1, :, 0], atol=1e-3)
             and np.allclose(uv[:, :, 1], uv[:, 0:1, 1], atol=1e-3)):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..io.bank import IPSFBank
-from .kernels import optical_center
+from ..optics.pixels import pixel_to_sensor
 
 __all__ = ["synthetic_ipsf", "synthetic_radial_bank", "synthetic_grid_bank",
            "synthetic_kernel_field"]
@@ -85,15 +85,14 @@ def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int
     Points run evenly from the first to the last pixel centre in each direction.
     """
     H, W = image_shape[:2]
-    cy, cx = optical_center((H, W))
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)
     ys = np.linspace(0, H - 1, grid_shape[0])
     xs = np.linspace(0, W - 1, grid_shape[1])
     yy, xx = np.meshgrid(ys, xs, indexing="ij")
-    u, v = (xx - cx).ravel(), (cy - yy).ravel()
-    k = synthetic_ipsf(np.hypot(u, v), np.arctan2(v, u), size, r_max, **kw)
+    u, v = pixel_to_sensor(yy.ravel(), xx.ravel(), (H, W), pixel_pitch)
+    k = synthetic_ipsf(np.hypot(u, v) / pixel_pitch, np.arctan2(v, u), size, r_max, **kw)
     kernels = np.repeat(k[None], len(depths_mm), axis=0).astype(np.float32)
-    pts = np.stack([u * pixel_pitch, v * pixel_pitch], axis=1)
+    pts = np.stack([u, v], axis=1)
     return IPSFBank(kernels=kernels, points_uv=pts, depths_mm=np.asarray(depths_mm, float),
                     pixel_pitch=pixel_pitch, reference_sensor_distance=30.0, kind="grid",
                     grid_shape=tuple(grid_shape), metadata=_bank_meta(image_shape, r_max_px=r_max))
@@ -103,8 +102,7 @@ def synthetic_kernel_field(image_shape: tuple[int, int], size: int = 21,
                            r_max_px: float | None = None, **kw) -> np.ndarray:
     """(H, W, K, K) exact per-pixel kernels of the synthetic model (small images only)."""
     H, W = image_shape[:2]
-    cy, cx = optical_center((H, W))
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)
     yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)
-    u, v = xx - cx, cy - yy
+    u, v = pixel_to_sensor(yy, xx, (H, W), 1.0)   # in pixels: a pitch of one
     return synthetic_ipsf(np.hypot(u, v), np.arctan2(v, u), size, r_max, **kw)

@@ -36,13 +36,19 @@ def sensor_to_pixel(u, v, shape, pitch: float):
     """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pitch ``pitch`` mm."""
     r0, c0 = optical_center_px(shape)
     u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
-    row, col = r0 - v / pitch, c0 + u / pitch
-    return (float(row), float(col)) if row.ndim == 0 else (row, col)
+    return _pair(r0 - v / pitch, c0 + u / pitch)
 
 
 def pixel_to_sensor(row, col, shape, pitch: float):
     """Sensor point ``(u, v)`` mm of pixel ``(row, col)`` (centres at integers)."""
     r0, c0 = optical_center_px(shape)
     row, col = np.asarray(row, dtype=float), np.asarray(col, dtype=float)
-    u, v = (col - c0) * pitch, (r0 - row) * pitch
-    return (float(u), float(v)) if u.ndim == 0 else (u, v)
+    return _pair((col - c0) * pitch, (r0 - row) * pitch)
+
+
+def _pair(a: np.ndarray, b: np.ndarray):
+    """Two floats for scalar inputs, else two arrays broadcast to one shape."""
+    if a.ndim == 0 and b.ndim == 0:
+        return float(a), float(b)
+    a, b = np.broadcast_arrays(a, b)
+    return a.copy(), b.copy()

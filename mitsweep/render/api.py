@@ -1,9 +1,11 @@
 """Rendering API: the four camera modes on one reference pixel grid, AOVs, EXR output.
 
-Reference geometry (DESIGN.md): the reference sensor distance is mid-travel of the
-setup's sweep, ``i_ref = optimal_sweep_range(setup).reference_sensor_distance``; every
-mode's pixel (col, row) has the chief ray of the pinhole camera at ``i_ref`` with the
-setup's pixel pitch, so all images line up pixel for pixel with the ground truth.
+Reference geometry (docs/design.md, :mod:`mitsweep.optics.reference`): the reference
+sensor distance ``i_ref`` is mid-travel of the sensor motion that is run (the default
+motion over the optimal sweep range, or a given, e.g. measured, one); every mode's pixel
+(col, row) has the chief ray of the pinhole camera at ``i_ref`` with the setup's pixel
+pitch, so all images line up pixel for pixel with the ground truth and with the
+tracer's IPSF banks, which resolve ``i_ref`` the same way.
 
 Modes
 -----
@@ -37,8 +39,10 @@ from pathlib import Path
 import numpy as np
 
 from ..optics import (chief_ray, focal_image_axial_distances, image_distance, image_point,
-                      mirror_point_from_image, optimal_sweep_range, placement_of)
-from ..optics.motion import MotionProfile, motion_for
+                      mirror_point_from_image, placement_of)
+from ..optics.motion import MotionProfile
+from ..optics.pixels import image_shape, pixel_to_sensor, sensor_to_pixel
+from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..resources import check_allocation
 
 __all__ = ["MODES", "RenderResult", "render_image", "render_to_exr", "render_point_source",
@@ -78,18 +82,12 @@ class RenderResult:
     metadata: dict = field(default_factory=dict)
 
 
-def _sweep_of(setup, sweep):
-    """(SweepRange, MotionProfile) for the ``sweep`` argument (None, SweepRange or motion)."""
-    if isinstance(sweep, MotionProfile):
-        return optimal_sweep_range(setup), sweep
-    sr = optimal_sweep_range(setup) if sweep is None else sweep
-    return sr, motion_for(setup, sr)
+def reference_sensor_distance(setup, sweep=None, *, motion: MotionProfile | None = None) -> float:
+    """Reference sensor distance ``i_ref`` (mm): mid-travel of the motion run.
 
-
-def reference_sensor_distance(setup, sweep=None) -> float:
-    """Mid-travel sensor distance (mm) of the setup's sweep: the reference grid's."""
-    sr, motion = _sweep_of(setup, sweep)
-    return motion.midpoint if isinstance(sweep, MotionProfile) else sr.reference_sensor_distance
+    A thin wrapper of :func:`mitsweep.optics.reference.reference_geometry`.
+    """
+    return reference_geometry(setup, sweep=sweep, motion=motion).sensor_distance
 
 
 def focus_distance_mirror_centre(setup, depth: float = FOCUS_REFERENCE_DEPTH_MM) -> float:
@@ -135,21 +133,26 @@ def camera_dict(setup, *, sensor_distance: float | None = None, motion: MotionPr
     return d
 
 
-def mode_camera(setup, mode, sweep=None, f_number=None):
+def mode_camera(setup, mode, geometry: ReferenceGeometry | None = None, f_number=None):
     """Camera of a mode on the reference grid: (kwargs of :func:`camera_dict`, description).
 
-    The description holds the reference sensor distance, the sweep and motion, and for
-    ``focused``/``stopped`` the focus distance, sensor distance, f-number and the pitch
-    scale ``i_f / i_ref`` that puts the image on the reference grid.
+    ``geometry`` is the setup's :class:`~mitsweep.optics.reference.ReferenceGeometry`
+    (default: resolved from the setup alone). The description holds the reference sensor
+    distance, the sweep and motion, and for ``focused``/``stopped`` the focus distance,
+    sensor distance, f-number and the pitch scale ``i_f / i_ref`` that puts the image on
+    the reference grid.
     """
     if mode not in MODES:
         raise ValueError(f"mode: must be one of {', '.join(MODES)}, got {mode!r}")
-    sr, motion = _sweep_of(setup, sweep)
-    i_ref = reference_sensor_distance(setup, sweep)
+    if geometry is None:
+        geometry = reference_geometry(setup)
+    elif not isinstance(geometry, ReferenceGeometry):
+        raise TypeError(f"geometry: expected a ReferenceGeometry (see "
+                        f"mitsweep.optics.reference_geometry), got {type(geometry).__name__}")
+    sr, motion, i_ref = geometry.sweep, geometry.motion, geometry.sensor_distance
     f = setup.lens.focal_length
     pitch = setup.sensor.pixel_pitch
-    desc = {"reference_sensor_distance_mm": i_ref, "sweep": sr.as_dict(),
-            "motion": motion.as_dict()}
+    desc = geometry.as_dict()
     if mode == "pinhole":
         return dict(sensor_distance=i_ref, aperture_radius=0.0, pixel_pitch=pitch), desc
     if mode == "sweep":
@@ -180,10 +183,8 @@ def mirror_image_bbox(setup, sensor_distance: float, margin_px: int = 8):
         rims.append((u, v))
     u = np.concatenate([a for a, _ in rims])
     v = np.concatenate([b for _, b in rims])
-    W, H = setup.sensor.resolution
-    p = setup.sensor.pixel_pitch
-    cols = W / 2 + u / p - 0.5
-    rows = H / 2 - v / p - 0.5
+    H, W = image_shape(setup)
+    rows, cols = sensor_to_pixel(u, v, (H, W), setup.sensor.pixel_pitch)
     x0 = int(max(0, math.floor(cols.min()) - margin_px))
     x1 = int(min(W, math.ceil(cols.max()) + margin_px + 1))
     y0 = int(max(0, math.floor(rows.min()) - margin_px))
@@ -258,11 +259,9 @@ def _aovs(scene, setup, i_ref: float, wanted) -> dict:
     import drjit as dr
     import mitsuba as mi
 
-    W, H = setup.sensor.resolution
-    p = setup.sensor.pixel_pitch
-    cols, rows = np.meshgrid(np.arange(W), np.arange(H))
-    u = (cols + 0.5 - W / 2) * p
-    v = (H / 2 - rows - 0.5) * p
+    H, W = image_shape(setup)
+    rows, cols = np.indices((H, W))
+    u, v = pixel_to_sensor(rows, cols, (H, W), setup.sensor.pixel_pitch)
     vd = setup.mirror.vertex_distance
     d = np.stack([u, v, -np.full_like(u, i_ref)], axis=-1).reshape(-1, 3)
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
@@ -283,7 +282,7 @@ def _aovs(scene, setup, i_ref: float, wanted) -> dict:
 
 
 def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=None,
-                 f_number: float | None = None, mirror_only: bool = True,
+                 motion: MotionProfile | None = None, f_number: float | None = None, mirror_only: bool = True,
                  progress: bool = False, max_depth: int | None = None) -> RenderResult:
     """Render the setup's scene through the mirror in one of :data:`MODES`.
 
@@ -298,8 +297,12 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
         Base seed; pass k uses ``(seed · 1000003 + k) mod 2^32``.
     aovs : iterable of {"depth", "mask"}
         Extra layers, computed only when asked.
-    sweep : SweepRange or MotionProfile, optional
-        Default: the setup's optimal range and motion profile.
+    sweep : SweepRange, optional
+        Default: the setup's optimal range.
+    motion : MotionProfile, optional
+        The sensor motion of the ``sweep`` mode, e.g. a measured one (default: the
+        setup's profile over ``sweep``); its mid-travel is the reference distance of
+        every mode (:func:`mitsweep.optics.reference.reference_geometry`).
     f_number : float, optional
         The ``stopped`` mode's f-number (default 11).
     mirror_only : bool
@@ -323,7 +326,8 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
     unknown = sorted(set(aovs) - set(AOV_NAMES))
     if unknown:
         raise ValueError(f"aovs: unknown {unknown[0]!r}; allowed: {', '.join(AOV_NAMES)}")
-    kwargs, desc = mode_camera(setup, mode, sweep, f_number)
+    geometry = reference_geometry(setup, sweep=sweep, motion=motion)
+    kwargs, desc = mode_camera(setup, mode, geometry, f_number)
     i_ref = desc["reference_sensor_distance_mm"]
     W, H = setup.sensor.resolution
     crop = mirror_image_bbox(setup, i_ref, margin_px=8) if mirror_only else (0, 0, W, H)
@@ -373,6 +377,7 @@ def _world_per_pixel(setup, u, v, depth, i_ref) -> float:
 
 def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, seed: int = 0,
                         mode: str = "sweep", window: int = 64, sweep=None,
+                        motion: MotionProfile | None = None,
                         sensor_distance: float | None = None,
                         f_number: float | None = None, radius_px: float = 0.1,
                         mesh_tol: float | None = None) -> np.ndarray:
@@ -381,8 +386,10 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
     The emitter is a sphere at depth ``depth`` (mm) along the world-bound chief ray of
     the upright image point ``(u, v)`` (mm) at the reference distance; its radius is
     ``radius_px`` (default a tenth) of the world size of a pixel there, so its own image
-    is sub-pixel. Only a
-    ``window`` × ``window`` pixel crop around the point's reference pixel is rendered.
+    is sub-pixel. Only a ``window`` × ``window`` pixel crop around the point's reference
+    pixel is rendered. ``sweep`` and ``motion`` as in :func:`render_image` (they set the
+    reference distance, so a tabulated ``motion`` places the source where the tracer's
+    :func:`~mitsweep.tracer.integrated_psf` with that motion does).
 
     ``sensor_distance`` (with mode ``"fixed"``) renders a fixed sensor at that distance
     with the setup's pitch and aperture (the N-plane reference). ``mesh_tol`` (mm and
@@ -392,7 +399,8 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
     from .sensor import register
 
     register()
-    i_ref = reference_sensor_distance(setup, sweep)
+    geometry = reference_geometry(setup, sweep=sweep, motion=motion)
+    i_ref = geometry.sensor_distance
     placement = placement_of(setup.mirror)
     ray = mirror_point_from_image(placement, u, v, i_ref)
     if not np.all(np.isfinite(ray.surface.position)):
@@ -406,10 +414,9 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
                       aperture_radius=setup.lens.aperture_radius,
                       pixel_pitch=setup.sensor.pixel_pitch)
     else:
-        kwargs, _ = mode_camera(setup, mode, sweep, f_number)
-    W, H = setup.sensor.resolution
-    col = W / 2 + u / setup.sensor.pixel_pitch - 0.5
-    row = H / 2 - v / setup.sensor.pixel_pitch - 0.5
+        kwargs, _ = mode_camera(setup, mode, geometry, f_number)
+    H, W = image_shape(setup)
+    row, col = sensor_to_pixel(u, v, (H, W), setup.sensor.pixel_pitch)
     x0 = int(np.clip(round(col) - window // 2, 0, max(0, W - window)))
     y0 = int(np.clip(round(row) - window // 2, 0, max(0, H - window)))
     crop = (x0, y0, min(window, W), min(window, H))

@@ -17,8 +17,8 @@ import numpy as np
 from .. import __version__
 from ..config import setup_to_dict
 from ..io.bank import IPSFBank, optics_sections
-from ..optics import chief_ray, image_point, optimal_sweep_range, placement_of
-from ..optics.motion import motion_for
+from ..optics import chief_ray, image_point, placement_of
+from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..resources import check_allocation
 from .psf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, KERNEL_PIXEL_BYTES, integrated_psf
 from .source import check_depth
@@ -31,11 +31,15 @@ log = logging.getLogger(__name__)
 BANK_RAYS = 1_000_000
 
 
-def field_radius(setup, sweep) -> float:
-    """Image radius (mm, at the reference distance) of the FOV's mirror-zone edge."""
+def field_radius(setup, geometry: ReferenceGeometry | None = None) -> float:
+    """Image radius (mm, at the reference distance) of the FOV's mirror-zone edge.
+
+    ``geometry``: the setup's reference geometry (default: resolved from the setup).
+    """
+    geometry = reference_geometry(setup) if geometry is None else geometry
     pl = placement_of(setup.mirror)
-    edge = chief_ray(pl, pl.surface(np.array([sweep.rho_end_mm]), np.array([0.0])))
-    u, v = image_point(edge, sweep.reference_sensor_distance)
+    edge = chief_ray(pl, pl.surface(np.array([geometry.sweep.rho_end_mm]), np.array([0.0])))
+    u, v = image_point(edge, geometry.sensor_distance)
     return float(math.hypot(float(u[0]), float(v[0])))
 
 
@@ -70,7 +74,9 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     depths : sequence of float
         Depths l, mm (inf allowed).
     rays, kernel_size, seed, motion, sweep, method, time_samples, n_planes
-        As :func:`mitsweep.tracer.integrated_psf`.
+        As :func:`mitsweep.tracer.integrated_psf`; ``sweep`` and ``motion`` are resolved
+        once by :func:`mitsweep.optics.reference.reference_geometry`, so the bank's
+        ``reference_sensor_distance`` is the mid-travel of the motion it was traced for.
     progress : callable, optional
         Called with no argument after each IPSF (e.g. a tqdm ``update``).
 
@@ -85,9 +91,8 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     depths = [check_depth(d) for d in np.atleast_1d(np.asarray(depths, dtype=float))]
     if not depths:
         raise ValueError("depths: give at least one depth")
-    sweep = optimal_sweep_range(setup) if sweep is None else sweep
-    motion = motion_for(setup, sweep) if motion is None else motion
-    ref = sweep.reference_sensor_distance
+    geometry = reference_geometry(setup, motion=motion, sweep=sweep)
+    sweep, motion, ref = geometry.sweep, geometry.motion, geometry.sensor_distance
     radii = None
     grid_shape = None
     K = int(kernel_size)
@@ -105,7 +110,7 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
                              f"is tilted by {setup.mirror.tilt_deg:g} deg: use kind='grid'")
         if int(n_radii) < 1:
             raise ValueError(f"n_radii: must be >= 1, got {n_radii!r}")
-        radii = np.linspace(0.0, field_radius(setup, sweep), int(n_radii))
+        radii = np.linspace(0.0, field_radius(setup, geometry), int(n_radii))
         points = np.stack([radii, np.zeros_like(radii)], axis=1)
     else:
         grid_shape = (int(grid[0]), int(grid[1]))

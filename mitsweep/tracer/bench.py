@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from ..config import load_setup, DEFAULT_SETUP
-from ..optics import optimal_sweep_range
+from ..optics.reference import reference_geometry
 from .bank import field_radius
 from .kernel import trace_arrays
 from .psf import DEFAULT_TIME_SAMPLES, fit_sampling_box, integrated_psf
@@ -117,8 +117,9 @@ def run_bench(args) -> dict:
     """Run the benchmark; ``args.quick`` shrinks the problem. Returns a flat-ish dict."""
     quick = bool(getattr(args, "quick", False))
     setup = _setup()
-    sweep = optimal_sweep_range(setup)
-    u = 0.9 * field_radius(setup, sweep)
+    geometry = reference_geometry(setup)
+    sweep = geometry.sweep
+    u = 0.9 * field_radius(setup, geometry)
     depth = 500.0
     rays = (1 << 23) if quick else (1 << 26)
     threads = os.cpu_count() or 1
@@ -139,7 +140,7 @@ def run_bench(args) -> dict:
     rate, info = measure(1)
     rate_default, _ = measure(DEFAULT_TIME_SAMPLES)
     source = source_from_image(setup, u, 0.0, depth,
-                               reference_sensor_distance=sweep.reference_sensor_distance)
+                               reference_sensor_distance=geometry.sensor_distance)
     out = {
         "target": "tracer", "setup": setup.name,
         "image_point_mm": [u, 0.0], "depth_mm": depth,
@@ -151,7 +152,7 @@ def run_bench(args) -> dict:
         "default_time_samples": DEFAULT_TIME_SAMPLES,
     }
     center = source_from_image(setup, 0.0, 0.0, depth,
-                               reference_sensor_distance=sweep.reference_sensor_distance)
+                               reference_sensor_distance=geometry.sensor_distance)
     out.update(_batoid_rate(setup, source, center, (1 << 20) if quick else (1 << 22), threads))
     peer = out.get("peer_rays_per_s")
     out["ratio"] = (rate / peer) if peer else None

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from ..config import load_setup
-from ..optics import optimal_sweep_range
+from ..optics.reference import reference_geometry
 from .bank import field_radius
 from .psf import integrated_psf
 
@@ -37,10 +37,10 @@ def convergence_table(setup, *, u: float | None = None, depth: float = 500.0,
         ``rows``: list of {method, samples, rays, l1, seconds}; ``reference_l1`` (two
         independent references); the point and depth.
     """
-    sweep = optimal_sweep_range(setup)
+    geometry = reference_geometry(setup)
     if u is None:
-        u = 0.9 * field_radius(setup, sweep)
-    kw = dict(sweep=sweep, kernel_size=kernel_size)
+        u = 0.9 * field_radius(setup, geometry)
+    kw = dict(sweep=geometry.sweep, motion=geometry.motion, kernel_size=kernel_size)
     integrated_psf(setup, u, 0.0, depth, rays=1 << 16, **kw)  # compile
     ref, _ = integrated_psf(setup, u, 0.0, depth, rays=reference_rays, seed=1001,
                             time_samples=8, **kw)

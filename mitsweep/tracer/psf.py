@@ -27,8 +27,9 @@ import time
 
 import numpy as np
 
-from ..optics import optimal_sweep_range
-from ..optics.motion import MotionProfile, motion_for
+from ..optics.motion import MotionProfile
+from ..optics.pixels import optical_center_px, pixel_to_sensor
+from ..optics.reference import reference_geometry
 from ..resources import check_allocation
 from .kernel import TraceParams, deposit, trace_arrays
 from .source import PointSource, source_from_image
@@ -205,8 +206,10 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         raise ValueError(f"the whole PSF falls outside the {K}x{K} kernel window")
     kernel = (img / total).astype(np.float32)
     rows, cols = np.mgrid[0:K, 0:K]
-    c_row = float((img * rows).sum() / total) - K // 2
-    c_col = float((img * cols).sum() / total) - K // 2
+    row, col = float((img * rows).sum() / total), float((img * cols).sum() / total)
+    # the kernel is the image grid's (K, K) window centred on the chief-ray image
+    du, dv = pixel_to_sensor(row, col, (K, K), pitch)
+    c_row, c_col = (x - c for x, c in zip((row, col), optical_center_px((K, K))))
     landed_est = landed_w  # weights are (1 + |a|²/l²)^(-3/2) ≈ 1 for rays near the chief ray
     info = {
         "vignetted_fraction": float(max(0.0, 1.0 - landed_w / free_w)),
@@ -215,8 +218,7 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         "rays_traced": rays + box_info["pilot_rays"],
         "rays_landed": int(round(landed_est)),
         "centroid_px": (c_row, c_col),
-        "centroid_uv_mm": (source.image_uv[0] + c_col * setup.sensor.pixel_pitch,
-                           source.image_uv[1] - c_row * setup.sensor.pixel_pitch),
+        "centroid_uv_mm": (source.image_uv[0] + du, source.image_uv[1] + dv),
         "center_uv_mm": source.image_uv,
         "mirror_point_mm": source.mirror_point.tolist(),
         "depth_mm": source.depth,
@@ -227,20 +229,6 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         "precision": "float64" if double else "float32",
     }
     return kernel, info
-
-
-def _resolve_sweep(setup, sweep, motion, reference_sensor_distance):
-    if sweep is None and (motion is None or reference_sensor_distance is None):
-        sweep = optimal_sweep_range(setup)
-    if motion is None:
-        motion = motion_for(setup, sweep)
-    if not isinstance(motion, MotionProfile):
-        raise ValueError(f"motion: expected a MotionProfile (linear, trapezoidal or "
-                         f"tabulated), got {type(motion).__name__}")
-    if reference_sensor_distance is None:
-        reference_sensor_distance = sweep.reference_sensor_distance if sweep is not None \
-            else motion.midpoint
-    return sweep, motion, float(reference_sensor_distance)
 
 
 def integrated_psf(setup, u: float, v: float, depth, *, rays: int = DEFAULT_RAYS,
@@ -266,14 +254,18 @@ def integrated_psf(setup, u: float, v: float, depth, *, rays: int = DEFAULT_RAYS
     seed : int
         Seed of the low-discrepancy sample stream.
     motion : MotionProfile, optional
-        Stage motion (default: ``motion_for(setup, sweep)``, from ``sweep.profile``).
+        Stage motion (default: ``motion_for(setup, sweep)``, from ``sweep.profile``), e.g.
+        a measured (tabulated) one.
     sweep : mitsweep.optics.SweepRange, optional
         Default: ``optimal_sweep_range(setup)`` (honours ``sweep.focus_min/max``).
+        ``sweep`` and ``motion`` are resolved by
+        :func:`mitsweep.optics.reference.reference_geometry`, as the renderer does.
     method : {"continuous", "planes"}
         Stratified continuous time (``time_samples`` per ray) or the paper's sum over
         ``n_planes`` equally spaced-in-time focal planes.
     reference_sensor_distance : float, optional
-        Pixel grid and centring distance, mm (default: mid-travel).
+        Pixel grid and centring distance, mm (default: the reference geometry's, the
+        mid-travel of ``motion``; give another only to study a mismatched grid).
     double : bool
         Trace in float64 (reference runs; float32 agrees to ~1e-4 in L1, see tests).
     aperture_radius : float, optional
@@ -299,7 +291,10 @@ def integrated_psf(setup, u: float, v: float, depth, *, rays: int = DEFAULT_RAYS
     """
     if method not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
-    sweep, motion, ref = _resolve_sweep(setup, sweep, motion, reference_sensor_distance)
+    geometry = reference_geometry(setup, motion=motion, sweep=sweep)
+    motion = geometry.motion
+    ref = geometry.sensor_distance if reference_sensor_distance is None \
+        else float(reference_sensor_distance)
     source = source_from_image(setup, u, v, depth, reference_sensor_distance=ref)
     if method == "planes":
         if not 1 <= int(n_planes) <= 64:
