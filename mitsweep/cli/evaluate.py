@@ -18,31 +18,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", metavar="FILE", help="also write the JSON to FILE")
 
 
-def plot_per_radius(results: dict, path, pixel_pitch: float | None = None) -> None:
-    from ..plots import new_figure, save_figure
-
-    scenes = results["scenes"]
-    first = next(iter(scenes.values()))
-    fig, ax = new_figure(figsize=(7, 4.5))
-    styles = {"edof": ("tab:red", "-"), "focused": ("tab:blue", "-"), "stopped": ("tab:green", "-"),
-              "sweep": ("0.5", ":")}
-    for name, entry in sorted(first.items()):
-        if not isinstance(entry, dict):
-            continue
-        base = name.split("_")[0]
-        color, ls = styles.get(base, ("k", "-"))
-        if "lux" in name:
-            ls = "--"
-        r = entry["per_radius"]
-        ax.plot(r["radius_px"], r["psnr"], ls, color=color, marker="o", ms=3, label=name)
-    ax.set_xlabel("distance from the optical axis (pixels)")
-    ax.set_ylabel("PSNR (dB) against the pinhole ground truth")
-    ax.set_title("per-radius PSNR inside the mirror's image")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7)
-    save_figure(fig, path)
-
-
 def run(args) -> int:
     import json
 
@@ -56,8 +31,14 @@ def run(args) -> int:
     for path in (args.plot, args.out):
         if path:
             check_writable(path)
+    if args.plot:
+        from ..plots import check_figure_path
+
+        check_figure_path(args.plot, "--plot")
     results = evaluate_dataset(args.dataset)
     if args.plot:
+        from ..plots import plot_per_radius
+
         plot_per_radius(results, args.plot)
     if args.out:
         write_text_atomic(args.out, json.dumps(results, indent=1, default=str) + "\n")

@@ -185,9 +185,15 @@ def run(args) -> int:
                 write_exr(args.output, channels=chans, metadata=meta)
             out["output"] = args.output
         if args.plot:
-            from ..tracer.figures import plot_bank
+            from ..plots import plot_bank
+            from ..tracer.metrics import cross_sections
 
-            plot_bank(bank, args.plot)
+            sections = {}
+            for name, i in (("centre", 0), ("periphery", bank.kernels.shape[1] - 1)):
+                u, v = bank.points_uv[i]
+                angle = math.atan2(v, u) if (u or v) else 0.0
+                sections[name] = [cross_sections(k, angle) for k in bank.kernels[:, i]]
+            plot_bank(bank, args.plot, sections=sections)
             out["plot"] = args.plot
         return _report(args, out)
 
@@ -232,11 +238,12 @@ def run(args) -> int:
             save_bank(args.output, bank)
         out["output"] = args.output
     if args.plot:
-        from ..tracer.figures import plot_ipsf
+        from ..plots import plot_ipsf
+        from ..tracer.metrics import cross_sections
 
         title = "PSF" if args.sensor_distance else "IPSF"
         plot_ipsf(kernel, args.plot, pitch_mm=setup.sensor.pixel_pitch,
-                  angle=math.atan2(v, u) if (u or v) else 0.0,
+                  sections=cross_sections(kernel, math.atan2(v, u) if (u or v) else 0.0),
                   title=f"{title} at ({u:.2f}, {v:.2f}) mm, l = {depth:g} mm")
         out["plot"] = args.plot
     return _report(args, out)

@@ -45,8 +45,11 @@ def run(args) -> int:
 
     setup = load_setup_arg(args.setup)
     check_outputs([args.setup], [args.plot])
-    if args.plot:
-        check_writable(args.plot)  # before the traces, not after
+    if args.plot:  # before the traces, not after
+        from ..plots import check_figure_path
+
+        check_writable(args.plot)
+        check_figure_path(args.plot, "--plot")
     if args.kernel_size % 2 == 0 or args.kernel_size < 3:
         raise UsageError(f"--kernel-size: must be odd and >= 3, got {args.kernel_size}")
     ranges = args.ranges or default_ranges(setup)
@@ -56,7 +59,7 @@ def run(args) -> int:
         result = table1(setup, ranges=ranges, n_radii=args.radii, rays=args.rays,
                         kernel_size=args.kernel_size, seed=args.seed, progress=bar.update)
     if args.plot:
-        from ..tracer.figures import plot_table1
+        from ..plots import plot_table1
 
         plot_table1(result, args.plot)
         result["plot"] = args.plot
