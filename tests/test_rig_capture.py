@@ -106,10 +106,11 @@ def test_zaber_capture_with_arduino_shutter(tmp_path):
     exp = data["measured"]["exposure"]
     assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
                                                        abs=TIMER_RESOLUTION_S)
-    # positions come from polls interpolated at the shutter times; the host-board clock
-    # mapping is uncertain by half the SHUTTER round trip, and the host-timed shutter
-    # opens late or early by at most the host's latency from sending the move to the
-    # SHUTTER reply (a few ms when idle, more under load): allow both at the velocity
+    # positions come from polls interpolated at the shutter times: the record's timing
+    # uncertainty (the SHUTTER round trip's half for the clock mapping, plus half the
+    # round trip of the polls used); and the host-timed shutter opens late or early by
+    # at most the host's latency from sending the move to the SHUTTER reply (a few ms
+    # when idle, more under load): allow both at the velocity
     placement_s = data["clock_map"]["placement_uncertainty_s"]
     assert 0 < placement_s < 0.5
     tol = plan.velocity_actual_mm_s * (exp["timing_uncertainty_s"] + placement_s)

@@ -158,9 +158,15 @@ class HostBoard:
     def pin_changes(self, pin: int) -> list[tuple[int, int, int]]:
         """(micros, value, axis steps) for each change of ``pin`` (none before the
         program has opened its trace)."""
+        return [(t, v, a) for t, p, v, a, _ in self._rows() if p == pin]
+
+    def pin_times(self, pin: int) -> list[tuple[float, int]]:
+        """(``time.monotonic()`` s, value) of each change of ``pin``."""
+        return [(mono * 1e-6, v) for _, p, v, _, mono in self._rows() if p == pin]
+
+    def _rows(self) -> list[tuple[int, ...]]:
         text = self.trace.read_text() if self.trace.exists() else ""
-        rows = [tuple(int(v) for v in ln.split()) for ln in text.splitlines()]
-        return [(t, v, a) for t, p, v, a in rows if p == pin]
+        return [tuple(int(v) for v in ln.split()) for ln in text.splitlines()]
 
 
 def test_sketch_runs_a_capture_with_the_python_driver(host_firmware, tmp_path):

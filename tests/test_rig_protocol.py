@@ -185,7 +185,9 @@ def test_zaber_limits_motion_move_and_poll():
     ]) as z:
         z.set_soft_limits(0.0, 25.0)
         assert z.move_to(3.0, velocity_mm_s=2.0, acceleration_mm_s2=10.0, timeout_s=0.5) == 3.0
-    assert [p for _, p in z.samples] == [1500, 3000]
+    assert [p for _, p, _ in z.samples] == [1500, 3000]
+    # each poll is placed within its own round trip
+    assert all(u >= 0 for _, _, u in z.samples)
     assert z.alerts == ["!01 1 IDLE --"]
 
 

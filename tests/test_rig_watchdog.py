@@ -27,29 +27,25 @@ from mitsweep.rig.transport import LineTransport, open_port
 
 WATCHDOG_S = 1.0
 WATCHDOG_RIG = f"watchdog_s = {WATCHDOG_S}\n"
-# How late after the watchdog's expiry the test may see the board at rest: the board
-# notices within a loop turn (1 ms), the test polls every 5 ms, and on a loaded 2-core
-# machine either thread may wait a few scheduler slices. The expiry itself comes at
-# most WATCHDOG_S after the kill (the last heartbeat preceded the kill).
+# The expiry comes at most WATCHDOG_S after the kill (the last line preceded it); the
+# board acts on it within a loop turn (1 ms in the simulator, ~20 µs plus scheduling in
+# the host build, whose process shares a loaded 2-core machine). The time is the
+# board's own record of when it released the shutter (the simulator's model time, the
+# host build's pin trace on CLOCK_MONOTONIC), so a test process that is itself starved
+# does not count; the kill time is taken *before* the kill, so the bound is an upper one.
 MARGIN_S = 0.3
+# How long the test waits to see the board at rest at all.
+GIVE_UP_S = 10.0
 
 
 def kill_mid_sweep(proc, shutter_open) -> float:
-    """SIGKILL the capture once the shutter is open mid-sweep; returns the kill time."""
+    """SIGKILL the capture once the shutter is open mid-sweep; returns a time just
+    before the kill."""
     wait_for(shutter_open, "the shutter to open mid-sweep", proc)
-    proc.send_signal(signal.SIGKILL)
     t_kill = time.monotonic()
+    proc.send_signal(signal.SIGKILL)
     proc.wait(timeout=10)
     return t_kill
-
-
-def seconds_until(condition, t0: float, limit_s: float) -> float:
-    """Seconds from ``t0`` until ``condition()`` holds (fails after ``limit_s``)."""
-    while not condition():
-        if time.monotonic() - t0 > limit_s:
-            pytest.fail(f"board not at rest {limit_s:.2f} s after the host died")
-        time.sleep(0.005)
-    return time.monotonic() - t0
 
 
 @pytest.mark.parametrize("rig_kind", ["arduino", "zaber"])
@@ -70,9 +66,12 @@ def test_sigkilled_host_simulator_board_stops_within_watchdog(tmp_path, rig_kind
             # runs to its target (no watchdog on a Zaber stage)
             return shutter_done and (rig.stage or not board.moving(time.monotonic()))
 
-        elapsed = seconds_until(safe, t_kill, WATCHDOG_S + MARGIN_S)
+        wait_for(safe, "the board at rest", timeout_s=GIVE_UP_S)
         assert board.faults_seen == ["WATCHDOG"]
         assert board.stopped
+        kind, t_release = board.shutter_history[-1]
+        assert kind == "close"
+        elapsed = t_release - t_kill
         if rig_kind == "zaber":
             wait_for(lambda: not rig.motor.moving(time.monotonic()), "the Zaber move",
                      timeout_s=10.0)
@@ -95,8 +94,8 @@ def test_sigkilled_host_firmware_stops_within_watchdog(host_firmware, tmp_path):
         finally:
             proc.kill()
             proc.wait()
-        elapsed = seconds_until(lambda: shutter() == [1, 0], t_kill,
-                                WATCHDOG_S + MARGIN_S)
+        wait_for(lambda: shutter() == [1, 0], "the shutter's release", timeout_s=GIVE_UP_S)
+        elapsed = board.pin_times(6)[-1][0] - t_kill
         # what the board said after the host died, then its own account of its state
         lines = read_lines(board.slave, 0.5)
         faults = [ln for ln in lines if ln.startswith("EV FAULT")]

@@ -16,7 +16,8 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
     commands        every line sent and received: t_s (host monotonic, s since the
                     capture started), device, dir ("tx"/"rx"), text
     events          the Arduino's events (board µs clock, unwrapped)
-    stage_samples   Zaber position polls (host t_s, microsteps), zaber mode only
+    stage_samples   Zaber position polls (host t_s, microsteps, ± s: half the poll's
+                    round trip), zaber mode only
     clock_map       zaber mode: board µs ↔ host s at the SHUTTER exchange (uncertainty_s:
                     half its round trip); placement_uncertainty_s bounds how far from its
                     planned time the host-timed shutter opened (move sent → SHUTTER reply)
@@ -70,7 +71,7 @@ class CaptureRecord:
         self.marks: list[dict] = []
         self.safety_actions: list[dict] = []
         self.board_events: list = []
-        self.stage_samples: list[tuple[float, int]] = []
+        self.stage_samples: list[tuple[float, int, float]] = []
         self.clock_map: dict | None = None
         self.created_utc = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
@@ -139,7 +140,12 @@ class CaptureRecord:
             x = np.concatenate([[np.interp(h_open, st, sx)], sx[inside],
                                 [np.interp(h_close, st, sx)]])
             source = "zaber position polls (host clock), interpolated at the shutter events"
-            uncertainty = cm["uncertainty_s"]
+            # the clock mapping's, plus the larger of the two polls each interpolation
+            # uses (a poll's time is known to half its round trip)
+            su = np.array([s[2] for s in self.stage_samples])
+            near = lambda h: su[np.clip(np.searchsorted(st, h) + np.array([-1, 0]),  # noqa: E731
+                                        0, len(st) - 1)].max()
+            uncertainty = cm["uncertainty_s"] + max(near(h_open), near(h_close))
         s = plan.sensor_distance(x)
         return {
             "exposure": {
@@ -176,7 +182,8 @@ class CaptureRecord:
             "marks": list(self.marks),
             "commands": self.log.as_list(),
             "events": [e.as_dict() for e in self.board_events],
-            "stage_samples": [[round(t, 6), int(p)] for t, p in self.stage_samples],
+            "stage_samples": [[round(t, 6), int(p), round(u, 6)]
+                              for t, p, u in self.stage_samples],
             "clock_map": self.clock_map,
             "safety": list(self.safety_actions),
             "measured": self.measurement(),

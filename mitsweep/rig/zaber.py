@@ -105,7 +105,10 @@ class ZaberStage(Stage):
         self.message_ids = message_ids
         self._next_id = 0
         self.alerts: list[str] = []
-        self.samples: list[tuple[float, int]] = []  # (host log time s, microsteps) from polls
+        # position polls: (host log time s, microsteps, ± s). The device reads its
+        # position somewhere between the poll's send and its reply: the sample is placed
+        # at the midpoint, uncertain by half the round trip (long on a loaded host).
+        self.samples: list[tuple[float, int, float]] = []
 
     def enable_checksums(self) -> None:
         """Append and require Zaber checksums on every message from now on."""
@@ -158,12 +161,14 @@ class ZaberStage(Stage):
         return f"zaber device id {reply.data} at address {self.device}"
 
     def get_position(self) -> tuple[int, ZaberReply]:
+        t_tx = self.transport.log.now()
         reply = self.command("get pos")
+        t_rx = self.transport.log.now()
         try:
             pos = int(reply.data)
         except ValueError:
             raise ProtocolError(f"{self.name}: position {reply.data!r} is not an integer") from None
-        self.samples.append((self.transport.log.now(), pos))
+        self.samples.append((0.5 * (t_tx + t_rx), pos, 0.5 * (t_rx - t_tx)))
         return pos, reply
 
     def state(self) -> StageState:

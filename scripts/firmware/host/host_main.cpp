@@ -7,7 +7,8 @@
 // supply: its watchdog (WATCHDOG <ms>) then stops the axis and releases the shutter.
 //
 // Environment: MITSWEEP_FW_START_STEPS (axis position at start, steps, default 400),
-// MITSWEEP_FW_TRACE (file to append "<micros> <pin> <value> <axis>" pin changes to).
+// MITSWEEP_FW_TRACE (file to append "<micros> <pin> <value> <axis> <monotonic_us>" pin
+// changes to; the last is CLOCK_MONOTONIC, the clock of Python's time.monotonic()).
 #include "Arduino.h"
 
 #include <errno.h>
@@ -48,7 +49,10 @@ void digitalWrite(uint8_t pin, uint8_t value) {
     axis += pins[DIR_PIN] ? 1 : -1;
   }
   if (pins[pin] != value && trace && pin != STEP_PIN) {
-    fprintf(trace, "%lu %u %u %ld\n", micros(), pin, value, axis);
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    fprintf(trace, "%lu %u %u %ld %lld\n", micros(), pin, value, axis,
+            (long long)now.tv_sec * 1000000LL + now.tv_nsec / 1000);
     fflush(trace);
   }
   pins[pin] = value;
