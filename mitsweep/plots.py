@@ -40,6 +40,14 @@ DPI = 120
 KERNEL_CMAP = "inferno"
 
 
+#: Grid lines: a light grey rather than a transparent black, and legends opaque, so that
+#: PostScript output (which has no transparency) looks the same and raises no warning.
+GRID_COLOR = "0.88"
+
+#: Formats whose files carry matplotlib's ``metadata`` (the maker and version).
+_TAGGED = frozenset({"png", "pdf", "svg", "svgz", "ps", "eps"})
+
+
 def _format_of(path: Path) -> str:
     return path.suffix.lstrip(".").lower() or "png"
 
@@ -74,12 +82,26 @@ def new_figure(*args, figsize=(7.0, 4.5), layout: str | None = "constrained", **
 
 
 def save_figure(fig, path: str | Path, dpi: int = DPI) -> Path:
-    """Write ``fig`` to ``path`` atomically (format from the suffix, PNG without one)."""
+    """Write ``fig`` to ``path`` atomically (format from the suffix, PNG without one).
+
+    PNG, PDF, SVG and PostScript files name their maker (``Creator: mitsweep <version>``)
+    in their metadata; matplotlib has no metadata for the other formats.
+    """
+    from . import __version__
+
     p = Path(path)
+    fmt = _format_of(p)
+    extra = {"metadata": {"Creator": f"mitsweep {__version__}"}} if fmt in _TAGGED else {}
     with atomic_path(p) as tmp:
-        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=_format_of(p))
+        fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=fmt, **extra)
     logger.info("wrote %s", p)
     return p
+
+
+def _legend_outside(ax) -> None:
+    """The legend right of the axes, top-aligned: never over the data."""
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+              framealpha=1.0)
 
 
 def plot_focal_surfaces(setup, sweep, path: str | Path,
@@ -128,7 +150,7 @@ def plot_focal_surfaces(setup, sweep, path: str | Path,
     ax.set_aspect("equal")
     ax.set_title(f"{setup.name}: focal surfaces (FOV {sweep.fov_deg:g}°)")
     # Outside the axes: inside, every corner holds a curve or a focus label.
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    _legend_outside(ax)
     return save_figure(fig, path)
 
 
@@ -178,8 +200,8 @@ def plot_ipsf(kernel, path: str | Path, *, pitch_mm: float,
     _sections_axes(a1, sections, pitch_um)
     a1.set_xlabel("position (µm)")
     a1.set_ylabel("IPSF (unit sum)")
-    a1.grid(alpha=0.3)
-    a1.legend()
+    a1.grid(color=GRID_COLOR)
+    a1.legend(framealpha=1.0)
     return save_figure(fig, path)
 
 
@@ -213,7 +235,8 @@ def plot_bank(bank, path: str | Path, *,
     pitch_um = bank.pixel_pitch * 1e3
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(max(1.9 * cols + 1.0, 8.0), 6.4), layout="constrained")
+    fig = Figure(figsize=(max(1.6 * cols + 1.2, 8.0), 6.4), layout="constrained")
+    fig.get_layout_engine().set(h_pad=0.1)   # inches; room between the rows' titles
     top, bottom = fig.subfigures(2, 1, height_ratios=(1.0, 1.35))
     thumbs = top.subplots(1, cols, sharex=True, sharey=True, squeeze=False)[0]
     im = None
@@ -235,8 +258,8 @@ def plot_bank(bank, path: str | Path, *,
         ax.set_title(name, fontsize=9)
         ax.set_xlabel("position (µm)", fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=6)
+        ax.grid(color=GRID_COLOR)
+        ax.legend(fontsize=6, framealpha=1.0)
     panels[0].set_ylabel("IPSF (unit sum)", fontsize=8)
     return save_figure(fig, path)
 
@@ -290,7 +313,7 @@ def plot_table1(result: dict, path: str | Path) -> Path:
                   **tick_style)
     a1.set_ylabel("kurtosis (Gaussian = 3, dotted)")
     a1.set_xlabel("sweep range (focus distances)")
-    a1.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    _legend_outside(a1)
     return save_figure(fig, path)
 
 
@@ -346,6 +369,6 @@ def plot_per_radius(results: dict, path: str | Path) -> Path:
     ax.set_xlabel("distance from the optical axis (pixels)")
     ax.set_ylabel("PSNR (dB) against the pinhole ground truth")
     ax.set_title("per-radius PSNR inside the mirror's image")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0)
+    ax.grid(color=GRID_COLOR)
+    _legend_outside(ax)
     return save_figure(fig, path)

@@ -4,6 +4,7 @@ defects users reported stay fixed (checked on the drawn figure's geometry)."""
 from __future__ import annotations
 
 import json
+import logging
 import math
 import struct
 import subprocess
@@ -214,12 +215,21 @@ def test_plotting_leaves_pyplot_and_the_backend_alone(tmp_path):
     assert png_size(tmp_path / "t.png")[0] > 0
 
 
-@pytest.mark.parametrize("name", ["fig.svg", "fig.pdf", "fig.PNG", "fig"])
-def test_the_suffix_picks_the_format(tmp_path, name):
-    path = plots.plot_table1(table1_result(), tmp_path / name)
-    head = path.read_bytes()[:8]
-    expected = {".svg": b"<?xml", ".pdf": b"%PDF"}.get(path.suffix.lower(), PNG_SIGNATURE)
-    assert head.startswith(expected)
+@pytest.mark.parametrize("name,head,tagged", [
+    ("fig.png", PNG_SIGNATURE, True), ("fig.PNG", PNG_SIGNATURE, True),
+    ("fig", PNG_SIGNATURE, True), ("fig.svg", b"<?xml", True), ("fig.pdf", b"%PDF", True),
+    ("fig.eps", b"%!PS-Adobe", True), ("fig.jpg", b"\xff\xd8\xff", False)])
+def test_the_suffix_picks_the_format_and_the_file_names_its_maker(tmp_path, caplog, name,
+                                                                  head, tagged):
+    from mitsweep import __version__
+
+    with caplog.at_level(logging.INFO, logger="matplotlib"):
+        path = plots.plot_per_radius(evaluation_results(), tmp_path / name)
+    data = path.read_bytes()
+    assert data.startswith(head)
+    assert (f"mitsweep {__version__}".encode() in data) is tagged
+    # No transparency for PostScript to complain about, nothing else said either.
+    assert [r.getMessage() for r in caplog.records if r.name.startswith("matplotlib")] == []
 
 
 def test_unknown_figure_format_is_refused_naming_the_flag(tmp_path):
