@@ -25,7 +25,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -190,8 +190,8 @@ class Lens:
     f_number: float = 2.8
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "focal_length", _positive(self.focal_length, "lens.focal_length"))
-        object.__setattr__(self, "f_number", _positive(self.f_number, "lens.f_number"))
+        _assign(self, focal_length=_positive(self.focal_length, "lens.focal_length"),
+                f_number=_positive(self.f_number, "lens.f_number"))
 
     @property
     def aperture_radius(self) -> float:
@@ -213,8 +213,8 @@ class Sensor:
                  f"must be [width, height], got {res!r}")
         w, h = (_integer(v, f"sensor.resolution {name}", 1, MAX_RESOLUTION)
                 for name, v in zip(("width", "height"), res))
-        object.__setattr__(self, "resolution", (w, h))
-        object.__setattr__(self, "pixel_pitch", _positive(self.pixel_pitch, "sensor.pixel_pitch"))
+        _assign(self, resolution=(w, h),
+                pixel_pitch=_positive(self.pixel_pitch, "sensor.pixel_pitch"))
 
     @property
     def width(self) -> int:
@@ -296,14 +296,13 @@ class Scene:
         rs = self.room_size
         _require(isinstance(rs, (tuple, list)) and len(rs) == 3, "scene.room_size",
                  f"must be [x, y, z] in mm, got {rs!r}")
-        object.__setattr__(self, "room_size",
-                           tuple(_positive(v, "scene.room_size") for v in rs))
-        _assign(self, objects=_integer(self.objects, "scene.objects", 0, 64),
+        _assign(self, room_size=tuple(_positive(v, "scene.room_size") for v in rs),
+                objects=_integer(self.objects, "scene.objects", 0, 64),
                 texture_seed=_integer(self.texture_seed, "scene.texture_seed", 0),
                 max_depth=_integer(self.max_depth, "scene.max_depth", 0, 64))
         _choice(self.lighting, "scene.lighting", SCENE_LIGHTING)
-        for name in ("mesh_sag_tol", "mesh_normal_tol"):
-            object.__setattr__(self, name, _positive(getattr(self, name), f"scene.{name}"))
+        _assign(self, **{name: _positive(getattr(self, name), f"scene.{name}")
+                         for name in ("mesh_sag_tol", "mesh_normal_tol")})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -343,14 +342,15 @@ class Rig:
     watchdog_s: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("travel", "max_velocity", "acceleration", "min_exposure_s", "max_exposure_s",
-                     "steps_per_mm", "reply_timeout_s", "watchdog_s"):
-            object.__setattr__(self, name, _positive(getattr(self, name), f"rig.{name}"))
+        _assign(self, **{name: _positive(getattr(self, name), f"rig.{name}")
+                         for name in ("travel", "max_velocity", "acceleration", "min_exposure_s",
+                                      "max_exposure_s", "steps_per_mm", "reply_timeout_s",
+                                      "watchdog_s")})
         _require(self.watchdog_s <= 60.0, "rig.watchdog_s",
                  f"must be in (0, 60] s, got {self.watchdog_s:g}")
         sd = _finite(self.settle_distance, "rig.settle_distance")
         _require(sd >= 0, "rig.settle_distance", f"must be >= 0, got {sd}")
-        object.__setattr__(self, "settle_distance", sd)
+        _assign(self, settle_distance=sd)
         _require(self.min_exposure_s < self.max_exposure_s, "rig.min_exposure_s",
                  "must be < rig.max_exposure_s")
         lo = _finite(self.soft_limit_min, "rig.soft_limit_min")
@@ -361,12 +361,10 @@ class Rig:
                  f"must be <= rig.travel ({self.travel:g} mm), got {hi:g}")
         _require(lo < hi, "rig.soft_limit_min",
                  f"must be < rig.soft_limit_max ({hi:g} mm), got {lo:g}")
-        object.__setattr__(self, "soft_limit_min", lo)
-        object.__setattr__(self, "soft_limit_max", hi)
+        _assign(self, soft_limit_min=lo, soft_limit_max=hi)
         if self.sensor_distance_at_zero is not None:
-            object.__setattr__(self, "sensor_distance_at_zero",
-                               _positive(self.sensor_distance_at_zero,
-                                         "rig.sensor_distance_at_zero"))
+            _assign(self, sensor_distance_at_zero=_positive(self.sensor_distance_at_zero,
+                                                            "rig.sensor_distance_at_zero"))
         direction = self.sensor_direction
         _require(isinstance(direction, numbers.Integral) and not isinstance(direction, bool)
                  and direction in (1, -1), "rig.sensor_direction",
@@ -594,7 +592,3 @@ DEFAULT_SETUP = Setup(
     sweep=Sweep(fov_deg=237.0, depth_min=300.0, depth_max=10000.0, velocity=1.0),
 )
 
-
-def with_sweep(setup: Setup, **changes: Any) -> Setup:
-    """A copy of ``setup`` with sweep fields replaced (validated)."""
-    return replace(setup, sweep=replace(setup.sweep, **changes))

@@ -45,6 +45,7 @@ from .config import Setup, setup_from_dict, setup_to_dict
 from .io import WriteError, read_exr, write_exr, write_text_atomic
 from .io.exr import stack_channels
 from .optics.pixels import optical_center_px
+from .render.api import MODES  # the camera modes; render imports Mitsuba only when rendering
 
 __all__ = ["DatasetOptions", "options_from_dict", "build_dataset", "evaluate_dataset",
            "load_manifest", "validate_manifest", "item_names", "dataset_inputs", "MANIFEST",
@@ -54,10 +55,9 @@ log = logging.getLogger(__name__)
 
 MANIFEST = "manifest.json"
 FORMAT = "mitsweep-dataset/1"
-MODES = ("pinhole", "focused", "sweep", "stopped")
 WHITE_PERCENTILE = 99.0
 #: Pixel of the camera whose noise the noisy images carry, mm: a DSLR of the paper's
-#: era (6.4 µm, whose ~40 000 e⁻ full well is the noise model's default). The renders
+#: era (6.4 µm, whose ~60 000 e⁻ full well is the noise model's default). The renders
 #: use larger synthetic pixels so that the mirror's image fits a small frame; each
 #: rendered pixel gets the noise of one such camera pixel (not of an 18 µm pixel, which
 #: would collect 8× the light and saturate the modelled full well).

@@ -20,6 +20,12 @@ from mitsweep.render.sensor import motion_table, register  # noqa: E402
 W = H = 48
 PITCH = 0.05     # mm
 F = 50.0         # mm
+BOARD = 420.0    # mm: distance of the board from the lens
+#: Sensor distance (mm) that focuses the board (thin lens: 56.76 mm) ...
+I_FOCUS = F * BOARD / (BOARD - F)
+#: ... and one 1.24 mm behind it, where the board is out of focus, so that the aperture
+#: sample shows in the image (a blur of ~0.4 mm, 8 px, at f/2.8).
+I_DEFOCUS = 58.0
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -27,7 +33,7 @@ def _variant():
     register()
 
 
-def _scene(sensor: dict, board_distance: float = 420.0) -> "mi.Scene":
+def _scene(sensor: dict, board_distance: float = BOARD) -> "mi.Scene":
     from mitsweep.render.textures import siemens_star
 
     T = mi.ScalarTransform4f
@@ -102,7 +108,7 @@ def _passes(scene, seeds, spp):
 
 
 def test_collapsed_sweep_matches_thinlens_with_other_seeds_statistically():
-    i, a = 58.0, F / (2 * 2.8)
+    i, a = I_DEFOCUS, F / (2 * 2.8)
     m1, v1 = _passes(_scene(_focalsweep(sensor_distance=i, aperture_radius=a)),
                      range(100, 108), 16)
     m2, v2 = _passes(_scene(_thinlens(i, a)), range(200, 208), 16)
@@ -146,15 +152,16 @@ def test_motion_table_is_uniform_in_time():
 
 
 @pytest.mark.parametrize("params, message", [
-    (dict(sensor_distance=58.0, bogus=1.0), "bogus"),
+    (dict(sensor_distance=I_DEFOCUS, bogus=1.0), "bogus"),
     (dict(sensor_distance=50.0), "focal length"),
-    (dict(sensor_start=58.0, sensor_end=49.0, shutter_close=1.0), "focal length"),
-    (dict(sensor_distance=58.0, pixel_pitch=0.0), "pixel_pitch"),
-    (dict(sensor_distance=58.0, pixel_pitch=-0.01), "pixel_pitch"),
-    (dict(sensor_start=58.0, sensor_end=57.0), "shutter_close"),
-    (dict(sensor_start=58.0), "sensor_end"),
-    (dict(sensor_distance=58.0, f_number=2.0, aperture_radius=1.0), "not both"),
-    (dict(sensor_start=58.0, sensor_end=57.0, shutter_close=1.0, profile="sine"), "profile"),
+    (dict(sensor_start=I_DEFOCUS, sensor_end=49.0, shutter_close=1.0), "focal length"),
+    (dict(sensor_distance=I_DEFOCUS, pixel_pitch=0.0), "pixel_pitch"),
+    (dict(sensor_distance=I_DEFOCUS, pixel_pitch=-0.01), "pixel_pitch"),
+    (dict(sensor_start=I_DEFOCUS, sensor_end=57.0), "shutter_close"),
+    (dict(sensor_start=I_DEFOCUS), "sensor_end"),
+    (dict(sensor_distance=I_DEFOCUS, f_number=2.0, aperture_radius=1.0), "not both"),
+    (dict(sensor_start=I_DEFOCUS, sensor_end=57.0, shutter_close=1.0, profile="sine"),
+     "profile"),
 ])
 def test_bad_parameters_raise_clear_errors(params, message):
     with pytest.raises(Exception, match=message):
@@ -162,7 +169,7 @@ def test_bad_parameters_raise_clear_errors(params, message):
 
 
 def test_traverse_exposes_parameters_and_updates_render():
-    scene = _scene(_focalsweep(sensor_distance=58.0, f_number=4.0))
+    scene = _scene(_focalsweep(sensor_distance=I_DEFOCUS, f_number=4.0))
     params = mi.traverse(scene)
     keys = set(params.keys())
     for k in ("to_world", "aperture_radius", "pixel_pitch", "sensor_distances"):
@@ -176,7 +183,7 @@ def test_traverse_exposes_parameters_and_updates_render():
 
 def test_sweep_blurs_between_its_end_focus_images():
     """A sweep image lies between its two end-focused images in sharpness."""
-    i_focus = F * 420.0 / (420.0 - F)   # the board in focus
+    i_focus = I_FOCUS
     a = F / (2 * 2.0)
     sharp = _render(_scene(_focalsweep(sensor_distance=i_focus, aperture_radius=a)), 1)
     sweep = _render(_scene(_focalsweep(sensor_start=i_focus - 0.6, sensor_end=i_focus + 0.6,
@@ -190,9 +197,10 @@ def test_sweep_blurs_between_its_end_focus_images():
 
 
 @pytest.mark.parametrize("kw", [
-    dict(sensor_distance=58.0, aperture_radius=0.0),
-    dict(sensor_distance=58.0, f_number=2.8),
-    dict(sensor_start=57.5, sensor_end=58.5, shutter_close=1.0, f_number=2.8),
+    dict(sensor_distance=I_DEFOCUS, aperture_radius=0.0),
+    dict(sensor_distance=I_DEFOCUS, f_number=2.8),
+    dict(sensor_start=I_DEFOCUS - 0.5, sensor_end=I_DEFOCUS + 0.5, shutter_close=1.0,
+         f_number=2.8),
 ], ids=["pinhole", "thinlens", "sweep"])
 def test_light_tracing_through_sample_direction_matches_path_tracing(kw):
     """``ptracer`` (which connects to the camera via sample_direction) = ``path``."""
@@ -261,7 +269,8 @@ def test_register_again_after_a_variant_change(tmp_path):
         "mi.set_variant('scalar_rgb')\n"
         "register()\n"
         "s = mi.load_dict({'type': 'focalsweep', 'focal_length': 50.0, 'pixel_pitch': 0.02,"
-        " 'sensor_distance': 58.0, 'film': {'type': 'hdrfilm', 'width': 4, 'height': 4}})\n"
+        f" 'sensor_distance': {I_DEFOCUS!r},"
+        " 'film': {'type': 'hdrfilm', 'width': 4, 'height': 4}})\n"
         "ray, w = s.sample_ray(0.0, 0.5, mi.Point2f(0.5, 0.5), mi.Point2f(0.5, 0.5))\n"
         "print(mi.variant(), abs(ray.d[2] - 1.0) < 1e-6)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

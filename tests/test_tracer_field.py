@@ -17,7 +17,7 @@ from mitsweep.optics.sweep import mirror_zone
 from mitsweep.tracer.focus import (FIELDS, PROBE_APERTURE_MM, _fov_field, numeric_focus,
                                    traced_sweep_range)
 from mitsweep.tracer.kernel import trace_arrays
-from mitsweep.tracer.psf import fit_sampling_box
+from mitsweep.tracer.ipsf import fit_sampling_box
 from mitsweep.tracer.source import source_from_mirror
 
 TILTED = load_setup("scenes/paraboloid_tilted.toml")

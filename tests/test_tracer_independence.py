@@ -1,5 +1,5 @@
 """The tracer is an independent implementation: it must not import Mitsuba or the
-renderer (DESIGN.md), and optics/motion.py stays pure NumPy."""
+renderer (docs/design.md), and optics/motion.py stays pure NumPy."""
 
 import ast
 import pathlib

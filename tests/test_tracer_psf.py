@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 
 from mitsweep.config import Mirror, SetupError, load_setup
-from mitsweep.optics import intersect_mirror, optimal_sweep_range, placement_of
+from mitsweep.optics import image_distance, intersect_mirror, optimal_sweep_range, placement_of
+from mitsweep.optics.reference import reference_geometry
 from mitsweep.optics.motion import MotionProfile
 from mitsweep.tracer import integrated_psf, psf
 from mitsweep.tracer.kernel import trace_arrays
-from mitsweep.tracer.psf import fit_sampling_box
+from mitsweep.tracer.ipsf import fit_sampling_box
 from mitsweep.tracer.source import source_from_mirror
 
 SPHERE = load_setup("scenes/sphere.toml")
@@ -119,9 +120,11 @@ def test_vignetting_is_reported_at_the_rim():
     src_rho = 9.95
     from mitsweep.optics import chief_ray, image_point
     pl = placement_of(setup.mirror)
-    u, _ = image_point(chief_ray(pl, pl.surface(np.array([src_rho]), np.array([0.0]))), 58.0)
+    geometry = reference_geometry(setup, sweep=optimal_sweep_range(setup, fov_deg=60.0))
+    u, _ = image_point(chief_ray(pl, pl.surface(np.array([src_rho]), np.array([0.0]))),
+                       geometry.sensor_distance)
     k, info = integrated_psf(setup, float(u[0]), 0.0, 500.0, rays=400_000,
-                             sweep=optimal_sweep_range(setup, fov_deg=60.0))
+                             sweep=geometry.sweep)
     assert 0.05 < info["vignetted_fraction"] < 0.95
     assert k.sum() == pytest.approx(1.0, abs=1e-5)
 
@@ -136,7 +139,7 @@ def test_vignetting_is_reported_at_the_rim():
     (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, motion="linear"), TypeError,
      "MotionProfile"),
     (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0,
-                            motion=MotionProfile.linear(58.0, 58.0)), SetupError, "empty"),
+                            motion=MotionProfile.linear(REF, REF)), SetupError, "empty"),
 ])
 def test_bad_input_gets_a_clear_error(call, err, match):
     with pytest.raises(err, match=match):
@@ -183,7 +186,10 @@ def _numpy_retrace(setup, geom, r):
         aspheric=(2e-6, -1e-9))), 15.0, 500.0),
 ])
 def test_kernel_agrees_with_independent_float64_retrace(name, setup, rho, depth):
-    src = source_from_mirror(setup, rho, 0.0, depth, reference_sensor_distance=58.0)
+    # the retrace compares rays, whatever grid they are binned on: refer the image point
+    # to the sensor distance that focuses the mirror's vertex
+    i_vertex = image_distance(setup.lens.focal_length, setup.mirror.vertex_distance)
+    src = source_from_mirror(setup, rho, 0.0, depth, reference_sensor_distance=i_vertex)
     geom = src.geometry(setup)
     params, _ = fit_sampling_box(geom, double=True)
     r = trace_arrays(geom, params, 20000, double=True)

@@ -9,9 +9,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from mitsweep.config import Lens, Mirror, Sensor, Setup, Sweep
+from mitsweep.optics import image_distance
 from mitsweep.tracer.focus import numeric_focus
 from mitsweep.tracer.kernel import TraceParams, trace_arrays
-from mitsweep.tracer.psf import fit_sampling_box, render_source
+from mitsweep.tracer.ipsf import fit_sampling_box, render_source
 from mitsweep.tracer.source import source_from_mirror
 
 
@@ -36,7 +37,10 @@ def cases(draw):
 
 def _source(setup, x, y, depth):
     try:
-        return source_from_mirror(setup, x, y, depth, reference_sensor_distance=58.0)
+        # these random mirrors need not have a sweep range for FOV 90: refer the image
+        # point to the sensor distance focusing the mirror's vertex (near all its foci)
+        i_vertex = image_distance(setup.lens.focal_length, setup.mirror.vertex_distance)
+        return source_from_mirror(setup, x, y, depth, reference_sensor_distance=i_vertex)
     except ValueError as exc:  # the lens cannot see this point of a tilted mirror
         assert "not visible" in str(exc)
         return None

@@ -1,7 +1,8 @@
 """``mitsweep.deconv``: EDOF recovery by deconvolution, sensor noise and image metrics.
 
-NumPy/SciPy (and scikit-image for metrics and noise estimation) only: this package never
-imports Mitsuba or Dr.Jit.
+NumPy/SciPy (and scikit-image for SSIM) only: this package never imports Mitsuba or
+Dr.Jit. The noise level of an image is estimated here (:func:`estimate_nsr`: a robust
+median of the finest diagonal Haar wavelet band), not by scikit-image.
 
 - :func:`wiener_deconvolve` — shift-invariant Wiener, padded, stated regulariser;
 - :func:`polar_deconvolve` — rotationally symmetric setups (radial banks, paper Fig. 8);

@@ -1,6 +1,6 @@
 """Wiener deconvolution with a shift-invariant kernel, done carefully.
 
-Compared with :func:`skimage.restoration.wiener` (see DESIGN.md) this keeps the
+Compared with :func:`skimage.restoration.wiener` (see docs/design.md) this keeps the
 complex transfer function whole, pads the image against circular wrap-around, uses a
 stated regulariser (a constant noise-to-signal ratio, or the natural-image 1/|f|²
 power spectrum that the V metric weighs with), picks fast FFT lengths, keeps float32 as

@@ -2,7 +2,7 @@
 
 A bank holds unit-sum IPSF kernels for a set of image points and depths, expressed on the
 pixel grid of the reference sensor distance and centred on the chief-ray image of each
-point at that distance (DESIGN.md).
+point at that distance (docs/design.md).
 
 Layout conventions
 ------------------

@@ -173,7 +173,7 @@ class MotionProfile:
 
     @property
     def midpoint(self) -> float:
-        """Mid-travel sensor distance, mm: the reference distance of IPSFs (DESIGN.md)."""
+        """Mid-travel sensor distance, mm: the reference distance of IPSFs (docs/design.md)."""
         lo, hi = self.span
         return 0.5 * (lo + hi)
 

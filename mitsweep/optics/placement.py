@@ -1,6 +1,6 @@
 """Placement of the mirror relative to the camera, and points on the mirror.
 
-World frame (DESIGN.md): the mirror vertex at the origin, its untilted axis +z toward
+World frame (docs/design.md): the mirror vertex at the origin, its untilted axis +z toward
 the camera, the lens centre at ``(0, 0, vertex_distance)``; the camera looks down −z,
 image right = world +x, image up = world +y. Tilt rotates the mirror about its vertex in
 the x–z plane: the local axis becomes ``(sin t, 0, cos t)``, so for t > 0 the mirror's

@@ -1,6 +1,6 @@
 """Field of view → mirror zone, and the optimal focal-sweep range (paper Eq. 8–9).
 
-The mirror zone (DESIGN.md):
+The mirror zone (docs/design.md):
 
 - untilted: ρ from the axis out to where the world-bound reflected chief ray makes
   ``fov/2`` with the mirror axis pointing toward the camera;

@@ -225,7 +225,11 @@ def _pass_seeds(seed: int, n: int) -> list[int]:
 
 
 def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render"):
-    """Render ``spp`` samples in passes (memory bound, progress); mean image (h, w, C)."""
+    """Render ``spp`` samples in passes (memory bound, progress).
+
+    Returns the mean image (h, w, C), the loaded scene and the seconds spent rendering
+    (the passes only, not the scene load).
+    """
     import mitsuba as mi
 
     film = scene_dict["sensor"]["film"]
@@ -250,8 +254,7 @@ def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render"):
             bar.update(c)
     if bar is not None:
         bar.close()
-    _render_passes.last_seconds = _time.perf_counter() - t0  # render only, no scene load
-    return (acc / spp).astype(np.float32), scene
+    return (acc / spp).astype(np.float32), scene, _time.perf_counter() - t0
 
 
 def _aovs(scene, setup, i_ref: float, wanted) -> dict:
@@ -337,9 +340,9 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
     cam = camera_dict(setup, spp=spp, crop=crop, **kwargs)
     scene_dict, info = build_scene(setup, cam, max_depth=max_depth)
     t0 = _time.perf_counter()
-    img, scene = _render_passes(scene_dict, spp, seed, progress=progress, desc=f"{mode}")
+    img, scene, t_render = _render_passes(scene_dict, spp, seed, progress=progress,
+                                          desc=f"{mode}")
     t_total = _time.perf_counter() - t0
-    t_render = _render_passes.last_seconds
     full = np.zeros((H, W, 3), dtype=np.float32)
     x, y, w, h = crop
     full[y:y + h, x:x + w] = img[..., :3]
@@ -428,7 +431,7 @@ def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, se
                                             normal_tol=mesh_tol)
     scene_dict, _ = build_scene(setup, cam, surroundings=False, extra={"source": source},
                                 max_depth=2, **mesh)
-    img, _ = _render_passes(scene_dict, spp, seed, progress=False)
+    img, _, _ = _render_passes(scene_dict, spp, seed, progress=False)
     out = np.zeros((H, W), dtype=np.float64)
     x, y, w, h = crop
     out[y:y + h, x:x + w] = img[..., :3].mean(axis=-1)

@@ -109,7 +109,7 @@ def _make_class():
 
         def __init__(self, props):
             super().__init__(props)
-            self.m_needs_sample_3 = True  # aperture sample (see DESIGN.md pitfalls)
+            self.m_needs_sample_3 = True  # aperture sample (docs/design.md, pitfalls)
             f = props.get("focal_length", None)
             if f is None or not (float(f) > 0):
                 raise ValueError(f"focalsweep: focal_length must be > 0 mm, got {f!r}")

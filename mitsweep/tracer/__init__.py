@@ -15,6 +15,6 @@ Main entry points
 
 from .bank import ipsf_bank
 from .focus import numeric_focus, traced_sweep_range
-from .psf import integrated_psf, psf
+from .ipsf import integrated_psf, psf
 
 __all__ = ["integrated_psf", "psf", "ipsf_bank", "numeric_focus", "traced_sweep_range"]

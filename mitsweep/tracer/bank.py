@@ -20,7 +20,7 @@ from ..io.bank import IPSFBank, optics_sections
 from ..optics import chief_ray, image_point, placement_of
 from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..resources import check_allocation
-from .psf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, KERNEL_PIXEL_BYTES, integrated_psf
+from .ipsf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, KERNEL_PIXEL_BYTES, integrated_psf
 from .source import check_depth
 
 __all__ = ["ipsf_bank", "field_radius", "grid_points"]

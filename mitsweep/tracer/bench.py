@@ -3,7 +3,8 @@
 *Useful rays* are rays that reach the sensor, counted once each, with everything that
 produced them timed: pilot passes, generation, intersection, reflection, thin lens and
 deposition at ``time_samples`` stratified sweep times. The peer, batoid (C++, the
-fastest of the peers measured in DESIGN.md), reflects the *same* rays (generated in
+fastest of the ray tracers the optics were cross-checked with: batoid, KrakenOS,
+pyoptools, DeepLens), reflects the *same* rays (generated in
 NumPy beforehand, not timed) off the same sphere on the same threads; only its
 ``Surface.reflect`` call is timed, and its useful rays are those of its output that pass
 the lens aperture (computed afterwards, not timed), so the comparison favours the peer.
@@ -24,7 +25,7 @@ from ..config import load_setup, DEFAULT_SETUP
 from ..optics.reference import reference_geometry
 from .bank import field_radius
 from .kernel import trace_arrays
-from .psf import DEFAULT_TIME_SAMPLES, fit_sampling_box, integrated_psf
+from .ipsf import DEFAULT_TIME_SAMPLES, fit_sampling_box, integrated_psf
 from .source import source_from_image
 
 __all__ = ["run_bench"]

@@ -19,7 +19,7 @@ import numpy as np
 from ..config import load_setup
 from ..optics.reference import reference_geometry
 from .bank import field_radius
-from .psf import integrated_psf
+from .ipsf import integrated_psf
 
 __all__ = ["convergence_table", "main"]
 

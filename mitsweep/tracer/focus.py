@@ -43,7 +43,7 @@ from ..config import SetupError
 from ..optics import chief_ray, object_distance, optimal_sweep_range, placement_of
 from ..optics.sweep import mirror_zone
 from .kernel import trace_arrays
-from .psf import fit_sampling_box
+from .ipsf import fit_sampling_box
 from .source import PointSource, source_from_mirror
 
 __all__ = ["FocusResult", "numeric_focus", "TracedSweepRange", "traced_sweep_range",

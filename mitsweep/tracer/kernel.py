@@ -11,7 +11,7 @@ The point source sits at ``S = p_r + l w`` (mirror point ``p_r``, world-bound ch
 direction ``w``, depth ``l``). Rays are parametrised by their crossing ``Q = p_r + a e₁ +
 b e₂`` of the *aim plane* through ``p_r`` perpendicular to ``w`` (``e₁, e₂ ⊥ w``), with
 ``(a, b)`` uniform in a box fitted to the part of the mirror whose reflections reach the
-lens (see :mod:`mitsweep.tracer.psf`). The direction is
+lens (see :mod:`mitsweep.tracer.ipsf`). The direction is
 
 .. math:: \\hat d \\propto -w + (a/l)\\,e_1 + (b/l)\\,e_2,
 
@@ -38,7 +38,7 @@ Thin lens and sensor
 A reflected ray reaching the lens plane at ``L`` (``|L| ≤`` aperture radius) with
 direction ``r`` leaves toward the point ``f r_xy / r_z`` of the focal plane; on a sensor
 at distance ``i`` it lands at ``L (1 − i/f) + i r_xy/r_z``, affine in ``i``. In upright
-image coordinates (DESIGN.md) the hit is ``h(i) = A + B i`` with ``A = −L_xy`` and
+image coordinates (docs/design.md) the hit is ``h(i) = A + B i`` with ``A = −L_xy`` and
 ``B = L_xy/f − r_xy/r_z``.
 """
 
