@@ -273,7 +273,7 @@ def _task_noisy(pinhole_path: str, image_path: str, lux: float, f_number: float,
     level = white_level(gt, chans.get("mask.Y"))
     img, _, meta = _read_rgb(image_path)
     noise = SensorNoise(illuminance_lux=lux, exposure_s=exposure_s, f_number=f_number,
-                        pixel_size_mm=pixel_pitch, iso=iso)
+                        pixel_pitch=pixel_pitch, iso=iso)
     info: dict = {}
     noisy = noise.apply(np.maximum(img / level, 0.0).astype(np.float32),
                         np.random.default_rng(list(seed)), info=info)

@@ -9,7 +9,7 @@ from mitsweep.deconv.noise import PHOTONS_PER_LUX_S_M2, SensorNoise, paper_fig10
 
 
 def model(**kw):
-    base = dict(illuminance_lux=50.0, exposure_s=0.6, f_number=2.8, pixel_size_mm=0.0064)
+    base = dict(illuminance_lux=50.0, exposure_s=0.6, f_number=2.8, pixel_pitch=0.0064)
     base.update(kw)
     return SensorNoise(**base)
 
@@ -103,3 +103,26 @@ def test_negative_pixels_expose_nothing_and_nonfinite_are_refused():
                                   model().apply(np.zeros(2), rng=0))
     with pytest.raises(ValueError, match="NaN"):
         model().apply(np.array([np.nan]), rng=0)
+
+
+def test_pixel_pitch_keeps_its_former_name_as_a_deprecated_alias():
+    """``pixel_size_mm`` (the name before the unit rule) still works, with a warning;
+    provenance keeps the JSON key ``pixel_size_mm``."""
+    import dataclasses
+
+    new = model()
+    with pytest.warns(DeprecationWarning, match="pixel_pitch"):
+        old = SensorNoise(illuminance_lux=50.0, exposure_s=0.6, f_number=2.8,
+                          pixel_size_mm=0.0064)
+    assert old == new
+    with pytest.warns(DeprecationWarning, match="pixel_pitch"):
+        assert new.pixel_size_mm == 0.0064
+    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="not both"):
+        SensorNoise(illuminance_lux=50.0, exposure_s=0.6, f_number=2.8, pixel_pitch=0.0064,
+                    pixel_size_mm=0.0064)
+    with pytest.warns(DeprecationWarning):
+        assert paper_fig10_settings(pixel_size_mm=0.0064) == paper_fig10_settings(0.0064)
+    assert new.as_dict()["pixel_size_mm"] == 0.0064 and "pixel_pitch" not in new.as_dict()
+    assert dataclasses.replace(new, iso=200.0).pixel_pitch == 0.0064
+    with pytest.raises(ValueError, match="noise.pixel_pitch"):
+        model(pixel_pitch=0.0)

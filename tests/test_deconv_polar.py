@@ -175,7 +175,7 @@ def test_no_blow_up_from_no_noise_to_very_low_light(blurred_scene, lux, method):
     nsr = None
     if lux is not None:
         noise = SensorNoise(illuminance_lux=lux, exposure_s=0.6, f_number=2.8,
-                            pixel_size_mm=0.0064)
+                            pixel_pitch=0.0064)
         y = noise.apply(y, rng=0)
         nsr = noise.nsr(mean_level=float(img.mean()), signal_std=float(img.std()))
     if method == "polar":

@@ -70,13 +70,13 @@ def test_reference_is_mid_travel_of_the_default_motion():
     sr = optimal_sweep_range(DEFAULT_SETUP)
     ref = reference_geometry(DEFAULT_SETUP)
     assert ref.sensor_distance == pytest.approx(sr.reference_sensor_distance, abs=1e-12)
-    assert ref.motion.span == pytest.approx((sr.sensor_start_mm, sr.sensor_end_mm)) or \
-        ref.motion.span == pytest.approx((sr.sensor_end_mm, sr.sensor_start_mm))
+    assert ref.motion.span == pytest.approx((sr.sensor_start, sr.sensor_end)) or \
+        ref.motion.span == pytest.approx((sr.sensor_end, sr.sensor_start))
 
 
 def test_a_measured_motion_sets_the_reference():
     sr = optimal_sweep_range(DEFAULT_SETUP)
-    lo, hi = sorted((sr.sensor_start_mm, sr.sensor_end_mm))
+    lo, hi = sorted((sr.sensor_start, sr.sensor_end))
     # a rig log that overshot by 0.1 mm at the far end and started 0.05 mm late
     table = MotionProfile.tabulated([0.0, 0.3, 1.0], [lo + 0.05, 0.5 * (lo + hi), hi + 0.1])
     ref = reference_geometry(DEFAULT_SETUP, motion=table)

@@ -38,7 +38,7 @@ TOLERANCE_PX = 0.1
 def _measured_motion(geometry) -> MotionProfile:
     """A rig-like log: the optimal travel shifted by +0.15 mm, 20 % longer, uneven speed."""
     sr = geometry.sweep
-    half = 0.5 * abs(sr.sensor_start_mm - sr.sensor_end_mm)
+    half = 0.5 * abs(sr.sensor_start - sr.sensor_end)
     mid = geometry.sensor_distance + 0.15
     start, end = mid + 1.2 * half, mid - 1.2 * half     # sensor_start > sensor_end here
     frac = np.array([0.0, 0.25, 0.6, 1.0])              # of the travel, at these times:

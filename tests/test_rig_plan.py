@@ -41,8 +41,8 @@ def test_plan_covers_sweep_range_at_constant_velocity(scenes_dir_module, scene, 
     plan = plan_capture(setup, stage=stage, sweep_range=sr)
     # the shutter window maps onto the optical sweep, to within half a step
     half_step = 0.5 / spm
-    assert plan.sensor_distance(plan.open_mm) == pytest.approx(sr.sensor_start_mm, abs=half_step)
-    assert plan.sensor_distance(plan.close_mm) == pytest.approx(sr.sensor_end_mm,
+    assert plan.sensor_distance(plan.open_mm) == pytest.approx(sr.sensor_start, abs=half_step)
+    assert plan.sensor_distance(plan.close_mm) == pytest.approx(sr.sensor_end,
                                                                 abs=2 * half_step)
     # ramp + settle separate the shutter window from both ends of the move
     ramp = plan.velocity_actual_mm_s ** 2 / (2 * plan.acceleration_mm_s2)
@@ -61,13 +61,13 @@ def test_plan_covers_sweep_range_at_constant_velocity(scenes_dir_module, scene, 
     # window (one step at the run velocity; or the Arduino's 1 µs timer in zaber mode)
     quantum = 1.0 / (spm * plan.velocity_actual_mm_s) if stage == "arduino" else 1e-6
     assert plan.planned_exposure_s == pytest.approx(
-        sr.translation_mm / plan.velocity_actual_mm_s, abs=quantum)
+        sr.translation / plan.velocity_actual_mm_s, abs=quantum)
 
 
 @pytest.mark.parametrize("direction", [1, -1])
 def test_calibrated_mapping_puts_sweep_where_the_rig_says(sphere, direction):
     sr = optimal_sweep_range(sphere)
-    s0 = sr.sensor_start_mm - direction * 10.0   # stage 10 mm maps to the sweep start
+    s0 = sr.sensor_start - direction * 10.0   # stage 10 mm maps to the sweep start
     plan = plan_capture(with_rig(sphere, sensor_distance_at_zero=s0, sensor_direction=direction))
     assert plan.mapping == "calibrated"
     assert plan.open_mm == pytest.approx(10.0, abs=0.5 / 400)
@@ -82,7 +82,7 @@ def test_sweep_longer_than_travel_is_refused(sphere):
 def test_calibrated_sweep_outside_soft_limits_is_refused(sphere):
     sr = optimal_sweep_range(sphere)
     with pytest.raises(PlanError, match="outside the soft limits"):
-        plan_capture(with_rig(sphere, sensor_distance_at_zero=sr.sensor_start_mm - 24.95))
+        plan_capture(with_rig(sphere, sensor_distance_at_zero=sr.sensor_start - 24.95))
 
 
 def test_velocity_above_stage_limit_is_refused(sphere):

@@ -170,7 +170,7 @@ def _dense_grid_extremes(setup, spacing, rim_step_deg, points=None):
     pts = points
     lo = (math.inf, None)
     hi = (-math.inf, None)
-    for depth in (sr.depth_min_mm, sr.depth_max_mm):
+    for depth in (sr.depth_min, sr.depth_max):
         for x, y in pts:
             h = math.hypot(x, y)
             if h > RIM:  # rounding of cos/sin

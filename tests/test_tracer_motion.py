@@ -74,8 +74,8 @@ def test_motion_for_setup_spans_the_sweep_range(profile):
     sr = optimal_sweep_range(setup)
     m = motion_for(setup, sr)
     assert m.kind == profile
-    assert m.sensor_distance(0.0) == pytest.approx(sr.sensor_start_mm)
-    assert m.sensor_distance(1.0) == pytest.approx(sr.sensor_end_mm)
+    assert m.sensor_distance(0.0) == pytest.approx(sr.sensor_start)
+    assert m.sensor_distance(1.0) == pytest.approx(sr.sensor_end)
     assert m.midpoint == pytest.approx(sr.reference_sensor_distance)
 
 

@@ -85,7 +85,7 @@ def test_continuous_sweep_and_plane_sum_converge_to_the_same_ipsf(u):
 def test_ipsf_is_the_time_average_of_psfs():
     """The N-plane IPSF equals the mean of the N single-distance PSFs on the same grid."""
     n = 4
-    motion = MotionProfile.linear(SR.sensor_start_mm, SR.sensor_end_mm)
+    motion = MotionProfile.linear(SR.sensor_start, SR.sensor_end)
     k, _ = integrated_psf(SPHERE, 2.0, 0.0, 500.0, rays=1_000_000, method="planes",
                           n_planes=n, motion=motion, reference_sensor_distance=REF)
     dists = motion.sensor_distance((np.arange(n) + 0.5) / n)
@@ -96,8 +96,8 @@ def test_ipsf_is_the_time_average_of_psfs():
 
 
 def test_trapezoidal_motion_dwells_longer_at_the_ends():
-    lin = MotionProfile.linear(SR.sensor_start_mm, SR.sensor_end_mm)
-    trap = MotionProfile.trapezoidal(SR.sensor_start_mm, SR.sensor_end_mm, 0.4)
+    lin = MotionProfile.linear(SR.sensor_start, SR.sensor_end)
+    trap = MotionProfile.trapezoidal(SR.sensor_start, SR.sensor_end, 0.4)
     kl, _ = integrated_psf(SPHERE, 0.0, 0.0, 10000.0, rays=1_000_000, motion=lin, sweep=SR)
     kt, _ = integrated_psf(SPHERE, 0.0, 0.0, 10000.0, rays=1_000_000, motion=trap, sweep=SR)
     # A far source focuses near the start of the sweep; the slow trapezoidal start

@@ -87,8 +87,8 @@ def run(args) -> int:
 
         field = args.field or "plane"
         trace = lambda f: traced_sweep_range(  # noqa: E731
-            setup, fov_deg=args.fov, depth_min=result.depth_min_mm,
-            depth_max=result.depth_max_mm, field=f)
+            setup, fov_deg=args.fov, depth_min=result.depth_min,
+            depth_max=result.depth_max, field=f)
         traced = trace(field)
         out.update(_traced_keys(traced))
         # traced_field_focus_*: the whole mirror (field "mirror"), as before for a tilted
@@ -114,12 +114,12 @@ def run(args) -> int:
         lines = [
             f"setup            {setup.name}",
             f"field of view    {r.fov_deg:.2f} deg (mirror reaches {r.max_fov_deg:.2f} deg); "
-            f"mirror zone rho {r.rho_start_mm:.3f} .. {r.rho_end_mm:.3f} mm",
-            f"depth range      {r.depth_min_mm:g} .. {r.depth_max_mm:g} mm",
-            f"focus range      {r.focus_min_mm:.3f} .. {r.focus_max_mm:.3f} mm ({r.source})",
-            f"sensor distance  {r.sensor_start_mm:.4f} -> {r.sensor_end_mm:.4f} mm "
+            f"mirror zone rho {r.rho_start:.3f} .. {r.rho_end:.3f} mm",
+            f"depth range      {r.depth_min:g} .. {r.depth_max:g} mm",
+            f"focus range      {r.focus_min:.3f} .. {r.focus_max:.3f} mm ({r.source})",
+            f"sensor distance  {r.sensor_start:.4f} -> {r.sensor_end:.4f} mm "
             f"(reference {r.reference_sensor_distance:.4f} mm)",
-            f"sensor travel    {r.translation_mm:.4f} mm",
+            f"sensor travel    {r.translation:.4f} mm",
             f"exposure         {r.exposure_s:.4f} s at {r.velocity_mm_s:g} mm/s",
         ]
         if "traced_focus_min_mm" in out:

@@ -81,7 +81,7 @@ def make_problem(size: int, *, kernel_size: int, grid: int, seed: int = 0) -> di
     # kernel every ~size/48 px, much finer than the model's variation)
     fine = synthetic_grid_bank(shape, (49, 49), size=kernel_size, r_max_px=r_mirror)
     blurred = spatially_varying_blur(sharp, fine)
-    noise = paper_fig10_settings(pixel_size_mm=0.0064)["sweep"]
+    noise = paper_fig10_settings(pixel_pitch=0.0064)["sweep"]
     # expose like a metered camera: the brightest scene point just below saturation
     scale = 0.9 * noise.saturation / float(sharp.max())
     noisy = noise.apply(blurred * scale, rng=seed) / scale

@@ -31,8 +31,10 @@ References
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -66,8 +68,9 @@ class SensorNoise:
         Exposure time, s.
     f_number : float
         Working f-number N of the lens.
-    pixel_size_mm : float
-        Pixel pitch, mm (``setup.sensor.pixel_pitch``).
+    pixel_pitch : float
+        Pixel pitch, mm (``setup.sensor.pixel_pitch``). The former keyword
+        ``pixel_size_mm`` is still accepted, with a :class:`DeprecationWarning`.
     reflectance : float
         Mean scene reflectance R that relative exposure 1.0 stands for.
     quantum_efficiency : float
@@ -96,7 +99,7 @@ class SensorNoise:
     illuminance_lux: float
     exposure_s: float
     f_number: float
-    pixel_size_mm: float
+    pixel_pitch: float
     reflectance: float = 0.5
     quantum_efficiency: float = 0.5
     read_noise_e: float = 3.0
@@ -110,7 +113,7 @@ class SensorNoise:
         _check("illuminance_lux", self.illuminance_lux, lo=0.0, lo_open=False)
         _check("exposure_s", self.exposure_s)
         _check("f_number", self.f_number)
-        _check("pixel_size_mm", self.pixel_size_mm)
+        _check("pixel_pitch", self.pixel_pitch)
         _check("reflectance", self.reflectance, hi=1.0)
         _check("quantum_efficiency", self.quantum_efficiency, hi=1.0)
         _check("read_noise_e", self.read_noise_e, lo_open=False)
@@ -125,7 +128,7 @@ class SensorNoise:
     @property
     def electrons_per_unit(self) -> float:
         """J: mean photo-electrons for relative exposure 1.0."""
-        delta_m = self.pixel_size_mm * 1e-3
+        delta_m = self.pixel_pitch * 1e-3
         return (PHOTONS_PER_LUX_S_M2 * self.exposure_s * self.illuminance_lux
                 * self.reflectance * self.quantum_efficiency * delta_m ** 2
                 / self.f_number ** 2)
@@ -226,15 +229,52 @@ class SensorNoise:
         return (dn / (g * J)).astype(out_dt)
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """Provenance; the pitch under its JSON key ``pixel_size_mm``, as before."""
+        return {("pixel_size_mm" if k == "pixel_pitch" else k): v
+                for k, v in asdict(self).items()}
 
 
-def paper_fig10_settings(pixel_size_mm: float, illuminance_lux: float = 50.0) -> dict:
+_dataclass_init = SensorNoise.__init__
+
+
+@functools.wraps(_dataclass_init)
+def _init_accepting_pixel_size_mm(self, *args, pixel_size_mm=None, **kwargs):
+    if pixel_size_mm is not None:
+        warnings.warn("SensorNoise(pixel_size_mm=...) is deprecated: use pixel_pitch",
+                      DeprecationWarning, stacklevel=2)
+        if "pixel_pitch" in kwargs:
+            raise ValueError("noise: give pixel_pitch or the deprecated pixel_size_mm, "
+                             "not both")
+        kwargs["pixel_pitch"] = pixel_size_mm
+    _dataclass_init(self, *args, **kwargs)
+
+
+def _pixel_size_mm(self) -> float:
+    warnings.warn("SensorNoise.pixel_size_mm is deprecated: use pixel_pitch (mm)",
+                  DeprecationWarning, stacklevel=2)
+    return self.pixel_pitch
+
+
+# The former name of ``pixel_pitch`` keeps working as a keyword and a read-only
+# attribute, with a DeprecationWarning (it is not a field: replace() never sees it).
+SensorNoise.__init__ = _init_accepting_pixel_size_mm
+SensorNoise.pixel_size_mm = property(_pixel_size_mm, doc="Deprecated alias of pixel_pitch.")
+
+
+def paper_fig10_settings(pixel_pitch: float | None = None, illuminance_lux: float = 50.0, *,
+                         pixel_size_mm: float | None = None) -> dict:
     """The paper's Fig. 10 comparison: focal sweep F2.8, 0.6 s, ISO 100 against a
-    stopped-down F11, 0.6 s, ISO 1600 exposure, both at ``illuminance_lux``.
+    stopped-down F11, 0.6 s, ISO 1600 exposure, both at ``illuminance_lux``, for pixels
+    of pitch ``pixel_pitch`` mm (``pixel_size_mm``: its deprecated keyword).
 
     Returns ``{"sweep": SensorNoise, "stopped": SensorNoise}``.
     """
-    common = dict(illuminance_lux=illuminance_lux, exposure_s=0.6, pixel_size_mm=pixel_size_mm)
+    if pixel_size_mm is not None:
+        warnings.warn("paper_fig10_settings(pixel_size_mm=...) is deprecated: use pixel_pitch",
+                      DeprecationWarning, stacklevel=2)
+        if pixel_pitch is not None:
+            raise ValueError("give pixel_pitch or the deprecated pixel_size_mm, not both")
+        pixel_pitch = pixel_size_mm
+    common = dict(illuminance_lux=illuminance_lux, exposure_s=0.6, pixel_pitch=pixel_pitch)
     return {"sweep": SensorNoise(f_number=2.8, iso=100.0, **common),
             "stopped": SensorNoise(f_number=11.0, iso=1600.0, **common)}

@@ -234,7 +234,7 @@ def motion_for(setup, sweep_range=None, *, table=None) -> MotionProfile:
         ``setup.rig.acceleration`` (mm/s²) set the trapezoidal ramps.
     sweep_range : mitsweep.optics.SweepRange, optional
         Default: :func:`mitsweep.optics.optimal_sweep_range` of the setup. The sensor
-        moves from ``sensor_start_mm`` (focus at focus_min) to ``sensor_end_mm``.
+        moves from ``sensor_start`` (focus at focus_min) to ``sensor_end``.
     table : (times, positions), optional
         Required for ``profile = "tabulated"``: a measured rig log, positions as sensor
         distances in mm.
@@ -250,7 +250,7 @@ def motion_for(setup, sweep_range=None, *, table=None) -> MotionProfile:
         from .sweep import optimal_sweep_range
 
         sweep_range = optimal_sweep_range(setup)
-    start, end = sweep_range.sensor_start_mm, sweep_range.sensor_end_mm
+    start, end = sweep_range.sensor_start, sweep_range.sensor_end
     kind = setup.sweep.profile
     if kind == "linear":
         return MotionProfile.linear(start, end)

@@ -15,6 +15,7 @@ evaluated; over the zone a dense grid is refined by a bounded 1-D minimisation.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -53,37 +54,64 @@ class MirrorZone:
 class SweepRange:
     """An optical sweep: focus distances (object side) and the sensor travel.
 
-    ``sensor_start`` is the sensor distance focusing at ``focus_min`` (the larger
-    distance), ``sensor_end`` the one focusing at ``focus_max``. The reference distance
-    of IPSFs and ground truth is mid-travel.
+    Lengths are mm (unsuffixed, docs/design.md); ``exposure_s``, ``velocity_mm_s`` and
+    the angles carry their units. ``sensor_start`` is the sensor distance focusing at
+    ``focus_min`` (the larger distance), ``sensor_end`` the one focusing at
+    ``focus_max``. The reference distance of IPSFs and ground truth is the mid-travel of
+    the motion run over it (:func:`mitsweep.optics.reference.reference_geometry`); for
+    the default motion that is :attr:`reference_sensor_distance`.
+
+    The former ``*_mm`` attribute names (``focus_min_mm``, ...) still read, with a
+    :class:`DeprecationWarning`; :meth:`as_dict` keeps the ``*_mm`` keys.
     """
 
-    focus_min_mm: float
-    focus_max_mm: float
-    sensor_start_mm: float
-    sensor_end_mm: float
-    translation_mm: float
+    focus_min: float
+    focus_max: float
+    sensor_start: float
+    sensor_end: float
+    translation: float
     exposure_s: float
     velocity_mm_s: float
-    rho_max_mm: float
-    rho_start_mm: float
-    rho_end_mm: float
+    rho_max: float
+    rho_start: float
+    rho_end: float
     fov_deg: float
     max_fov_deg: float
-    depth_min_mm: float
-    depth_max_mm: float
+    depth_min: float
+    depth_max: float
     source: str            # "optimal" (Eq. 8–9) or "setup" (given focus_min/max)
     min_at: dict           # where the minimum is reached: surface, rho_mm, depth_mm
     max_at: dict
 
     @property
     def reference_sensor_distance(self) -> float:
-        return 0.5 * (self.sensor_start_mm + self.sensor_end_mm)
+        """Mid-travel of the sensor, mm."""
+        return 0.5 * (self.sensor_start + self.sensor_end)
 
     def as_dict(self) -> dict:
-        d = asdict(self)
+        """JSON provenance: lengths under their ``*_mm`` keys (unchanged for readers)."""
+        d = {(f"{k}_mm" if k in _MM_FIELDS else k): v for k, v in asdict(self).items()}
         d["reference_sensor_distance_mm"] = self.reference_sensor_distance
         return d
+
+
+#: SweepRange lengths (mm) that were named ``<name>_mm`` before; JSON keeps that form.
+_MM_FIELDS = ("focus_min", "focus_max", "sensor_start", "sensor_end", "translation",
+              "rho_max", "rho_start", "rho_end", "depth_min", "depth_max")
+
+
+def _deprecated_mm_alias(name: str) -> property:
+    def read(self):
+        warnings.warn(f"SweepRange.{name}_mm is deprecated: use SweepRange.{name} (mm)",
+                      DeprecationWarning, stacklevel=2)
+        return getattr(self, name)
+
+    return property(read, doc=f"Deprecated alias of :attr:`{name}` (read-only).")
+
+
+for _name in _MM_FIELDS:
+    setattr(SweepRange, f"{_name}_mm", _deprecated_mm_alias(_name))
+del _name
 
 
 def _reflected_angles(placement, xs):
@@ -225,7 +253,7 @@ def optimal_sweep_range(setup, *, fov_deg: float | None = None,
     Returns
     -------
     SweepRange
-        ``focus_min_mm``/``focus_max_mm`` are D_min^opt and D_max^opt (Eq. 8–9), the
+        ``focus_min``/``focus_max`` are D_min^opt and D_max^opt (Eq. 8–9), the
         sensor distances follow from the thin lens (Eq. 1), the exposure is the sensor
         translation over the stage velocity.
 
@@ -262,13 +290,13 @@ def optimal_sweep_range(setup, *, fov_deg: float | None = None,
     i_end = image_distance(f, fmax)
     translation = abs(i_start - i_end)
     return SweepRange(
-        focus_min_mm=float(fmin), focus_max_mm=float(fmax),
-        sensor_start_mm=float(i_start), sensor_end_mm=float(i_end),
-        translation_mm=float(translation),
+        focus_min=float(fmin), focus_max=float(fmax),
+        sensor_start=float(i_start), sensor_end=float(i_end),
+        translation=float(translation),
         exposure_s=float(translation / setup.sweep.velocity),
         velocity_mm_s=setup.sweep.velocity,
-        rho_max_mm=zone.rho_max, rho_start_mm=zone.rho_start, rho_end_mm=zone.rho_end,
+        rho_max=zone.rho_max, rho_start=zone.rho_start, rho_end=zone.rho_end,
         fov_deg=zone.fov_deg, max_fov_deg=zone.max_fov_deg,
-        depth_min_mm=float(dmin), depth_max_mm=float(dmax),
+        depth_min=float(dmin), depth_max=float(dmax),
         source=source, min_at=at_min, max_at=at_max)
 

@@ -159,7 +159,7 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
     rig = setup.rig
     spm = rig.steps_per_mm
     v = float(sweep_range.velocity_mm_s)
-    s_start, s_end = float(sweep_range.sensor_start_mm), float(sweep_range.sensor_end_mm)
+    s_start, s_end = float(sweep_range.sensor_start), float(sweep_range.sensor_end)
     travel = abs(s_end - s_start)
 
     if v > rig.max_velocity:

@@ -38,7 +38,7 @@ def field_radius(setup, geometry: ReferenceGeometry | None = None) -> float:
     """
     geometry = reference_geometry(setup) if geometry is None else geometry
     pl = placement_of(setup.mirror)
-    edge = chief_ray(pl, pl.surface(np.array([geometry.sweep.rho_end_mm]), np.array([0.0])))
+    edge = chief_ray(pl, pl.surface(np.array([geometry.sweep.rho_end]), np.array([0.0])))
     u, v = image_point(edge, geometry.sensor_distance)
     return float(math.hypot(float(u[0]), float(v[0])))
 

@@ -34,9 +34,9 @@ PAPER_RANGE_FRACTIONS = (9.0 / 25.25, 18.0 / 25.25, 35.0 / 25.25)
 def default_ranges(setup) -> list[tuple[float, float]]:
     """The paper's three ranges scaled to the setup, then the optimal range itself."""
     sr = optimal_sweep_range(setup)
-    lo, span = sr.focus_min_mm, sr.focus_max_mm - sr.focus_min_mm
+    lo, span = sr.focus_min, sr.focus_max - sr.focus_min
     rows = [(lo, lo + frac * span) for frac in PAPER_RANGE_FRACTIONS]
-    rows.append((lo, sr.focus_max_mm))
+    rows.append((lo, sr.focus_max))
     return rows
 
 
@@ -125,7 +125,7 @@ def table1(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
             kz[where] = {"tangential": float(np.mean(tan)), "radial": float(np.mean(rad))}
         rows.append({
             "focus_min_mm": fmin, "focus_max_mm": fmax,
-            "sensor_travel_mm": sr.translation_mm,
+            "sensor_travel_mm": sr.translation,
             "v_avg": v_avg(bank.kernels, epsilon=epsilon), "kurtosis": kz,
             "periphery_radius_mm": float(bank.radii_mm[-1]),
             "max_outside_kernel": float(np.max(bank.metadata["outside_kernel"])),
