@@ -38,12 +38,9 @@ logger = logging.getLogger(__name__)
 DPI = 120
 #: Colour map of kernel thumbnails (normalised to their maximum).
 KERNEL_CMAP = "inferno"
-
-
 #: Grid lines: a light grey rather than a transparent black, and legends opaque, so that
 #: PostScript output (which has no transparency) looks the same and raises no warning.
 GRID_COLOR = "0.88"
-
 #: Formats whose files carry matplotlib's ``metadata`` (the maker and version).
 _TAGGED = frozenset({"png", "pdf", "svg", "svgz", "ps", "eps"})
 
@@ -220,10 +217,12 @@ def plot_bank(bank, path: str | Path, *,
     sections : mapping of str to a sequence of ``(x, radial, tangential)``
         Per panel (e.g. ``"centre"``, ``"periphery"``), the cross-sections of one point
         at each of the bank's depths, in the bank's depth order (radial in blue shades,
-        tangential in red shades, darker for nearer depths).
+        tangential in red shades, brightest at the first depth, darker at each next).
     max_thumbs : int
         At most this many thumbnails, evenly spaced over the points.
     """
+    from matplotlib.figure import Figure
+
     kernels = np.asarray(bank.kernels)
     n_depths, n = kernels.shape[:2]
     for name, per_depth in sections.items():
@@ -233,8 +232,6 @@ def plot_bank(bank, path: str | Path, *,
     idx = np.unique(np.linspace(0, n - 1, min(n, max_thumbs)).round().astype(int))
     cols = max(len(idx), 2)
     pitch_um = bank.pixel_pitch * 1e3
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=(max(1.6 * cols + 1.2, 8.0), 6.4), layout="constrained")
     fig.get_layout_engine().set(h_pad=0.1)   # inches; room between the rows' titles
     top, bottom = fig.subfigures(2, 1, height_ratios=(1.0, 1.35))
@@ -289,15 +286,15 @@ def plot_table1(result: dict, path: str | Path) -> Path:
     # Side by side, one-line "339–364 mm" labels run into each other: two lines each for a
     # few ranges, vertical single lines for more (two lines no longer fit then either).
     vertical = len(rows) > TABLE1_UPRIGHT_RANGES
-    sep = " " if vertical else "\n"
-    labels = [f"{r['focus_min_mm']:.0f}–{'' if vertical else sep}{r['focus_max_mm']:.0f} mm"
-              for r in rows]
+    br = "" if vertical else "\n"
+    labels = [f"{r['focus_min_mm']:.0f}–{br}{r['focus_max_mm']:.0f} mm" for r in rows]
+    conventional = "conventional camera" if vertical else "conventional\ncamera"
     tick_style = dict(fontsize=8, rotation=90 if vertical else 0)
     fig, (a0, a1) = new_figure(1, 2, figsize=(11, 4.5))
     a0.bar(np.arange(len(rows) + 1), [r["v_avg"] for r in rows]
            + [result["conventional"]["v_avg"]],
            color=["tab:blue"] * len(rows) + ["tab:gray"])
-    a0.set_xticks(np.arange(len(rows) + 1), labels + [f"conventional{sep}camera"],
+    a0.set_xticks(np.arange(len(rows) + 1), labels + [conventional],
                   **tick_style)
     a0.set_yscale("log")
     a0.set_ylabel("V_avg (Eq. 3)")
@@ -320,8 +317,16 @@ def plot_table1(result: dict, path: str | Path) -> Path:
 #: Colour of each image kind in :func:`plot_per_radius` (noisy versions share it).
 IMAGE_COLORS = {"edof": "tab:red", "focused": "tab:blue", "stopped": "tab:green",
                 "sweep": "0.45", "pinhole": "k"}
-#: Line style and marker per light level, brightest first; the noise-free image first.
-LIGHT_STYLES = (("-", "o"), ("--", "s"), ("-.", "^"), (":", "v"), ((0, (5, 1, 1, 1)), "D"))
+OTHER_IMAGE_COLOR = "tab:purple"
+#: Entries per column of the per-radius key (more light levels: more columns).
+LEGEND_ROWS = 20
+#: Line style and marker of the noise-free images in :func:`plot_per_radius`.
+CLEAN_STYLE = ("-", "o")
+#: Line styles and markers of the light levels, brightest first: level k gets style
+#: k mod 3 and marker k mod 11, so 33 levels (3 × 11, coprime) get distinct pairs, more
+#: than a dataset holds (mitsweep.pipeline.MAX_LIGHT_LEVELS).
+LIGHT_DASHES = ("--", "-.", ":")
+LIGHT_MARKERS = ("s", "^", "v", "D", "P", "X", "*", "p", "h", "<", ">")
 _LUX_NAME = re.compile(r"(?P<base>.+)_(?P<lux>[0-9.e+-]+)lux")
 
 
@@ -340,8 +345,8 @@ def plot_per_radius(results: dict, path: str | Path) -> Path:
     """PSNR per radius inside the mirror's image, for the first scene of an evaluation.
 
     One colour per image kind (``IMAGE_COLORS``), one line style and marker per light
-    level (``LIGHT_STYLES``: the noise-free image solid with circles, then brightest to
-    dimmest).
+    level: the noise-free image solid with circles (``CLEAN_STYLE``), then the light
+    levels brightest to dimmest (``LIGHT_DASHES``, ``LIGHT_MARKERS``).
 
     Parameters
     ----------
@@ -355,20 +360,34 @@ def plot_per_radius(results: dict, path: str | Path) -> Path:
     entries = {name: e for name, e in first.items() if isinstance(e, dict)}
     levels = sorted({lux for lux in (_image_kind(n)[1] for n in entries) if lux is not None},
                     reverse=True)
-    style_of = {None: LIGHT_STYLES[0]}
-    style_of.update({lux: LIGHT_STYLES[1 + k % (len(LIGHT_STYLES) - 1)]
+    style_of = {None: CLEAN_STYLE}
+    style_of.update({lux: (LIGHT_DASHES[k % len(LIGHT_DASHES)],
+                           LIGHT_MARKERS[k % len(LIGHT_MARKERS)])
                      for k, lux in enumerate(levels)})
+    from matplotlib.lines import Line2D
+
     fig, ax = new_figure(figsize=(8.5, 4.8))
+    kinds, lights = {}, {}
     for base, lux, entry in sorted(((*_image_kind(n), e) for n, e in entries.items()),
                                    key=lambda t: (t[0], -math.inf if t[1] is None else -t[1])):
         ls, marker = style_of[lux]
+        color = kinds.setdefault(base, IMAGE_COLORS.get(base, OTHER_IMAGE_COLOR))
         r = entry["per_radius"]
         ax.plot(r["radius_px"], r["psnr"], linestyle=ls, marker=marker, ms=4, lw=1.2,
-                color=IMAGE_COLORS.get(base, "tab:purple"),
-                label=base if lux is None else f"{base}, {lux:g} lux")
+                color=color, label=base if lux is None else f"{base}, {lux:g} lux")
+        lights[lux] = "noise-free" if lux is None else f"{lux:g} lux"
     ax.set_xlabel("distance from the optical axis (pixels)")
     ax.set_ylabel("PSNR (dB) against the pinhole ground truth")
     ax.set_title("per-radius PSNR inside the mirror's image")
     ax.grid(color=GRID_COLOR)
-    _legend_outside(ax)
+    # One key, not one entry per curve (kinds × light levels): a colour per image kind,
+    # then a black line per light level.
+    key = [Line2D([], [], color=c, lw=2, label=b) for b, c in kinds.items()]
+    key += [Line2D([], [], color="k", lw=1.2, linestyle=style_of[lux][0],
+                   marker=style_of[lux][1], ms=4, label=text)
+            for lux, text in sorted(lights.items(),
+                                    key=lambda kv: -math.inf if kv[0] is None else -kv[0])]
+    ax.legend(handles=key, title="colour: image; line: light", title_fontsize=7, fontsize=7,
+              ncols=math.ceil(len(key) / LEGEND_ROWS), loc="upper left",
+              bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, framealpha=1.0)
     return save_figure(fig, path)

@@ -21,6 +21,7 @@ from mitsweep.cli.main import main
 from mitsweep.config import load_setup
 from mitsweep.io.bank import IPSFBank
 from mitsweep.optics import optimal_sweep_range
+from mitsweep.pipeline import MAX_LIGHT_LEVELS
 from mitsweep.tracer.metrics import cross_sections
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -99,14 +100,14 @@ def table1_result(n_rows: int = 4) -> dict:
 LIGHT_LEVELS = (50.0, 2.0, 0.5)
 
 
-def evaluation_results() -> dict:
+def evaluation_results(light_levels=LIGHT_LEVELS) -> dict:
     radius = np.linspace(10.0, 200.0, 6)
     scene = {"white_level": 1.0, "mirror_radius_px": 200.0}
     for base, psnr in (("edof", 34.0), ("focused", 28.0), ("stopped", 26.0), ("sweep", 24.0)):
         names = [(base, psnr)]
         if base != "focused":
             names += [(f"{base}_{lux:g}lux", psnr - 3 * (j + 1))
-                      for j, lux in enumerate(LIGHT_LEVELS)]
+                      for j, lux in enumerate(light_levels)]
         for name, p in names:
             scene[name] = {"psnr": p, "ssim": 0.9,
                            "per_radius": {"radius_px": radius.tolist(),
@@ -184,8 +185,11 @@ def test_table1_png_tick_labels_do_not_overlap(tmp_path, drawn, n_rows):
     assert not _boxes_overlap(legend, fig.axes[1].get_window_extent(renderer))
 
 
-def test_per_radius_png_gives_each_light_level_its_own_style(tmp_path, drawn):
-    results = evaluation_results()
+@pytest.mark.parametrize("levels", [LIGHT_LEVELS,
+                                    tuple(100.0 / 2 ** np.arange(MAX_LIGHT_LEVELS))],
+                         ids=["paper", "most"])
+def test_per_radius_png_gives_each_light_level_its_own_style(tmp_path, drawn, levels):
+    results = evaluation_results(levels)
     path = plots.plot_per_radius(results, tmp_path / "psnr_per_radius.png")
     assert_real_png(path, (8.5, 4.8))
     (fig, renderer), = drawn
@@ -193,7 +197,7 @@ def test_per_radius_png_gives_each_light_level_its_own_style(tmp_path, drawn):
     assert len(lines) == len([v for v in results["scenes"]["scene_000"].values()
                               if isinstance(v, dict)])
     for base in ("edof", "stopped", "sweep"):
-        group = [lines[base]] + [lines[f"{base}, {lux:g} lux"] for lux in LIGHT_LEVELS]
+        group = [lines[base]] + [lines[f"{base}, {lux:g} lux"] for lux in levels]
         styles = {(line.get_linestyle(), line.get_marker()) for line in group}
         assert len(styles) == len(group), (base, styles)
         assert len({line.get_color() for line in group}) == 1   # colour = image kind
