@@ -235,7 +235,12 @@ class Sweep:
 
     ``focus_min``/``focus_max`` (mm, optional, both or neither) override the optimal
     sweep range computed from ``fov_deg`` and the depth range (paper Eq. 8–9), e.g. to
-    reproduce Table 1's longer sweeps.
+    reproduce Table 1's longer sweeps. ``velocity`` is the stage velocity in mm/s.
+
+    The fields of the setup dataclasses are the TOML keys, one for one (the loader, the
+    strict key check, :func:`setup_to_dict` and the banks' optics fingerprints all use
+    them), so ``velocity`` keeps its documented key rather than the ``velocity_mm_s`` of
+    computed quantities such as :attr:`mitsweep.optics.SweepRange.velocity_mm_s`.
     """
 
     fov_deg: float

@@ -187,3 +187,18 @@ def test_cli_render_bad_setup_values_exit_2(tmp_path, capsys, key, value, messag
     setup.write_text(text)
     rc = main(["render", str(setup), "--mode", "pinhole", "--out", str(tmp_path / "o.exr")])
     assert rc == 2 and message in capsys.readouterr().err
+
+
+def test_render_cli_offers_exactly_the_render_modes_and_aovs():
+    """The CLI spells the choices out (its parser must not import the renderer); they
+    are the render API's."""
+    import argparse
+
+    from mitsweep.cli import render as cli_render
+    from mitsweep.render import AOV_NAMES, MODES
+
+    p = argparse.ArgumentParser()
+    cli_render.add_arguments(p)
+    choices = {a.dest: tuple(a.choices) for a in p._actions if a.choices}
+    assert choices["mode"] == MODES
+    assert choices["aov"] == AOV_NAMES
