@@ -57,12 +57,18 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
     Raises
     ------
     ValueError
-        The suffix names no format matplotlib writes; the message lists those it does.
+        The suffix names no format matplotlib writes here (PGF needs a TeX system); the
+        message lists those it does.
     """
+    import shutil
+
+    import matplotlib
     from matplotlib.figure import Figure
 
     p = Path(path)
-    formats = Figure().canvas.get_supported_filetypes()
+    formats = set(Figure().canvas.get_supported_filetypes())
+    if shutil.which(matplotlib.rcParams["pgf.texsystem"]) is None:
+        formats.discard("pgf")   # PGF output measures its text with LaTeX
     if _format_of(p) not in formats:
         raise ValueError(f"{flag + ' ' if flag else ''}{p}: a figure must end in one of "
                          f"{', '.join('.' + f for f in sorted(formats))} (or have no suffix, "
@@ -119,9 +125,9 @@ def plot_focal_surfaces(setup, sweep, path: str | Path,
     from .optics.coddington import focal_distances
 
     placement = placement_of(setup.mirror)
-    ds = sorted(set(depths) | {sweep.depth_min_mm, sweep.depth_max_mm})
-    lo = -setup.mirror.rim_radius if not setup.mirror.is_symmetric else -sweep.rho_max_mm
-    xs = np.linspace(min(lo, sweep.rho_start_mm), max(sweep.rho_end_mm, sweep.rho_max_mm), 801)
+    ds = sorted(set(depths) | {sweep.depth_min, sweep.depth_max})
+    lo = -setup.mirror.rim_radius if not setup.mirror.is_symmetric else -sweep.rho_max
+    xs = np.linspace(min(lo, sweep.rho_start), max(sweep.rho_end, sweep.rho_max), 801)
     ray = chief_ray(placement, placement.surface(xs, np.zeros_like(xs)))
     ok = ray.visible
     fig, ax = new_figure(figsize=(8.5, 6))
@@ -139,7 +145,7 @@ def plot_focal_surfaces(setup, sweep, path: str | Path,
             q = p[ok] - dist[:, None] * ray.to_lens[ok]
             ax.plot(q[:, 0], q[:, 2], style, color=c, lw=1, label=f"{nm}, depth {d:g} mm")
     vd = setup.mirror.vertex_distance
-    for f, lab in ((sweep.focus_min_mm, "focus min"), (sweep.focus_max_mm, "focus max")):
+    for f, lab in ((sweep.focus_min, "focus min"), (sweep.focus_max, "focus max")):
         ax.axhline(vd - f, color="0.5", lw=0.6, ls=":")
         ax.text(xs[0], vd - f, f" {lab} {f:.1f} mm", fontsize=7, va="bottom")
     ax.set_xlabel("x (mm)")

@@ -243,12 +243,28 @@ def test_unknown_figure_format_is_refused_naming_the_flag(tmp_path):
     assert plots.check_figure_path(tmp_path / "fig.png") == tmp_path / "fig.png"
 
 
-def test_table1_cli_refuses_a_bad_plot_format_before_tracing(scenes_dir, tmp_path, capsys):
-    rc = main(["table1", str(scenes_dir / "sphere.toml"), "--plot", str(tmp_path / "t.txt")])
+def test_pgf_is_refused_without_a_tex_system(tmp_path, monkeypatch):
+    """PGF output needs LaTeX to measure text: without it the plot would fail after the
+    computation, so the format is refused up front."""
+    import matplotlib
+
+    monkeypatch.setitem(matplotlib.rcParams, "pgf.texsystem", "xelatex")
+    monkeypatch.setenv("PATH", str(tmp_path))   # no xelatex on it
+    with pytest.raises(ValueError, match=r"fig\.pgf: a figure must end in one of"):
+        plots.check_figure_path(tmp_path / "fig.pgf")
+
+
+@pytest.mark.parametrize("command", [["table1"], ["ipsf", "--bank", "radial"],
+                                     ["sweep-range", "--verify"]], ids=lambda c: c[0])
+def test_cli_refuses_a_bad_plot_format_before_tracing(scenes_dir, tmp_path, capsys, command):
+    """Refused before any trace (after them, these runs would take minutes)."""
+    rc = main([command[0], str(scenes_dir / "sphere.toml"), *command[1:],
+               "--plot", str(tmp_path / "t.txt")])
     err = capsys.readouterr().err
     assert rc == 2
     assert err.startswith("mitsweep: error: --plot ") and "t.txt" in err and ".png" in err
-    assert "Traceback" not in err
+    assert "Traceback" not in err and err.count("\n") == 1
+    assert not (tmp_path / "t.txt").exists()
 
 
 def test_ipsf_bank_cli_writes_its_plot(scenes_dir, tmp_path, capsys):

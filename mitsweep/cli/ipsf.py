@@ -132,6 +132,10 @@ def run(args) -> int:
     from ..tracer.source import source_from_image
 
     check_outputs([args.setup, args.motion_table], [args.output, args.plot])
+    if args.plot:  # before the traces, not after
+        from ..plots import check_figure_path
+
+        check_figure_path(args.plot, "--plot")
     setup = load_setup_arg(args.setup)
     W, H = setup.sensor.resolution
     if args.kernel_size % 2 == 0 or not 3 <= args.kernel_size < min(W, H):

@@ -80,6 +80,9 @@ def run(args) -> int:
                          "--verify")
     if args.plot:
         check_outputs([args.setup], [args.plot])
+        from ..plots import check_figure_path
+
+        check_figure_path(args.plot, "--plot")  # before --verify's traces, not after
     setup, result, out = compute(args)
     if args.verify:
         from ..config import SetupError
