@@ -148,3 +148,13 @@ def test_ipsf_cli_bank_from_a_motion_table_records_its_mid_travel(case, tmp_path
     out = json.loads(capsys.readouterr().out)
     assert out["reference_sensor_distance_mm"] == pytest.approx(measured.sensor_distance,
                                                                 abs=1e-12)
+
+
+def test_mode_camera_refuses_a_bare_sweep_range(case):
+    """The third argument is the whole reference geometry: a SweepRange alone (the old
+    signature) would leave the motion, and so the reference, unresolved."""
+    from mitsweep.render.api import mode_camera
+
+    setup, optimal, _ = case
+    with pytest.raises(TypeError, match="ReferenceGeometry"):
+        mode_camera(setup, "pinhole", optimal.sweep)

@@ -77,8 +77,8 @@ def run(args) -> int:
     sweep = optimal_sweep_range(setup)
     plot_focal_surfaces(setup, sweep, out / "focal_surfaces.png")
     timings["sweep_range_s"] = time.perf_counter() - t0
-    _step(f"sweep range {sweep.focus_min_mm:.2f}-{sweep.focus_max_mm:.2f} mm, sensor travel "
-          f"{sweep.translation_mm:.3f} mm, exposure {sweep.exposure_s:.3f} s")
+    _step(f"sweep range {sweep.focus_min:.2f}-{sweep.focus_max:.2f} mm, sensor travel "
+          f"{sweep.translation:.3f} mm, exposure {sweep.exposure_s:.3f} s")
     report: dict = {"setup": setup.name, "sweep_range": sweep.as_dict()}
 
     if not args.no_verify:
@@ -115,7 +115,7 @@ def run(args) -> int:
     write_text_atomic(out / "report.md", _report_md(setup, sweep, report, results))
     _step(f"done in {timings['total_s']:.0f} s")
     means = results["mean"]
-    print(f"sweep range {sweep.focus_min_mm:.2f}-{sweep.focus_max_mm:.2f} mm; PSNR inside the "
+    print(f"sweep range {sweep.focus_min:.2f}-{sweep.focus_max:.2f} mm; PSNR inside the "
           f"mirror: EDOF {means['edof']['psnr']:.2f} dB, focused {means['focused']['psnr']:.2f} "
           f"dB, stopped {means['stopped']['psnr']:.2f} dB; report: {out / 'report.md'}")
     return 0
@@ -123,9 +123,9 @@ def run(args) -> int:
 
 def _report_md(setup, sweep, report, results) -> str:
     lines = [f"# mitsweep demo: {setup.name}", "",
-             f"Sweep range (Eq. 8–9): {sweep.focus_min_mm:.2f}–{sweep.focus_max_mm:.2f} mm; "
-             f"sensor {sweep.sensor_start_mm:.4f} → {sweep.sensor_end_mm:.4f} mm "
-             f"(travel {sweep.translation_mm:.4f} mm, exposure {sweep.exposure_s:.3f} s at "
+             f"Sweep range (Eq. 8–9): {sweep.focus_min:.2f}–{sweep.focus_max:.2f} mm; "
+             f"sensor {sweep.sensor_start:.4f} → {sweep.sensor_end:.4f} mm "
+             f"(travel {sweep.translation:.4f} mm, exposure {sweep.exposure_s:.3f} s at "
              f"{sweep.velocity_mm_s:g} mm/s)."]
     if "traced_sweep_range" in report:
         t = report["traced_sweep_range"]

@@ -147,8 +147,8 @@ def mode_camera(setup, mode, geometry: ReferenceGeometry | None = None, f_number
     if geometry is None:
         geometry = reference_geometry(setup)
     elif not isinstance(geometry, ReferenceGeometry):
-        raise TypeError(f"geometry: expected a ReferenceGeometry (see "
-                        f"mitsweep.optics.reference_geometry), got {type(geometry).__name__}")
+        raise TypeError(f"geometry: expected a ReferenceGeometry (from mitsweep.optics."
+                        f"reference.reference_geometry), got {type(geometry).__name__}")
     sr, motion, i_ref = geometry.sweep, geometry.motion, geometry.sensor_distance
     f = setup.lens.focal_length
     pitch = setup.sensor.pixel_pitch

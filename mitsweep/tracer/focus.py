@@ -436,7 +436,7 @@ def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | N
     if int(n_points) < 3 or int(n_rings) < 1:
         raise ValueError(f"n_points must be >= 3 and n_rings >= 1, got {n_points}, {n_rings}")
     sr = optimal_sweep_range(setup, fov_deg=fov_deg, depth_min=depth_min, depth_max=depth_max)
-    depths = tuple(sorted({sr.depth_min_mm, sr.depth_max_mm}))
+    depths = tuple(sorted({sr.depth_min, sr.depth_max}))
     rim = setup.mirror.rim_radius
     tilted = not setup.mirror.is_symmetric
     zone = mirror_zone(setup, fov_deg)
