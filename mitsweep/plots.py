@@ -57,12 +57,18 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
     Raises
     ------
     ValueError
-        The suffix names no format matplotlib writes; the message lists those it does.
+        The suffix names no format matplotlib writes here (PGF needs a TeX system); the
+        message lists those it does.
     """
+    import shutil
+
+    import matplotlib
     from matplotlib.figure import Figure
 
     p = Path(path)
-    formats = Figure().canvas.get_supported_filetypes()
+    formats = set(Figure().canvas.get_supported_filetypes())
+    if shutil.which(matplotlib.rcParams["pgf.texsystem"]) is None:
+        formats.discard("pgf")   # PGF output measures its text with LaTeX
     if _format_of(p) not in formats:
         raise ValueError(f"{flag + ' ' if flag else ''}{p}: a figure must end in one of "
                          f"{', '.join('.' + f for f in sorted(formats))} (or have no suffix, "
