@@ -39,8 +39,8 @@ LAYERS = {
     "backend": set(),
     "plots": {"optics", "io"},
     # The tracer and the renderer are independent implementations (DESIGN.md): they
-    # share optics, never each other. Tracer figures use the shared plotting helpers.
-    "tracer": {"optics", "io", "backend", "plots"},
+    # share optics, never each other.
+    "tracer": {"optics", "io", "backend"},
     "render": {"optics", "io", "backend"},
     "deconv": {"optics", "io"},
     "rig": {"optics", "io"},

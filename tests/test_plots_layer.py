@@ -13,11 +13,9 @@ from test_architecture import PKG, _module_name, imports_of
 PACKAGES = ("optics", "tracer", "deconv", "render", "rig", "io")
 FORBIDDEN = ("matplotlib", "mitsweep.plots")
 
-#: Offences known today, in a file another part of the project owns: io/png.py writes its
-#: PNGs with ``matplotlib.pyplot.imsave``. Strict: once it stops, the xfail fails and this
-#: entry must go.
-KNOWN = {"io/png.py": "io.png writes PNGs with matplotlib.pyplot.imsave (to be replaced "
-                      "by a writer without matplotlib)"}
+#: Offences known today (module -> reason), each a strict xfail: none. io/png.py wrote its
+#: PNGs with matplotlib until it moved to Pillow.
+KNOWN: dict[str, str] = {}
 
 
 def figure_imports(path: Path, package: Path = PKG) -> list[str]:

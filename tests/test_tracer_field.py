@@ -189,13 +189,13 @@ def test_whole_mirror_range_matches_a_dense_grid():
     (g_lo, at_lo), (g_hi, at_hi) = _dense_grid_extremes(TILTED, spacing=2.0, rim_step_deg=2.0)
     # The search reaches at least as far as every grid point (up to its own 0.1 µm
     # stopping tolerance)...
-    assert traced.focus_min_mm <= g_lo + 1e-4
-    assert traced.focus_max_mm >= g_hi - 1e-4
+    assert traced.focus_min <= g_lo + 1e-4
+    assert traced.focus_max >= g_hi - 1e-4
     # ...and no farther than the grid's discretisation allows: a smooth extreme lies
     # within half a cell (1 mm) of a grid point, worth < 0.05 mm of focus here (the
     # focus changes by at most ~3 mm per mm of mirror, quadratically near an extreme).
-    assert traced.focus_min_mm == pytest.approx(g_lo, abs=0.05)
-    assert traced.focus_max_mm == pytest.approx(g_hi, abs=0.05)
+    assert traced.focus_min == pytest.approx(g_lo, abs=0.05)
+    assert traced.focus_max == pytest.approx(g_hi, abs=0.05)
     # Same places: within a grid cell on the mirror, at the same depth.
     for at, (x, y, depth) in ((traced.min_at, at_lo), (traced.max_at, at_hi)):
         assert math.hypot(at["x_mm"] - x, abs(at["y_mm"]) - abs(y)) <= 2.0 * math.sqrt(2)
@@ -204,8 +204,8 @@ def test_whole_mirror_range_matches_a_dense_grid():
     # tilt-plane minimum the paper's range has.
     assert traced.max_at["on_rim"] and traced.max_at["x_mm"] > 0.99 * RIM
     plane = traced_sweep_range(TILTED, field="plane")
-    assert traced.focus_min_mm == pytest.approx(plane.focus_min_mm, abs=1e-4)
-    assert traced.focus_max_mm > plane.focus_max_mm + 50.0
+    assert traced.focus_min == pytest.approx(plane.focus_min, abs=1e-4)
+    assert traced.focus_max > plane.focus_max + 50.0
 
 
 @pytest.mark.slow
@@ -213,8 +213,8 @@ def test_whole_mirror_search_converges():
     """Refining the coarse grid (4, 6, 8 rings) moves the refined extremes by < 1 µm,
     while the coarse grids alone differ by up to 0.14 mm."""
     runs = [traced_sweep_range(TILTED, field="mirror", n_rings=n) for n in (4, 6, 8)]
-    lows = [t.focus_min_mm for t in runs]
-    highs = [t.focus_max_mm for t in runs]
+    lows = [t.focus_min for t in runs]
+    highs = [t.focus_max for t in runs]
     assert np.ptp(lows) < 1e-3 and np.ptp(highs) < 1e-3
     for t in runs:
         for key in ("min", "max"):
@@ -233,23 +233,23 @@ def test_fov_field_range_matches_a_dense_grid():
         TILTED, 0, 0, points=_fov_points(spacing=2.0, boundary_step_deg=2.0))
     # As for the whole mirror: at least as far as every grid point, and within the
     # grid's discretisation (half a 2 mm cell; < 0.05 mm of focus) of it.
-    assert traced.focus_min_mm <= g_lo + 1e-4
-    assert traced.focus_max_mm >= g_hi - 1e-4
-    assert traced.focus_min_mm == pytest.approx(g_lo, abs=0.05)
-    assert traced.focus_max_mm == pytest.approx(g_hi, abs=0.05)
+    assert traced.focus_min <= g_lo + 1e-4
+    assert traced.focus_max >= g_hi - 1e-4
+    assert traced.focus_min == pytest.approx(g_lo, abs=0.05)
+    assert traced.focus_max == pytest.approx(g_hi, abs=0.05)
     for at, (x, y, depth) in ((traced.min_at, at_lo), (traced.max_at, at_hi)):
         assert math.hypot(at["x_mm"] - x, abs(at["y_mm"]) - abs(y)) <= 2.0 * math.sqrt(2)
         assert at["depth_mm"] == depth
     assert traced.max_at["on_boundary"] and abs(traced.max_at["y_mm"]) > 10.0
-    assert traced.focus_max_mm > 389.52 + 1.0
+    assert traced.focus_max > 389.52 + 1.0
 
 
 @pytest.mark.slow
 def test_fov_field_search_converges_and_equals_plane_when_untilted():
     runs = [traced_sweep_range(TILTED, field="fov", n_rings=n) for n in (4, 8)]
-    assert abs(runs[0].focus_min_mm - runs[1].focus_min_mm) < 1e-3
-    assert abs(runs[0].focus_max_mm - runs[1].focus_max_mm) < 1e-3
+    assert abs(runs[0].focus_min - runs[1].focus_min) < 1e-3
+    assert abs(runs[0].focus_max - runs[1].focus_max) < 1e-3
     untilted = load_setup("scenes/paraboloid.toml")
     fov = traced_sweep_range(untilted, field="fov", n_points=25)
     plane = traced_sweep_range(untilted, field="plane", n_points=25)
-    assert (fov.focus_min_mm, fov.focus_max_mm) == (plane.focus_min_mm, plane.focus_max_mm)
+    assert (fov.focus_min, fov.focus_max) == (plane.focus_min, plane.focus_max)

@@ -84,12 +84,12 @@ def test_traced_sweep_range_matches_analytic(scene):
     # Both extremes are refined (Brent) past the 25-point grid, so what is left is the
     # traced foci's own departure from Coddington: up to ~8 µm of focus distance
     # (0.2 µm of sensor distance) at the tilted mirror's rim; 10 µm bounds it.
-    assert traced.focus_min_mm == pytest.approx(analytic.focus_min_mm, abs=0.01)
-    assert traced.focus_max_mm == pytest.approx(analytic.focus_max_mm, abs=0.01)
+    assert traced.focus_min == pytest.approx(analytic.focus_min, abs=0.01)
+    assert traced.focus_max == pytest.approx(analytic.focus_max, abs=0.01)
     # The rounding of the paper's two-decimal numbers.
     lo, hi = PAPER_RANGES[scene]
-    assert traced.focus_min_mm == pytest.approx(lo, abs=0.005 + 1e-9)
-    assert traced.focus_max_mm == pytest.approx(hi, abs=0.005 + 1e-9)
+    assert traced.focus_min == pytest.approx(lo, abs=0.005 + 1e-9)
+    assert traced.focus_max == pytest.approx(hi, abs=0.005 + 1e-9)
     # Where: on the tilt-plane zone (y = 0), at the depth the analytic extreme has, and
     # at its mirror point to a twentieth of the grid spacing (0.9-1.7 mm here).
     for at, ref in ((traced.min_at, analytic.min_at), (traced.max_at, analytic.max_at)):

@@ -87,9 +87,9 @@ def run(args) -> int:
         t0 = time.perf_counter()
         traced = traced_sweep_range(setup)
         timings["traced_sweep_range_s"] = time.perf_counter() - t0
-        report["traced_sweep_range"] = {"focus_min_mm": traced.focus_min_mm,
-                                        "focus_max_mm": traced.focus_max_mm}
-        _step(f"traced sweep range {traced.focus_min_mm:.2f}-{traced.focus_max_mm:.2f} mm")
+        report["traced_sweep_range"] = {"focus_min_mm": traced.focus_min,
+                                        "focus_max_mm": traced.focus_max}
+        _step(f"traced sweep range {traced.focus_min:.2f}-{traced.focus_max:.2f} mm")
 
     _step(f"rendering and deconvolving into {out / 'dataset'} (spp {spp})")
     t0 = time.perf_counter()

@@ -60,8 +60,8 @@ def compute(args) -> tuple[object, dict]:
 
 def _traced_keys(traced) -> dict:
     return {"traced_field": traced.field,
-            "traced_focus_min_mm": traced.focus_min_mm,
-            "traced_focus_max_mm": traced.focus_max_mm,
+            "traced_focus_min_mm": traced.focus_min,
+            "traced_focus_max_mm": traced.focus_max,
             "traced_focus_min_at": traced.min_at,
             "traced_focus_max_at": traced.max_at,
             "traced_convergence": traced.convergence,
@@ -103,8 +103,8 @@ def run(args) -> int:
             except SetupError as exc:
                 logger.info("no whole-mirror traced range: %s", exc)
         if whole is not None:
-            out["traced_field_focus_min_mm"] = whole.focus_min_mm
-            out["traced_field_focus_max_mm"] = whole.focus_max_mm
+            out["traced_field_focus_min_mm"] = whole.focus_min
+            out["traced_field_focus_max_mm"] = whole.focus_max
     if args.plot:
         from ..plots import plot_focal_surfaces
 

@@ -27,10 +27,7 @@ def write_png(path: str | Path, image: np.ndarray, *, white: float | None = None
     image by the smallest integer factor that fits (box average of the linear values,
     before encoding).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from PIL import Image
 
     img = np.asarray(image, dtype=np.float64)
     if img.ndim == 3 and img.shape[2] == 1:
@@ -45,9 +42,9 @@ def write_png(path: str | Path, image: np.ndarray, *, white: float | None = None
     white = white if white > 0 else 1.0
     srgb = (linear_to_srgb(np.nan_to_num(img / white)) * 255 + 0.5).astype(np.uint8)
     p = Path(path)
+    if srgb.ndim == 3 and srgb.shape[2] not in (3, 4):
+        raise ValueError(f"image must be (H, W), (H, W, 1), (H, W, 3) or (H, W, 4), "
+                         f"got shape {image.shape}")
     with atomic_path(p, suffix=".png") as tmp:
-        if srgb.ndim == 2:
-            plt.imsave(tmp, srgb, cmap="gray", vmin=0, vmax=255, format="png")
-        else:
-            plt.imsave(tmp, srgb, format="png")
+        Image.fromarray(np.ascontiguousarray(srgb)).save(tmp, format="PNG")
     return p

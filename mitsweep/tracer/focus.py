@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import logging
 import math
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -166,8 +167,11 @@ class TracedSweepRange:
     ----------
     field : str
         A key of :data:`FIELDS`.
-    focus_min_mm, focus_max_mm : float
-        The nearest and the farthest line focus over the field and the two end depths.
+    focus_min, focus_max : float
+        The nearest and the farthest line focus over the field and the two end depths,
+        mm (named as in :class:`~mitsweep.optics.SweepRange`; the former
+        ``focus_min_mm``/``focus_max_mm`` read on with a DeprecationWarning, and
+        :meth:`as_dict` keeps those keys).
     min_at, max_at : dict
         Where they are reached: the mirror point ``x_mm``, ``y_mm`` (local frame),
         ``depth_mm``, ``on_boundary`` (of the field), ``on_rim``, and the chief-ray image
@@ -181,8 +185,8 @@ class TracedSweepRange:
     """
 
     field: str
-    focus_min_mm: float
-    focus_max_mm: float
+    focus_min: float
+    focus_max: float
     min_at: dict
     max_at: dict
     convergence: dict
@@ -194,7 +198,22 @@ class TracedSweepRange:
     def as_dict(self) -> dict:
         d = asdict(self)
         d.pop("samples")
+        d["focus_min_mm"], d["focus_max_mm"] = d.pop("focus_min"), d.pop("focus_max")
         return d
+
+    @property
+    def focus_min_mm(self) -> float:
+        """Deprecated alias of :attr:`focus_min`."""
+        warnings.warn("TracedSweepRange.focus_min_mm is deprecated: use focus_min (mm)",
+                      DeprecationWarning, stacklevel=2)
+        return self.focus_min
+
+    @property
+    def focus_max_mm(self) -> float:
+        """Deprecated alias of :attr:`focus_max`."""
+        warnings.warn("TracedSweepRange.focus_max_mm is deprecated: use focus_max (mm)",
+                      DeprecationWarning, stacklevel=2)
+        return self.focus_max
 
 
 class _LineFoci:
@@ -463,7 +482,7 @@ def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | N
     logger.info("traced sweep range over field %s: %.4f .. %.4f mm (%d points)", field,
                 out["min"][0], out["max"][0], foci.evaluations)
     return TracedSweepRange(
-        field=field, focus_min_mm=float(out["min"][0]), focus_max_mm=float(out["max"][0]),
+        field=field, focus_min=float(out["min"][0]), focus_max=float(out["max"][0]),
         min_at=out["min"][1], max_at=out["max"][1],
         convergence={"min": out["min"][2], "max": out["max"][2]},
         points=foci.evaluations, depths_mm=depths,
