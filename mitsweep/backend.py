@@ -18,7 +18,7 @@ import os
 __all__ = ["BackendError", "MIN_LLVM", "llvm_version", "select_backend", "mitsuba_variant",
            "set_mitsuba_variant", "drjit_module"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 MIN_LLVM = (19, 0, 0)
 _BACKENDS = ("cuda", "llvm", "scalar")
@@ -95,7 +95,7 @@ def set_mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str
     variant = mitsuba_variant(spectrum, prefer)
     if mi.variant() != variant:
         mi.set_variant(variant)
-        log.info("mitsuba variant %s", variant)
+        logger.info("mitsuba variant %s", variant)
     return variant
 
 

@@ -51,7 +51,7 @@ __all__ = ["DatasetOptions", "options_from_dict", "build_dataset", "evaluate_dat
            "load_manifest", "validate_manifest", "item_names", "dataset_inputs", "MANIFEST",
            "MAX_SCENES", "DatasetError"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 MANIFEST = "manifest.json"
 FORMAT = "mitsweep-dataset/1"
@@ -546,7 +546,7 @@ def _build_locked(setup: Setup, root: Path, opts: DatasetOptions, executor: str,
     todo = [t for t in tasks if not is_done(t)]
     skipped = len(tasks) - len(todo)
     if skipped:
-        log.info("resuming: %d of %d items already complete", skipped, len(tasks))
+        logger.info("resuming: %d of %d items already complete", skipped, len(tasks))
     for t in todo:  # invalid or stale entries must not survive a crash mid-run
         manifest["items"].pop(t.name, None)
     _write_manifest(root, manifest)

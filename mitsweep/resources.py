@@ -20,7 +20,7 @@ import os
 __all__ = ["ResourceError", "check_allocation", "available_memory_bytes", "memory_cap_bytes",
            "format_bytes", "DEFAULT_MAX_MEMORY_GB", "MAX_MEMORY_ENV"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 GIB = 1 << 30
 #: Hard cap on one step's memory, GiB, unless ``$MITSWEEP_MAX_MEMORY_GB`` says otherwise.
@@ -103,4 +103,4 @@ def check_allocation(what: str, nbytes: float) -> None:
     if avail and need > avail:
         raise ResourceError(f"{what}: needs {format_bytes(need)}, {format_bytes(avail)} "
                             f"available; use smaller sizes or free memory")
-    log.debug("%s: %s of %s available", what, format_bytes(need), format_bytes(avail))
+    logger.debug("%s: %s of %s available", what, format_bytes(need), format_bytes(avail))

@@ -15,7 +15,7 @@ NAME = "deconvolve"
 HELP = ("deconvolve a focal-sweep image (EXR) with an IPSF bank: polar for radial banks, "
         "spatially varying for grid banks")
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 
 def _nsr(text: str) -> float:
@@ -109,7 +109,7 @@ def _image_optics(meta: dict, setup_path: str | None, src: Path):
 def _setup_motion(setup) -> dict | None:
     """The stage motion a setup implies, or None for a measured (tabulated) one."""
     if setup.sweep.profile == "tabulated":
-        log.info("sweep.profile = 'tabulated': the bank's motion is not compared")
+        logger.info("sweep.profile = 'tabulated': the bank's motion is not compared")
         return None
     from ..optics.reference import reference_geometry
 
@@ -142,7 +142,7 @@ def run(args) -> int:
         raise UsageError(f"{src}: needs a Y channel or R, G, B channels ({exc})") from None
     pitch = args.pixel_pitch if args.pixel_pitch is not None else _image_pixel_pitch(meta)
     if pitch is None:
-        log.warning("%s: no pixel pitch in the metadata; assuming the bank's %g mm",
+        logger.warning("%s: no pixel pitch in the metadata; assuming the bank's %g mm",
                     src, bank.pixel_pitch)
     check_bank_matches(bank, image.shape, pixel_pitch=pitch)
     optics, optics_from = _image_optics(meta, args.setup, src)
@@ -151,7 +151,7 @@ def run(args) -> int:
         hint = " (give --setup)" if optics is None and bank.optics is not None else ""
         raise BankError(f"{problem}{hint}; use --force to override")
     if problem is not None:
-        log.warning("--force: %s", problem)
+        logger.warning("--force: %s", problem)
     identity = {"checked_against": optics_from, "forced": problem is not None,
                 "problem": problem, "bank_optics_sha256":
                 None if bank.optics is None else optics_fingerprint(bank.optics)}

@@ -21,7 +21,7 @@ from .common import UsageError, check_outputs, positive_int
 NAME = "demo"
 HELP = "run the whole pipeline on the embedded default setup (the paper's spherical mirror)"
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 #: Samples per pixel of the demo's renders: enough that Monte Carlo noise stays below
 #: the blur differences being measured (see README, "Validation on ground truth").

@@ -30,7 +30,7 @@ import numpy as np
 
 __all__ = ["run_bench", "make_problem"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 POLAR_GOAL_S = 1.5
 SPATIAL_GOAL_S = 5.0

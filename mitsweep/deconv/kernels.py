@@ -25,7 +25,7 @@ __all__ = ["PAPER_DECONV_DEPTH_MM", "optical_center", "select_depth", "radii_px"
            "interpolate_radial", "rotate_kernel", "grid_bank_from_radial",
            "check_bank_matches", "bank_identity_problem", "check_bank_identity", "normalise"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 #: The paper deconvolves with IPSFs computed for a 50 cm scene depth (Sec. 5, Fig. 8a).
 PAPER_DECONV_DEPTH_MM = 500.0
@@ -66,7 +66,7 @@ def select_depth(bank: IPSFBank, depth_mm: float | str | None = None) -> np.ndar
     depths = np.asarray(bank.depths_mm, dtype=np.float64)
     with np.errstate(divide="ignore"):
         i = int(np.argmin(np.abs(1.0 / depths - 1.0 / target)))
-    log.debug("deconvolving with the bank's depth %g mm", depths[i])
+    logger.debug("deconvolving with the bank's depth %g mm", depths[i])
     return normalise(k[i])
 
 
@@ -253,7 +253,7 @@ def bank_identity_problem(bank: IPSFBank, optics: Mapping[str, Any] | None, *,
     """
     if not bank.fingerprinted:
         return ("the bank predates optics fingerprints (bank format 1), so nothing says "
-                f"which optics it was traced for; trace it again with `mitsweep ipsf --bank`")
+                "which optics it was traced for; trace it again with `mitsweep ipsf --bank`")
     if bank.optics is None:
         if optics is None:
             return None          # a synthetic bank on an image that claims no optics

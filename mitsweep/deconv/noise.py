@@ -41,7 +41,7 @@ import numpy as np
 
 __all__ = ["SensorNoise", "PHOTONS_PER_LUX_S_M2", "paper_fig10_settings"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 #: Cossairt et al.'s constant: photo-electron count J = 1e15 · t I R q Δ² / N².
 PHOTONS_PER_LUX_S_M2 = 1e15
@@ -206,7 +206,7 @@ class SensorNoise:
         if np.any(xf < 0):
             # no light is negative: negatives come from reconstruction-filter ringing
             # (Mitchell, Lanczos) or FFT round-off; they expose the sensor to nothing
-            log.debug("%d negative pixels treated as 0", int(np.sum(xf < 0)))
+            logger.debug("%d negative pixels treated as 0", int(np.sum(xf < 0)))
             xf = np.clip(xf, 0, None)
         J = self.electrons_per_unit
         if J == 0:
@@ -225,7 +225,7 @@ class SensorNoise:
         if info is not None:
             info.update(saturated_fraction=sat, electrons_per_unit=J, gain=g)
         if sat > 0:
-            log.info("%.3g %% of pixels saturated", 100 * sat)
+            logger.info("%.3g %% of pixels saturated", 100 * sat)
         return (dn / (g * J)).astype(out_dt)
 
     def as_dict(self) -> dict:

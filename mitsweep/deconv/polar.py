@@ -40,7 +40,7 @@ from .wiener import (check_image_values, check_nsr, estimate_nsr, regulariser,
 __all__ = ["PolarGrid", "polar_grid", "to_polar", "from_polar", "polar_deconvolve",
            "polar_memory_bytes"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 _SPLINE_PX = 8  # context a cubic spline needs around the mapped-back region (px; 0.268^12 ≈ 1e-7)
 _WRAP = 12  # angle columns added on each side so the spline sees a periodic signal
@@ -436,7 +436,7 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     K = kernels.shape[-1]
     if nsr is None:
         nsr = estimate_nsr(img)
-        log.info("estimated NSR %.3g", nsr)
+        logger.info("estimated NSR %.3g", nsr)
     nsr = check_nsr(nsr)
     H, W = img.shape[:2]
     corner = polar_grid(img.shape).r_max if center is None else None

@@ -33,7 +33,7 @@ __all__ = ["hat_weights", "grid_axes_px", "grid_windows", "product_convolve",
            "scatter_blur", "grid_kernel_field", "spatially_varying_blur",
            "spatially_varying_deconvolve"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 
 def hat_weights(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
@@ -208,7 +208,7 @@ def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     check_image_values(img)
     if nsr is None:
         nsr = estimate_nsr(img)
-        log.info("estimated NSR %.3g", nsr)
+        logger.info("estimated NSR %.3g", nsr)
     nsr = check_nsr(nsr)
     K = kernels.shape[-1]
     m = 3 * K if margin is None else int(margin)

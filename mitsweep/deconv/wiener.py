@@ -21,7 +21,7 @@ __all__ = ["wiener_deconvolve", "wiener_filter", "kernel_spectrum", "regulariser
            "working_dtype", "check_image_values", "check_nsr", "wiener_memory_bytes",
            "PRIORS", "DEFAULT_NSR_FLOOR", "MAX_NSR", "MAX_ABS_VALUE"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 PRIORS = ("constant", "natural")
 
@@ -288,7 +288,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None =
         raise ValueError(f"psf must be (K, L), got shape {k.shape}")
     if nsr is None:
         nsr = estimate_nsr(img)
-        log.info("estimated NSR %.3g", nsr)
+        logger.info("estimated NSR %.3g", nsr)
     nsr = check_nsr(nsr)
     if pad == "auto":
         pads = (2 * k.shape[0], 2 * k.shape[1])

@@ -50,7 +50,7 @@ __all__ = ["MODES", "RenderResult", "render_image", "render_to_exr", "render_poi
            "focus_distance_mirror_centre", "mirror_image_bbox", "AOV_NAMES",
            "FOCUS_REFERENCE_DEPTH_MM"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 MODES = ("pinhole", "focused", "sweep", "stopped")
 AOV_NAMES = ("depth", "mask")

@@ -34,7 +34,7 @@ from ..optics import Profile, placement_of, profile_of
 __all__ = ["MirrorMesh", "tessellate", "mesh_errors", "cache_dir", "mirror_shape",
            "uses_analytic_sphere", "DEFAULT_SAG_TOL", "DEFAULT_NORMAL_TOL"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 #: Default bounds: 0.1 µm sag and 0.1 mrad normal error (a pixel's chief-ray bundle
 #: covers ~0.1 mm of the paper's mirrors, where the normal turns by ~8 mrad).
@@ -249,7 +249,7 @@ def cached_mesh_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
         try:
             return path, json.loads(meta_path.read_text())
         except ValueError:
-            log.warning("mesh cache %s: unreadable stats, rebuilding", meta_path)
+            logger.warning("mesh cache %s: unreadable stats, rebuilding", meta_path)
     folder.mkdir(parents=True, exist_ok=True)
     mesh = tessellate(profile, mirror.rim_radius, sag_tol=sag_tol, normal_tol=normal_tol)
     _write_ply(path, mesh)
@@ -260,7 +260,7 @@ def cached_mesh_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
     from ..io import write_text_atomic
 
     write_text_atomic(meta_path, json.dumps(stats))
-    log.info("mirror mesh %s: %d triangles (sag %.2g mm, normal %.2g rad)", path.name,
+    logger.info("mirror mesh %s: %d triangles (sag %.2g mm, normal %.2g rad)", path.name,
              mesh.n_triangles, mesh.sag_error, mesh.normal_error)
     return path, stats
 

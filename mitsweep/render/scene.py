@@ -28,7 +28,7 @@ from .textures import TEXTURE_NAMES, texture
 
 __all__ = ["build_scene", "integrator_depth", "board_layout", "camera_transform", "FAR_CLIP"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 #: Far clip of every camera, mm (Mitsuba's default, 1e4 scene units, would cut at 10 m).
 FAR_CLIP = 1.0e6
@@ -154,7 +154,7 @@ def board_layout(setup) -> list[dict]:
             if not blocked and inside:
                 break
         else:
-            log.warning("board %d at %.0f mm: no free place found; skipped", k, d)
+            logger.warning("board %d at %.0f mm: no free place found; skipped", k, d)
             continue
         boards.append({"center": c, "normal": -w, "half_size": half,
                        "texture": names[(k + sc.texture_seed) % len(names)]})

@@ -68,7 +68,7 @@ from ..backend import set_mitsuba_variant
 
 __all__ = ["register", "motion_table", "PLUGIN_NAME", "MOTION_TABLE_SIZE"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 PLUGIN_NAME = "focalsweep"
 #: Trapezoidal and tabulated motions are resampled on this many uniform intervals of t
@@ -368,5 +368,5 @@ def register() -> str:
         cls = _make_class()
         mi.register_sensor(PLUGIN_NAME, lambda props: cls(props))
         _registered_for.add(variant)
-        log.debug("registered %s for %s", PLUGIN_NAME, variant)
+        logger.debug("registered %s for %s", PLUGIN_NAME, variant)
     return variant

@@ -25,7 +25,7 @@ from .source import check_depth
 
 __all__ = ["ipsf_bank", "field_radius", "grid_points"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 #: Rays per IPSF in a bank: ~0.05 s each on 2 cores; L1 error ~1e-2 (see README table).
 BANK_RAYS = 1_000_000
@@ -134,7 +134,7 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
             except ValueError as exc:
                 if kind == "radial":
                     raise
-                log.debug("grid point (%g, %g) skipped: %s", u, v, exc)
+                logger.debug("grid point (%g, %g) skipped: %s", u, v, exc)
                 kernels[di, pi, K // 2, K // 2] = 1.0
                 vign[di, pi] = 1.0
                 valid[pi] = False

@@ -30,7 +30,7 @@ from .source import source_from_image
 
 __all__ = ["run_bench"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 
 def _setup():

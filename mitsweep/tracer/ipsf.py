@@ -38,7 +38,7 @@ __all__ = ["integrated_psf", "psf", "render_source", "fit_sampling_box", "METHOD
            "DEFAULT_RAYS", "DEFAULT_KERNEL_SIZE",
            "DEFAULT_TIME_SAMPLES"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 METHODS = ("continuous", "planes")
 DEFAULT_RAYS = 1_000_000
@@ -119,7 +119,7 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
             break
         a0, a1, b0, b1 = na0, na1, nb0, nb1
     else:
-        log.warning("sampling box not settled after %d pilot rounds", max_rounds)
+        logger.warning("sampling box not settled after %d pilot rounds", max_rounds)
     # A steep mirror can send light into the lens from a second, detached part of its
     # surface (a second image of the point: seen on a hyperboloid, R 9, k -2, at
     # 1e9 mm, 2.7 % of the flux). Growing from the first footprint never finds it, so

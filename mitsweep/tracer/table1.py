@@ -21,7 +21,7 @@ from .metrics import EPSILON, cross_sections, kurtosis, v_avg
 __all__ = ["PAPER_DEPTHS_MM", "PAPER_RANGE_FRACTIONS", "default_ranges", "conventional_psf",
            "conventional_v_avg", "table1"]
 
-log = logging.getLogger(__name__)
+logger = logging.getLogger(__name__)
 
 #: Depths of Eq. 3, mm.
 PAPER_DEPTHS_MM = (500.0, 1000.0, 5000.0, 10000.0)
@@ -130,7 +130,7 @@ def table1(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
             "periphery_radius_mm": float(bank.radii_mm[-1]),
             "max_outside_kernel": float(np.max(bank.metadata["outside_kernel"])),
         })
-        log.info("table1 range %.1f-%.1f: V_avg %.3g", fmin, fmax, rows[-1]["v_avg"])
+        logger.info("table1 range %.1f-%.1f: V_avg %.3g", fmin, fmax, rows[-1]["v_avg"])
     conv, focus = conventional_v_avg(setup, depths, kernel_size=kernel_size, epsilon=epsilon)
     return {"setup": setup.name, "rows": rows,
             "conventional": {"v_avg": conv, "focus_distance_mm": focus},
