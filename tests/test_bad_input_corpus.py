@@ -421,22 +421,18 @@ def _raw_exr(path: Path, channels: dict, metadata: dict | None = None) -> Path:
     return path
 
 
-def _nan_image(t, argv):
-    img = np.ones((SIZE, SIZE), np.float32)
-    img[3, 4] = np.nan
-    _raw_exr(t / "image.exr", {"Y": img})
-    return argv
+def _image_with(value, at=(3, 4)):
+    """The baseline image with one pixel set to a non-finite ``value``."""
+    def f(t, argv):
+        img = np.ones((SIZE, SIZE), np.float32)
+        img[at] = value
+        _raw_exr(t / "image.exr", {"Y": img})
+        return argv
+    return f
 
 
 def _huge_image(t, argv):
     _write_exr(t / "image.exr", np.full((SIZE, SIZE), 3e38, np.float32))
-    return argv
-
-
-def _inf_image(t, argv):
-    img = np.ones((SIZE, SIZE), np.float32)
-    img[0, 0] = np.inf
-    _raw_exr(t / "image.exr", {"Y": img})
     return argv
 
 
@@ -515,8 +511,8 @@ DECONV_CASES = [
     ("image-empty", _replace_file("image.exr", b""), "image.exr"),
     ("image-toml", lambda t, a: [a[0], write(t, "s.toml", SPHERE), *a[2:]], "s.toml"),
     ("image-directory", lambda t, a: [a[0], t, *a[2:]], ""),
-    ("image-nan", _nan_image, "nan"),
-    ("image-inf", _inf_image, "inf"),
+    ("image-nan", _image_with(np.nan), "nan"),
+    ("image-inf", _image_with(np.inf, at=(0, 0)), "inf"),
     ("image-huge", _huge_image, "1e+20"),
     ("image-size-mismatch",
      lambda t, a: _write_exr(t / "image.exr", np.ones((SIZE + 8, SIZE), np.float32)) and a,

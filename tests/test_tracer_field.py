@@ -183,10 +183,9 @@ def _dense_grid_extremes(setup, spacing, rim_step_deg, points=None):
     return lo, hi
 
 
-@pytest.mark.slow
-def test_whole_mirror_range_matches_a_dense_grid():
-    traced = traced_sweep_range(TILTED, field="mirror")
-    (g_lo, at_lo), (g_hi, at_hi) = _dense_grid_extremes(TILTED, spacing=2.0, rim_step_deg=2.0)
+def _assert_matches_grid(traced, grid_extremes, spacing=2.0):
+    """The search against an independent dense grid of ``spacing`` mm."""
+    (g_lo, at_lo), (g_hi, at_hi) = grid_extremes
     # The search reaches at least as far as every grid point (up to its own 0.1 µm
     # stopping tolerance)...
     assert traced.focus_min <= g_lo + 1e-4
@@ -198,8 +197,14 @@ def test_whole_mirror_range_matches_a_dense_grid():
     assert traced.focus_max == pytest.approx(g_hi, abs=0.05)
     # Same places: within a grid cell on the mirror, at the same depth.
     for at, (x, y, depth) in ((traced.min_at, at_lo), (traced.max_at, at_hi)):
-        assert math.hypot(at["x_mm"] - x, abs(at["y_mm"]) - abs(y)) <= 2.0 * math.sqrt(2)
+        assert math.hypot(at["x_mm"] - x, abs(at["y_mm"]) - abs(y)) <= spacing * math.sqrt(2)
         assert at["depth_mm"] == depth
+
+
+@pytest.mark.slow
+def test_whole_mirror_range_matches_a_dense_grid():
+    traced = traced_sweep_range(TILTED, field="mirror")
+    _assert_matches_grid(traced, _dense_grid_extremes(TILTED, spacing=2.0, rim_step_deg=2.0))
     # The far rim, in the tilt plane, at 10 m is the farthest focus; the nearest is the
     # tilt-plane minimum the paper's range has.
     assert traced.max_at["on_rim"] and traced.max_at["x_mm"] > 0.99 * RIM
@@ -229,17 +234,8 @@ def test_fov_field_range_matches_a_dense_grid():
     """The FOV in 2-D reaches past the paper's tilt-plane range (362.84-389.52 mm), off
     the tilt plane, on the FOV's boundary."""
     traced = traced_sweep_range(TILTED, field="fov")
-    (g_lo, at_lo), (g_hi, at_hi) = _dense_grid_extremes(
-        TILTED, 0, 0, points=_fov_points(spacing=2.0, boundary_step_deg=2.0))
-    # As for the whole mirror: at least as far as every grid point, and within the
-    # grid's discretisation (half a 2 mm cell; < 0.05 mm of focus) of it.
-    assert traced.focus_min <= g_lo + 1e-4
-    assert traced.focus_max >= g_hi - 1e-4
-    assert traced.focus_min == pytest.approx(g_lo, abs=0.05)
-    assert traced.focus_max == pytest.approx(g_hi, abs=0.05)
-    for at, (x, y, depth) in ((traced.min_at, at_lo), (traced.max_at, at_hi)):
-        assert math.hypot(at["x_mm"] - x, abs(at["y_mm"]) - abs(y)) <= 2.0 * math.sqrt(2)
-        assert at["depth_mm"] == depth
+    _assert_matches_grid(traced, _dense_grid_extremes(
+        TILTED, 0, 0, points=_fov_points(spacing=2.0, boundary_step_deg=2.0)))
     assert traced.max_at["on_boundary"] and abs(traced.max_at["y_mm"]) > 10.0
     assert traced.focus_max > 389.52 + 1.0
 
