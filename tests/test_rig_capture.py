@@ -15,8 +15,10 @@ import numpy as np
 import pytest
 
 from mitsweep.config import load_setup
-from mitsweep.rig import RigPorts, load_capture_record, measured_motion, plan_capture, run_capture
-from mitsweep.rig.simulator import ArduinoModel, PtyDevice, ZaberModel
+from mitsweep.rig import (HostTooSlow, RigPorts, load_capture_record, measured_motion,
+                          plan_capture, run_capture)
+from mitsweep.rig.capture import SHUTTER_ATTEMPTS
+from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
 from mitsweep.rig.testing import fast_rig_setup
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
@@ -110,10 +112,58 @@ def test_zaber_capture_with_arduino_shutter(tmp_path):
     # uncertainty (the SHUTTER round trip's half for the clock mapping, plus half the
     # round trip of the polls used); and the host-timed shutter opens late or early by
     # at most the host's latency from sending the move to the SHUTTER reply (a few ms
-    # when idle, more under load): allow both at the velocity
+    # when idle, more under load): allow both at the velocity. A complete record's
+    # latency keeps the whole exposure at constant velocity (within the settle distance)
     placement_s = data["clock_map"]["placement_uncertainty_s"]
-    assert 0 < placement_s < 0.5
+    assert 0 < placement_s <= plan.settle_mm / plan.velocity_actual_mm_s
     tol = plan.velocity_actual_mm_s * (exp["timing_uncertainty_s"] + placement_s)
     assert exp["open_position_mm"] == pytest.approx(plan.open_mm, abs=tol)
     assert exp["close_position_mm"] == pytest.approx(plan.close_mm, abs=tol)
     assert record.devices["zaber"].startswith("zaber device id")
+
+
+#: Injected host latency at the SHUTTER exchange: four times the settle time of the fast
+#: rig's sweep (0.05 mm at 1 mm/s = 0.05 s), so no scheduling luck makes it fit.
+SLOW_SHUTTER_REPLY_S = 0.2
+
+
+@pytest.mark.parametrize("slow_attempts", [1, SHUTTER_ATTEMPTS])
+def test_zaber_capture_host_too_slow_to_time_the_shutter(tmp_path, slow_attempts):
+    """The board answers SHUTTER late (it acts at once: as if the host read the reply
+    late), so the host cannot bound when the shutter opened relative to the move better
+    than the settle distance allows. Each such attempt is abandoned with the shutter
+    released; a later fast attempt completes, and none fast fails the capture safely."""
+    setup = fast_rig_setup(load_setup(SCENES / "sphere.toml"), steps_per_mm=ZABER_STEPS_PER_MM)
+    plan = plan_capture(setup, stage="zaber")
+    allowed_s = plan.settle_mm / plan.velocity_actual_mm_s
+    assert SLOW_SHUTTER_REPLY_S > 2 * allowed_s
+    out = tmp_path / "capture.json"
+    slow = [Fault("slow_reply", command="SHUTTER", delay_s=SLOW_SHUTTER_REPLY_S)] * slow_attempts
+    with PtyDevice(ArduinoModel(slow)) as board, \
+            PtyDevice(ZaberModel(max_position=int(26 * ZABER_STEPS_PER_MM))) as stage:
+        ports = RigPorts(arduino=board.port, zaber=stage.port)
+        if slow_attempts == SHUTTER_ATTEMPTS:
+            with pytest.raises(HostTooSlow, match="host too slow to time the shutter"):
+                run_capture(setup, ports, out=out)
+        else:
+            run_capture(setup, ports, out=out)
+        now = time.monotonic()
+        assert not stage.model.moving(now) and not board.model.shutter_open
+        # every abandoned attempt's exposure was cut short by the host
+        opens = [t for what, t in board.model.shutter_history if what == "open"]
+        assert len(opens) == SHUTTER_ATTEMPTS if slow_attempts == SHUTTER_ATTEMPTS \
+            else slow_attempts + 1
+    data = load_capture_record(out)
+    abandoned = [m for m in data["marks"] if "host too slow" in m["what"]]
+    assert len(abandoned) == slow_attempts
+    if slow_attempts == SHUTTER_ATTEMPTS:
+        assert data["complete"] is False and data["status"] == "host too slow"
+        assert "host too slow" in data["error"] and "rig.settle_distance" in data["error"]
+        assert data["safety"] and all(a["ok"] for a in data["safety"])
+        assert data["measured"] is None, "an abandoned exposure must not be measured"
+    else:
+        assert data["complete"] and data["status"] == "complete"
+        assert data["clock_map"]["placement_uncertainty_s"] <= allowed_s
+        exp = data["measured"]["exposure"]
+        assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
+                                                           abs=TIMER_RESOLUTION_S)

@@ -14,12 +14,12 @@ Depends only on :mod:`mitsweep.optics` and :mod:`mitsweep.config` (and pyserial)
 """
 
 from .capture import RigPorts, capture, run_capture, safety_summary
-from .errors import (CaptureInterrupted, DeviceError, DeviceFault, PlanError, PortLost,
-                     PortUnavailable, ProtocolError, ReplyTimeout, RigError)
+from .errors import (CaptureInterrupted, DeviceError, DeviceFault, HostTooSlow, PlanError,
+                     PortLost, PortUnavailable, ProtocolError, ReplyTimeout, RigError)
 from .plan import CapturePlan, plan_capture
 from .record import CaptureRecord, load_capture_record, measured_motion
 
 __all__ = ["RigPorts", "capture", "run_capture", "safety_summary", "CaptureInterrupted", "CapturePlan", "plan_capture",
            "CaptureRecord", "load_capture_record", "measured_motion", "PlanError",
            "PortUnavailable", "RigError", "ProtocolError", "ReplyTimeout", "PortLost",
-           "DeviceError", "DeviceFault"]
+           "DeviceError", "DeviceFault", "HostTooSlow"]

@@ -15,6 +15,16 @@ Two rig configurations:
   the ramp and settle distance; exposure times come from the board, positions from
   ``get pos`` polls of the stage interpolated at those times (the board clock is mapped
   onto the host clock at the ``SHUTTER`` exchange; uncertainty = half its round trip).
+  The host's time from sending the move to the ``SHUTTER`` reply bounds how far from its
+  planned time the shutter opened; while it exceeds the settle time (settle distance /
+  velocity: how far off the exposure may be and still lie at constant velocity) the
+  attempt is abandoned, shutter released and stage back to the approach position, and
+  after :data:`SHUTTER_ATTEMPTS` such attempts the capture fails with
+  :class:`~mitsweep.rig.errors.HostTooSlow` (status ``"host too slow"``).
+
+Deadlines are checked against when a poll was *sent*, and a read past its deadline
+first takes what has arrived, so a host descheduled for a while (a busy laptop) does
+not blame the devices for its own lateness.
 
 Safety: any exception — a timeout, a lost port, a device fault, a protocol error — and
 the signals SIGINT (Ctrl-C), SIGTERM (``kill``) and SIGHUP (the terminal closed) during
@@ -50,8 +60,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .arduino import MAX_WATCHDOG_MS, ArduinoSweepController
-from .errors import (CaptureInterrupted, DeviceFault, PlanError, PortLost, ReplyTimeout,
-                     RigError)
+from .errors import (CaptureInterrupted, DeviceFault, HostTooSlow, PlanError, PortLost,
+                     ReplyTimeout, RigError)
 from .plan import CapturePlan, plan_capture
 from .record import CaptureRecord
 from .transport import CommandLog, LineTransport, open_port
@@ -68,6 +78,11 @@ DEADLINE_SLACK_S = 0.5
 DEADLINE_FRACTION = 0.25
 #: Zaber position polling period during the sweep, s.
 POLL_PERIOD_S = 0.01
+#: Zaber mode: sweeps attempted before a host too slow to time the shutter fails the
+#: capture (:class:`~mitsweep.rig.errors.HostTooSlow`). A slow attempt is a load spike of
+#: the host (seen: one round trip of 0.3 s among ~300 of 0.1 ms with two busy processes
+#: on two cores); three in a row is a host that cannot run this capture.
+SHUTTER_ATTEMPTS = 3
 #: Signals that run the safety path (those that exist on this platform).
 CAPTURE_SIGNALS = tuple(name for name in ("SIGINT", "SIGTERM", "SIGHUP")
                         if hasattr(signal, name))
@@ -215,6 +230,8 @@ def status_of(exc: BaseException) -> str:
         return "timeout"
     if isinstance(exc, DeviceFault):
         return "fault"
+    if isinstance(exc, HostTooSlow):
+        return "host too slow"
     return "error"
 
 
@@ -256,10 +273,14 @@ def _prepare(dev: _Devices, plan: CapturePlan, setup, ports: RigPorts,
         state = stage.state()
     record.mark("homed" if record.homed else "position known")
     here = state.position_mm if state.position_mm is not None else 0.0
+    _move_to_approach(stage, plan, here_mm=here)
+    record.mark("at approach position")
+
+
+def _move_to_approach(stage, plan: CapturePlan, *, here_mm: float) -> None:
     stage.move_to(plan.approach_mm, velocity_mm_s=plan.positioning_velocity_mm_s,
                   acceleration_mm_s2=plan.positioning_acceleration_mm_s2,
-                  timeout_s=_positioning_time(plan, plan.approach_mm - here) * 1.5 + 1.0)
-    record.mark("at approach position")
+                  timeout_s=_positioning_time(plan, plan.approach_mm - here_mm) * 1.5 + 1.0)
 
 
 def _sweep_arduino(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> None:
@@ -274,6 +295,62 @@ def _sweep_arduino(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> N
 
 
 def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> None:
+    """The host-timed sweep, attempted up to :data:`SHUTTER_ATTEMPTS` times: an attempt
+    whose shutter timing the host cannot vouch for is abandoned (shutter released, stage
+    stopped and sent back to the approach position) before its exposure counts."""
+    a, z = dev.arduino, dev.zaber
+    allowed_s = _shutter_timing_allowance_s(plan)
+    for attempt in range(1, SHUTTER_ATTEMPTS + 1):
+        placement_s = _start_zaber_sweep(dev, plan, record)
+        if placement_s <= allowed_s:
+            break
+        logger.warning("zaber: attempt %d of %d: the host took %.3f s from the move to the "
+                       "SHUTTER reply, more than the %.3f s the settle distance allows; "
+                       "shutter released, trying again", attempt, SHUTTER_ATTEMPTS,
+                       placement_s, allowed_s)
+        record.mark(f"attempt {attempt}: host too slow to time the shutter "
+                    f"({placement_s:.3f} s > {allowed_s:.3f} s), abandoned")
+        a.close_shutter()
+        z.stop()
+        if attempt == SHUTTER_ATTEMPTS:
+            raise HostTooSlow(
+                f"host too slow to time the shutter: {SHUTTER_ATTEMPTS} attempts took "
+                f"{placement_s:.3f} s (last) from the move to the SHUTTER reply; the "
+                f"settle distance {plan.settle_mm:g} mm at {plan.velocity_actual_mm_s:g} "
+                f"mm/s allows {allowed_s:.3f} s. Close other programs, or raise "
+                f"rig.settle_distance")
+        z.wait_idle(timeout_s=_positioning_time(plan, plan.translation_mm) * 1.5 + 1.0)
+        _move_to_approach(dev.stage, plan, here_mm=plan.end_mm)
+    deadline = _deadline(plan.sweep_duration_s)
+    while True:
+        a.keep_alive()
+        a.poll_events()
+        t_poll = time.monotonic()
+        pos, reply = z.get_position()
+        if not reply.busy:
+            break
+        if t_poll > deadline:     # the poll's send time: a host starved after it is no fault
+            raise ReplyTimeout(f"zaber: still moving {plan.sweep_duration_s:.2f} s "
+                               f"after the sweep started")
+        time.sleep(POLL_PERIOD_S)
+    if pos != plan.end_steps:
+        raise RigError(f"zaber: sweep ended at {pos} microsteps, not {plan.end_steps}")
+    a.wait_event("CLOSE", deadline=deadline)
+    record.mark("sweep done")
+    record.set_board_events(a.events)
+    record.set_stage_samples(z.samples)
+
+
+def _shutter_timing_allowance_s(plan: CapturePlan) -> float:
+    """How far (s) the host-timed shutter may open from its planned time with the whole
+    exposure still at constant velocity: the settle distance at the sweep velocity."""
+    return plan.settle_mm / plan.velocity_actual_mm_s
+
+
+def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> float:
+    """Start the move and time the shutter; returns the placement uncertainty (s): the
+    host's time from sending the move to the SHUTTER reply, which bounds how far from
+    ``t_to_open`` after the move's start the shutter opens."""
     a, z = dev.arduino, dev.zaber
     z.set_motion(plan.velocity_mm_s, plan.acceleration_mm_s2)
     # time from the start of the move to the open position: ramp, then cruise
@@ -297,23 +374,7 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
                         "uncertainty_s": 0.5 * (t_rx - t_tx),
                         "placement_uncertainty_s": t_rx - t_move}
     record.mark("sweep started")
-    deadline = _deadline(plan.sweep_duration_s)
-    while True:
-        a.keep_alive()
-        a.poll_events()
-        pos, reply = z.get_position()
-        if not reply.busy:
-            break
-        if time.monotonic() > deadline:
-            raise ReplyTimeout(f"zaber: still moving {plan.sweep_duration_s:.2f} s "
-                               f"after the sweep started")
-        time.sleep(POLL_PERIOD_S)
-    if pos != plan.end_steps:
-        raise RigError(f"zaber: sweep ended at {pos} microsteps, not {plan.end_steps}")
-    a.wait_event("CLOSE", deadline=deadline)
-    record.mark("sweep done")
-    record.set_board_events(a.events)
-    record.set_stage_samples(z.samples)
+    return t_rx - t_move
 
 
 def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,

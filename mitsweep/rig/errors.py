@@ -16,7 +16,7 @@ SIGTERM, SIGHUP) that stopped a capture: it runs the same safety path.
 from __future__ import annotations
 
 __all__ = ["PlanError", "PortUnavailable", "RigError", "ProtocolError", "ReplyTimeout",
-           "PortLost", "DeviceError", "DeviceFault", "CaptureInterrupted"]
+           "PortLost", "DeviceError", "DeviceFault", "HostTooSlow", "CaptureInterrupted"]
 
 
 class PlanError(ValueError):
@@ -50,6 +50,13 @@ class DeviceError(RigError):
 
 class DeviceFault(RigError):
     """The device reported a fault (Arduino ``EV FAULT``, Zaber ``F*`` warning flag)."""
+
+
+class HostTooSlow(RigError):
+    """The host answered too late to time something the plan needs it to time (in
+    ``zaber`` mode: the shutter, opened by the host relative to the stage's move), on
+    every attempt. Nothing is wrong with the devices; a less loaded host, or a longer
+    ``rig.settle_distance`` (more time for the host's lateness), lets the capture run."""
 
 
 class CaptureInterrupted(KeyboardInterrupt):

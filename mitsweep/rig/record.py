@@ -4,7 +4,7 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
 
     complete        true only when the sweep ran to its end with the shutter cycle seen
     status          "running" | "complete" | "interrupted" | "timeout" | "port lost" |
-                    "fault" | "error"
+                    "fault" | "host too slow" | "error"
     error           the reason, one line (null when complete)
     signal          the signal that interrupted the capture ("SIGINT", "SIGTERM",
                     "SIGHUP"), else null; signals_during_safety: those that arrived
@@ -102,6 +102,9 @@ class CaptureRecord:
         starts = [i for i, e in enumerate(evs) if e.name == "START"]
         if self.plan.stage == "arduino" and starts:
             evs = evs[starts[-1]:]
+        if self.plan.stage == "zaber" and self.clock_map is not None:
+            # the last SHUTTER's exposure, not one of an abandoned attempt
+            evs = [e for e in evs if e.t_us >= self.clock_map["board_t_us"]]
         opens = [e for e in evs if e.name == "OPEN"]
         closes = [e for e in evs if e.name == "CLOSE"]
         return evs, (opens[-1] if opens else None), (closes[-1] if closes else None)

@@ -251,6 +251,12 @@ class LineTransport:
                 keepalive[1]()
             remaining = deadline - time.monotonic()
             if remaining <= 0:
+                # what arrived while this host was not scheduled arrived in time: read
+                # it before calling the deadline missed
+                self._fill(0.0)
+                line = self._pop_line()
+                if line is not None:
+                    return self._accept(line)
                 if self._buffer:
                     partial = bytes(self._buffer)
                     self._buffer.clear()

@@ -213,10 +213,12 @@ class ZaberStage(Stage):
         is kept in :attr:`samples` (the measured motion)."""
         deadline = time.monotonic() + timeout_s
         while True:
+            t_poll = time.monotonic()
             pos, reply = self.get_position()
             if not reply.busy:
                 return pos
-            if time.monotonic() > deadline:
+            # the poll's send time, not now: a host starved after a poll is no late stage
+            if t_poll > deadline:
                 raise ReplyTimeout(f"{self.name}: still moving after {timeout_s:.1f} s")
             if poll_s:
                 time.sleep(poll_s)
