@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import MOTION_PROFILES, SetupError
+from .kinematics import Trapezoid
 
 __all__ = ["MotionProfile", "motion_for", "MOTION_PROFILES"]
 
@@ -131,6 +132,11 @@ class MotionProfile:
         tn[-1] = 1.0
         return cls("tabulated", float(p[0]), float(p[-1]), times=tn, positions=p)
 
+    def _trapezoid(self) -> Trapezoid:
+        """The trapezoidal profile as a move over the normalised exposure (duration 1)."""
+        return Trapezoid.with_accel_fraction(abs(self.end - self.start), 1.0,
+                                             self.accel_fraction)
+
     # -- evaluation ---------------------------------------------------------------------
     def sensor_distance(self, t):
         """Sensor distance (mm) at normalised time(s) ``t`` ∈ [0, 1] (clipped), vectorised."""
@@ -139,12 +145,8 @@ class MotionProfile:
         if self.kind == "linear":
             out = self.start + delta * t
         elif self.kind == "trapezoidal":
-            a = self.accel_fraction
-            v = delta / (1.0 - a)
-            out = np.where(
-                t < a, self.start + v * t * t / (2.0 * a),
-                np.where(t > 1.0 - a, self.end - v * (1.0 - t) ** 2 / (2.0 * a),
-                         self.start + v * (t - 0.5 * a)))
+            move = self._trapezoid()   # its duration is 1 up to rounding: t scaled onto it
+            out = self.start + np.sign(delta) * np.asarray(move.position_at(t * move.duration))
         else:
             out = np.interp(t, self.times, self.positions)
         return out if out.ndim else float(out)
@@ -156,9 +158,9 @@ class MotionProfile:
         if self.kind == "linear":
             out = np.full_like(t, delta)
         elif self.kind == "trapezoidal":
-            a = self.accel_fraction
-            v = delta / (1.0 - a)
-            out = np.where(t < a, v * t / a, np.where(t > 1.0 - a, v * (1.0 - t) / a, v))
+            # velocity_at is 0 at the very ends, where the ramps' own limit is also 0
+            move = self._trapezoid()
+            out = np.sign(delta) * move.duration * np.asarray(move.velocity_at(t * move.duration))
         else:
             j = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
             out = np.diff(self.positions)[j] / np.diff(self.times)[j]
@@ -244,7 +246,8 @@ def motion_for(setup, sweep_range=None, *, table=None) -> MotionProfile:
     Trapezoidal: the stage ramps to the sweep velocity ``v`` at acceleration ``A`` in
     ``v/A`` seconds over ``v²/(2A)`` mm. If the two ramps fit in the travel ``Δ``, the
     exposure is ``Δ/v + v/A`` and ``accel_fraction = (v/A) / (Δ/v + v/A)``; otherwise the
-    profile is triangular (``accel_fraction = 0.5``).
+    profile is triangular (``accel_fraction = 0.5``). See
+    :class:`mitsweep.optics.kinematics.Trapezoid`.
     """
     if sweep_range is None:
         from .sweep import optimal_sweep_range
@@ -255,14 +258,8 @@ def motion_for(setup, sweep_range=None, *, table=None) -> MotionProfile:
     if kind == "linear":
         return MotionProfile.linear(start, end)
     if kind == "trapezoidal":
-        v, acc = setup.sweep.velocity, setup.rig.acceleration
-        travel = abs(end - start)
-        if v * v / acc >= travel:
-            frac = 0.5
-        else:
-            t_ramp = v / acc
-            frac = t_ramp / (travel / v + t_ramp)
-        return MotionProfile.trapezoidal(start, end, frac)
+        move = Trapezoid(abs(end - start), setup.sweep.velocity, setup.rig.acceleration)
+        return MotionProfile.trapezoidal(start, end, move.accel_fraction)
     if kind == "tabulated":
         if table is None:
             raise SetupError("sweep.profile: 'tabulated' needs a measured motion table "

@@ -59,6 +59,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..optics.kinematics import Trapezoid
 from .arduino import MAX_WATCHDOG_MS, ArduinoSweepController
 from .errors import (CaptureInterrupted, DeviceFault, HostTooSlow, PlanError, PortLost,
                      ReplyTimeout, RigError)
@@ -354,11 +355,9 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
     a, z = dev.arduino, dev.zaber
     z.set_motion(plan.velocity_mm_s, plan.acceleration_mm_s2)
     # time from the start of the move to the open position: ramp, then cruise
-    v = plan.velocity_actual_mm_s * plan.steps_per_mm
-    acc = plan.acceleration_mm_s2 * plan.steps_per_mm
-    d_r = v * v / (2 * acc)
-    margin = abs(plan.open_steps - plan.approach_steps)
-    t_to_open = v / acc + (margin - d_r) / v
+    move = Trapezoid(abs(plan.end_mm - plan.approach_mm), plan.velocity_actual_mm_s,
+                     plan.acceleration_mm_s2)
+    t_to_open = move.time_at(abs(plan.open_mm - plan.approach_mm))
     z.samples.clear()
     t_move = record.log.now()
     z.start_move(plan.end_mm)

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+from ..optics.kinematics import Trapezoid
 from .arduino import MAX_STEP_RATE
 from .errors import PlanError
 from .zaber import SPEED_UNIT, accel_data, speed_data
@@ -192,10 +193,10 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
     if travel_steps < 1:
         raise PlanError(f"sensor travel {travel:g} mm is less than one step "
                         f"({1 / spm:g} mm)")
-    if stage == "arduino":
-        ramp_steps = math.ceil(rate * rate / (2.0 * accel))
+    if stage == "arduino":   # in the board's integer units, as the firmware checks it
+        ramp_steps = math.ceil(Trapezoid.reaching(rate, accel).ramp_distance)
     else:
-        ramp_steps = math.ceil(v_run * v_run / (2.0 * a_run) * spm)
+        ramp_steps = math.ceil(Trapezoid.reaching(v_run, a_run).ramp_distance * spm)
     settle_steps = math.ceil(rig.settle_distance * spm - 1e-9)
     margin = ramp_steps + settle_steps
     planned_exposure = travel_steps / (v_run * spm)
@@ -234,9 +235,7 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
             raise PlanError(f"the sweep's {name} position {x:.4f} mm (sensor distance "
                             f"{s0 + delta * x:.4f} mm) is outside the soft limits "
                             f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
-    ramp_time = v_run / a_run
-    duration = 2 * ramp_time + (travel_steps + 2 * settle_steps +
-                                2 * ramp_steps - 2 * v_run * v_run / (2 * a_run) * spm) / (v_run * spm)
+    sweep = Trapezoid((travel_steps + 2 * margin) / spm, v_run, a_run)   # approach -> end
     return CapturePlan(
         setup=setup.name, stage=stage, steps_per_mm=spm,
         sensor_start_mm=s_start, sensor_end_mm=s_end, translation_mm=travel,
@@ -246,6 +245,6 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
         sensor_distance_at_zero_mm=s0, sensor_direction=delta, mapping=mapping,
         soft_limit_min_mm=lo, soft_limit_max_mm=hi,
         approach_steps=approach_steps, open_steps=open_steps, close_steps=close_steps,
-        end_steps=end_steps, planned_exposure_s=planned_exposure, ramp_time_s=ramp_time,
-        sweep_duration_s=duration, positioning_velocity_mm_s=rig.max_velocity,
+        end_steps=end_steps, planned_exposure_s=planned_exposure,
+        ramp_time_s=sweep.ramp_time, sweep_duration_s=sweep.duration, positioning_velocity_mm_s=rig.max_velocity,
         positioning_acceleration_mm_s2=rig.acceleration)

@@ -48,6 +48,7 @@ import time
 import tty
 from dataclasses import dataclass
 
+from ..optics.kinematics import Trapezoid
 from .arduino import (FIRMWARE_NAME, MAX_STEP_RATE, MAX_WATCHDOG_MS, POS_EVENT_PERIOD_US,
                       PROTOCOL_VERSION)
 from .transport import XorChecksum, ZaberChecksum
@@ -88,46 +89,25 @@ class Fault:
 
 
 class Move:
-    """Trapezoidal (or triangular) point-to-point motion from ``x0`` to ``x1``.
-
-    Units are the caller's (steps, steps/s, steps/s², seconds). Distance covered after
-    τ seconds: ``a τ²/2`` during the ramp, ``d_r + v (τ − t_r)`` at cruise, symmetric at
-    the end; :meth:`time_at` inverts it.
-    """
+    """Trapezoidal (or triangular) point-to-point motion from ``x0`` to ``x1`` starting at
+    ``t0``, in the caller's units (steps, steps/s, steps/s², s): a
+    :class:`~mitsweep.optics.kinematics.Trapezoid` placed in position and time."""
 
     def __init__(self, x0: float, x1: float, v: float, a: float, t0: float) -> None:
         self.x0, self.x1, self.t0 = float(x0), float(x1), float(t0)
         self.sign = 1.0 if x1 >= x0 else -1.0
-        self.length = abs(x1 - x0)
-        t_r, d_r = v / a, v * v / (2 * a)
-        if 2 * d_r > self.length:     # never reaches v: triangular
-            v = math.sqrt(a * self.length)
-            t_r, d_r = v / a, self.length / 2
-        self.v, self.a, self.t_r, self.d_r = v, a, t_r, d_r
-        self.t_c = (self.length - 2 * d_r) / v if v > 0 else 0.0
-        self.duration = 2 * t_r + self.t_c
+        self.profile = Trapezoid(abs(self.x1 - self.x0), v, a)
+        self.length = self.profile.distance
+        self.duration = self.profile.duration
 
     def distance(self, t: float) -> float:
-        tau = min(max(t - self.t0, 0.0), self.duration)
-        if tau <= self.t_r:
-            return 0.5 * self.a * tau * tau
-        if tau <= self.t_r + self.t_c:
-            return self.d_r + self.v * (tau - self.t_r)
-        rem = self.duration - tau
-        return self.length - 0.5 * self.a * rem * rem
+        return self.profile.position_at(t - self.t0)
 
     def position(self, t: float) -> float:
         return self.x0 + self.sign * self.distance(t)
 
     def time_at(self, d: float) -> float:
-        d = min(max(d, 0.0), self.length)
-        if d <= self.d_r:
-            tau = math.sqrt(2 * d / self.a)
-        elif d <= self.length - self.d_r:
-            tau = self.t_r + (d - self.d_r) / self.v
-        else:
-            tau = self.duration - math.sqrt(2 * (self.length - d) / self.a)
-        return self.t0 + tau
+        return self.t0 + self.profile.time_at(d)
 
     @property
     def end_time(self) -> float:
@@ -407,7 +387,7 @@ class ArduinoModel(_Model):
             return err
         x0 = self.position(now)
         mv = Move(x0, target, rate, accel, now)
-        ramp = math.ceil(rate * rate / (2.0 * accel))
+        ramp = math.ceil(Trapezoid.reaching(rate, accel).ramp_distance)
         d_open, d_close = abs(open_at - x0), abs(close_at - x0)
         inside = lambda p: min(x0, target) <= p <= max(x0, target)  # noqa: E731
         if not (inside(open_at) and inside(close_at) and ramp <= d_open < d_close
