@@ -126,3 +126,29 @@ def test_unknown_stage_kind_is_refused(sphere):
 def test_rig_config_validation_names_the_key(sphere, rig, key):
     with pytest.raises(SetupError, match=key):
         dataclasses.replace(sphere.rig, **rig)
+
+
+@pytest.mark.parametrize("stage, steps_per_mm", [("arduino", 400.0),
+                                                 ("zaber", 1 / 0.047625e-3)])
+def test_plan_holds_mm_and_each_driver_converts_to_its_units(sphere, stage, steps_per_mm):
+    """The plan's rates are mm/s and mm/s² only; the driver's quantised units, derived
+    from them, are the ones the controller was planned for (round trip exact)."""
+    from mitsweep.rig import zaber
+    from mitsweep.rig.arduino import step_accel, step_rate
+    from mitsweep.rig.testing import fast_rig_setup
+
+    setup = fast_rig_setup(sphere, steps_per_mm=steps_per_mm)
+    plan = plan_capture(setup, stage=stage)
+    names = {f.name for f in dataclasses.fields(plan)}
+    assert not names & {"step_rate", "accel_rate"}
+    units = plan.as_dict()["driver_units"]
+    v, a = plan.velocity_actual_mm_s, plan.acceleration_mm_s2
+    if stage == "arduino":
+        assert units == {"step_rate_steps_s": step_rate(v, steps_per_mm),
+                         "accel_steps_s2": step_accel(a, steps_per_mm)}
+        assert units["step_rate_steps_s"] / steps_per_mm == pytest.approx(v, rel=1e-15)
+        assert "steps/s" in plan.summary()
+    else:
+        assert zaber.speed_mm_s(units["maxspeed"], steps_per_mm) == pytest.approx(v, rel=1e-15)
+        assert zaber.accel_mm_s2(units["accel"], steps_per_mm) == pytest.approx(a, rel=1e-15)
+        assert "maxspeed" in plan.summary()

@@ -92,7 +92,9 @@ def test_arduino_sweep_events_in_order():
                    b"EV CLOSE 895100 4502\nEV DONE 995100 4800\n"),
     ]) as a:
         # direction -1 is fine too: the board only checks the window lies inside the move
-        a.start_sweep(target=4800, rate=400, accel=4000, open_at=4780, close_at=4502)
+        # 1 mm/s and 10 mm/s² at 400 steps/mm: 400 steps/s, 4000 steps/s² on the wire
+        a.start_sweep(target=4800, velocity_mm_s=1.0, acceleration_mm_s2=10.0, open_at=4780,
+                      close_at=4502)
         done = a.wait_event("DONE", timeout_s=0.5)
     assert done.position == 4800
     names = [e.name for e in a.events]
@@ -112,7 +114,8 @@ def test_arduino_fault_event_raises_device_fault():
     with expected_protocol(arduino, [
             (b"SWEEP 800 400 4000 780 502\n", b"OK SWEEP\n"),
             (None, b"EV START 10 820\nEV FAULT 500 700 STALL\n")]) as a:
-        a.start_sweep(target=800, rate=400, accel=4000, open_at=780, close_at=502)
+        a.start_sweep(target=800, velocity_mm_s=1.0, acceleration_mm_s2=10.0, open_at=780,
+                      close_at=502)
         with pytest.raises(DeviceFault, match="STALL"):
             a.wait_event("DONE", timeout_s=0.2)
 

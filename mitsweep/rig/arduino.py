@@ -65,7 +65,7 @@ from .interfaces import Shutter, Stage, StageState
 from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, XorChecksum
 
 __all__ = ["ArduinoSweepController", "BoardEvent", "BoardClock", "FIRMWARE_NAME",
-           "PROTOCOL_VERSION", "MAX_STEP_RATE", "EVENT_NAMES", "ERROR_CODES",
+           "PROTOCOL_VERSION", "MAX_STEP_RATE", "step_rate", "step_accel", "EVENT_NAMES", "ERROR_CODES",
            "POS_EVENT_PERIOD_US", "MAX_WATCHDOG_MS", "HEARTBEATS_PER_TIMEOUT"]
 
 logger = logging.getLogger(__name__)
@@ -74,6 +74,16 @@ FIRMWARE_NAME = "mitsweep-sweep"
 PROTOCOL_VERSION = 2
 #: Highest step rate the firmware generates reliably (steps/s), polling micros() on a 16 MHz Uno.
 MAX_STEP_RATE = 4000
+
+
+def step_rate(mm_s: float, steps_per_mm: float) -> int:
+    """A velocity (mm/s) as the firmware's integer step rate (steps/s), unchecked."""
+    return int(round(mm_s * steps_per_mm))
+
+
+def step_accel(mm_s2: float, steps_per_mm: float) -> int:
+    """An acceleration (mm/s²) as the firmware's integer steps/s² (at least 1)."""
+    return max(1, int(round(mm_s2 * steps_per_mm)))
 #: Period of ``EV POS`` samples during a SWEEP, µs.
 POS_EVENT_PERIOD_US = 50_000
 #: Longest watchdog timeout the firmware accepts, ms.
@@ -214,10 +224,13 @@ class ArduinoSweepController(Stage, Shutter):
             raise ProtocolError(f"{self.name}: move ended at step {ev.position}, not {target}")
         return ev.position / self.steps_per_mm
 
-    def start_sweep(self, *, target: int, rate: int, accel: int, open_at: int,
-                    close_at: int) -> None:
-        """Send ``SWEEP`` (integer steps, steps/s, steps/s²); events follow."""
-        self._query(f"SWEEP {target} {rate} {accel} {open_at} {close_at}", n_fields=0)
+    def start_sweep(self, *, target: int, velocity_mm_s: float, acceleration_mm_s2: float,
+                    open_at: int, close_at: int) -> None:
+        """Send ``SWEEP`` to step ``target`` with the shutter open from step ``open_at``
+        to ``close_at`` (exact step positions: the board triggers on them); velocity and
+        acceleration are converted to the board's steps/s and steps/s². Events follow."""
+        self._query(f"SWEEP {target} {self.rate(velocity_mm_s)} "
+                    f"{self.accel(acceleration_mm_s2)} {open_at} {close_at}", n_fields=0)
 
     def fire(self, *, delay_us: int, duration_us: int) -> int:
         """``SHUTTER``: open after ``delay_us`` for ``duration_us``; returns the board time
@@ -314,14 +327,14 @@ class ArduinoSweepController(Stage, Shutter):
         return int(round(mm * self.steps_per_mm))
 
     def rate(self, mm_s: float) -> int:
-        r = int(round(mm_s * self.steps_per_mm))
+        r = step_rate(mm_s, self.steps_per_mm)
         if not 1 <= r <= MAX_STEP_RATE:
             raise DeviceError(f"{self.name}: {mm_s:g} mm/s is {r} steps/s, outside the "
                               f"firmware's 1..{MAX_STEP_RATE} steps/s")
         return r
 
     def accel(self, mm_s2: float) -> int:
-        return max(1, int(round(mm_s2 * self.steps_per_mm)))
+        return step_accel(mm_s2, self.steps_per_mm)
 
     # -- internals ----------------------------------------------------------------------
     def _keepalive(self):

@@ -286,7 +286,8 @@ def _move_to_approach(stage, plan: CapturePlan, *, here_mm: float) -> None:
 
 def _sweep_arduino(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> None:
     a = dev.arduino
-    a.start_sweep(target=plan.end_steps, rate=plan.step_rate, accel=plan.accel_rate,
+    a.start_sweep(target=plan.end_steps, velocity_mm_s=plan.velocity_actual_mm_s,
+                  acceleration_mm_s2=plan.acceleration_mm_s2,
                   open_at=plan.open_steps, close_at=plan.close_steps)
     record.mark("sweep started")
     deadline = _deadline(plan.sweep_duration_s)
@@ -353,7 +354,7 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
     host's time from sending the move to the SHUTTER reply, which bounds how far from
     ``t_to_open`` after the move's start the shutter opens."""
     a, z = dev.arduino, dev.zaber
-    z.set_motion(plan.velocity_mm_s, plan.acceleration_mm_s2)
+    z.set_motion(plan.velocity_actual_mm_s, plan.acceleration_mm_s2)
     # time from the start of the move to the open position: ramp, then cruise
     move = Trapezoid(abs(plan.end_mm - plan.approach_mm), plan.velocity_actual_mm_s,
                      plan.acceleration_mm_s2)

@@ -30,9 +30,9 @@ import math
 from dataclasses import asdict, dataclass
 
 from ..optics.kinematics import Trapezoid
-from .arduino import MAX_STEP_RATE
+from .arduino import MAX_STEP_RATE, step_accel, step_rate
 from .errors import PlanError
-from .zaber import SPEED_UNIT, accel_data, speed_data
+from .zaber import accel_data, accel_mm_s2, speed_data, speed_mm_s
 
 __all__ = ["CapturePlan", "plan_capture", "STAGE_KINDS"]
 
@@ -46,8 +46,13 @@ VELOCITY_TOLERANCE = 0.01
 class CapturePlan:
     """A capture, fully resolved into stage positions, rates and times.
 
-    Lengths mm (stage coordinates unless named ``sensor_*``), velocities mm/s, times s;
-    ``*_steps`` are controller steps (Arduino steps or Zaber microsteps).
+    Lengths mm (stage coordinates unless named ``sensor_*``), velocities mm/s,
+    accelerations mm/s², times s; each driver converts them to its own units
+    (:meth:`driver_units`). The four positions are kept as integer controller steps
+    (``*_steps``: Arduino steps or Zaber microsteps, ``steps_per_mm`` of them per mm;
+    ``*_mm`` properties give them in mm) because the plan needs them exact: the board
+    triggers the shutter at those step positions, the exposure is a whole number of
+    steps, and a move is checked to end on its target step.
     """
 
     setup: str
@@ -59,9 +64,7 @@ class CapturePlan:
     exposure_s: float            # optical: translation / requested velocity
     velocity_mm_s: float         # requested (sweep.velocity)
     velocity_actual_mm_s: float  # what the controller will run
-    step_rate: int               # Arduino: steps/s; Zaber: maxspeed data value
-    accel_rate: int              # Arduino: steps/s²; Zaber: accel data value
-    acceleration_mm_s2: float
+    acceleration_mm_s2: float    # what the controller will run
     ramp_mm: float
     settle_mm: float
     direction: int               # +1 / -1: sign of the stage motion during the sweep
@@ -104,12 +107,22 @@ class CapturePlan:
         """Sensor distance (mm) at stage position(s) ``position_mm``."""
         return self.sensor_distance_at_zero_mm + self.sensor_direction * position_mm
 
+    def driver_units(self) -> dict:
+        """The sweep's velocity and acceleration in the controller's own units (derived,
+        for the record): Arduino ``steps/s``, ``steps/s^2``; Zaber ``maxspeed`` and
+        ``accel`` data values."""
+        v, a, spm = self.velocity_actual_mm_s, self.acceleration_mm_s2, self.steps_per_mm
+        if self.stage == "arduino":
+            return {"step_rate_steps_s": step_rate(v, spm), "accel_steps_s2": step_accel(a, spm)}
+        return {"maxspeed": speed_data(v, spm), "accel": accel_data(a, spm)}
+
     def as_dict(self) -> dict:
         d = asdict(self)
         d.update(approach_mm=self.approach_mm, open_mm=self.open_mm, close_mm=self.close_mm,
                  end_mm=self.end_mm,
                  open_sensor_distance_mm=self.sensor_distance(self.open_mm),
-                 close_sensor_distance_mm=self.sensor_distance(self.close_mm))
+                 close_sensor_distance_mm=self.sensor_distance(self.close_mm),
+                 driver_units=self.driver_units())
         return d
 
     def summary(self) -> str:
@@ -130,7 +143,15 @@ class CapturePlan:
             f"sensor mapping     s = {self.sensor_distance_at_zero_mm:.4f} "
             f"{'+' if self.sensor_direction > 0 else '-'} x mm ({self.mapping})",
             f"sweep duration     {self.sweep_duration_s:.3f} s",
+            self._driver_units_line(),
         ])
+
+    def _driver_units_line(self) -> str:
+        u = self.driver_units()
+        if self.stage == "arduino":
+            return (f"arduino units      {u['step_rate_steps_s']} steps/s, "
+                    f"{u['accel_steps_s2']} steps/s^2")
+        return f"zaber units        maxspeed {u['maxspeed']}, accel {u['accel']} (data values)"
 
 
 def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CapturePlan:
@@ -166,13 +187,14 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
     if v > rig.max_velocity:
         raise PlanError(f"sweep velocity {v:g} mm/s is more than the stage can hold "
                         f"(rig.max_velocity = {rig.max_velocity:g} mm/s)")
+    # quantised as each controller does: what it will actually run, in mm/s and mm/s²
     if stage == "arduino":
-        rate = int(round(v * spm))
+        rate = step_rate(v, spm)
         if not 1 <= rate <= MAX_STEP_RATE:
             raise PlanError(f"sweep velocity {v:g} mm/s is {v * spm:.4g} steps/s at "
                             f"{spm:g} steps/mm; the Arduino controller holds 1..{MAX_STEP_RATE}"
                             f" steps/s ({1 / spm:g}..{MAX_STEP_RATE / spm:g} mm/s)")
-        accel = max(1, int(round(rig.acceleration * spm)))
+        accel = step_accel(rig.acceleration, spm)
         v_run = rate / spm
         a_run = accel / spm
     else:
@@ -182,8 +204,8 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
             raise PlanError(f"sweep velocity {v:g} mm/s or acceleration {rig.acceleration:g} "
                             f"mm/s² is below the Zaber stage's resolution at {spm:g} "
                             f"microsteps/mm")
-        v_run = rate / SPEED_UNIT / spm
-        a_run = accel * 10.0 / SPEED_UNIT / spm
+        v_run = speed_mm_s(rate, spm)
+        a_run = accel_mm_s2(accel, spm)
     if abs(v_run - v) > VELOCITY_TOLERANCE * v:
         raise PlanError(f"sweep velocity {v:g} mm/s cannot be held: the nearest the "
                         f"{stage} controller runs is {v_run:.6g} mm/s "
@@ -240,7 +262,7 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
         setup=setup.name, stage=stage, steps_per_mm=spm,
         sensor_start_mm=s_start, sensor_end_mm=s_end, translation_mm=travel,
         exposure_s=float(sweep_range.exposure_s), velocity_mm_s=v, velocity_actual_mm_s=v_run,
-        step_rate=rate, accel_rate=accel, acceleration_mm_s2=a_run,
+        acceleration_mm_s2=a_run,
         ramp_mm=ramp_steps / spm, settle_mm=settle_steps / spm, direction=direction,
         sensor_distance_at_zero_mm=s0, sensor_direction=delta, mapping=mapping,
         soft_limit_min_mm=lo, soft_limit_max_mm=hi,

@@ -29,7 +29,7 @@ from .interfaces import Stage, StageState
 from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, ZaberChecksum
 
 __all__ = ["ZaberStage", "ZaberReply", "SPEED_UNIT", "ACCEL_UNIT", "FAULT_FLAGS",
-           "parse_reply", "speed_data", "accel_data"]
+           "parse_reply", "speed_data", "accel_data", "speed_mm_s", "accel_mm_s2"]
 
 logger = logging.getLogger(__name__)
 
@@ -55,6 +55,17 @@ def speed_data(mm_s: float, steps_per_mm: float) -> int:
 def accel_data(mm_s2: float, steps_per_mm: float) -> int:
     """An acceleration (mm/s²) as an ``accel`` data value."""
     return int(round(mm_s2 * steps_per_mm * ACCEL_UNIT))
+
+
+def speed_mm_s(data: int, steps_per_mm: float) -> float:
+    """A ``maxspeed`` data value as a velocity (mm/s): the inverse of :func:`speed_data`."""
+    return data / SPEED_UNIT / steps_per_mm
+
+
+def accel_mm_s2(data: int, steps_per_mm: float) -> float:
+    """An ``accel`` data value as an acceleration (mm/s²): the inverse of
+    :func:`accel_data`."""
+    return data / ACCEL_UNIT / steps_per_mm
 
 
 @dataclass(frozen=True)
