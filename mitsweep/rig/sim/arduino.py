@@ -1,0 +1,330 @@
+"""The Arduino sweep controller's firmware, in Python (protocol in
+:mod:`mitsweep.rig.arduino`): stepper with trapezoidal motion, home switch, soft limits,
+the shutter opto, events with ``micros()`` timestamps (optionally started near the
+32-bit wrap), and the firmware's watchdog (``WATCHDOG <ms>``: while it moves or an
+exposure is pending or open, a host silent for that long gets ``EV FAULT ... WATCHDOG``
+after the shutter was released and the motor stopped).
+"""
+
+from __future__ import annotations
+
+import math
+
+from ..arduino import (FIRMWARE_NAME, MAX_STEP_RATE, MAX_WATCHDOG_MS, POS_EVENT_PERIOD_US,
+                       PROTOCOL_VERSION)
+from ...optics.kinematics import Trapezoid
+from ..transport import XorChecksum
+from .base import Model, Move, command
+
+__all__ = ["ArduinoModel", "FIRMWARE_VERSION"]
+
+FIRMWARE_VERSION = "1.1"
+
+
+class ArduinoModel(Model):
+    """The sweep controller's firmware, in Python (see :mod:`mitsweep.rig.arduino`).
+
+    Parameters
+    ----------
+    faults : iterable of Fault
+    homed : bool
+        Whether the board starts knowing its position (a real board never does).
+    micros_start : int
+        ``micros()`` at boot (set near 2**32 to exercise the wrap).
+    home_time_s : float
+        How long homing takes.
+    """
+
+    reset_on_open = True
+
+    def __init__(self, faults=(), *, homed: bool = False, position: int = 0,
+                 micros_start: int = 0, home_time_s: float = 0.05,
+                 boot_time_s: float = 0.1) -> None:
+        super().__init__(faults)
+        self.homed = homed
+        self._pos = int(position)
+        self.limits: tuple[int, int] | None = None
+        self.sweep_window: tuple[int, int] | None = None
+        self.shutter_open = False
+        self.shutter_history: list[tuple[str, float]] = []
+        self.checksums = False
+        self.micros_start = int(micros_start)
+        self.home_time_s = home_time_s
+        self.boot_time_s = boot_time_s
+        self._boot_state = (homed, int(position))
+        self.boot_t = 0.0
+        self._shutter_plan: tuple[float, float] | None = None   # (open, close) times
+        self._opened = False                    # the planned exposure has opened
+        self.watchdog_s = 0.0                   # 0: off (the firmware's default)
+        self.last_rx = 0.0                      # when the last line came from the host
+        self.faults_seen: list[str] = []        # codes of the EV FAULTs sent
+
+    # -- clock, position ----------------------------------------------------------------
+    def micros(self, t: float) -> int:
+        return (self.micros_start + int(round((t - self.boot_t) * 1e6))) % 2**32
+
+    def position(self, now: float) -> int:
+        if self.move is not None:
+            d = self.move.distance(now)
+            return int(round(self.move.x0 + self.move.sign * math.floor(d + 1e-9)))
+        return self._pos
+
+    # -- output -------------------------------------------------------------------------
+    def _line(self, text: str) -> bytes:
+        if self.checksums:
+            text = XorChecksum().append(text)
+        return text.encode("ascii") + b"\n"
+
+    def _event(self, t: float, name: str, pos: int, detail: str = "") -> tuple[float, bytes]:
+        text = f"EV {name} {self.micros(t)} {pos}" + (f" {detail}" if detail else "")
+        return t, self._line(text)
+
+    def boot(self, now: float) -> list[bytes]:
+        # the bootloader runs first, then the sketch prints READY
+        self.boot_t = now
+        self.schedule(now + self.boot_time_s,
+                      self._line(f"READY {FIRMWARE_NAME} {FIRMWARE_VERSION} {PROTOCOL_VERSION}"))
+        return []
+
+    def reset(self, now: float) -> None:
+        """Opening the port pulses DTR, which resets an Uno: the sketch restarts with
+        its constructor state (``homed=True`` thus models a board that keeps its
+        reference across resets, which a real one does not), shutter released."""
+        self.cancel_scheduled()
+        self.homed, self._pos = self._boot_state
+        self.limits = None
+        self.move = None
+        self._shutter_plan = None
+        self.shutter_open = False
+        self.checksums = False
+        self._fault_at = None
+        self.watchdog_s = 0.0
+        self.boot(now)
+
+    # -- input --------------------------------------------------------------------------
+    def handle(self, line: bytes, now: float) -> list[bytes]:
+        self._settle(now)
+        self.last_rx = now      # any line feeds the watchdog
+        try:
+            text = line.decode("ascii")
+        except UnicodeDecodeError:
+            return [self._line("ERR SYNTAX non-ASCII")]
+        if self.checksums:
+            try:
+                text = XorChecksum().strip(text)
+            except Exception:
+                return [self._line("ERR CHECKSUM")]
+        parts = text.split()
+        if not parts:
+            return []
+        word, args = parts[0], parts[1:]
+        if self.take_fault("no_reply", word):
+            return []
+        if self.take_fault("garbage", word):
+            return [b"\xfe\x81\x00garbage\xff\n"]
+        try:
+            nums = [int(a) for a in args]
+        except ValueError:
+            return [self._line(f"ERR SYNTAX {word}")]
+        handler, known_args = self.handler(parts)
+        if handler is None:
+            return [self._line(f"ERR SYNTAX unknown command {word}")]
+        if known_args is None:
+            return [self._line(f"ERR SYNTAX {word} takes {self.commands[(word,)][1]} "
+                               f"arguments")]
+        replies = handler(nums, now)
+        slow = self.take_fault("slow_reply", word)
+        if slow:
+            for data in replies:
+                self.schedule(now + slow.delay_s, data)
+            return []
+        return replies
+
+    @command("ID", nargs=0)
+    def _cmd_id(self, nums, now):
+        return [
+            self._line(f"OK ID {FIRMWARE_NAME} {FIRMWARE_VERSION} {PROTOCOL_VERSION}")]
+
+    @command("CHK", nargs=1)
+    def _cmd_chk(self, nums, now):
+        self.checksums = bool(nums[0])
+        return [self._line(f"OK CHK {int(self.checksums)}")]
+
+    @command("PING", nargs=0)
+    def _cmd_ping(self, nums, now):
+        return [self._line(f"OK PING {self.micros(now)}")]
+
+    @command("WATCHDOG", nargs=1)
+    def _cmd_watchdog(self, nums, now):
+        if not 0 <= nums[0] <= MAX_WATCHDOG_MS:
+            return [self._line("ERR RANGE watchdog ms")]
+        self.watchdog_s = nums[0] * 1e-3
+        return [self._line(f"OK WATCHDOG {nums[0]}")]
+
+    def watchdog_armed(self, now: float) -> bool:
+        """Motion, or an exposure pending or open: what the watchdog guards."""
+        return (self.moving(now) or self._shutter_plan is not None or self.shutter_open
+                or any(tag == "homing" for _, _, tag in self._scheduled))
+
+    @command("STATE", nargs=0)
+    def _cmd_state(self, nums, now):
+        return [self._line(
+            f"OK STATE {self.micros(now)} {self.position(now)} {int(self.homed)} "
+            f"{int(self.moving(now))} {int(self.shutter_open)}")]
+
+    @command("LIMITS", nargs=2)
+    def _cmd_limits(self, nums, now):
+        lo, hi = nums
+        if lo >= hi:
+            return [self._line("ERR RANGE min must be < max")]
+        self.limits = (lo, hi)
+        return [self._line(f"OK LIMITS {lo} {hi}")]
+
+    def _check_move(self, target, rate, accel, now):
+        if self.moving(now):
+            return [self._line("ERR BUSY moving")]
+        if not self.homed:
+            return [self._line("ERR HOME not homed")]
+        if not (1 <= rate <= MAX_STEP_RATE) or accel < 1:
+            return [self._line("ERR RANGE rate or accel")]
+        if self.limits is None or not (self.limits[0] <= target <= self.limits[1]):
+            return [self._line("ERR LIMIT target outside soft limits")]
+        return None
+
+    @command("HOME", nargs=1)
+    def _cmd_home(self, nums, now):
+        if self.moving(now):
+            return [self._line("ERR BUSY moving")]
+        self.homed, self._pos = True, 0
+        self.schedule(*self._event(now + self.home_time_s, "HOMED", 0), "homing")
+        return [self._line("OK HOME")]
+
+    def _start_move(self, target, rate, accel, now):
+        x0 = self.position(now)
+        self.move = Move(x0, target, rate, accel, now)
+        self.stopped = False
+        return x0
+
+    @command("MOVE", nargs=3)
+    def _cmd_move(self, nums, now):
+        target, rate, accel = nums
+        if err := self._check_move(target, rate, accel, now):
+            return err
+        self._start_move(target, rate, accel, now)
+        self.schedule(*self._event(self.move.end_time, "DONE", target))
+        return [self._line("OK MOVE")]
+
+    @command("SWEEP", nargs=5)
+    def _cmd_sweep(self, nums, now):
+        target, rate, accel, open_at, close_at = nums
+        if err := self._check_move(target, rate, accel, now):
+            return err
+        x0 = self.position(now)
+        mv = Move(x0, target, rate, accel, now)
+        ramp = math.ceil(Trapezoid.reaching(rate, accel).ramp_distance)
+        d_open, d_close = abs(open_at - x0), abs(close_at - x0)
+        inside = lambda p: min(x0, target) <= p <= max(x0, target)  # noqa: E731
+        if not (inside(open_at) and inside(close_at) and ramp <= d_open < d_close
+                <= mv.length - ramp):
+            return [self._line("ERR RANGE open/close outside the constant-velocity part")]
+        self._start_move(target, rate, accel, now)
+        self.sweep_window = (open_at, close_at)
+        t_open, t_close = mv.time_at(d_open), mv.time_at(d_close)
+        late = self.take_fault("late_event")
+        delay = late.delay_s if late else 0.0
+        self.schedule(*self._event(now, "START", x0))
+        self.schedule(*self._event(t_open, "OPEN", open_at), "shutter")
+        period = POS_EVENT_PERIOD_US * 1e-6
+        k = 1
+        while now + k * period < mv.end_time:
+            t = now + k * period
+            self.schedule(*self._event(t, "POS", self.position(t)))
+            k += 1
+        t_ev, line = self._event(t_close, "CLOSE", close_at)
+        self.schedule(t_ev + delay, line, "shutter")
+        t_ev, line = self._event(mv.end_time, "DONE", target)
+        self.schedule(t_ev + delay, line)
+        self._set_shutter_plan(t_open, t_close)
+        self.arm_motion_faults(mv)
+        return [self._line("OK SWEEP")]
+
+    @command("SHUTTER", nargs=2)
+    def _cmd_shutter(self, nums, now):
+        delay_us, duration_us = nums
+        if delay_us < 0 or duration_us < 1:
+            return [self._line("ERR RANGE delay or duration")]
+        t_open = now + delay_us * 1e-6
+        t_close = t_open + duration_us * 1e-6
+        late = self.take_fault("late_event")
+        delay = late.delay_s if late else 0.0
+        pos = self.position(now)
+        self.schedule(*self._event(t_open, "OPEN", pos), "shutter")
+        t_ev, line = self._event(t_close, "CLOSE", pos)
+        self.schedule(t_ev + delay, line, "shutter")
+        self._set_shutter_plan(t_open, t_close)
+        return [self._line(f"OK SHUTTER {self.micros(now)}")]
+
+    @command("CLOSE", nargs=None)
+    def _cmd_close(self, nums, now):
+        self._close_now(now)
+        return [self._line("OK CLOSE")]
+
+    def _close_now(self, now):
+        if self.shutter_open:
+            self.shutter_history.append(("close", now))
+        self.shutter_open = False
+        self._shutter_plan = None
+        self.cancel_scheduled("shutter")
+
+    def _set_shutter_plan(self, t_open, t_close):
+        self._shutter_plan = (t_open, t_close)
+        self._opened = False
+
+    @command("STOP", nargs=None)
+    def _cmd_stop(self, nums, now):
+        self._close_now(now)
+        self.cancel_scheduled()
+        pos = self.position(now)
+        self.move, self._pos, self.stopped = None, pos, True
+        self._fault_at = None
+        return [self._line(f"OK STOP {self.micros(now)} {pos}")]
+
+    def tick(self, now: float) -> list[bytes]:
+        """Advance the shutter and faults to ``now``; scheduled lines are emitted by the
+        server."""
+        out = []
+        if self._shutter_plan is not None:
+            t_open, t_close = self._shutter_plan
+            if now >= t_open and not self._opened:
+                self._opened = self.shutter_open = True
+                self.shutter_history.append(("open", t_open))
+            if now >= t_close:
+                self.shutter_open = False
+                self.shutter_history.append(("close", t_close))
+                self._shutter_plan = None
+        if self._fault_at is not None and now >= self._fault_at:
+            out.append(self._fault(self._fault_at, "STALL"))
+        expiry = self.last_rx + self.watchdog_s
+        if self.watchdog_s and now >= expiry and self.watchdog_armed(expiry):
+            out.append(self._fault(expiry, "WATCHDOG"))
+        self._settle(now)
+        return out
+
+    def _fault(self, t: float, code: str) -> bytes:
+        """Release the shutter, stop the motor (at time ``t``), then the ``EV FAULT``."""
+        pos = self.position(t)
+        self._close_now(t)
+        self.cancel_scheduled()
+        self.move, self._pos, self.stopped = None, pos, True
+        self._fault_at = None
+        self.faults_seen.append(code)
+        return self._event(t, "FAULT", pos, code)[1]
+
+    def on_unplug(self, now: float) -> None:
+        # USB-powered board: power goes, the motor stops and the opto releases
+        pos = self.position(now)
+        if self.shutter_open:
+            self.shutter_history.append(("close", now))
+        self.shutter_open = False
+        self._shutter_plan = None
+        self.move, self._pos, self.stopped = None, pos, True

@@ -1,0 +1,187 @@
+"""What both simulated devices share: injected faults, the motion under way, the
+scheduled output queue and the command table.
+
+A model's commands are declared with :func:`command` (the command word and how many
+arguments it takes); :class:`Model` collects them into the class's ``commands`` table,
+which :meth:`Model.handler` looks up by name, so a subclass may override one command's
+method (tests do, to act in the middle of a sweep).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ...optics.kinematics import Trapezoid
+
+__all__ = ["Fault", "FAULT_KINDS", "Move", "Model", "command"]
+
+FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event", "slow_reply")
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One injected fault.
+
+    kind : one of :data:`FAULT_KINDS`.
+    command : for ``no_reply`` / ``garbage`` / ``slow_reply``: the command word it hits
+        (``"SWEEP"``, ``"STATE"``, ``"move"``, ...); the first such command only.
+    at_fraction : for ``fault_flag`` / ``unplug``: fraction of the next long move
+        (SWEEP, or a Zaber ``move``) at which it happens.
+    delay_s : for ``late_event``: how late the end-of-exposure events are; for
+        ``slow_reply``: how late the reply is.
+    """
+
+    kind: str
+    command: str | None = None
+    at_fraction: float = 0.5
+    delay_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind must be one of {', '.join(FAULT_KINDS)}, got {self.kind!r}")
+        if self.kind in ("no_reply", "garbage", "slow_reply") and not self.command:
+            raise ValueError(f"fault {self.kind!r} needs the command word it hits")
+        if not 0.0 <= self.at_fraction <= 1.0:
+            raise ValueError(f"fault at_fraction must be in [0, 1], got {self.at_fraction}")
+
+
+class Move:
+    """Trapezoidal (or triangular) point-to-point motion from ``x0`` to ``x1`` starting at
+    ``t0``, in the caller's units (steps, steps/s, steps/s², s): a
+    :class:`~mitsweep.optics.kinematics.Trapezoid` placed in position and time."""
+
+    def __init__(self, x0: float, x1: float, v: float, a: float, t0: float) -> None:
+        self.x0, self.x1, self.t0 = float(x0), float(x1), float(t0)
+        self.sign = 1.0 if x1 >= x0 else -1.0
+        self.profile = Trapezoid(abs(self.x1 - self.x0), v, a)
+        self.length = self.profile.distance
+        self.duration = self.profile.duration
+
+    def distance(self, t: float) -> float:
+        return self.profile.position_at(t - self.t0)
+
+    def position(self, t: float) -> float:
+        return self.x0 + self.sign * self.distance(t)
+
+    def time_at(self, d: float) -> float:
+        return self.t0 + self.profile.time_at(d)
+
+    @property
+    def end_time(self) -> float:
+        return self.t0 + self.duration
+
+
+def command(*words: str, nargs: int | None = None):
+    """Declare a model method as the handler of the command ``words`` (the leading
+    words that name it) taking ``nargs`` further arguments (None: any number)."""
+    def declare(method):
+        method.sim_command = (tuple(words), nargs)
+        return method
+    return declare
+
+
+class Model:
+    """Base of the device models: faults, the scheduled-output queue, the motion under
+    way (``move``; ``_pos``, the position at rest, in device units) and the command
+    table."""
+
+    #: ``words -> (method name, nargs)``, collected from the :func:`command` methods.
+    commands: dict[tuple[str, ...], tuple[str, int | None]] = {}
+    #: Whether opening the port resets the device (an Uno's auto-reset on DTR).
+    reset_on_open = False
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        table = dict(cls.commands)
+        for name, member in vars(cls).items():
+            declared = getattr(member, "sim_command", None)
+            if declared is not None:
+                words, nargs = declared
+                table[words] = (name, nargs)
+        cls.commands = table
+
+    def __init__(self, faults=()) -> None:
+        self.faults = list(faults)
+        self._scheduled: list[tuple[float, bytes, str]] = []
+        self.unplug_at: float | None = None
+        self.log: list[tuple[float, str, str]] = []   # (t, "rx"/"tx", text) seen by the device
+        self.move: Move | None = None
+        self._pos = 0
+        self.stopped = False
+        self._fault_at: float | None = None     # when an armed fault_flag fault strikes
+
+    # -- commands -----------------------------------------------------------------------
+    def handler(self, words: list[str]):
+        """``(bound method, arguments)`` of the command that ``words`` start with (the
+        longest declared match), or ``(None, None)``; arguments is None when their
+        number is not the declared one."""
+        for n in range(len(words), 0, -1):
+            entry = self.commands.get(tuple(words[:n]))
+            if entry is not None:
+                name, nargs = entry
+                args = words[n:]
+                return getattr(self, name), (args if nargs is None or len(args) == nargs
+                                             else None)
+        return None, None
+
+    # -- scheduled output ---------------------------------------------------------------
+    def schedule(self, t: float, data: bytes, tag: str = "") -> None:
+        self._scheduled.append((t, data, tag))
+        self._scheduled.sort(key=lambda x: x[0])
+
+    def due(self, now: float) -> list[bytes]:
+        out = []
+        while self._scheduled and self._scheduled[0][0] <= now:
+            out.append(self._scheduled.pop(0)[1])
+        return out
+
+    def next_due(self) -> float | None:
+        times = [t for t, _, _ in self._scheduled[:1]]
+        if self.unplug_at is not None:
+            times.append(self.unplug_at)
+        return min(times) if times else None
+
+    def cancel_scheduled(self, tag: str | None = None) -> None:
+        self._scheduled = [s for s in self._scheduled if tag is not None and s[2] != tag]
+
+    # -- faults -------------------------------------------------------------------------
+    def take_fault(self, kind: str, command: str | None = None) -> Fault | None:
+        for f in self.faults:
+            if f.kind == kind and (command is None or f.command == command):
+                self.faults.remove(f)
+                return f
+        return None
+
+    def arm_motion_faults(self, mv: Move) -> None:
+        """A pending ``fault_flag`` or ``unplug`` fault strikes part-way through ``mv``."""
+        f = self.take_fault("fault_flag")
+        if f:
+            self._fault_at = mv.t0 + f.at_fraction * mv.duration
+        f = self.take_fault("unplug")
+        if f:
+            self.unplug_at = mv.t0 + f.at_fraction * mv.duration
+
+    # -- the device's life --------------------------------------------------------------
+    def boot(self, now: float) -> list[bytes]:  # pragma: no cover - overridden
+        return []
+
+    def reset(self, now: float) -> None:
+        """The host opened (and flushed) the port."""
+
+    def handle(self, line: bytes, now: float) -> list[bytes]:  # pragma: no cover
+        raise NotImplementedError
+
+    def tick(self, now: float) -> list[bytes]:  # pragma: no cover - overridden
+        return []
+
+    def on_unplug(self, now: float) -> None:
+        pass
+
+    # -- motion -------------------------------------------------------------------------
+    def moving(self, now: float) -> bool:
+        return self.move is not None and now < self.move.end_time
+
+    def _settle(self, now: float) -> None:
+        if self.move is not None and now >= self.move.end_time:
+            self._pos = int(round(self.move.x1))
+            self.move = None
