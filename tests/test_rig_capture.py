@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from mitsweep.config import load_setup
-from mitsweep.rig import (HostTooSlow, RigPorts, load_capture_record, measured_motion,
+from mitsweep.rig import (DeviceFault, HostTooSlow, RigPorts, load_capture_record, measured_motion,
                           plan_capture, run_capture)
 from mitsweep.rig.capture import SHUTTER_ATTEMPTS
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
@@ -167,3 +167,30 @@ def test_zaber_capture_host_too_slow_to_time_the_shutter(tmp_path, slow_attempts
         exp = data["measured"]["exposure"]
         assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
                                                            abs=TIMER_RESOLUTION_S)
+
+
+def test_complete_record_holds_the_reference_geometry_of_its_measured_motion(sphere, tmp_path):
+    """The record's reference sensor distance is the measured span's midpoint (the rule of
+    optics.reference), over the measured samples; an incomplete record has none."""
+    out = tmp_path / "capture.json"
+    plan = plan_capture(sphere)
+    with PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps)) as dev:
+        run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+    data = load_capture_record(out)
+    ref = data["reference"]
+    _, s = measured_motion(data)
+    assert ref["reference_sensor_distance_mm"] == pytest.approx(0.5 * (s.min() + s.max()),
+                                                                abs=1e-12)
+    assert ref["motion"]["kind"] == "tabulated"
+    assert ref["motion"]["positions_mm"] == pytest.approx(s.tolist(), abs=0)
+    # within a step of the plan's midpoint: the measured motion is the planned one
+    assert ref["reference_sensor_distance_mm"] == pytest.approx(
+        0.5 * (plan.sensor_start_mm + plan.sensor_end_mm), abs=1.0 / plan.steps_per_mm)
+    assert ref["sweep"]["sensor_start_mm"] == pytest.approx(plan.sensor_start_mm, abs=1e-12)
+
+    out2 = tmp_path / "interrupted.json"
+    with PtyDevice(ArduinoModel([Fault("fault_flag", at_fraction=0.5)], homed=True,
+                                position=plan.approach_steps)) as dev:
+        with pytest.raises(DeviceFault):
+            run_capture(sphere, RigPorts(arduino=dev.port), out=out2)
+    assert load_capture_record(out2)["reference"] is None

@@ -26,6 +26,10 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
                     not)
     measured        exposure: open/close times and positions, measured exposure;
                     motion: time_s (from shutter open), position_mm, sensor_distance_mm
+    reference       complete records: the reference geometry of the measured motion
+                    (mitsweep.optics.reference.reference_geometry(setup, motion=the
+                    tabulated measured profile).as_dict(): reference_sensor_distance_mm,
+                    sweep, motion), so a bank traced for this capture uses its grid
 
 ``measured.motion`` is a measured motion profile: :func:`measured_motion` returns it as
 ``(times_s, sensor_distance_mm)`` arrays, ready for
@@ -174,6 +178,7 @@ class CaptureRecord:
         if self.ports is not None:
             ports = {"arduino": self.ports.arduino, "zaber": self.ports.zaber,
                      "checksums": self.ports.checksums, "watchdog_s": self.ports.watchdog_s}
+        measured = self.measurement()
         return {
             "format": FORMAT, "version": VERSION,
             "complete": self.complete, "status": self.status, "error": self.error,
@@ -189,8 +194,26 @@ class CaptureRecord:
                               for t, p, u in self.stage_samples],
             "clock_map": self.clock_map,
             "safety": list(self.safety_actions),
-            "measured": self.measurement(),
+            "measured": measured,
+            "reference": self.reference(measured) if self.complete else None,
         }
+
+    def reference(self, measured: dict | None = None) -> dict | None:
+        """The reference geometry of the measured motion
+        (:func:`mitsweep.optics.reference.reference_geometry` with the tabulated measured
+        profile), as a dict, so that a PSF bank traced for this capture uses the same
+        grid (reference sensor distance: the measured span's midpoint); None without a
+        measurement."""
+        if measured is None:
+            measured = self.measurement()
+        if measured is None:
+            return None
+        from ..optics.motion import MotionProfile
+        from ..optics.reference import reference_geometry
+
+        m = measured["motion"]
+        motion = MotionProfile.tabulated(m["time_s"], m["sensor_distance_mm"])
+        return reference_geometry(self.setup, motion=motion).as_dict()
 
     def save(self) -> Path | None:
         """Write the record atomically to :attr:`path` (no-op without a path)."""
