@@ -12,11 +12,17 @@ release the shutter and stop the stage, then write the record marked incomplete
 (``status: "interrupted"``, ``signal``); a second signal does not cut that short. What
 cannot be caught (SIGKILL, a crash) is left to the board's watchdog (``rig.watchdog_s``).
 
+With a Zaber stage the host times the shutter; when it answers too late to do so within
+the settle distance it abandons the attempt (shutter released) and tries again, and after
+three it stops with status ``"host too slow"`` (exit 1): close other programs, or raise
+``rig.settle_distance``.
+
 Exit status
 -----------
 ===  =========================================================================
 0    capture complete
-1    incomplete (fault, timeout, lost link, ...); every safety step confirmed
+1    incomplete (fault, timeout, lost link, host too slow, ...); every safety
+     step confirmed
 2    bad input, refused before any motion
 3    incomplete and some safety step NOT confirmed: the rig may be unsafe
 130  interrupted by SIGINT, every safety step confirmed (143: SIGTERM,
