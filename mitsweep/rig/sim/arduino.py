@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 
+from ...optics.kinematics import Trapezoid
 from ..arduino import (FIRMWARE_NAME, MAX_STEP_RATE, MAX_WATCHDOG_MS, POS_EVENT_PERIOD_US,
                        PROTOCOL_VERSION)
-from ...optics.kinematics import Trapezoid
 from ..transport import XorChecksum
 from .base import Model, Move, command
 
