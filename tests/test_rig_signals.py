@@ -22,6 +22,7 @@ from test_rig_cli import setup_file
 from mitsweep.config import load_setup
 from mitsweep.rig import load_capture_record, plan_capture
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
+from mitsweep.rig.transport import SAFETY_ATTEMPTS
 
 ZABER_STEPS_PER_MM = 1 / 0.047625e-3
 ZABER_RIG = f"steps_per_mm = {ZABER_STEPS_PER_MM!r}\n"
@@ -215,10 +216,33 @@ def test_unconfirmed_safety_step_exits_3_and_says_which(tmp_path, rig_kind, boar
                                                   else [False])
 
 
-def test_signal_with_unanswered_stop_exits_3(tmp_path):
-    """An interrupted capture whose STOP goes unanswered is 'maybe unsafe' (3), not the
-    signal's status: the board stopped, but nothing confirmed it."""
+def test_signal_with_one_lost_stop_retries_and_confirms(tmp_path):
+    """The first STOP is swallowed: the safety path sends it again (a stop is idempotent)
+    and the second is confirmed, so the exit status is the signal's."""
     with Rig("arduino", tmp_path, board_faults=[Fault("no_reply", command="STOP")]) as rig:
+        proc = rig.start_capture()
+        try:
+            wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
+            proc.send_signal(signal.SIGTERM)
+            rc, err = finish(proc)
+        finally:
+            proc.kill()
+            proc.wait()
+        # the watchdog may have stopped the board while the first STOP went unanswered
+        assert not rig.board.model.shutter_open
+        assert not rig.board.model.moving(time.monotonic())
+        assert sum(1 for _, d, text in list(rig.board.model.log)
+                   if d == "rx" and text == "STOP") == 2
+    assert rc == signal_exit_status("SIGTERM"), err
+    data = load_capture_record(rig.out)
+    assert all(step["ok"] for step in data["safety"])
+
+
+def test_signal_with_unanswered_stop_exits_3(tmp_path):
+    """An interrupted capture whose STOP goes unanswered every time is 'maybe unsafe'
+    (3), not the signal's status: the board stopped, but nothing confirmed it."""
+    lost = [Fault("no_reply", command="STOP")] * SAFETY_ATTEMPTS
+    with Rig("arduino", tmp_path, board_faults=lost) as rig:
         proc = rig.start_capture()
         try:
             wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)

@@ -99,3 +99,61 @@ def test_busy_cores_fixture_keeps_the_cpus_busy(busy_cores):
     time.sleep(0.5)
     ticks = [int(open(f"/proc/{pid}/stat").read().split()[13]) for pid in busy_cores]
     assert all(t > 0 for t in ticks), ticks   # each got CPU time (user ticks)
+
+
+def _answer_stop(fds, reply: bytes, *, after_s: float = 0.0):
+    """Device thread: wait for ``STOP``, then answer ``reply``."""
+    import threading
+
+    def run():
+        got = b""
+        while b"STOP\n" not in got:
+            got += os.read(fds["master"], 100)
+        time.sleep(after_s)
+        os.write(fds["master"], reply)
+    th = threading.Thread(target=run, daemon=True)
+    th.start()
+    return th
+
+
+def test_safety_path_discards_a_partial_line_left_by_an_interruption(pty_link):
+    """A signal can land between a read and its use, leaving the head of a line ("E" of
+    "EV OPEN ...") in the buffer; the stop's reply must not be glued to it (seen under
+    load: 'EOK STOP 366770 5139', the stop then reported unconfirmed)."""
+    from mitsweep.rig.arduino import ArduinoSweepController
+
+    t, fds = pty_link
+    os.write(fds["master"], b"EV POS 1 2\nE")
+    time.sleep(0.05)
+    assert t.read_line() == "EV POS 1 2"
+    t._fill(0.05)                      # the partial "E" is now buffered
+    assert t.unread == b"E"
+    th = _answer_stop(fds, b"OK STOP 1234 5139\n")
+    a = ArduinoSweepController(t, steps_per_mm=400.0)
+    assert a.safe_stop(timeout_s=1.0) == 5139
+    th.join(1.0)
+    assert any(e.text == "E <partial, discarded>" for e in t.log.entries)
+
+
+def test_safety_path_sends_the_stop_again_when_unanswered(pty_link):
+    """A lost reply (or a garbled one) is not the end: the stop is idempotent and is sent
+    again, ``attempts`` times in all, before it counts as unconfirmed."""
+    t, fds = pty_link
+    sent = []
+
+    def device():
+        got = b""
+        while got.count(b"STOP\n") < 2:   # ignore the first STOP, answer the second
+            got += os.read(fds["master"], 100)
+        sent.append(got)
+        os.write(fds["master"], b"OK STOP 1 7\n")
+    import threading
+
+    th = threading.Thread(target=device, daemon=True)
+    th.start()
+    got = t.send_on_safety_path("STOP", lambda ln: ln if ln.startswith("OK STOP") else None,
+                                timeout_s=0.3, attempts=3)
+    th.join(1.0)
+    assert got == "OK STOP 1 7" and sent[0].count(b"STOP\n") == 2
+    with pytest.raises(ReplyTimeout, match="in 2 attempts"):
+        t.send_on_safety_path("STOP", lambda ln: None, timeout_s=0.1, attempts=2)

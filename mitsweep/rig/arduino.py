@@ -308,9 +308,14 @@ class ArduinoSweepController(Stage, Shutter):
         motor), tolerant of stray lines from an interrupted exchange. Returns the step
         position the board stopped at."""
         def stopped_at(line: str):
-            if line.startswith("OK STOP "):
-                return self._ints(line.split()[2:], "STOP")[1]
-            return None
+            # the reply may follow the remains of a line the interruption cut short
+            i = line.find("OK STOP ")
+            if i < 0:
+                return None
+            fields = line[i:].split()[2:]
+            if len(fields) != 2:
+                return None
+            return self._ints(fields, "STOP")[1]
 
         def keep_event(line: str) -> None:
             if line.startswith("EV "):

@@ -38,6 +38,8 @@ logger = logging.getLogger(__name__)
 #: the reply late, and a stop reported "not confirmed" because of the host's own load
 #: would be a false alarm (seen at 1.0 s with two busy processes on two cores).
 SAFETY_REPLY_TIMEOUT_S = 3.0
+#: Times a stop command is sent on the safety path before it counts as unconfirmed.
+SAFETY_ATTEMPTS = 3
 
 try:
     import termios as _termios
@@ -271,31 +273,46 @@ class LineTransport:
         self._fill(0.0)
         return self._has_line()
 
-    def send_on_safety_path(self, line: str, until, *, timeout_s: float, on_other=None):
+    def send_on_safety_path(self, line: str, until, *, timeout_s: float, on_other=None,
+                            attempts: int = SAFETY_ATTEMPTS):
         """Send ``line`` after discarding whatever is buffered, then read until
         ``until(reply)`` returns something other than None, and return that.
 
         For stop commands after an interrupted exchange: garbage and stray lines in the
         buffer must not block the stop, so unparseable lines are skipped and other lines
-        go to ``on_other`` (e.g. to keep the board's events). Raises ``ReplyTimeout``
-        when ``timeout_s`` passes without the awaited reply.
+        go to ``on_other`` (e.g. to keep the board's events). A partial line left in the
+        buffer by the interruption (a signal can land between a read and its use) is
+        discarded before sending, so it cannot prefix the reply. Without the awaited
+        reply within ``timeout_s`` the line is sent again (stop commands are idempotent),
+        ``attempts`` times in all; then ``ReplyTimeout``.
         """
-        try:
-            self.drain()
-        except Exception:  # noqa: BLE001 - garbage in the buffer must not block the stop
-            logger.debug("%s: drain before %r failed", self.name, line, exc_info=True)
-        self.write_line(line)
-        deadline = time.monotonic() + timeout_s
-        while True:
+        for attempt in range(1, attempts + 1):
             try:
-                reply = self.read_line(deadline=deadline)
-            except ProtocolError:
-                continue
-            result = until(reply)
-            if result is not None:
-                return result
-            if on_other is not None:
-                on_other(reply)
+                self.drain()
+            except Exception:  # noqa: BLE001 - garbage in the buffer must not block the stop
+                logger.debug("%s: drain before %r failed", self.name, line, exc_info=True)
+            if self._buffer:
+                self.log.add(self.name, "rx", bytes(self._buffer).decode("ascii", "replace")
+                             + " <partial, discarded>")
+                self._buffer.clear()
+            self.write_line(line)
+            deadline = time.monotonic() + timeout_s
+            while True:
+                try:
+                    reply = self.read_line(deadline=deadline)
+                except ProtocolError:
+                    continue
+                except ReplyTimeout:
+                    logger.warning("%s: no reply to %r within %.1f s (attempt %d of %d)",
+                                   self.name, line, timeout_s, attempt, attempts)
+                    break
+                result = until(reply)
+                if result is not None:
+                    return result
+                if on_other is not None:
+                    on_other(reply)
+        raise ReplyTimeout(f"{self.name}: no reply to {line!r} in {attempts} attempts of "
+                           f"{timeout_s:g} s")
 
     def drain(self) -> list[str]:
         """Read and log whatever is waiting now (used after a reset); returns raw texts."""

@@ -242,7 +242,7 @@ class ZaberStage(Stage):
         """Safety path: ``stop``, tolerant of stray lines from an interrupted exchange."""
         prefix = f"@{self.device:02d} {self.axis} "
         self.transport.send_on_safety_path(
-            f"/{self.device} {self.axis} stop", lambda line: True if line.startswith(prefix) else None,
+            f"/{self.device} {self.axis} stop", lambda line: True if prefix in line else None,
             timeout_s=timeout_s)
 
     def warnings(self) -> list[str]:

@@ -61,7 +61,7 @@ class PtyDevice:
     def start(self) -> None:
         with self._lock:
             for data in self.model.boot(time.monotonic()):
-                os.write(self.master, data)
+                self._write_all(data)
         self._thread.start()
 
     def close(self) -> None:
@@ -75,6 +75,12 @@ class PtyDevice:
         with self._lock:
             self.model.on_unplug(time.monotonic())
             self._close_fds()
+
+    def _write_all(self, data: bytes) -> None:
+        """Write every byte (a pty may take a write in parts; the rest must not be lost)."""
+        view = memoryview(data)
+        while view:
+            view = view[os.write(self.master, view):]
 
     def _close_fds(self) -> None:
         if not self.unplugged:
@@ -98,7 +104,7 @@ class PtyDevice:
                 out = self.model.tick(now) + self.model.due(now)
                 for data in out:
                     if data:
-                        os.write(self.master, data)
+                        self._write_all(data)
             nxt = self.model.next_due()
             wait = self.poll_s if nxt is None else max(0.0, min(self.poll_s, nxt - now))
             try:
@@ -135,4 +141,4 @@ class PtyDevice:
                     self.model.log.append((now, "rx", line.decode("ascii", "replace")))
                     for data in self.model.tick(now) + self.model.handle(line, now):
                         if data:
-                            os.write(self.master, data)
+                            self._write_all(data)
