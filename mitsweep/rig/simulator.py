@@ -4,7 +4,8 @@ one by hand (it prints the port to open)."""
 
 from __future__ import annotations
 
-import time
+import signal
+import threading
 
 from .sim import (FAULT_KINDS, FIRMWARE_VERSION, ArduinoModel, Fault, Model, Move, PtyDevice,
                   ZaberModel)
@@ -22,13 +23,17 @@ def _main(argv=None) -> int:  # pragma: no cover - manual use
     args = p.parse_args(argv)
     model = ArduinoModel(homed=args.homed) if args.device == "arduino" \
         else ZaberModel(homed=args.homed)
+    # Ctrl-C, SIGTERM and SIGHUP end the server cleanly. A handler that only sets an
+    # event (rather than raising KeyboardInterrupt wherever the main thread happens to
+    # be) cannot cut the start-up or the shutdown short on a busy machine.
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, lambda *_: stop.set())
     with PtyDevice(model) as dev:
         print(dev.port, flush=True)
-        try:
-            while True:
-                time.sleep(1)
-        except KeyboardInterrupt:
-            return 0
+        while not stop.wait(1.0):
+            pass
+    return 0
 
 
 if __name__ == "__main__":  # pragma: no cover
