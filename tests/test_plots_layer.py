@@ -13,11 +13,6 @@ from test_architecture import PKG, _module_name, imports_of
 PACKAGES = ("optics", "tracer", "deconv", "render", "rig", "io")
 FORBIDDEN = ("matplotlib", "mitsweep.plots")
 
-#: Offences known today (module -> reason), each a strict xfail: none. io/png.py wrote its
-#: PNGs with matplotlib until it moved to Pillow.
-KNOWN: dict[str, str] = {}
-
-
 def figure_imports(path: Path, package: Path = PKG) -> list[str]:
     """The imports of matplotlib or mitsweep.plots that the module at ``path`` (inside
     the ``mitsweep`` folder ``package``) makes."""
@@ -32,8 +27,7 @@ def _modules():
     for package in PACKAGES:
         for path in sorted((PKG / package).rglob("*.py")):
             rel = path.relative_to(PKG).as_posix()
-            marks = [pytest.mark.xfail(reason=KNOWN[rel], strict=True)] if rel in KNOWN else []
-            yield pytest.param(path, id=rel, marks=marks)
+            yield pytest.param(path, id=rel)
 
 
 @pytest.mark.parametrize("path", list(_modules()))

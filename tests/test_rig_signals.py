@@ -216,18 +216,23 @@ def test_unconfirmed_safety_step_exits_3_and_says_which(tmp_path, rig_kind, boar
                                                   else [False])
 
 
+def sigterm_mid_sweep(rig) -> tuple[int, str]:
+    """Start a capture, SIGTERM it once the shutter is open, and return (status, stderr)."""
+    proc = rig.start_capture()
+    try:
+        wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
+        proc.send_signal(signal.SIGTERM)
+        return finish(proc)
+    finally:
+        proc.kill()
+        proc.wait()
+
+
 def test_signal_with_one_lost_stop_retries_and_confirms(tmp_path):
     """The first STOP is swallowed: the safety path sends it again (a stop is idempotent)
     and the second is confirmed, so the exit status is the signal's."""
     with Rig("arduino", tmp_path, board_faults=[Fault("no_reply", command="STOP")]) as rig:
-        proc = rig.start_capture()
-        try:
-            wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
-            proc.send_signal(signal.SIGTERM)
-            rc, err = finish(proc)
-        finally:
-            proc.kill()
-            proc.wait()
+        rc, err = sigterm_mid_sweep(rig)
         # the watchdog may have stopped the board while the first STOP went unanswered
         assert not rig.board.model.shutter_open
         assert not rig.board.model.moving(time.monotonic())
@@ -243,14 +248,7 @@ def test_signal_with_unanswered_stop_exits_3(tmp_path):
     (3), not the signal's status: the board stopped, but nothing confirmed it."""
     lost = [Fault("no_reply", command="STOP")] * SAFETY_ATTEMPTS
     with Rig("arduino", tmp_path, board_faults=lost) as rig:
-        proc = rig.start_capture()
-        try:
-            wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
-            proc.send_signal(signal.SIGTERM)
-            rc, err = finish(proc)
-        finally:
-            proc.kill()
-            proc.wait()
+        rc, err = sigterm_mid_sweep(rig)
         # the board never acted on that STOP; its watchdog stopped it when the host went
         # silent (the safety path waits for the reply without sending heartbeats)
         wait_for(lambda: not rig.board.model.moving(time.monotonic()), "the watchdog",
