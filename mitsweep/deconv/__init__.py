@@ -25,7 +25,7 @@ from .polar import PolarGrid, from_polar, polar_deconvolve, polar_grid, to_polar
 from .spatial import scatter_blur, spatially_varying_blur, spatially_varying_deconvolve
 from .wiener import estimate_nsr, wiener_deconvolve
 
-__all__ = ["deconvolve", "wiener_deconvolve", "polar_deconvolve",
+__all__ = ["deconvolve", "METHODS", "wiener_deconvolve", "polar_deconvolve",
            "spatially_varying_deconvolve", "spatially_varying_blur", "scatter_blur",
            "estimate_nsr", "SensorNoise", "paper_fig10_settings", "psnr", "ssim",
            "per_radius", "per_depth_band", "PolarGrid", "polar_grid", "to_polar",
@@ -33,14 +33,22 @@ __all__ = ["deconvolve", "wiener_deconvolve", "polar_deconvolve",
            "optical_center", "BankError", "IPSFBank"]
 
 
-def deconvolve(image: np.ndarray, bank: IPSFBank, **kw) -> np.ndarray:
-    """Restore a focal-sweep image with the right method for ``bank``.
+#: Restoration methods :func:`deconvolve` accepts (``method=``); every command that makes
+#: an EDOF image offers these names.
+METHODS: tuple[str, ...] = ("wiener",)
 
-    A ``kind="radial"`` bank (untilted, rotationally symmetric setup) goes to
-    :func:`polar_deconvolve`; a ``kind="grid"`` bank to
+
+def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener", **kw) -> np.ndarray:
+    """Restore a focal-sweep image with ``method`` and the right operator for ``bank``.
+
+    ``method="wiener"``: a ``kind="radial"`` bank (untilted, rotationally symmetric
+    setup) goes to :func:`polar_deconvolve`; a ``kind="grid"`` bank to
     :func:`spatially_varying_deconvolve`. Keyword arguments are passed on (both take
-    ``nsr``, ``prior`` and ``depth_mm``).
+    ``nsr``, ``prior`` and ``depth_mm``). Other names of :data:`METHODS` are the
+    prior-based solvers.
     """
+    if method not in METHODS:
+        raise ValueError(f"unknown restoration method {method!r}; allowed: {', '.join(METHODS)}")
     if bank.kind == "radial":
         return polar_deconvolve(image, bank, **kw)
     if bank.kind == "grid":
