@@ -1,0 +1,746 @@
+"""Camera files in (RAW, TIFF, PNG, JPEG, EXR) as linear images; display images out.
+
+:func:`read_camera_image` turns a photograph into what the rest of mitsweep works on: a
+float32 array (H, W, 3) or (H, W), *linear* in scene radiance, scaled so that the
+format's white level is 1.0, with the pixel pitch when the file states it.
+
+Formats (chosen by the file's suffix) and what "linear" means for each:
+
+========  ============================================================================
+kind      decoding
+========  ============================================================================
+``raw``   DNG, CR2, NEF, ARW, ... through rawpy (LibRaw): black level subtracted,
+          white level applied (LibRaw's automatic maximum adjustment off), gamma (1, 1),
+          no auto-brightening, linear sRGB primaries, the white balance stated in
+          :data:`WHITE_BALANCES` (default the camera's as-shot balance). 1.0 is the
+          white level in the least-amplified channel (dcraw's convention).
+``tiff``  8/16/32-bit through tifffile. The transfer function is decided by
+          :func:`tiff_transfer` (the rule below); integer samples are divided by
+          ``2**bits - 1``, float samples are taken as they are.
+``png``   8-bit through Pillow, 16-bit through this module's decoder (Pillow reduces
+          16-bit colour PNGs to 8 bits); sRGB-encoded unless the file says otherwise.
+``jpeg``  through Pillow; sRGB-encoded unless its ICC profile says otherwise.
+``exr``   through :mod:`mitsweep.io.exr`: already linear.
+========  ============================================================================
+
+**Transfer rule** (TIFF, PNG, JPEG), first match wins:
+
+1. the ``transfer`` argument (``"linear"`` or ``"srgb"``), when given;
+2. floating-point samples are linear;
+3. mitsweep's own display files state it (``"transfer"`` in a TIFF's JSON
+   ``ImageDescription`` or a PNG's ``mitsweep`` text chunk);
+4. an embedded ICC profile: a gray/red tone curve that is the identity or a pure
+   gamma of 1.0 is linear; another pure gamma γ decodes as ``x**γ``; any other curve
+   (the sRGB curve, parametric curves) as sRGB. A PNG ``gAMA`` chunk without an
+   ``sRGB`` chunk is read the same way;
+5. otherwise integer samples are sRGB-encoded (what image software writes by default).
+
+Only the transfer function is undone; colour primaries are not converted.
+
+Pixel pitch (mm) comes from the file's EXIF ``FocalPlaneXResolution`` and
+``FocalPlaneResolutionUnit`` (RAW, TIFF, JPEG) or a mitsweep EXR's setup, else from the
+``pixel_pitch`` argument, else it is None.
+
+:func:`write_display_image` writes a linear image as a 16-bit sRGB TIFF or PNG for
+viewing (the linear result belongs in EXR, :func:`mitsweep.io.exr.write_exr`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import struct
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from .atomic import atomic_path
+from .exr import _openexr_chatter as _library_chatter  # collects C libraries' stderr
+from .png import linear_to_srgb
+
+__all__ = ["CameraFileError", "CameraImage", "RAW_SUFFIXES", "CAMERA_SUFFIXES",
+           "WHITE_BALANCES", "TRANSFERS", "read_camera_image", "write_display_image",
+           "srgb_to_linear", "tiff_transfer"]
+
+logger = logging.getLogger(__name__)
+
+#: File suffixes read through rawpy/LibRaw.
+RAW_SUFFIXES = (".dng", ".cr2", ".cr3", ".crw", ".nef", ".nrw", ".arw", ".srf", ".sr2",
+                ".raf", ".orf", ".rw2", ".rwl", ".pef", ".srw", ".3fr", ".iiq", ".erf",
+                ".mrw", ".dcr", ".kdc", ".mos", ".x3f", ".raw")
+_KIND_OF_SUFFIX = {**{s: "raw" for s in RAW_SUFFIXES}, ".tif": "tiff", ".tiff": "tiff",
+                   ".png": "png", ".jpg": "jpeg", ".jpeg": "jpeg", ".exr": "exr"}
+#: Every suffix :func:`read_camera_image` accepts.
+CAMERA_SUFFIXES = tuple(_KIND_OF_SUFFIX)
+#: White balance of RAW decoding: the camera's as-shot multipliers, LibRaw's daylight
+#: multipliers for the camera, a grey-world estimate from the image, or none (unit
+#: multipliers: the sensor's raw channel response).
+WHITE_BALANCES = ("camera", "daylight", "auto", "none")
+#: Transfer functions the ``transfer`` argument may force.
+TRANSFERS = ("linear", "srgb")
+
+#: Share of pixels at the white level above which a clipping warning is given.
+CLIPPED_WARN_FRACTION = 1e-3
+#: Relative difference between the file's pitch and the argument's that is reported.
+PITCH_MISMATCH_WARN = 0.01
+
+_EIGHT_BIT_WARNING = ("8-bit input: 256 sRGB-encoded levels limit the restoration "
+                      "(deconvolution amplifies quantisation noise); use a RAW file or a "
+                      "16-bit TIFF where possible")
+_JPEG_WARNING = ("JPEG input: lossy compression adds block artefacts that deconvolution "
+                 "amplifies")
+
+
+class CameraFileError(ValueError):
+    """A camera file cannot be read, or holds something that is not an image."""
+
+
+@dataclass(frozen=True)
+class CameraImage:
+    """A photograph decoded to linear values.
+
+    Attributes
+    ----------
+    data : (H, W, 3) or (H, W) float32 ndarray
+        Linear values; the format's white level is 1.0.
+    pixel_pitch : float or None
+        Pixel pitch, mm: from the file's metadata, else the caller's, else None.
+    kind : {"raw", "tiff", "png", "jpeg", "exr"}
+    bit_depth : int
+        Bits per sample as stored (8, 16, 32; RAW: the bits the white level needs).
+    meta : dict
+        ``path``, ``transfer``, ``white_level``, ``black_level``, ``white_balance`` (RAW),
+        ``exif`` (essentials found), ``exr_header`` (EXR), ``pixel_pitch_source``.
+    warnings : list of str
+        What limits the result (8-bit input, JPEG, clipping, a pitch mismatch); each was
+        also logged.
+    """
+
+    data: np.ndarray
+    pixel_pitch: float | None
+    kind: str
+    bit_depth: int
+    meta: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(H, W)``."""
+        return int(self.data.shape[0]), int(self.data.shape[1])
+
+
+def srgb_to_linear(x) -> np.ndarray:
+    """The sRGB transfer function inverted (IEC 61966-2-1), float32, on [0, 1]."""
+    x = np.asarray(x, dtype=np.float32)
+    return np.where(x <= 0.04045, x / np.float32(12.92),
+                    ((x + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4)
+                    ).astype(np.float32)
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_camera_image(path, *, pixel_pitch: float | None = None,
+                      white_balance: str = "camera", transfer: str | None = None
+                      ) -> CameraImage:
+    """Read a camera file as a linear float32 image.
+
+    Parameters
+    ----------
+    path : path
+        A RAW (see :data:`RAW_SUFFIXES`), TIFF, PNG, JPEG or EXR file, by suffix.
+    pixel_pitch : float, optional
+        Pitch (mm) to use when the file does not state one.
+    white_balance : {"camera", "daylight", "auto", "none"}
+        RAW only: see :data:`WHITE_BALANCES`.
+    transfer : {"linear", "srgb"}, optional
+        Force the transfer function of a TIFF, PNG or JPEG (default: the module's rule).
+
+    Returns
+    -------
+    CameraImage
+
+    Raises
+    ------
+    CameraFileError
+        Unknown suffix, missing, unreadable or truncated file, an image that is not
+        (H, W[, 3|4]), or a bad argument; the message is one line naming the file.
+    """
+    p = Path(path)
+    kind = _KIND_OF_SUFFIX.get(p.suffix.lower())
+    if kind is None:
+        raise CameraFileError(f"{p}: unknown camera file type {p.suffix or '(no suffix)'!r}; "
+                              f"allowed: RAW ({', '.join(RAW_SUFFIXES[:6])}, ...), .tif, "
+                              f".tiff, .png, .jpg, .jpeg, .exr")
+    if white_balance not in WHITE_BALANCES:
+        raise CameraFileError(f"white balance must be one of {', '.join(WHITE_BALANCES)}, "
+                              f"got {white_balance!r}")
+    if transfer is not None and transfer not in TRANSFERS:
+        raise CameraFileError(f"transfer must be one of {', '.join(TRANSFERS)}, "
+                              f"got {transfer!r}")
+    if pixel_pitch is not None and not (math.isfinite(pixel_pitch) and pixel_pitch > 0):
+        raise CameraFileError(f"pixel pitch must be a finite number > 0 mm, got {pixel_pitch!r}")
+    if not p.is_file():
+        raise CameraFileError(f"{p}: no such file")
+    reader = {"raw": _read_raw, "tiff": _read_tiff, "png": _read_png, "jpeg": _read_jpeg,
+              "exr": _read_exr}[kind]
+    warnings: list[str] = []
+    data, bit_depth, meta, file_pitch = reader(p, warnings=warnings,
+                                               white_balance=white_balance, transfer=transfer)
+    data = _as_image(np.asarray(data), p, warnings)
+    if not np.all(np.isfinite(data)):
+        raise CameraFileError(f"{p}: holds NaN or infinite values")
+    meta["path"] = str(p)
+    pitch, source = file_pitch, "file" if file_pitch is not None else None
+    if pitch is None and pixel_pitch is not None:
+        pitch, source = float(pixel_pitch), "argument"
+    elif pitch is not None and pixel_pitch is not None \
+            and abs(pitch - pixel_pitch) > PITCH_MISMATCH_WARN * pixel_pitch:
+        warnings.append(f"the file states a pixel pitch of {pitch:.6g} mm, not the "
+                        f"{pixel_pitch:.6g} mm given; using the file's")
+    meta["pixel_pitch_source"] = source
+    for w in warnings:
+        logger.warning("%s: %s", p, w)
+    return CameraImage(data=data, pixel_pitch=pitch, kind=kind, bit_depth=int(bit_depth),
+                       meta=meta, warnings=warnings)
+
+
+def _as_image(a: np.ndarray, p: Path, warnings: list[str]) -> np.ndarray:
+    """(H, W) or (H, W, 3) float32: a single channel squeezed, alpha dropped."""
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim == 3 and a.shape[2] in (2, 4):
+        warnings.append("alpha channel ignored")
+        a = a[..., 0] if a.shape[2] == 2 else a[..., :3]
+    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3) or min(a.shape[:2]) < 1:
+        raise CameraFileError(f"{p}: expected an (H, W) or (H, W, 3) image, got shape "
+                              f"{a.shape}")
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def _clip_warning(a: np.ndarray, white: float, warnings: list[str]) -> None:
+    frac = float(np.mean(np.max(a, axis=-1) >= white)) if a.ndim == 3 else \
+        float(np.mean(a >= white))
+    if frac > CLIPPED_WARN_FRACTION:
+        warnings.append(f"{100 * frac:.2g}% of pixels are at the white level (clipped): "
+                        f"deconvolution cannot restore them")
+
+
+def _raw_error(p: Path, exc: BaseException, said: list[str]) -> CameraFileError:
+    cause = exc.args[0] if exc.args else type(exc).__name__
+    if isinstance(cause, bytes):
+        cause = cause.decode("utf-8", "replace")
+    told = "; ".join(s.split(": ", 1)[-1] for s in said)
+    return CameraFileError(f"{p}: not a readable RAW file ({cause}"
+                           f"{'; ' + told if told else ''})")
+
+
+def _read_raw(p: Path, *, warnings, white_balance, transfer):
+    import rawpy
+
+    if transfer not in (None, "linear"):
+        raise CameraFileError(f"{p}: a RAW file is linear; transfer {transfer!r} does not apply")
+    wb_args = {"camera": dict(use_camera_wb=True), "daylight": dict(use_camera_wb=False),
+               "auto": dict(use_auto_wb=True),
+               "none": dict(user_wb=[1.0, 1.0, 1.0, 1.0])}[white_balance]
+    try:
+        with _library_chatter() as said:
+            with rawpy.imread(str(p)) as raw:
+                rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16,
+                                      output_color=rawpy.ColorSpace.sRGB, user_flip=0,
+                                      adjust_maximum_thr=0.0, **wb_args)
+                white = int(raw.white_level)
+                black = [int(b) for b in raw.black_level_per_channel]
+                multipliers = {"camera": list(raw.camera_whitebalance),
+                               "daylight": list(raw.daylight_whitebalance),
+                               "none": [1.0, 1.0, 1.0, 1.0]}.get(white_balance)
+                pattern = raw.color_desc.decode("ascii", "replace")
+    except (rawpy.LibRawError, OSError, ValueError) as exc:
+        raise _raw_error(p, exc, said) from None
+    if said:
+        logger.debug("%s: LibRaw said: %s", p, " | ".join(said))
+    if white <= max(black, default=0):
+        raise CameraFileError(f"{p}: white level {white} is not above the black level "
+                              f"{max(black)}")
+    data = rgb.astype(np.float32) / np.float32(65535.0)
+    _clip_warning(data, 1.0, warnings)
+    exif, pitch = {}, None
+    try:  # DNG, NEF, CR2, ARW, PEF are TIFF inside: their EXIF is readable there
+        import tifffile
+
+        with _library_chatter():
+            with tifffile.TiffFile(str(p)) as tf:
+                exif = _tiff_exif(tf.pages[0])
+        pitch = _pitch_from_exif(exif)
+    except Exception as exc:  # noqa: BLE001 - EXIF is optional; the image was read
+        logger.debug("%s: no EXIF through tifffile (%s)", p, exc)
+    meta = {"transfer": "linear", "white_level": white, "black_level": black,
+            "white_balance": {"mode": white_balance, "multipliers": multipliers},
+            "color_space": "linear sRGB primaries", "cfa_colors": pattern, "exif": exif}
+    return data, max(1, math.ceil(math.log2(white + 1))), meta, pitch
+
+
+#: EXIF and TIFF tags kept in ``meta["exif"]`` (tifffile's names).
+_EXIF_KEYS = ("Make", "Model", "UniqueCameraModel", "DateTimeOriginal", "DateTime",
+              "ExposureTime", "FNumber", "ISOSpeedRatings", "PhotographicSensitivity",
+              "FocalLength", "LensModel", "FocalPlaneXResolution", "FocalPlaneYResolution",
+              "FocalPlaneResolutionUnit")
+#: FocalPlaneResolutionUnit → mm per unit (EXIF: 2 inch, 3 cm, 4 mm, 5 µm).
+_FOCAL_PLANE_UNIT_MM = {1: 25.4, 2: 25.4, 3: 10.0, 4: 1.0, 5: 1e-3}
+
+
+def _plain(value):
+    """An EXIF value as JSON-friendly Python: rationals as floats, enums as ints."""
+    if isinstance(value, tuple) and len(value) == 2 and all(isinstance(v, int) for v in value):
+        return value[0] / value[1] if value[1] else None
+    if isinstance(value, bytes):
+        return value.decode("utf-8", "replace").rstrip("\x00")
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if hasattr(value, "item"):
+        return value.item()
+    if isinstance(value, (int, float, str)):
+        return int(value) if isinstance(value, int) else value
+    try:
+        return float(value)  # PIL's IFDRational
+    except (TypeError, ValueError):
+        return str(value)
+
+
+def _tiff_exif(page) -> dict:
+    tags = {t.name: t.value for t in page.tags}
+    exif = tags.get("ExifTag")
+    if isinstance(exif, dict):
+        tags = {**exif, **tags}
+    return {k: _plain(tags[k]) for k in _EXIF_KEYS if k in tags}
+
+
+def _pitch_from_exif(exif: Mapping[str, Any]) -> float | None:
+    """Pixel pitch, mm, from FocalPlaneXResolution (pixels per unit) and its unit."""
+    res = exif.get("FocalPlaneXResolution")
+    unit = _FOCAL_PLANE_UNIT_MM.get(int(exif.get("FocalPlaneResolutionUnit", 2) or 2))
+    if not isinstance(res, (int, float)) or not res > 0 or unit is None:
+        return None
+    pitch = unit / float(res)
+    return pitch if 1e-4 < pitch < 1.0 else None  # 0.1 µm .. 1 mm: else not a pitch
+
+
+def _decode_transfer(a: np.ndarray, rule: str, gamma: float | None) -> np.ndarray:
+    if rule == "linear":
+        return a
+    if rule == "gamma":
+        return np.power(np.clip(a, 0.0, None), np.float32(gamma)).astype(np.float32)
+    return srgb_to_linear(np.clip(a, 0.0, 1.0))
+
+
+def _icc_transfer(icc: bytes | None) -> tuple[str, float | None] | None:
+    """``("linear"|"gamma"|"srgb", γ)`` from an ICC profile's gray or red tone curve."""
+    if not icc or len(icc) < 132:
+        return None
+    try:
+        (count,) = struct.unpack(">I", icc[128:132])
+        table = {}
+        for k in range(min(count, 256)):
+            sig, off, size = struct.unpack(">4sII", icc[132 + 12 * k:144 + 12 * k])
+            table[sig] = icc[off:off + size]
+        curve = table.get(b"kTRC") or table.get(b"rTRC")
+        if curve is None or curve[:4] != b"curv":
+            return ("srgb", None) if curve is not None else None
+        (n,) = struct.unpack(">I", curve[8:12])
+        if n == 0:
+            return ("linear", None)
+        if n == 1:
+            (g,) = struct.unpack(">H", curve[12:14])
+            g = g / 256.0
+            return ("linear", None) if abs(g - 1.0) < 1e-3 else ("gamma", g)
+        return ("srgb", None)
+    except struct.error:
+        return None
+
+
+def tiff_transfer(page, forced: str | None = None) -> tuple[str, float | None, str]:
+    """The transfer function of a TIFF page by the module's rule.
+
+    Returns
+    -------
+    (rule, gamma, reason) : (str, float or None, str)
+        ``rule`` is ``"linear"``, ``"srgb"`` or ``"gamma"`` (decode as ``x**gamma``);
+        ``reason`` says which step of the rule decided.
+    """
+    if forced is not None:
+        return forced, None, "forced by the caller"
+    if page.sampleformat == 3:
+        return "linear", None, "floating-point samples"
+    described = _described_transfer(page.description)
+    if described is not None:
+        return described, None, "stated in the ImageDescription"
+    icc = page.tags.get(34675)
+    found = _icc_transfer(bytes(icc.value) if icc is not None else None)
+    if found is not None:
+        return found[0], found[1], "ICC profile"
+    return "srgb", None, "integer samples without a profile (default)"
+
+
+def _described_transfer(text) -> str | None:
+    try:
+        value = json.loads(text or "").get("transfer")
+    except (ValueError, AttributeError):
+        return None
+    return value if value in TRANSFERS else None
+
+
+def _read_tiff(p: Path, *, warnings, white_balance, transfer):
+    import tifffile
+
+    try:
+        with _library_chatter() as said:
+            with tifffile.TiffFile(str(p)) as tf:
+                page = tf.pages[0]
+                if page.photometric == 32803:
+                    raise CameraFileError(f"{p}: a raw CFA (Bayer) TIFF; give it a .dng "
+                                          f"suffix to read it through LibRaw")
+                if int(page.photometric) not in (0, 1, 2):
+                    raise CameraFileError(
+                        f"{p}: TIFF photometric {page.photometric!r} is not supported; "
+                        f"allowed: grey (min-is-black) or RGB")
+                a = page.asarray()
+                axes = page.axes
+                bits = int(page.bitspersample)
+                rule, gamma, reason = tiff_transfer(page, transfer)
+                exif = _tiff_exif(page)
+                inverted = int(page.photometric) == 0
+    except CameraFileError:
+        raise
+    except Exception as exc:  # tifffile raises TiffFileError, ValueError, OSError, ...
+        cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CameraFileError(f"{p}: not a readable TIFF file ({cause})") from None
+    if said:
+        logger.debug("%s: tifffile said: %s", p, " | ".join(said))
+    if "S" in axes and axes.index("S") < axes.index("Y"):  # planar: (S, H, W)
+        a = np.moveaxis(a, axes.index("S"), -1)
+    a = np.squeeze(a) if a.ndim > 3 else a
+    if np.issubdtype(a.dtype, np.integer):
+        white = float(np.iinfo(a.dtype).max) if bits >= 8 * a.dtype.itemsize \
+            else float(2 ** bits - 1)
+        data = a.astype(np.float32) / np.float32(white)
+        if inverted:
+            data = 1.0 - data
+        _clip_warning(data, 1.0, warnings)
+    elif np.issubdtype(a.dtype, np.floating):
+        data, white = a.astype(np.float32), 1.0
+    else:
+        raise CameraFileError(f"{p}: TIFF samples of type {a.dtype} are not supported")
+    if bits <= 8:
+        warnings.append(_EIGHT_BIT_WARNING)
+    data = _decode_transfer(data, rule, gamma)
+    meta = {"transfer": rule if rule != "gamma" else f"gamma {gamma:g}",
+            "transfer_reason": reason, "white_level": white, "black_level": 0, "exif": exif}
+    return data, bits, meta, _pitch_from_exif(exif)
+
+
+def _read_pillow(p: Path, label: str):
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(p) as im:
+            im.load()
+            info = dict(im.info)
+            exif = {}
+            try:
+                raw_exif = im.getexif()
+                from PIL import ExifTags
+
+                merged = {**dict(raw_exif.get_ifd(0x8769)), **dict(raw_exif)}
+                named = {ExifTags.TAGS.get(k, str(k)): v for k, v in merged.items()}
+                exif = {k: _plain(named[k]) for k in _EXIF_KEYS if k in named}
+            except Exception as exc:  # noqa: BLE001 - EXIF is optional
+                logger.debug("%s: EXIF not read (%s)", p, exc)
+            mode = im.mode
+            if mode in ("P", "PA", "1", "CMYK", "YCbCr", "LAB", "HSV"):
+                im = im.convert("RGBA" if mode == "PA" or "transparency" in info else "RGB")
+            elif mode == "I;16B":
+                im = im.convert("I;16")
+            a = np.asarray(im)
+    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
+        cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CameraFileError(f"{p}: not a readable {label} file ({cause})") from None
+    return a, mode, info, exif
+
+
+def _read_jpeg(p: Path, *, warnings, white_balance, transfer):
+    a, mode, info, exif = _read_pillow(p, "JPEG")
+    rule, gamma, reason = _pillow_transfer(info, transfer, default_reason="JPEG (sRGB)")
+    data = a.astype(np.float32) / np.float32(255.0)
+    _clip_warning(data, 1.0, warnings)
+    warnings.append(_EIGHT_BIT_WARNING)
+    warnings.append(_JPEG_WARNING)
+    meta = {"transfer": rule if rule != "gamma" else f"gamma {gamma:g}",
+            "transfer_reason": reason, "white_level": 255, "black_level": 0,
+            "source_mode": mode, "exif": exif}
+    return _decode_transfer(data, rule, gamma), 8, meta, _pitch_from_exif(exif)
+
+
+def _pillow_transfer(info: Mapping, forced: str | None, *, default_reason: str):
+    if forced is not None:
+        return forced, None, "forced by the caller"
+    described = _described_transfer(info.get("mitsweep"))
+    if described is not None:
+        return described, None, "stated in the mitsweep text chunk"
+    found = _icc_transfer(info.get("icc_profile"))
+    if found is not None:
+        return found[0], found[1], "ICC profile"
+    if "gamma" in info and "srgb" not in info:  # PNG gAMA: stored value is 1/γ
+        g = 1.0 / float(info["gamma"]) if float(info["gamma"]) > 0 else 1.0
+        return ("linear", None, "gAMA chunk") if abs(g - 1.0) < 1e-3 else \
+            ("gamma", g, "gAMA chunk")
+    return "srgb", None, default_reason
+
+
+def _read_png(p: Path, *, warnings, white_balance, transfer):
+    header = _png_header(p)
+    if header is not None and header["bit_depth"] == 16 and header["color_type"] in (2, 6):
+        a, info = _decode_png16(p, header)
+        mode, exif = f"RGB{'A' if header['color_type'] == 6 else ''};16", {}
+    else:
+        a, mode, info, exif = _read_pillow(p, "PNG")
+    rule, gamma, reason = _pillow_transfer(info, transfer, default_reason="PNG (sRGB)")
+    if a.dtype == np.uint8:
+        bits, white = 8, 255.0
+        warnings.append(_EIGHT_BIT_WARNING)
+    elif a.dtype in (np.uint16, np.dtype(">u2")) or mode.startswith("I;16"):
+        bits, white = 16, 65535.0
+    elif mode == "I":  # Pillow's 32-bit integer mode holds 16-bit grey PNGs too
+        bits, white = 16, 65535.0
+    else:
+        bits, white = 8 * a.dtype.itemsize, float(np.iinfo(a.dtype).max)
+    data = a.astype(np.float32) / np.float32(white)
+    _clip_warning(data, 1.0, warnings)
+    meta = {"transfer": rule if rule != "gamma" else f"gamma {gamma:g}",
+            "transfer_reason": reason, "white_level": white, "black_level": 0,
+            "source_mode": mode, "exif": exif}
+    return _decode_transfer(data, rule, gamma), bits, meta, _pitch_from_exif(exif)
+
+
+def _read_exr(p: Path, *, warnings, white_balance, transfer):
+    from .exr import ExrError, read_exr, stack_channels
+
+    if transfer not in (None, "linear"):
+        raise CameraFileError(f"{p}: an EXR file is linear; transfer {transfer!r} does not apply")
+    try:
+        chans, header = read_exr(p)
+    except ExrError as exc:
+        raise CameraFileError(str(exc)) from None
+    try:
+        data = stack_channels(chans)
+    except ValueError as exc:
+        raise CameraFileError(f"{p}: {exc}") from None
+    bits = 16 if data.dtype == np.float16 else 32
+    pitch = None
+    setup = header.get("setup")
+    if isinstance(setup, dict):
+        value = (setup.get("sensor") or {}).get("pixel_pitch")
+        pitch = float(value) if isinstance(value, (int, float)) and value > 0 else None
+    meta = {"transfer": "linear", "white_level": 1.0, "black_level": 0.0,
+            "exr_header": header, "exif": {}}
+    return data, bits, meta, pitch
+
+
+# ------------------------------------------------------------- 16-bit PNG, both ways
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def _png_chunks(blob: bytes, p: Path):
+    pos = len(_PNG_SIGNATURE)
+    while pos + 8 <= len(blob):
+        n, kind = struct.unpack(">I4s", blob[pos:pos + 8])
+        data = blob[pos + 8:pos + 8 + n]
+        if len(data) < n or pos + 12 + n > len(blob):
+            raise CameraFileError(f"{p}: not a readable PNG file (truncated in chunk "
+                                  f"{kind.decode('latin-1')!r})")
+        crc = struct.unpack(">I", blob[pos + 8 + n:pos + 12 + n])[0]
+        if zlib.crc32(kind + data) & 0xFFFFFFFF != crc:
+            raise CameraFileError(f"{p}: not a readable PNG file (bad CRC in chunk "
+                                  f"{kind.decode('latin-1')!r})")
+        yield kind, data
+        pos += 12 + n
+        if kind == b"IEND":
+            return
+    raise CameraFileError(f"{p}: not a readable PNG file (truncated: no IEND chunk)")
+
+
+def _png_header(p: Path) -> dict | None:
+    with open(p, "rb") as f:
+        head = f.read(33)
+    if len(head) < 33 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+        return None
+    w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", head[16:29])
+    return {"width": w, "height": h, "bit_depth": depth, "color_type": ctype,
+            "interlace": interlace}
+
+
+def _decode_png16(p: Path, header: dict) -> tuple[np.ndarray, dict]:
+    """A 16-bit RGB(A) PNG as uint16 (H, W, C): Pillow would reduce it to 8 bits."""
+    if header["interlace"]:
+        raise CameraFileError(f"{p}: interlaced 16-bit colour PNG is not supported; "
+                              f"save it without interlacing or as a 16-bit TIFF")
+    blob = p.read_bytes()
+    idat, info = [], {}
+    for kind, data in _png_chunks(blob, p):
+        if kind == b"IDAT":
+            idat.append(data)
+        elif kind == b"tEXt" and b"\x00" in data:
+            key, text = data.split(b"\x00", 1)
+            info[key.decode("latin-1")] = text.decode("latin-1")
+        elif kind == b"iCCP":
+            name_end = data.index(b"\x00")
+            info["icc_profile"] = zlib.decompress(data[name_end + 2:])
+        elif kind == b"gAMA":
+            info["gamma"] = struct.unpack(">I", data)[0] / 100000.0
+        elif kind == b"sRGB":
+            info["srgb"] = data[0]
+    channels = 3 if header["color_type"] == 2 else 4
+    w, h = header["width"], header["height"]
+    bpp, stride = 2 * channels, 2 * channels * w
+    try:
+        raw = zlib.decompress(b"".join(idat))
+    except zlib.error as exc:
+        raise CameraFileError(f"{p}: not a readable PNG file ({exc})") from None
+    if len(raw) != h * (stride + 1):
+        raise CameraFileError(f"{p}: not a readable PNG file (image data holds {len(raw)} "
+                              f"bytes, {h * (stride + 1)} expected)")
+    rows = _png_unfilter(np.frombuffer(raw, np.uint8).reshape(h, stride + 1), bpp, p)
+    return rows.view(">u2").reshape(h, w, channels).astype(np.uint16), info
+
+
+def _png_unfilter(rows: np.ndarray, bpp: int, p: Path) -> np.ndarray:
+    """Undo PNG's per-row filters (PNG spec, Sec. 9). None, Sub and Up are vectorised;
+    Average and Paeth run per byte (slow for large images)."""
+    h, stride = rows.shape[0], rows.shape[1] - 1
+    out = np.empty((h, stride), np.uint8)
+    prev = np.zeros(stride, np.uint8)
+    for r in range(h):
+        f, x = int(rows[r, 0]), rows[r, 1:]
+        if f == 0:
+            cur = x.copy()
+        elif f == 1:
+            cur = np.cumsum(x.reshape(-1, bpp), axis=0, dtype=np.uint8).ravel()
+        elif f == 2:
+            cur = x + prev
+        elif f in (3, 4):
+            cur = _unfilter_sequential(f, x.tolist(), prev.tolist(), bpp)
+        else:
+            raise CameraFileError(f"{p}: not a readable PNG file (filter type {f} in row {r})")
+        out[r] = cur
+        prev = out[r]
+    return out
+
+
+def _unfilter_sequential(f: int, x: list, up: list, bpp: int) -> np.ndarray:
+    cur = [0] * len(x)
+    for i, xi in enumerate(x):
+        a = cur[i - bpp] if i >= bpp else 0
+        b = up[i]
+        if f == 3:
+            cur[i] = (xi + ((a + b) >> 1)) & 0xFF
+        else:
+            c = up[i - bpp] if i >= bpp else 0
+            pa, pb, pc = abs(b - c), abs(a - c), abs(a + b - 2 * c)
+            pred = a if pa <= pb and pa <= pc else (b if pb <= pc else c)
+            cur[i] = (xi + pred) & 0xFF
+    return np.array(cur, dtype=np.uint8)
+
+
+def _png16_bytes(img16: np.ndarray, text: Mapping[str, str]) -> bytes:
+    """A 16-bit grey or RGB PNG (filter Up on every row, sRGB chunk, tEXt chunks)."""
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + \
+            struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    h, w = img16.shape[:2]
+    channels = 1 if img16.ndim == 2 else img16.shape[2]
+    color_type = {1: 0, 3: 2}[channels]
+    rows = np.ascontiguousarray(img16, dtype=">u2").view(np.uint8).reshape(h, -1)
+    up = rows.copy()
+    up[1:] -= rows[:-1]  # uint8 arithmetic wraps modulo 256, as the filter wants
+    filtered = np.concatenate([np.full((h, 1), 2, np.uint8), up], axis=1)
+    out = [_PNG_SIGNATURE,
+           chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, color_type, 0, 0, 0)),
+           chunk(b"sRGB", b"\x00")]
+    out += [chunk(b"tEXt", k.encode("latin-1") + b"\x00" + v.encode("latin-1", "replace"))
+            for k, v in text.items()]
+    out += [chunk(b"IDAT", zlib.compress(filtered.tobytes(), 6)), chunk(b"IEND", b"")]
+    return b"".join(out)
+
+
+# --------------------------------------------------------------------------- writing
+
+DISPLAY_SUFFIXES = (".tif", ".tiff", ".png")
+
+
+def write_display_image(path, image, *, white: float | None = None,
+                        metadata: Mapping[str, Any] | None = None) -> Path:
+    """Write a linear image as a 16-bit sRGB TIFF or PNG for display (atomic).
+
+    Parameters
+    ----------
+    path : path
+        ``.tif``/``.tiff`` (zlib-compressed TIFF) or ``.png``.
+    image : (H, W) or (H, W, 3) ndarray
+        Linear values; negative values (deconvolution ringing) show as black.
+    white : float, optional
+        The linear value shown as full white (default: the 99.5th percentile, as
+        :func:`mitsweep.io.png.write_png`).
+    metadata : mapping, optional
+        Provenance, stored as JSON with the transfer (``"srgb"``) and the white used:
+        in the TIFF's ImageDescription, or a PNG ``tEXt`` chunk named ``mitsweep``, so
+        that :func:`read_camera_image` decodes the file back to these linear values
+        (divided by ``white``).
+
+    Returns
+    -------
+    Path
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix not in DISPLAY_SUFFIXES:
+        raise ValueError(f"{p}: display images are .tif, .tiff or .png, got "
+                         f"{p.suffix or '(no suffix)'!r}; linear results go to .exr")
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
+        raise ValueError(f"image must be (H, W) or (H, W, 3), got shape {img.shape}")
+    if not np.all(np.isfinite(img)):
+        raise ValueError("image holds NaN or inf values; refusing to write them")
+    if white is None:
+        white = float(np.percentile(img, 99.5)) if img.size else 1.0
+    if not (math.isfinite(white) and white > 0):
+        white = 1.0
+    img16 = np.round(linear_to_srgb(img / white) * 65535.0).astype(np.uint16)
+    desc = json.dumps({"transfer": "srgb", "white": white, **dict(metadata or {})},
+                      default=_json_default)
+    with atomic_path(p, suffix=suffix) as tmp:
+        if suffix == ".png":
+            tmp.write_bytes(_png16_bytes(img16, {"mitsweep": desc}))
+        else:
+            import tifffile
+
+            tifffile.imwrite(tmp, img16, photometric="rgb" if img16.ndim == 3 else
+                             "minisblack", description=desc, metadata=None,
+                             compression="zlib")
+    return p
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
