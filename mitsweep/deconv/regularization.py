@@ -1,0 +1,198 @@
+r"""Regularisation chosen from the noise model and the image, not guessed.
+
+- :func:`noise_sigma`: the noise standard deviation of an image, from a
+  :class:`~mitsweep.deconv.noise.SensorNoise` model, a given number, or the image
+  itself (Donoho's wavelet estimate, :func:`~mitsweep.deconv.wiener.estimate_noise_sigma`).
+- :func:`discrepancy_nsr`: the Wiener NSR (natural-image prior) by Morozov's
+  discrepancy principle: the NSR at which the restoration explains the data to the
+  noise, :math:`\lVert A\hat x - y\rVert^2 = \tau N \sigma^2`. The residual of a
+  Wiener filter is analytic in the Fourier domain, so the search costs one FFT of the
+  image; the spatially varying blur is stood in for by the bank's IPSF at the radius
+  that halves the restored disk's area (the residual is a global sum).
+- :func:`prior_weight`: the weight λ of a gradient prior :math:`\lambda \sum |\nabla x|^\alpha`
+  as the MAP weight of a generalised-Gaussian gradient law fitted to a first estimate,
+  :math:`\lambda = \kappa_\alpha\, \sigma^2 / (\alpha\, \overline{|\nabla x_0|^\alpha})`,
+  with one constant :math:`\kappa_\alpha` per prior (:data:`PRIOR_WEIGHT_SCALE`).
+
+The constants were tuned on one set of images, blurs and noise levels and checked on
+others (``tests/test_deconv_solvers.py``, docs/design.md).
+
+References
+----------
+.. [1] V. A. Morozov, "On the solution of functional equations by the method of
+   regularization", Soviet Math. Dokl. 7, 414–417, 1966.
+.. [2] D. Krishnan and R. Fergus, "Fast image deconvolution using hyper-Laplacian
+   priors", NIPS 2009.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import scipy.fft as sfft
+
+from ..io.bank import BankError, IPSFBank
+from .kernels import interpolate_radial, radii_px, select_depth
+from .wiener import (DEFAULT_NSR_FLOOR, MAX_NSR, estimate_noise_sigma, fast_shape,
+                     kernel_spectrum, natural_prior_scale)
+
+__all__ = ["noise_sigma", "discrepancy_nsr", "calibrated_nsr", "surrogate_kernel",
+           "prior_weight", "PRIOR_WEIGHT_SCALE", "DISCREPANCY_TAU"]
+
+logger = logging.getLogger(__name__)
+
+#: κ_α of :func:`prior_weight`, per prior exponent α. Tuned on the bench mosaic (512 px,
+#: 50 lux, the synthetic cross IPSF, K = 15): PSNR at κ = 0.125, 0.25, 0.5, 1, 2, 4 was
+#: 29.2, 30.7, 31.6, 31.8, 31.6, 31.1 dB (TV) and 29.3, 30.9, 31.6, 31.7, 31.4, 30.9 dB
+#: (α = 2/3), so κ = 1: the MAP weight itself. Validated on other
+#: photographs, another blur and other noise levels (tests/test_deconv_solvers.py).
+PRIOR_WEIGHT_SCALE = {1.0: 1.0, 2.0 / 3.0: 1.0}
+
+#: τ of the discrepancy principle: the residual's power per pixel over σ² (Morozov's
+#: τ ≥ 1; 1 is the noise exactly).
+DISCREPANCY_TAU = 1.0
+
+
+def noise_sigma(image: np.ndarray, noise=None) -> float:
+    """Noise standard deviation of ``image`` (its units).
+
+    Parameters
+    ----------
+    image : (H, W[, C]) ndarray
+    noise : SensorNoise, float or None
+        A sensor model (the image in its relative-exposure units: σ² is its variance at
+        the image's mean level), a σ, or None to estimate σ from the image.
+
+    Returns
+    -------
+    float
+        σ, at least 1 % of the image's standard deviation (as
+        :data:`~mitsweep.deconv.wiener.DEFAULT_NSR_FLOOR`: a noiseless render still
+        carries ~1e-4 relative error, and a zero σ would leave spectral zeros
+        unregularised); 0 only for a constant image.
+    """
+    img = np.asarray(image, dtype=np.float64)
+    floor = float(np.sqrt(DEFAULT_NSR_FLOOR)) * float(np.std(img))
+    if noise is None:
+        s = estimate_noise_sigma(img)
+    elif isinstance(noise, (int, float, np.floating, np.integer)):
+        s = float(noise)
+        if not (np.isfinite(s) and s >= 0):
+            raise ValueError(f"noise sigma must be a finite number >= 0, got {noise!r}")
+    elif hasattr(noise, "variance"):
+        s = float(np.sqrt(noise.variance(max(float(np.mean(img)), 0.0))))
+    else:
+        raise ValueError(f"noise must be a SensorNoise, a sigma or None, got {noise!r}")
+    return max(s, floor)
+
+
+def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
+                    tau: float = DISCREPANCY_TAU, mask: np.ndarray | None = None) -> float:
+    r"""Natural-prior Wiener NSR whose residual power equals ``tau · σ²`` per pixel.
+
+    The residual of the Wiener estimate with kernel spectrum H and regulariser
+    :math:`R = \text{nsr}\cdot c\,|f|^2` is :math:`(1 - H G) Y = R/(|H|^2 + R)\, Y`;
+    its power is increasing in the NSR, so a bisection on log NSR finds the one that
+    matches :math:`\tau N \sigma^2` (Parseval). ``mask`` restricts the image's mean
+    removal and the pixel count to a region (the mirror disk); outside, the image is
+    set to its mean there.
+
+    Returns the NSR clamped to [DEFAULT_NSR_FLOOR, MAX_NSR]; the floor when even the
+    smallest NSR leaves more residual than the noise (under-resolved noise estimate).
+    """
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim == 3:
+        img = img.mean(axis=2)
+    vals = img[mask] if mask is not None else img.ravel()
+    n = float(vals.size)
+    if n == 0 or sigma <= 0:
+        return float(DEFAULT_NSR_FLOOR)
+    x = img - float(vals.mean())
+    if mask is not None:
+        x = np.where(mask, x, 0.0)
+    H_, W_ = x.shape
+    M, N = fast_shape((H_, W_), (0, 0))
+    Y2 = np.abs(sfft.rfft2(x, s=(M, N), workers=-1)) ** 2
+    # rfft2 half plane: interior columns stand for two coefficients
+    wcol = np.full(N // 2 + 1, 2.0)
+    wcol[0] = 1.0
+    if N % 2 == 0:
+        wcol[-1] = 1.0
+    Y2 *= wcol[None, :] / (M * N)
+    Hk = np.abs(kernel_spectrum(psf, (M, N))) ** 2
+    fy = sfft.fftfreq(M)[:, None]
+    fx = sfft.rfftfreq(N)[None, :]
+    c = natural_prior_scale(float(np.sqrt(n))) * (fy * fy + fx * fx)
+    target = tau * n * sigma * sigma
+
+    def residual(log_nsr):
+        R = np.exp(log_nsr) * c
+        return float(np.sum(Y2 * (R / (Hk + R)) ** 2))
+
+    lo, hi = np.log(DEFAULT_NSR_FLOOR), np.log(MAX_NSR)
+    if residual(lo) >= target:
+        return float(DEFAULT_NSR_FLOOR)
+    if residual(hi) <= target:
+        return float(MAX_NSR)
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if residual(mid) < target:
+            lo = mid
+        else:
+            hi = mid
+    nsr = float(np.exp(0.5 * (lo + hi)))
+    logger.info("discrepancy NSR %.3g (sigma %.3g)", nsr, sigma)
+    return nsr
+
+
+def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,
+                     depth_mm: float | str | None = None,
+                     center: tuple[float, float] | None = None) -> np.ndarray:
+    """The one IPSF that stands for the bank in :func:`discrepancy_nsr`.
+
+    Radial bank: the kernel at r_max / √2, the radius that halves the restored disk's
+    area (r_max the bank's largest radius plus a kernel, capped at the image's farthest
+    corner, as in :func:`~mitsweep.deconv.polar.polar_deconvolve`); grid bank: the
+    middle grid point's kernel.
+    """
+    from .polar import polar_grid
+
+    kernels = select_depth(bank, depth_mm)
+    if bank.kind == "radial":
+        rad = radii_px(bank)
+        r_max = min(float(rad.max()) + kernels.shape[-1],
+                    polar_grid(image_shape, center=center).r_max)
+        return interpolate_radial(kernels, rad, r_max / np.sqrt(2))
+    if bank.kind == "grid":
+        return kernels[len(kernels) // 2]
+    raise BankError(f"unknown bank kind {bank.kind!r}")
+
+
+def calibrated_nsr(image: np.ndarray, bank: IPSFBank, *, noise=None,
+                   depth_mm: float | str | None = None,
+                   center: tuple[float, float] | None = None) -> float:
+    """Wiener NSR (natural prior) for ``image`` by the discrepancy principle: the median
+    over channels of :func:`discrepancy_nsr` with σ from :func:`noise_sigma` and the
+    bank's :func:`surrogate_kernel`."""
+    img = np.asarray(image)
+    chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
+    k = surrogate_kernel(bank, img.shape, depth_mm=depth_mm, center=center)
+    return float(np.median([discrepancy_nsr(c, k, noise_sigma(c, noise)) for c in chans]))
+
+
+def prior_weight(gradient_moment: float, sigma: float, alpha: float) -> float:
+    r"""λ of the prior :math:`\lambda \sum_p |\nabla x_p|^\alpha` (data term
+    :math:`\tfrac12\lVert Ax - y\rVert^2`).
+
+    A generalised-Gaussian gradient law :math:`p(g) \propto \exp(-|g|^\alpha / (\alpha m))`
+    has :math:`E|g|^\alpha = m`, so its MAP weight is :math:`\sigma^2 / (\alpha m)`;
+    ``gradient_moment`` is m measured on a first estimate, and the MAP weight is scaled
+    by :data:`PRIOR_WEIGHT_SCALE` (MAP weights are not the PSNR-optimal ones).
+    """
+    key = min(PRIOR_WEIGHT_SCALE, key=lambda a: abs(a - alpha))
+    if abs(key - alpha) > 1e-6:
+        raise ValueError(f"no calibrated weight for prior exponent {alpha}; "
+                         f"calibrated: {sorted(PRIOR_WEIGHT_SCALE)}")
+    m = max(float(gradient_moment), 1e-12)
+    return float(PRIOR_WEIGHT_SCALE[key] * sigma * sigma / (alpha * m))
