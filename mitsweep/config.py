@@ -23,6 +23,7 @@ Mirror kinds (all normalised to a conic of vertex radius ``radius`` and conic co
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import numbers
 from dataclasses import dataclass, field, fields
@@ -47,6 +48,7 @@ __all__ = [
     "setup_from_dict",
     "toml_nesting",
     "setup_to_dict",
+    "setup_to_toml",
     "DEFAULT_SETUP",
 ]
 
@@ -202,10 +204,18 @@ class Lens:
 @dataclass(frozen=True, kw_only=True)
 class Sensor:
     """Image sensor: ``resolution = [width, height]`` in pixels (each at most
-    :data:`MAX_RESOLUTION`), ``pixel_pitch`` in mm."""
+    :data:`MAX_RESOLUTION`), ``pixel_pitch`` in mm.
+
+    ``center_offset_px = [drow, dcol]`` (optional, pixels) is where the mirror's axis
+    meets the image relative to the image centre, as ``mitsweep calibrate`` measures it
+    on a photograph: the axis is at pixel ``(H/2 - 1/2 + drow, W/2 - 1/2 + dcol)`` (see
+    :mod:`mitsweep.optics.pixels`). Absent (None) means the image centre; each part must
+    lie within the image's height (rows) and width (columns) of it.
+    """
 
     resolution: tuple[int, int] = (512, 512)
     pixel_pitch: float = 0.018
+    center_offset_px: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         res = self.resolution
@@ -215,6 +225,18 @@ class Sensor:
                 for name, v in zip(("width", "height"), res))
         _assign(self, resolution=(w, h),
                 pixel_pitch=_positive(self.pixel_pitch, "sensor.pixel_pitch"))
+        off = self.center_offset_px
+        if off is not None:
+            _require(isinstance(off, (tuple, list)) and len(off) == 2, "sensor.center_offset_px",
+                     f"must be [drow, dcol] in pixels, got {off!r}")
+            drow, dcol = (_finite(v, f"sensor.center_offset_px {name}")
+                          for name, v in zip(("drow", "dcol"), off))
+            for name, value, limit in (("drow", drow, h), ("dcol", dcol, w)):
+                _require(abs(value) <= limit, f"sensor.center_offset_px {name}",
+                         f"must be in [-{limit}, {limit}] px (within the image's "
+                         f"{'height' if name == 'drow' else 'width'} of its centre), "
+                         f"got {value:g}")
+            _assign(self, center_offset_px=(drow, dcol))
 
     @property
     def width(self) -> int:
@@ -587,6 +609,38 @@ def setup_to_dict(setup: Setup) -> dict[str, Any]:
         out[section] = {k: (list(v) if isinstance(v, tuple) else v)
                         for k, v in value.items() if v is not None}
     return out
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        x = float(value)
+        if math.isinf(x):
+            return "inf" if x > 0 else "-inf"
+        text = repr(x)
+        return text if any(c in text for c in ".en") else text + ".0"
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False)  # a TOML basic string
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} {value!r} to TOML")
+
+
+def setup_to_toml(setup: Setup, *, header: str = "") -> str:
+    """The setup as TOML text that :func:`load_setup` reads back to an equal setup.
+
+    ``header`` (optional) is written first as ``#`` comment lines, e.g. provenance.
+    """
+    lines = [f"# {line}".rstrip() for line in header.splitlines()]
+    data = setup_to_dict(setup)
+    lines.append(f"name = {_toml_value(data.pop('name'))}")
+    for section, table in data.items():
+        lines += ["", f"[{section}]"]
+        lines += [f"{key} = {_toml_value(value)}" for key, value in table.items()]
+    return "\n".join(lines) + "\n"
 
 
 #: The embedded default: the paper's spherical mirror (Sec. 3.1 and 5.2).

@@ -66,3 +66,75 @@ def write_dng(path, rgb: np.ndarray, *, black: int = 512, white: int = 15000,
     tifffile.imwrite(path, raw, photometric=32803, extratags=tags, subfiletype=0,
                      metadata=None)
     return Path(path)
+
+
+def synthetic_mirror_photo(setup, shape, center_offset_px, *, supersample: int = 3,
+                           sweep_samples: int = 3, blur_px: float = 0.8, holder: bool = True,
+                           arm: bool = True, vignetting: bool = True, seed: int = 0,
+                           mirror: bool = True) -> np.ndarray:
+    """A linear RGB "photo" (H, W, 3) of the setup's mirror, its axis at
+    ``center_offset_px = (drow, dcol)`` from the image centre.
+
+    Built by ray casting, independently of :mod:`mitsweep.calibration`: each of
+    ``supersample²`` sub-pixel chief rays per pixel, at ``sweep_samples`` sensor
+    distances evenly over the sweep (the magnification breathes as in a sweep), is
+    intersected with the mirror (:func:`mitsweep.optics.chief_ray.intersect_mirror`);
+    hits show a texture of the world-bound reflected direction, misses a textured
+    background, a dark holder ring just outside the rim and an arm from it to the frame
+    edge; then a Gaussian blur of ``blur_px`` (defocus) and cos⁴ vignetting.
+    """
+    from scipy.ndimage import gaussian_filter
+
+    from mitsweep.optics.chief_ray import mirror_point_from_image
+    from mitsweep.optics.pixels import pixel_to_sensor
+    from mitsweep.optics.placement import placement_of
+    from mitsweep.optics.reference import reference_geometry
+
+    H, W = shape
+    pitch = setup.sensor.pixel_pitch
+    geo = reference_geometry(setup)
+    i_lo, i_hi = sorted((geo.sweep.sensor_start, geo.sweep.sensor_end))
+    distances = np.linspace(i_lo, i_hi, sweep_samples) if sweep_samples > 1 else \
+        np.array([geo.sensor_distance])
+    placement = placement_of(setup.mirror)
+    rng = np.random.default_rng(seed)
+    k = supersample
+    sub = (np.arange(k) + 0.5) / k - 0.5
+    rows = (np.arange(H)[:, None] + sub[None, :]).ravel()
+    cols = (np.arange(W)[:, None] + sub[None, :]).ravel()
+    rr, cc = np.meshgrid(rows, cols, indexing="ij")
+    u, v = pixel_to_sensor(rr, cc, (H, W), pitch, center_offset_px=center_offset_px)
+    freq = rng.uniform(2.0, 9.0, size=(3, 2))
+    phase = rng.uniform(0, 2 * np.pi, size=3)
+    img = np.zeros(rr.shape + (3,))
+    for i in distances:
+        tan_u, tan_v = u / i, v / i  # direction of the chief ray (pinhole) at this distance
+        bg = 0.25 + 0.15 * np.sin(40 * tan_u + 1.0) * np.cos(33 * tan_v) \
+            + 0.1 * np.sin(150 * (tan_u + 0.3 * tan_v))
+        layer = np.repeat(bg[..., None], 3, axis=-1) * np.array([0.9, 1.0, 1.1])
+        r_ang = np.hypot(tan_u, tan_v)
+        if mirror:
+            ray = mirror_point_from_image(placement, u, v, i)
+            hit = np.isfinite(ray.surface.rho) & (ray.cos_incidence > 0)
+            w = ray.world_dir
+            tex = [0.45 + 0.3 * np.sin(freq[c, 0] * np.arctan2(w[..., 1], w[..., 0])
+                                       + freq[c, 1] * w[..., 2] + phase[c]) for c in range(3)]
+            tex = np.nan_to_num(np.stack(tex, axis=-1))
+            # the holder: a dark ring from the rim's angular radius to 12% beyond
+            rim_ang = np.nanmax(np.where(hit, r_ang, np.nan)) if hit.any() else 0.0
+            if holder:
+                ring = (r_ang > 0.9 * rim_ang) & (r_ang < 1.12 * rim_ang) & ~hit
+                layer[ring] = 0.04
+            if arm:
+                bar = (np.abs(tan_v) < 0.12 * rim_ang) & (tan_u > rim_ang) & ~hit
+                layer[bar] = 0.06
+            layer[hit] = tex[hit]
+        img += layer
+    img /= len(distances)
+    img = img.reshape(H, k, W, k, 3).mean(axis=(1, 3))
+    img = gaussian_filter(img, (blur_px, blur_px, 0)) if blur_px > 0 else img
+    if vignetting:
+        r0, c0 = (H - 1) / 2, (W - 1) / 2
+        rad = np.hypot(*np.meshgrid(np.arange(H) - r0, np.arange(W) - c0, indexing="ij"))
+        img *= (np.cos(np.arctan(rad / (1.2 * max(H, W)))) ** 4)[..., None]
+    return img

@@ -11,13 +11,21 @@ sensor at the image centre, pixel ``(H/2 − 1/2, W/2 − 1/2)``:
 
 for pitch ``p`` (mm). Arrays broadcast; ``shape`` is an image's ``(H, W)`` (note that a
 setup's ``sensor.resolution`` is ``(W, H)``: use :func:`image_shape`).
+
+A real camera's mirror axis rarely meets the sensor exactly at its centre. Every
+function here takes an optional ``center_offset_px = (drow, dcol)``, the axis's offset
+from the image centre in pixels (a setup's ``sensor.center_offset_px``, measured by
+``mitsweep calibrate``; :func:`center_offset_of` reads it): the axis is then at
+``(H/2 − 1/2 + drow, W/2 − 1/2 + dcol)`` and ``(u, v)`` stay millimetres from it.
+``None`` (the default) is the image centre.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["image_shape", "optical_center_px", "pixel_to_sensor", "sensor_to_pixel"]
+__all__ = ["image_shape", "center_offset_of", "optical_center_px", "pixel_to_sensor",
+           "sensor_to_pixel"]
 
 
 def image_shape(setup) -> tuple[int, int]:
@@ -26,22 +34,29 @@ def image_shape(setup) -> tuple[int, int]:
     return int(H), int(W)
 
 
-def optical_center_px(shape) -> tuple[float, float]:
-    """``(row, col)`` of the optical axis on an image of ``shape = (H, W[, …])``."""
+def center_offset_of(setup) -> tuple[float, float] | None:
+    """A setup's ``sensor.center_offset_px`` (``(drow, dcol)`` px), or None: the centre."""
+    return getattr(setup.sensor, "center_offset_px", None)
+
+
+def optical_center_px(shape, center_offset_px=None) -> tuple[float, float]:
+    """``(row, col)`` of the optical axis on an image of ``shape = (H, W[, …])``,
+    moved by ``center_offset_px = (drow, dcol)`` pixels when given."""
     H, W = shape[0], shape[1]
-    return H / 2.0 - 0.5, W / 2.0 - 0.5
+    drow, dcol = (0.0, 0.0) if center_offset_px is None else center_offset_px
+    return H / 2.0 - 0.5 + float(drow), W / 2.0 - 0.5 + float(dcol)
 
 
-def sensor_to_pixel(u, v, shape, pitch: float):
+def sensor_to_pixel(u, v, shape, pitch: float, *, center_offset_px=None):
     """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pitch ``pitch`` mm."""
-    r0, c0 = optical_center_px(shape)
+    r0, c0 = optical_center_px(shape, center_offset_px)
     u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
     return _pair(r0 - v / pitch, c0 + u / pitch)
 
 
-def pixel_to_sensor(row, col, shape, pitch: float):
+def pixel_to_sensor(row, col, shape, pitch: float, *, center_offset_px=None):
     """Sensor point ``(u, v)`` mm of pixel ``(row, col)`` (centres at integers)."""
-    r0, c0 = optical_center_px(shape)
+    r0, c0 = optical_center_px(shape, center_offset_px)
     row, col = np.asarray(row, dtype=float), np.asarray(col, dtype=float)
     return _pair((col - c0) * pitch, (r0 - row) * pitch)
 

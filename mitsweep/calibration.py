@@ -1,0 +1,548 @@
+"""Find the mirror in a photograph: its predicted outline, and a sub-pixel rim fit.
+
+The setup predicts where the mirror's outline lands on the sensor, in millimetres from
+the optical axis (:func:`predicted_outline`): the chief-ray image
+(:mod:`mitsweep.optics.chief_ray`) of the mirror's rim, or of its limb where the camera
+sees past the surface before the rim (a hemisphere), at the reference sensor distance
+(mid-travel of the sweep, :mod:`mitsweep.optics.reference`). An untilted mirror's
+outline is a circle about the axis; a tilted mirror's is not, and its axis point (the
+image of the vertex) is not the outline's centre.
+
+:func:`fit_rim` finds that outline in a photograph. The unknowns are where the axis is
+(``center_px``, row and column) and a scale ``k`` of the outline about it, which absorbs
+a wrong pixel pitch or lens–mirror distance:
+
+1. *Coarse search* on a copy reduced so that the outline's radius is 32-64 px:
+   the gradient's double-angle orientation field (sign-free: a rim may be brighter or
+   darker than what surrounds it) correlated by FFT with the outline's normals, for
+   scales ``k`` in ``[1/3, 3]``. At the best position, of the scale peaks within half
+   the best score, the one nearest the predicted size is kept: a holder around the
+   mirror is a concentric outline too, and the rim is the one the setup predicts.
+2. *Refinement* at full resolution: along the outline's normal at each of N points,
+   the intensity profile's derivative (one sign, the dominant one) gives a sub-pixel
+   edge position as its centroid, which is the mean chief-ray position of a defocused,
+   breathing edge (a symmetric blur about each chief-ray image), so the fit lands on
+   the mid-travel outline. Normal offsets are fitted by iteratively reweighted least
+   squares (Tukey's biweight, scale from the median absolute deviation), so that
+   edges of a mount, an arm crossing the rim or a reflection do not pull the fit.
+   Vignetting and smooth illumination changes do not move a gradient's centroid.
+
+A photograph without the mirror gives few consistent edge points or a large residual,
+and :class:`CalibrationError` says so.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .optics.chief_ray import chief_ray, image_point
+from .optics.placement import placement_of
+from .optics.pixels import optical_center_px
+from .optics.reference import reference_geometry
+
+__all__ = ["CalibrationError", "RimOutline", "RimFit", "Calibration", "predicted_outline",
+           "fit_rim", "calibrate_photo", "luminance", "PLAUSIBLE_SCALE", "WARN_SCALE"]
+
+logger = logging.getLogger(__name__)
+
+#: Largest relative difference between the measured and the predicted outline size
+#: that a calibration accepts (a pitch or lens–mirror distance off by 15%).
+PLAUSIBLE_SCALE = 0.15
+#: Relative difference above which the calibration warns that the setup is off.
+WARN_SCALE = 0.01
+#: Smallest share of outline points that must show a consistent edge.
+MIN_INLIER_FRACTION = 0.4
+#: Largest RMS normal residual (px) of the inliers of an accepted fit.
+MAX_RESIDUAL_RMS_PX = 1.0
+#: Radius (px) of the outline in the reduced copy used for the coarse search (at least).
+COARSE_RADIUS_PX = 32.0
+#: Scales searched coarsely, geometric from 1/3 to 3 (steps of 4%: ~1.3 px at 32 px):
+#: wider than plausible, so that a setup far off is reported as such, not as no mirror.
+COARSE_SCALES = np.geomspace(1.0 / 3.0, 3.0, 57)
+
+
+class CalibrationError(ValueError):
+    """The mirror was not found in the photo, or disagrees with the setup."""
+
+
+@dataclass(frozen=True)
+class RimOutline:
+    """The mirror's predicted outline on the sensor.
+
+    Attributes
+    ----------
+    uv : (N, 2) ndarray
+        Outline points ``(u, v)``, mm from the optical axis (upright image: u right,
+        v up), in order around the outline.
+    normal_uv : (N, 2) ndarray
+        Outward unit normals in the same frame.
+    sensor_distance : float
+        Sensor distance (mm) the outline is predicted for.
+    on_rim : (N,) bool ndarray
+        True where the point is the rim's image, False where it is the limb's.
+    """
+
+    uv: np.ndarray
+    normal_uv: np.ndarray
+    sensor_distance: float
+    on_rim: np.ndarray
+
+    def offsets_px(self, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+        """Points and outward normals as ``(drow, dcol)`` pixels from the axis, (N, 2)."""
+        pts = np.stack([-self.uv[:, 1], self.uv[:, 0]], axis=-1) / pitch
+        nrm = np.stack([-self.normal_uv[:, 1], self.normal_uv[:, 0]], axis=-1)
+        return pts, nrm
+
+    def equivalent_radius_px(self, pitch: float) -> float:
+        """Radius (px) of the circle of the outline's area (the radius, for a circle)."""
+        u, v = self.uv[:, 0], self.uv[:, 1]
+        area = 0.5 * abs(np.dot(u, np.roll(v, -1)) - np.dot(v, np.roll(u, -1)))
+        return math.sqrt(area / math.pi) / pitch
+
+
+def _resample_closed(points: np.ndarray, n: int) -> np.ndarray:
+    """``n`` points evenly spaced by arc length along a closed polyline (N, 2)."""
+    closed = np.vstack([points, points[:1]])
+    seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    t = np.linspace(0.0, s[-1], n, endpoint=False)
+    return np.stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])], axis=-1)
+
+
+def predicted_outline(setup, *, sensor_distance: float | None = None,
+                      n_points: int = 1440) -> RimOutline:
+    """The outline of the mirror's image predicted by the setup.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+    sensor_distance : float, optional
+        Lens–sensor distance, mm (default: the reference distance, mid-travel of the
+        sweep, the distance whose image the centroid of a sweep photo's rim blur is).
+    n_points : int
+        Points along the outline (evenly spaced by arc length).
+
+    Returns
+    -------
+    RimOutline
+
+    Notes
+    -----
+    Along each meridian φ of the mirror the last point the lens sees is the rim, or
+    the limb ``n·r̂ = 0`` where that comes first (found by bisection); the outline is
+    the chief-ray image of those points. That is exact for an untilted mirror (the
+    image radius grows with ρ up to the limb) and wherever the rim is visible all
+    round (the paper's mirrors, the tilted paraboloid included).
+    """
+    if sensor_distance is None:
+        sensor_distance = reference_geometry(setup).sensor_distance
+    placement = placement_of(setup.mirror)
+    rim = setup.mirror.rim_radius
+    phi = np.linspace(0.0, 2.0 * math.pi, 4 * n_points, endpoint=False)
+
+    def cos_inc(rho):
+        surf = placement.surface(rho * np.cos(phi), rho * np.sin(phi))
+        return chief_ray(placement, surf).cos_incidence
+
+    rho_edge = np.full(phi.shape, rim)
+    hidden = ~(cos_inc(rho_edge) > 0)
+    if np.any(hidden):  # the limb comes before the rim on these meridians: bisect
+        lo, hi = np.zeros(phi.shape), np.full(phi.shape, rim)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            vis = cos_inc(mid) > 0
+            lo, hi = np.where(vis, mid, lo), np.where(vis, hi, mid)
+        rho_edge = np.where(hidden, lo, rim)
+    surf = placement.surface(rho_edge * np.cos(phi), rho_edge * np.sin(phi))
+    u, v = image_point(chief_ray(placement, surf), sensor_distance)
+    dense = np.stack([u, v], axis=-1)
+    uv = _resample_closed(dense, n_points)
+    tangent = np.roll(uv, -1, axis=0) - np.roll(uv, 1, axis=0)
+    normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=-1)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    centroid = uv.mean(axis=0)
+    normal *= np.where(np.sum((uv - centroid) * normal, axis=-1) < 0, -1.0, 1.0)[:, None]
+    # Which resampled points are rim (not limb): nearest dense sample's flag.
+    nearest = np.argmin(np.linalg.norm(dense[None, ::4] - uv[:, None], axis=-1), axis=1)
+    return RimOutline(uv=uv, normal_uv=normal, sensor_distance=float(sensor_distance),
+                      on_rim=~hidden[::4][nearest])
+
+
+def luminance(image: np.ndarray) -> np.ndarray:
+    """Linear luminance (H, W) float64 of an (H, W) or (H, W, 3) linear image
+    (Rec. 709 weights; a grey image is returned as is)."""
+    a = np.asarray(image, dtype=np.float64)
+    if a.ndim == 2:
+        return a
+    return a[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class RimFit:
+    """Where the outline was found.
+
+    ``center_px`` is the optical axis's pixel ``(row, col)`` (the image of the mirror's
+    vertex; the circle's centre for an untilted mirror), ``scale`` the outline's size
+    relative to the prediction; ``points_used`` of ``points_total`` outline points were
+    inliers with normal residual RMS ``residual_rms_px``. ``edge_points_px`` (N, 2) are
+    the inliers' sub-pixel edge positions (row, col).
+    """
+
+    center_px: tuple[float, float]
+    scale: float
+    points_used: int
+    points_total: int
+    residual_rms_px: float
+    edge_points_px: np.ndarray = field(repr=False)
+    iterations: int = 0
+
+
+def _smooth(img: np.ndarray, sigma: float) -> np.ndarray:
+    from scipy.ndimage import gaussian_filter
+
+    return gaussian_filter(img, sigma, mode="nearest") if sigma > 0 else img
+
+
+def _reduce(img: np.ndarray, factor: int) -> np.ndarray:
+    if factor <= 1:
+        return img
+    H, W = (img.shape[0] // factor) * factor, (img.shape[1] // factor) * factor
+    return img[:H, :W].reshape(H // factor, factor, W // factor, factor).mean(axis=(1, 3))
+
+
+def _coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray):
+    """Best ``(center (row, col), scale)`` of the outline in full-resolution pixels."""
+    from scipy.fft import irfft2, next_fast_len, rfft2
+
+    radius = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
+    factor = max(1, int(radius / COARSE_RADIUS_PX))
+    small = _smooth(_reduce(lum, factor), 1.0)
+    gy, gx = np.gradient(small)
+    mag = np.hypot(gx, gy)
+    # Sign-free orientation field, magnitude compressed so that a few very bright edges
+    # (a lamp in the reflection) do not outweigh the rim.
+    cap = np.percentile(mag, 99.5) + 1e-30
+    w = np.minimum(mag, cap) / (mag * mag + 1e-300) / cap  # |(j1, j2)| = min(|g|, cap)/cap
+    j1, j2 = (gx * gx - gy * gy) * w, (2.0 * gx * gy) * w
+    H, W = small.shape
+    # Template normals as image-axis angles: gradient (gy, gx) along (drow, dcol).
+    c2 = nrm[:, 1] ** 2 - nrm[:, 0] ** 2
+    s2 = 2.0 * nrm[:, 0] * nrm[:, 1]
+    extent = int(np.ceil(np.abs(pts).max() * COARSE_SCALES[-1] / factor)) + 2
+    shape = (next_fast_len(H + 2 * extent), next_fast_len(W + 2 * extent))
+    F1, F2 = rfft2(j1, shape), rfft2(j2, shape)
+    best = None
+    per_scale = []
+    for k in COARSE_SCALES:
+        p = pts * k / factor
+        flat = (np.round(p[:, 0]).astype(int) % shape[0]) * shape[1] \
+            + np.round(p[:, 1]).astype(int) % shape[1]
+        t1 = np.bincount(flat, weights=c2, minlength=shape[0] * shape[1]).reshape(shape)
+        t2 = np.bincount(flat, weights=s2, minlength=shape[0] * shape[1]).reshape(shape)
+        score = irfft2(F1 * np.conj(rfft2(t1)) + F2 * np.conj(rfft2(t2)), shape)[:H, :W]
+        score /= len(p)  # mean alignment along the outline, comparable across scales
+        i = int(np.argmax(score))
+        per_scale.append(score)
+        if best is None or score.flat[i] > best[0]:
+            best = (float(score.flat[i]), i, k)
+    top, idx, _ = best
+    row, col = np.unravel_index(idx, (H, W))
+    # At that position: of the scale peaks within half the best, the nearest to k = 1.
+    local = np.array([s[max(0, row - 1):row + 2, max(0, col - 1):col + 2].max()
+                      for s in per_scale])
+    peaks = [j for j in range(len(local))
+             if local[j] >= 0.5 * top and (j == 0 or local[j] >= local[j - 1])
+             and (j == len(local) - 1 or local[j] >= local[j + 1])]
+    j = min(peaks, key=lambda q: abs(math.log(COARSE_SCALES[q]))) if peaks else \
+        int(np.argmax(local))
+    s = per_scale[j]
+    win = s[max(0, row - 2):row + 3, max(0, col - 2):col + 3]
+    dr, dc = np.unravel_index(int(np.argmax(win)), win.shape)
+    row, col = max(0, row - 2) + dr, max(0, col - 2) + dc
+    centre = ((row + 0.5) * factor - 0.5, (col + 0.5) * factor - 0.5)
+    return centre, float(COARSE_SCALES[j]), float(local[j])
+
+
+def _edge_offsets(lum_s: np.ndarray, centre, scale, pts, nrm, half: float):
+    """Sub-pixel edge offset along each normal (NaN where no edge), and its contrast."""
+    from scipy.ndimage import map_coordinates
+
+    step = 0.25
+    t = np.arange(-half, half + step / 2, step)
+    base = np.asarray(centre)[None, :] + scale * pts
+    coords = base[:, None, :] + t[None, :, None] * nrm[:, None, :]
+    H, W = lum_s.shape
+    inside = np.all((coords[..., 0] >= 0) & (coords[..., 0] <= H - 1)
+                    & (coords[..., 1] >= 0) & (coords[..., 1] <= W - 1), axis=1)
+    prof = map_coordinates(lum_s, [coords[..., 0].ravel(), coords[..., 1].ravel()],
+                           order=1, mode="nearest").reshape(coords.shape[:2])
+    d = np.gradient(prof, step, axis=1)
+    sign = np.sign(np.sum(d, axis=1, keepdims=True))
+    sign[sign == 0] = 1.0
+    ds = d * sign
+    peak = ds.max(axis=1, keepdims=True)
+    # Centroid of the dominant-sign derivative above a fifth of its peak: the mean edge
+    # position of a symmetric blur, with the texture's small wiggles left out.
+    wgt = np.where(ds > 0.2 * peak, ds, 0.0)
+    total = wgt.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        off = (wgt * t[None, :]).sum(axis=1) / total
+    contrast = np.abs(prof[:, -1] - prof[:, 0])
+    step_size = total * step  # the integrated derivative: the edge's contrast
+    off = np.where(inside & (total > 0), off, np.nan)
+    return off, step_size, contrast
+
+
+def _noise_sigma(lum: np.ndarray) -> float:
+    """Robust per-pixel noise estimate (MAD of the diagonal second difference)."""
+    d = lum[1:, 1:] - lum[:-1, 1:] - lum[1:, :-1] + lum[:-1, :-1]
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / 2.0)
+
+
+def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
+            max_iterations: int = 30, edge_half_width_px: float | None = None) -> RimFit:
+    """Find the predicted outline in a photograph (see the module docstring).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        Linear photograph.
+    outline : RimOutline
+        The setup's prediction (:func:`predicted_outline`).
+    pitch : float
+        Pixel pitch of the photograph, mm.
+    max_iterations : int
+        Refinement passes at most (each resamples the edges at the current fit).
+    edge_half_width_px : float, optional
+        Half-width of the edge search along each normal (default: from the outline size:
+        1.5% of its radius, at least 4 px).
+
+    Returns
+    -------
+    RimFit
+
+    Raises
+    ------
+    CalibrationError
+        When too few outline points show a consistent edge or the residual is large:
+        the photo does not show the mirror the setup describes.
+    """
+    lum = luminance(image)
+    if lum.ndim != 2 or min(lum.shape) < 8:
+        raise CalibrationError(f"the photo must be an image of at least 8x8 pixels, got "
+                               f"shape {np.shape(image)}")
+    pts, nrm = outline.offsets_px(pitch)
+    radius = outline.equivalent_radius_px(pitch)
+    if radius < 8:
+        raise CalibrationError(f"the setup predicts a mirror image of radius {radius:.3g} px "
+                               f"at pitch {pitch:g} mm: too small to calibrate on")
+    centre, scale, coarse_score = _coarse_search(lum, pts, nrm)
+    logger.info("coarse rim search: centre (%.1f, %.1f) px, scale %.3f (score %.3g)",
+                *centre, scale, coarse_score)
+    half = edge_half_width_px or max(4.0, 0.015 * radius * scale)
+    lum_s = _smooth(lum, 0.7)
+    sigma = _noise_sigma(lum)
+    n = len(pts)
+    off = np.full(n, np.nan)
+    used = np.zeros(n, bool)
+    rms = math.inf
+    it = 0
+    # The first window covers the coarse search's steps: a reduced pixel and a scale step.
+    factor = max(1, int(radius / COARSE_RADIUS_PX))
+    search = max(half, 1.5 * factor + (COARSE_SCALES[1] / COARSE_SCALES[0] - 1) * radius * scale)
+    for it in range(1, max_iterations + 1):
+        off, strength, _ = _edge_offsets(lum_s, centre, scale, pts, nrm, search)
+        # An edge must rise clearly above the noise (a step of 8 σ) to count.
+        good = np.isfinite(off) & (strength > 8.0 * sigma + 1e-12)
+        if good.sum() < max(8, MIN_INLIER_FRACTION * n):
+            raise CalibrationError(
+                f"no visible mirror: only {int(good.sum())} of {n} points of the predicted "
+                f"outline (radius {radius:.1f} px at pitch {pitch:g} mm) show an edge; "
+                f"check that the photo shows the mirror of this setup")
+        # Normal displacement of point j: n_j · dc + dk (p_j · n_j).
+        A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])[good]
+        b = off[good]
+        wts = np.ones(len(b))
+        for _ in range(10):
+            sw = np.sqrt(wts)
+            x, *_ = np.linalg.lstsq(A * sw[:, None], b * sw, rcond=None)
+            res = b - A @ x
+            s = 1.4826 * np.median(np.abs(res - np.median(res))) + 1e-3
+            u = res / (4.685 * s)
+            wts = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        centre = (centre[0] + x[0], centre[1] + x[1])
+        scale += x[2]
+        inl = wts > 0
+        used = np.zeros(n, bool)
+        used[np.flatnonzero(good)[inl]] = True
+        rms = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else math.inf
+        search = max(half, min(search, 4.0 * np.abs(x[:2]).max() + 2.0))
+        if np.abs(x[:2]).max() < 1e-3 and abs(x[2]) * radius < 1e-3:
+            break
+    n_used = int(used.sum())
+    if n_used < MIN_INLIER_FRACTION * n or rms > MAX_RESIDUAL_RMS_PX:
+        raise CalibrationError(
+            f"no visible mirror: the best outline found fits {n_used} of {n} points with "
+            f"rms {rms:.2f} px (need {MIN_INLIER_FRACTION:.0%} within "
+            f"{MAX_RESIDUAL_RMS_PX:g} px); check that the photo shows the mirror of this setup")
+    edges = np.asarray(centre)[None, :] + scale * pts + off[:, None] * nrm
+    return RimFit(center_px=(float(centre[0]), float(centre[1])), scale=float(scale),
+                  points_used=n_used, points_total=n, residual_rms_px=rms,
+                  edge_points_px=edges[used], iterations=it)
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """A photo's calibration against a setup (see :func:`calibrate_photo`)."""
+
+    fit: RimFit
+    image_shape: tuple[int, int]
+    pixel_pitch: float
+    predicted_radius_px: float
+    rim_radius_px: float
+    center_offset_px: tuple[float, float]
+    implied_pixel_pitch: float
+    implied_vertex_distance: float | None
+    sensor_distance: float
+    warnings: list = field(default_factory=list)
+
+    @property
+    def center_px(self) -> tuple[float, float]:
+        return self.fit.center_px
+
+    @property
+    def radius_ratio(self) -> float:
+        return self.rim_radius_px / self.predicted_radius_px
+
+    def calibrated_setup(self, setup):
+        """The setup for this camera and photo: resolution, pitch, centre offset."""
+        from .config import Sensor
+
+        H, W = self.image_shape
+        return replace(setup, sensor=Sensor(resolution=(W, H), pixel_pitch=self.pixel_pitch,
+                                            center_offset_px=self.center_offset_px))
+
+    def as_dict(self) -> dict:
+        return {"center_px": list(self.center_px),
+                "center_offset_px": list(self.center_offset_px),
+                "image_shape": list(self.image_shape),
+                "pixel_pitch_mm": self.pixel_pitch,
+                "rim_radius_px": self.rim_radius_px,
+                "predicted_rim_radius_px": self.predicted_radius_px,
+                "radius_ratio": self.radius_ratio,
+                "implied_pixel_pitch_mm": self.implied_pixel_pitch,
+                "implied_vertex_distance_mm": self.implied_vertex_distance,
+                "reference_sensor_distance_mm": self.sensor_distance,
+                "points_used": self.fit.points_used, "points_total": self.fit.points_total,
+                "residual_rms_px": self.fit.residual_rms_px,
+                "warnings": list(self.warnings)}
+
+
+def _implied_vertex_distance(setup, pitch: float, radius_px: float) -> float | None:
+    """The lens–vertex distance (mm) at which the setup predicts ``radius_px``, the
+    rest of the setup (pitch, lens, sweep settings) kept; None when no distance within
+    20% does. The reference sensor distance follows the mirror: it is computed at the
+    setup's distance and at the first guess, and interpolated in between (the sweep
+    moves smoothly with the mirror)."""
+    from scipy.optimize import brentq
+
+    from .config import Mirror, SetupError
+
+    m = setup.mirror
+
+    def moved(vd: float):
+        return replace(setup, mirror=Mirror(kind=m.kind, radius=m.radius, conic=m.conic,
+                                            rim_radius=m.rim_radius, vertex_distance=vd,
+                                            tilt_deg=m.tilt_deg, aspheric=m.aspheric))
+
+    try:
+        vd0, i0 = m.vertex_distance, reference_geometry(setup).sensor_distance
+        r0 = predicted_outline(setup, sensor_distance=i0, n_points=360)
+        guess = vd0 * r0.equivalent_radius_px(pitch) / radius_px  # radius goes as ~1/distance
+        i1 = reference_geometry(moved(guess)).sensor_distance
+    except (SetupError, ValueError) as exc:
+        logger.info("no implied lens-mirror distance: %s", exc)
+        return None
+    slope = (i1 - i0) / (guess - vd0) if guess != vd0 else 0.0
+
+    def excess(vd: float) -> float:
+        try:
+            i = i0 + slope * (vd - vd0)
+            out = predicted_outline(moved(vd), sensor_distance=i, n_points=360)
+            return out.equivalent_radius_px(pitch) - radius_px
+        except (SetupError, ValueError):
+            return math.nan
+
+    for width in (0.01, 0.05, 0.2):
+        lo = max(guess * (1 - width), setup.lens.focal_length * 1.05)
+        hi = guess * (1 + width)
+        flo, fhi = excess(lo), excess(hi)
+        if math.isfinite(flo) and math.isfinite(fhi) and flo * fhi <= 0:
+            return float(brentq(excess, lo, hi, xtol=1e-3))
+    return None
+
+
+def calibrate_photo(image: np.ndarray, setup, *, pixel_pitch: float | None = None,
+                    plausible_scale: float = PLAUSIBLE_SCALE) -> Calibration:
+    """Calibrate a photograph of the setup's mirror: centre, rim size, what it implies.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        Linear photograph (e.g. :attr:`mitsweep.io.camera.CameraImage.data`).
+    setup : mitsweep.config.Setup
+    pixel_pitch : float, optional
+        The photo's pitch, mm (default: the setup's).
+    plausible_scale : float
+        Largest accepted relative difference between the measured and predicted
+        outline sizes.
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    CalibrationError
+        No mirror found, or one whose size disagrees with the setup by more than
+        ``plausible_scale`` (the message says the pitch or distance it would imply).
+    """
+    pitch = float(pixel_pitch or setup.sensor.pixel_pitch)
+    outline = predicted_outline(setup)
+    predicted = outline.equivalent_radius_px(pitch)
+    fit = fit_rim(image, outline, pitch)
+    measured = predicted * fit.scale
+    shape = (int(np.shape(image)[0]), int(np.shape(image)[1]))
+    r0, c0 = optical_center_px(shape)
+    offset = (fit.center_px[0] - r0, fit.center_px[1] - c0)
+    implied_pitch = pitch / fit.scale
+    if abs(fit.scale - 1.0) > plausible_scale:
+        raise CalibrationError(
+            f"implausible calibration: the mirror's rim measures {measured:.1f} px, the setup "
+            f"predicts {predicted:.1f} px ({100 * (fit.scale - 1):+.1f}%, more than "
+            f"{100 * plausible_scale:.0f}%); it implies a pixel pitch of "
+            f"{implied_pitch:.5g} mm (setup {pitch:g} mm): check sensor.pixel_pitch and "
+            f"mirror.vertex_distance")
+    implied_vd = _implied_vertex_distance(setup, pitch, measured)
+    warnings = []
+    if abs(fit.scale - 1.0) > WARN_SCALE:
+        vd = f"{implied_vd:.2f}" if implied_vd is not None else "?"
+        warnings.append(
+            f"rim radius {measured:.2f} px differs from the setup's {predicted:.2f} px by "
+            f"{100 * (fit.scale - 1):+.2f}%: the pixel pitch would be {implied_pitch:.5g} mm "
+            f"(setup {pitch:g}) or the lens-mirror distance {vd} mm "
+            f"(setup {setup.mirror.vertex_distance:g})")
+    H, W = shape
+    if not (0 <= fit.center_px[0] <= H - 1 and 0 <= fit.center_px[1] <= W - 1):
+        warnings.append("the mirror's axis lies outside the photo")
+    for w in warnings:
+        logger.warning("%s", w)
+    return Calibration(fit=fit, image_shape=shape, pixel_pitch=pitch,
+                       predicted_radius_px=predicted, rim_radius_px=measured,
+                       center_offset_px=offset, implied_pixel_pitch=implied_pitch,
+                       implied_vertex_distance=implied_vd,
+                       sensor_distance=outline.sensor_distance, warnings=warnings)
