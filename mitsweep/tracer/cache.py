@@ -1,0 +1,141 @@
+"""IPSF banks traced on demand and kept on disk, keyed by the optics' fingerprint.
+
+A real photograph needs the bank of *its* geometry: the camera's resolution and pixel
+pitch and the motion the stage actually ran (a capture record's measured motion).
+:func:`cached_bank` traces that bank once (:func:`mitsweep.tracer.ipsf_bank`) and keeps
+it under ``cache_root()/banks`` (:func:`mitsweep.io.cache.cache_root`), so the next photo
+of the same camera and sweep deconvolves at once.
+
+The key is the optics' fingerprint (:func:`mitsweep.io.bank.optics_fingerprint` of the
+setup's mirror, lens, sensor and sweep sections and the motion) and the trace settings
+(kind, depths, rays, kernel size, points, seed, mitsweep's version). Each entry is a
+directory ``{kind}-{optics16}-{trace12}`` holding ``bank.npz``. Two processes asking for
+one bank do not both trace it: the entry's directory lock
+(:class:`mitsweep.io.lock.DirectoryLock`) is held while tracing, the second waits and
+then loads what the first wrote (atomically, :func:`mitsweep.io.bank.save_bank`). An
+entry that does not load, or whose optics do not match its key, is traced again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..config import setup_to_dict
+from ..io.bank import BankError, IPSFBank, load_bank, optics_fingerprint, optics_sections, \
+    save_bank
+from ..io.cache import cache_root
+from ..io.lock import DirectoryLock
+from ..optics.reference import reference_geometry
+from .bank import BANK_RAYS, ipsf_bank
+from .ipsf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES
+
+__all__ = ["CachedBank", "cached_bank", "bank_cache_key", "bank_cache_dir"]
+
+logger = logging.getLogger(__name__)
+
+#: Bumped when the cache's layout or the meaning of its key changes.
+CACHE_LAYOUT = 1
+
+
+@dataclass(frozen=True)
+class CachedBank:
+    """A bank from the cache: the bank, its file, and whether this call traced it."""
+
+    bank: IPSFBank
+    path: Path
+    traced: bool
+
+
+def bank_cache_dir(cache_dir: str | Path | None = None) -> Path:
+    """``cache_dir`` or ``cache_root()/banks``."""
+    return Path(cache_dir) if cache_dir is not None else cache_root() / "banks"
+
+
+def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed) -> dict:
+    out = {"kind": kind, "depths_mm": ["inf" if math.isinf(d) else float(d) for d in depths],
+           "rays": int(rays), "kernel_size": int(kernel_size), "seed": int(seed),
+           "method": "continuous", "time_samples": DEFAULT_TIME_SAMPLES,
+           "version": __version__, "layout": CACHE_LAYOUT}
+    if kind == "radial":
+        out["n_radii"] = int(n_radii)
+    else:
+        out["grid"] = [int(g) for g in grid]
+    return out
+
+
+def bank_cache_key(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
+                   rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
+                   n_radii: int = 19, grid=(9, 9), seed: int = 0) -> tuple[str, dict, dict]:
+    """``(entry name, optics, trace settings)`` of the bank :func:`cached_bank` returns."""
+    kind = kind or ("radial" if setup.mirror.is_symmetric else "grid")
+    if kind not in ("radial", "grid"):
+        raise ValueError(f"kind: must be 'radial' or 'grid', got {kind!r}")
+    geometry = reference_geometry(setup, motion=motion)
+    optics = optics_sections(setup_to_dict(setup), geometry.motion.as_dict())
+    depths = [float(d) for d in np.atleast_1d(np.asarray(depths, dtype=float))]
+    trace = _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed)
+    digest = hashlib.sha256(json.dumps(trace, sort_keys=True).encode()).hexdigest()
+    return f"{kind}-{optics_fingerprint(optics)[:16]}-{digest[:12]}", optics, trace
+
+
+def cached_bank(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
+                rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
+                n_radii: int = 19, grid=(9, 9), seed: int = 0,
+                cache_dir: str | Path | None = None, progress=None) -> CachedBank:
+    """The IPSF bank of ``setup`` and ``motion``, from the cache or traced into it.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The photo's geometry: its sensor section has the photo's resolution and pitch.
+    motion : MotionProfile, optional
+        The motion the stage ran (a capture record's measured, tabulated motion); default
+        the setup's (:func:`mitsweep.optics.reference.reference_geometry`). It sets the
+        bank's reference sensor distance (mid-travel).
+    kind : {"radial", "grid"}, optional
+        Default: radial for rotationally symmetric setups, grid for tilted ones.
+    depths, rays, kernel_size, n_radii, grid, seed, progress
+        As :func:`mitsweep.tracer.ipsf_bank`.
+    cache_dir : path, optional
+        Default :func:`bank_cache_dir`.
+
+    Returns
+    -------
+    CachedBank
+    """
+    name, optics, trace = bank_cache_key(setup, motion=motion, kind=kind, depths=depths,
+                                         rays=rays, kernel_size=kernel_size,
+                                         n_radii=n_radii, grid=grid, seed=seed)
+    entry = bank_cache_dir(cache_dir) / name
+    entry.mkdir(parents=True, exist_ok=True)
+    path = entry / "bank.npz"
+    fingerprint = optics_fingerprint(optics)
+    with DirectoryLock(entry, wait=math.inf, command=f"tracing the IPSF bank {name}"):
+        if path.is_file():
+            try:
+                bank = load_bank(path)
+                if bank.optics is not None and optics_fingerprint(bank.optics) == fingerprint:
+                    logger.info("IPSF bank from the cache: %s", path)
+                    return CachedBank(bank, path, traced=False)
+                logger.warning("%s: its optics do not match its cache key; tracing it again",
+                               path)
+            except BankError as exc:
+                logger.warning("%s: unreadable cached bank (%s); tracing it again", path, exc)
+        geometry = reference_geometry(setup, motion=motion)
+        logger.info("tracing the IPSF bank %s (%s, %d depths) into %s", name,
+                    trace["kind"], len(trace["depths_mm"]), entry)
+        kw = {"n_radii": n_radii} if trace["kind"] == "radial" else {"grid": tuple(grid)}
+        bank = ipsf_bank(setup, kind=trace["kind"], depths=depths, rays=rays,
+                         kernel_size=kernel_size, seed=seed, motion=geometry.motion,
+                         sweep=geometry.sweep, progress=progress, **kw)
+        bank.metadata["cache"] = {"entry": name, "trace": trace}
+        save_bank(path, bank)
+    return CachedBank(bank, path, traced=True)
