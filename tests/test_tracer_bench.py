@@ -12,10 +12,25 @@ def test_bench_tracer_quick_json(capsys):
     assert main(["bench", "tracer", "--quick", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["rays_per_s"] > 0 and res["rays_landed"] > 0.5 * res["rays"]
+    assert res["rays_per_s_exact"] > 0
+    # Error per second: every method judged on the same reference bank; the exact
+    # segment deposit reaches L1 <= 1e-3 in every kernel within the ladder (measured at
+    # 2^18-2^19 rays per kernel), with no more rays than any other method needs.
+    table = res["bank_error_per_second"]
+    assert len(table["rows"]) == 4
+    exact = table["rows"][0]
+    assert exact["label"].startswith("exact") and exact["rays_per_kernel"] is not None
+    assert exact["worst_l1"] <= table["target_l1"] == 1e-3
+    for row in table["rows"][1:]:
+        rays = row["rays_per_kernel"]
+        assert rays is None or rays >= exact["rays_per_kernel"]
+    assert table["reference_self_l1"] < 0.5 * table["target_l1"]
     if res["peer_rays_per_s"] is None:
         assert "batoid" in res["peer_note"] and res["ratio"] is None
     else:
         assert res["ratio"] == pytest.approx(res["rays_per_s"] / res["peer_rays_per_s"])
+        assert res["ratio_exact"] == pytest.approx(res["rays_per_s_exact"]
+                                                   / res["peer_rays_per_s"])
         # Where batoid's root is right (rays along the axis) both traces agree to
         # float64 rounding.
         assert res["peer_center_landed_mismatch"] <= 2

@@ -62,8 +62,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="depth(s) l of the source from the mirror, mm (500; inf allowed)")
     p.add_argument("--sensor-distance", type=positive_float, metavar="MM",
                    help="a PSF at this one sensor distance instead of the sweep's IPSF")
-    p.add_argument("--method", choices=["continuous", "planes"], default="continuous",
-                   help="continuous sweep (stratified time) or the paper's N-plane sum")
+    p.add_argument("--method", choices=["exact", "continuous", "planes"], default="exact",
+                   help="exact: each ray's whole sweep deposited as its segment (default); "
+                        "continuous: stratified sweep times per ray; planes: the paper's "
+                        "N-plane sum")
     p.add_argument("--planes", type=positive_int, default=16,
                    help="focal planes of --method planes (16, at most 64)")
     p.add_argument("--time-samples", type=positive_int, default=4,

@@ -59,7 +59,7 @@ def grid_points(setup, grid: tuple[int, int]) -> np.ndarray:
 def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
               grid: tuple[int, int] = (9, 9), depths=(500.0,), rays: int = BANK_RAYS,
               kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0, motion=None,
-              sweep=None, method: str = "continuous", time_samples: int = DEFAULT_TIME_SAMPLES,
+              sweep=None, method: str = "exact", time_samples: int = DEFAULT_TIME_SAMPLES,
               n_planes: int = 16, progress=None) -> IPSFBank:
     """A bank of IPSFs for a setup.
 
@@ -143,7 +143,8 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     setup_dict = setup_to_dict(setup)
     meta = {
         "setup": setup_dict, "sweep_range": sweep.as_dict(),
-        "motion": motion.as_dict(), "method": method, "time_samples": int(time_samples),
+        "motion": motion.as_dict(), "method": method,
+        "time_samples": int(time_samples) if method == "continuous" else None,
         "n_planes": int(n_planes) if method == "planes" else None,
         "rays_per_ipsf": int(rays), "seed": int(seed), "version": __version__,
         "generator": "mitsweep.tracer.ipsf_bank", "outside_kernel": outside.tolist(),
