@@ -1,0 +1,139 @@
+"""``mitsweep unwarp``: the panorama of a catadioptric image, exact from the mirror geometry."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .common import UsageError, check_outputs, load_setup_arg, positive_float, positive_int, \
+    print_json
+
+NAME = "unwarp"
+HELP = ("unwarp a catadioptric image (an EDOF image or a photo) into a cylindrical or "
+        "equirectangular panorama, computed from the mirror geometry (the chief ray of "
+        "every pixel)")
+
+OUTPUT_SUFFIXES = (".exr", ".tif", ".tiff", ".png")
+
+
+def _elevation(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected degrees, got {text!r}") from None
+    if not -90.0 <= x <= 90.0:
+        raise argparse.ArgumentTypeError(f"must be in [-90, 90] degrees, got {text}")
+    return x
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from ..optics.panorama import CYLINDRICAL_TOP_DEG, PROJECTIONS
+
+    p.add_argument("image", help="image: EXR (an EDOF image from `mitsweep deconvolve`, or "
+                                 "a render), RAW, TIFF, PNG or JPEG")
+    p.add_argument("--setup", metavar="SETUP.toml",
+                   help="the setup of the image (default: the one in its metadata)")
+    p.add_argument("--projection", choices=PROJECTIONS, required=True,
+                   help="cylindrical: rows linear in tan(elevation); equirectangular: "
+                        "rows linear in elevation")
+    p.add_argument("--size", type=positive_int, nargs=2, metavar=("W", "H"),
+                   help="panorama size in pixels (default: one column per pixel of the "
+                        "mirror image's outer circumference, rows at the same angular step)")
+    p.add_argument("--elevation", type=_elevation, nargs=2, metavar=("LOW", "HIGH"),
+                   help="elevations of the panorama's bottom and top, degrees above the "
+                        "plane through the mirror vertex normal to the camera axis "
+                        "(default: everything the image sees; cylindrical: at most "
+                        f"{CYLINDRICAL_TOP_DEG:g})")
+    p.add_argument("--center", type=float, nargs=2, metavar=("ROW", "COL"),
+                   help="pixel position of the camera axis (default: the image's recorded "
+                        "centre, else the setup's calibrated one, else the image centre)")
+    p.add_argument("--pixel-pitch", type=positive_float, metavar="MM",
+                   help="pixel pitch, mm (default: the file's, else the setup's)")
+    p.add_argument("--sensor-distance", type=positive_float, metavar="MM",
+                   help="sensor distance of the image's pixel grid, mm (default: the one "
+                        "recorded in the image, else the setup's reference distance)")
+    p.add_argument("--out", required=True, metavar="PANO",
+                   help="panorama: .exr (linear, with a mask.Y layer and provenance) or "
+                        ".tif/.tiff/.png (16-bit sRGB)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _number(meta: dict, key: str) -> float | None:
+    value = meta.get(key)
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and \
+            math.isfinite(value) and value > 0:
+        return float(value)
+    return None
+
+
+def run(args) -> int:
+    from .. import __version__
+    from ..config import setup_from_dict, setup_to_dict
+    from ..io import write_exr
+    from ..io.camera import read_camera_image, write_display_image
+    from ..optics.panorama import panorama_map, unwarp
+
+    src, out = Path(args.image), Path(args.out)
+    if not src.is_file():
+        raise FileNotFoundError(f"{src}: no such image file")
+    if out.suffix.lower() not in OUTPUT_SUFFIXES:
+        raise UsageError(f"--out must be an {', '.join(OUTPUT_SUFFIXES)} file, got {out}")
+    check_outputs([src, args.setup], [out])
+    if args.elevation is not None and not args.elevation[0] < args.elevation[1]:
+        raise UsageError(f"--elevation {args.elevation[0]:g} {args.elevation[1]:g}: LOW must "
+                         f"be below HIGH")
+    if args.size is not None and min(args.size) < 2:
+        raise UsageError(f"--size {args.size[0]} {args.size[1]}: at least 2 x 2")
+    photo = read_camera_image(src, pixel_pitch=args.pixel_pitch)
+    meta = photo.meta.get("exr_header") or {}
+    if args.setup is not None:
+        setup = load_setup_arg(args.setup)
+    elif isinstance(meta.get("setup"), dict):
+        setup = setup_from_dict(meta["setup"])
+    else:
+        raise UsageError(f"{src}: no setup in its metadata; give --setup")
+    H, W = photo.shape
+    pitch = photo.pixel_pitch or _number(meta, "pixel_pitch") or setup.sensor.pixel_pitch
+    i = args.sensor_distance or _number(meta, "reference_sensor_distance")
+    center = args.center
+    if center is None and isinstance(meta.get("center_rc"), list):
+        center = tuple(float(x) for x in meta["center_rc"])
+    if center is not None and not (0 <= center[0] < H and 0 <= center[1] < W):
+        raise UsageError(f"--center {center[0]:g} {center[1]:g} lies outside the {W}x{H} image")
+    t0 = time.perf_counter()
+    pmap = panorama_map(setup, (H, W), projection=args.projection, size=args.size,
+                        elevation_deg=args.elevation, pixel_pitch=pitch, center_px=center,
+                        sensor_distance=i)
+    pano, valid = unwarp(photo.data, pmap)
+    seconds = time.perf_counter() - t0
+    lo, hi = (math.degrees(e) for e in pmap.elevation_range)
+    provenance = {
+        "command": "unwarp", "version": __version__, "input": str(src),
+        "projection": pmap.projection, "size": list(pmap.size),
+        "elevation_deg": [lo, hi], "center_rc": list(pmap.center_px),
+        "pixel_pitch": pmap.pixel_pitch, "sensor_distance": pmap.sensor_distance,
+        "valid_fraction": float(valid.mean()), "setup": setup_to_dict(setup),
+        "columns": "azimuth = 180 - 360 (col + 0.5) / W deg, from world +x toward +y",
+        "rows": ("elevation linear from top to bottom" if pmap.projection == "equirectangular"
+                 else "tan(elevation) linear from top to bottom"),
+    }
+    if out.suffix.lower() == ".exr":
+        write_exr(out, pano.astype(np.float32), channels={"mask.Y": valid.astype(np.float32)},
+                  metadata=provenance)
+    else:
+        write_display_image(out, pano, metadata=provenance)
+    result = {"out": str(out), "projection": pmap.projection, "size": list(pmap.size),
+              "elevation_deg": [lo, hi], "center_rc": list(pmap.center_px),
+              "valid_fraction": float(valid.mean()), "seconds": seconds}
+    if args.json:
+        print_json(result)
+    else:
+        sys.stdout.write(f"{out}: {pmap.projection} panorama {pmap.size[0]}x{pmap.size[1]}, "
+                         f"elevation {lo:.1f} to {hi:.1f} deg, {100 * valid.mean():.1f}% seen, "
+                         f"in {seconds:.2f} s\n")
+    return 0
