@@ -56,6 +56,9 @@ PLAUSIBLE_SCALE = 0.15
 WARN_SCALE = 0.01
 #: Smallest share of outline points that must show a consistent edge.
 MIN_INLIER_FRACTION = 0.4
+#: Smallest ratio of the gradient on the fitted outline to the gradient beside it
+#: (:func:`_edge_prominence`): a mirror's rim stands out, texture does not.
+MIN_EDGE_PROMINENCE = 3.0
 #: Largest RMS normal residual (px) of the inliers of an accepted fit.
 MAX_RESIDUAL_RMS_PX = 1.0
 #: Radius (px) of the outline in the reduced copy used for the coarse search (at least).
@@ -297,6 +300,31 @@ def _edge_offsets(lum_s: np.ndarray, centre, scale, pts, nrm, half: float):
     return off, step_size, contrast
 
 
+def _edge_prominence(lum_s, centre, scale, pts, nrm, half: float, radius: float) -> float:
+    """How much stronger the image's gradient is on the fitted outline than beside it:
+    the mean |derivative| across the outline within ``half``/2 of it, over its median
+    from 2 ``half`` to 4 ``half`` on both sides (a rim: several; texture: about 1)."""
+    from scipy.ndimage import map_coordinates
+
+    reach = min(4.0 * half, 0.5 * radius)
+    step = 0.25
+    t = np.arange(-reach, reach + step / 2, step)
+    coords = np.asarray(centre)[None, None, :] + scale * pts[:, None, :] \
+        + t[None, :, None] * nrm[:, None, :]
+    H, W = lum_s.shape
+    inside = np.all((coords[..., 0] >= 0) & (coords[..., 0] <= H - 1)
+                    & (coords[..., 1] >= 0) & (coords[..., 1] <= W - 1), axis=1)
+    if not inside.any():
+        return 0.0
+    c = coords[inside]
+    prof = map_coordinates(lum_s, [c[..., 0].ravel(), c[..., 1].ravel()], order=1,
+                           mode="nearest").reshape(c.shape[:2])
+    mean_abs = np.abs(np.gradient(prof, step, axis=1)).mean(axis=0)
+    on = mean_abs[np.abs(t) <= 0.5 * half].max()
+    beside = np.median(mean_abs[np.abs(t) >= min(2.0 * half, 0.5 * reach)])
+    return float(on / (beside + 1e-30))
+
+
 def _noise_sigma(lum: np.ndarray) -> float:
     """Robust per-pixel noise estimate (MAD of the diagonal second difference)."""
     d = lum[1:, 1:] - lum[:-1, 1:] - lum[1:, :-1] + lum[:-1, :-1]
@@ -384,6 +412,14 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         if np.abs(x[:2]).max() < 1e-3 and abs(x[2]) * radius < 1e-3:
             break
     n_used = int(used.sum())
+    prominence = _edge_prominence(lum_s, centre, scale, pts, nrm, half, radius * scale)
+    logger.info("rim fit: %d of %d points, rms %.3f px, edge prominence %.2f after %d "
+                "passes", n_used, n, rms, prominence, it)
+    if prominence < MIN_EDGE_PROMINENCE:
+        raise CalibrationError(
+            f"no visible mirror: the best outline found (radius {radius * scale:.1f} px) is "
+            f"no clearer an edge than its surroundings (prominence {prominence:.2f}, need "
+            f"{MIN_EDGE_PROMINENCE:g}); check that the photo shows the mirror of this setup")
     if n_used < MIN_INLIER_FRACTION * n or rms > MAX_RESIDUAL_RMS_PX:
         raise CalibrationError(
             f"no visible mirror: the best outline found fits {n_used} of {n} points with "
