@@ -190,3 +190,70 @@ def test_no_blow_up_from_no_noise_to_very_low_light(blurred_scene, lux, method):
     # noise, +3 dB at 50 lux, +0.3 dB at 0.5 lux, +8.6 dB at 0.05 lux (where the noise
     # itself dominates the error); a ringing blow-up loses many dB
     assert psnr(x, img, mask=m) > psnr(y, img, mask=m) - 1.0
+
+
+# -- the sparse resampling ------------------------------------------------------------
+
+@pytest.mark.parametrize("periodic", [False, True])
+def test_spline_sampling_matrix_matches_map_coordinates(periodic):
+    import scipy.ndimage as ndi
+
+    from mitsweep.deconv.polar import spline_sampling_matrix
+
+    rng = np.random.default_rng(1)
+    coef = rng.standard_normal((23, 31))
+    # points inside, on the edges and beyond them (mirrored or wrapped taps)
+    rows = rng.uniform(-3, 25, 500)
+    cols = rng.uniform(-3, 33, 500)
+    M = spline_sampling_matrix(rows, cols, coef.shape, periodic_cols=periodic)
+    if periodic:   # scipy's reference: the columns tiled three times
+        ref = ndi.map_coordinates(np.tile(coef, (1, 3)), [rows, cols + 31], order=3,
+                                  mode="mirror", prefilter=False)
+    else:
+        ref = ndi.map_coordinates(coef, [rows, cols], order=3, mode="mirror",
+                                  prefilter=False)
+    # same arithmetic in another order: float64 round-off
+    np.testing.assert_allclose(M @ coef.ravel(), ref, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("center", [None, (60.25, 70.8)])
+def test_polar_resampling_matrices_are_to_polar_and_from_polar(center):
+    """The public matrices (all points, no mirror views) agree with the fast paths
+    (a quarter of the points seen through four mirror views when the pole is the image
+    centre, every point otherwise) to float64 round-off."""
+    import scipy.ndimage as ndi
+
+    from mitsweep.deconv.polar import polar_resampling, polar_spline_coefficients
+
+    img = _gray("camera", 128)[:120]                 # 120 x 128: not square
+    g = polar_grid(img.shape, center=center, r_max=55)
+    T, B = polar_resampling(g, img.shape)
+    assert T.shape == (g.n_radii * g.n_angles, img.size) and B.shape == T.shape[::-1]
+    coef = ndi.spline_filter(img, order=3, mode="mirror")
+    pol = to_polar(img, g)
+    np.testing.assert_allclose((T @ coef.ravel()).reshape(pol.shape), pol, atol=1e-12)
+    back = from_polar(pol, g, img.shape)
+    via_b = (B @ polar_spline_coefficients(pol).ravel()).reshape(img.shape)
+    # from_polar rebuilds the rows near the pole at fewer angles: compare where it
+    # reads the full grid (2π (r + 8) 0.75 >= n/4 - 8 harmonics)
+    cy, cx = g.center
+    rr = np.hypot(*np.mgrid[0:120, 0:128] - np.array([cy, cx])[:, None, None])
+    full = (rr <= g.r_max) & (2 * np.pi * (rr + 8) * 0.75 >= g.n_angles / 4 - 8)
+    assert full.sum() > 0.5 * (rr <= g.r_max).sum()
+    np.testing.assert_allclose(back[full], via_b[full], atol=1e-12)
+    assert np.all(via_b[rr > g.r_max] == 0)
+
+
+def test_polar_deconvolution_does_not_depend_on_threads_or_cache(blurred_scene, monkeypatch):
+    from mitsweep.deconv import polar
+
+    _, y, bank = blurred_scene
+    outs = []
+    for n in (1, 3):
+        polar._to_polar_plan.cache_clear()
+        polar._from_polar_plan.cache_clear()
+        monkeypatch.setattr(polar, "_threads", lambda n=n: n)
+        outs.append(polar_deconvolve(y, bank, nsr=1e-3))
+        outs.append(polar_deconvolve(y, bank, nsr=1e-3))       # cached plans
+    for o in outs[1:]:
+        np.testing.assert_array_equal(o, outs[0])
