@@ -8,6 +8,7 @@ import pytest
 
 from conftest import run_cli
 from mitsweep import pipeline
+from mitsweep.pipeline import tasks
 from mitsweep.config import DEFAULT_SETUP, Sensor
 from mitsweep.pipeline import (DatasetError, DatasetOptions, build_dataset, evaluate_dataset,
                                load_manifest)
@@ -43,8 +44,8 @@ def test_dataset_holds_every_item_with_checksums(tiny_dataset):
 def test_rerun_skips_complete_items(tiny_dataset, monkeypatch):
     root, manifest = tiny_dataset
     calls = []
-    for fn in ("_task_render", "_task_bank", "_task_noisy", "_task_deconvolve"):
-        monkeypatch.setattr(pipeline, fn, lambda *a, _fn=fn: calls.append(_fn))
+    for fn in ("render", "trace_bank", "add_noise", "restore"):
+        monkeypatch.setattr(tasks, fn, lambda *a, _fn=fn, **k: calls.append(_fn))
     again = build_dataset(TINY, root, TINY_OPTS, progress=False)
     assert calls == []
     assert again["items"] == manifest["items"]
@@ -58,7 +59,7 @@ def test_corrupt_or_missing_items_are_redone(tmp_path):
     (root / "scene_000" / "edof.exr").write_bytes(b"garbage")   # corrupted
     (root / "scene_000" / "stopped_50lux.exr").unlink()         # lost
     after = build_dataset(TINY, root, TINY_OPTS, progress=False)["items"]
-    # Redone from the same inputs: the same pixels (the header holds a timing).
+    # Redone from the same inputs: the same pixels.
     np.testing.assert_array_equal(pipeline._read_rgb(root / "scene_000" / "edof.exr")[0], edof)
     assert (root / "scene_000" / "stopped_50lux.exr").is_file()
     # Everything else was kept as it was (same checksums, renders not redone).
@@ -68,12 +69,12 @@ def test_corrupt_or_missing_items_are_redone(tmp_path):
 
 def test_interrupted_run_keeps_finished_items_and_resumes(tmp_path, monkeypatch):
     root = tmp_path / "ds"
-    real = pipeline._task_noisy
+    real = tasks.add_noise
 
-    def boom(*args):
+    def boom(*args, **kwargs):
         raise KeyboardInterrupt  # as if Ctrl-C arrived during this task
 
-    monkeypatch.setattr(pipeline, "_task_noisy", boom)
+    monkeypatch.setattr(tasks, "add_noise", boom)
     with pytest.raises(KeyboardInterrupt):
         build_dataset(TINY, root, TINY_OPTS, progress=False)
     partial = load_manifest(root)
@@ -81,11 +82,11 @@ def test_interrupted_run_keeps_finished_items_and_resumes(tmp_path, monkeypatch)
     done = set(partial["items"])
     assert {"bank.npz", "scene_000/sweep.exr"} <= done
     assert not any(p.name.startswith(".") for p in root.rglob("*"))  # no temp files left
-    monkeypatch.setattr(pipeline, "_task_noisy", real)
+    monkeypatch.setattr(tasks, "add_noise", real)
     redone = []
-    orig_render = pipeline._task_render
-    monkeypatch.setattr(pipeline, "_task_render",
-                        lambda *a: (redone.append(a[2]), orig_render(*a))[1])
+    orig_render = tasks.render
+    monkeypatch.setattr(tasks, "render",
+                        lambda *a, **k: (redone.append(k["mode"]), orig_render(*a, **k))[1])
     final = build_dataset(TINY, root, TINY_OPTS, progress=False)
     assert set(final["items"]) == EXPECTED
     assert redone == []  # the finished renders were not redone

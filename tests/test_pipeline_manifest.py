@@ -16,6 +16,7 @@ import pytest
 from conftest import run_cli
 from mitsweep import pipeline
 from mitsweep.cli.main import main
+from mitsweep.pipeline import tasks
 from mitsweep.pipeline import (MANIFEST, MAX_SCENES, DatasetError, DatasetOptions, build_dataset,
                                evaluate_dataset, load_manifest, options_from_dict)
 from test_io_write_errors import tiny_setup_toml
@@ -249,21 +250,21 @@ def test_item_changed_during_the_run_keeps_the_dataset_incomplete(tmp_path, monk
     """Complete only when every item verifies: a file changed after it was recorded (as
     a second writer would) is caught, dropped from the manifest, and redone."""
     root = tmp_path / "ds"
-    real = pipeline._task_deconvolve
+    real = tasks.restore
 
-    def deconvolve_then_tamper(*args):
-        out = real(*args)
-        if out.endswith("edof_50lux.exr"):  # the last task; focused.exr was recorded
+    def deconvolve_then_tamper(setup, out, **kwargs):
+        info = real(setup, out, **kwargs)
+        if out.name == "edof_50lux.exr":  # the last task; focused.exr was recorded
             with open(root / "scene_000" / "focused.exr", "ab") as f:
                 f.write(b"\0")
-        return out
+        return info
 
-    monkeypatch.setattr(pipeline, "_task_deconvolve", deconvolve_then_tamper)
+    monkeypatch.setattr(tasks, "restore", deconvolve_then_tamper)
     with pytest.raises(DatasetError, match=r"focused.exr: changed after it was written"):
         build_dataset(TINY, root, TINY_OPTS, progress=False)
     partial = load_manifest(root)
     assert "complete" not in partial and "scene_000/focused.exr" not in partial["items"]
-    monkeypatch.setattr(pipeline, "_task_deconvolve", real)
+    monkeypatch.setattr(tasks, "restore", real)
     final = build_dataset(TINY, root, TINY_OPTS, progress=False)
     assert final["complete"] is True
     assert final["items"]["scene_000/focused.exr"]["sha256"] == pipeline._sha256(

@@ -23,8 +23,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    default=[16, 64, 128, 64], help="samples per pixel per mode (default 16 64 128 64)")
     p.add_argument("--lux", type=positive_float, nargs="*", default=[50.0, 2.0, 0.5],
                    help="light levels for the noisy images, lux (default 50 2 0.5)")
-    p.add_argument("--executor", choices=["serial", "process"], default="serial")
-    p.add_argument("--jobs", type=positive_int, default=2, help="processes for --executor process")
+    p.add_argument("--methods", type=_methods, default=("wiener",), metavar="M[,M...]",
+                   help="restoration methods of the EDOF images, comma-separated (default "
+                        "wiener; wiener writes edof*.exr, another method M edof_M*.exr)")
+    p.add_argument("--executor", choices=["serial", "process", "dask"], default=None,
+                   help="where tasks run: this process (default), --jobs local processes, "
+                        "or Dask (a local cluster of --jobs workers, or --scheduler's)")
+    p.add_argument("--jobs", type=positive_int, default=2,
+                   help="processes or Dask workers of the local pool or cluster (default 2)")
+    p.add_argument("--scheduler", type=_scheduler, metavar="tcp://HOST:PORT",
+                   help="run on the Dask cluster of this scheduler (implies --executor dask)")
+    p.add_argument("--shard", type=_shard, metavar="K/N",
+                   help="make only shard K of N (scenes i with i mod N = K-1, and the "
+                        "bank): for job arrays; the last shard to finish merges the "
+                        "manifests")
+    p.add_argument("--retries", type=_non_negative_int, default=2,
+                   help="times a task is submitted again after its worker was lost "
+                        "(default 2)")
     p.add_argument("--wait", nargs="?", type=_seconds, const=math.inf, default=None,
                    metavar="SECONDS",
                    help="if another run holds the directory, wait for it (for ever, or at "
@@ -42,16 +57,52 @@ def _seconds(text: str) -> float:
     return x
 
 
+def _methods(text: str) -> tuple[str, ...]:
+    names = tuple(m.strip() for m in text.split(","))
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"expected method names separated by commas, "
+                                         f"got {text!r}")
+    return names
+
+
+def _scheduler(text: str) -> str:
+    from ..pipeline import DatasetError
+    from ..pipeline.executors import check_scheduler_address
+
+    try:
+        return check_scheduler_address(text)
+    except DatasetError as exc:
+        raise argparse.ArgumentTypeError(str(exc).partition(": ")[2]) from None
+
+
+def _shard(text: str):
+    from ..pipeline import DatasetError, Shard
+
+    try:
+        return Shard.parse(text)
+    except DatasetError as exc:
+        raise argparse.ArgumentTypeError(str(exc).partition(": ")[2]) from None
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
+    return n
+
+
 #: DatasetOptions fields → the options that set them, for messages.
 _OPTION_OF = {"scenes": "--scenes", "seed": "--seed", "spp": "--spp",
-              "light_levels_lux": "--lux"}
+              "light_levels_lux": "--lux", "methods": "--methods"}
 
 
-def check_dataset_outputs(inputs: list, out: Path, opts) -> None:
+def check_dataset_outputs(inputs: list, out: Path, opts, shard=None) -> None:
     """:func:`check_outputs` for a dataset directory: no input is the directory, nor one
-    of the files a run with ``opts`` writes in it (manifest, lock, items)."""
-    from ..io.lock import LOCK_FILE
-    from ..pipeline import MANIFEST, item_names
+    of the files a run with ``opts`` writes in it (manifest, lock, items, logs)."""
+    from ..pipeline.dataset import written_paths
 
     check_outputs(inputs, [out])
     written = None
@@ -63,13 +114,13 @@ def check_dataset_outputs(inputs: list, out: Path, opts) -> None:
             rel = Path(inp).resolve().relative_to(root).as_posix()
         except ValueError:
             continue  # not inside the directory
-        written = written or {MANIFEST, LOCK_FILE, *item_names(opts)}
+        written = written or written_paths(opts, shard)
         if rel in written:
             check_outputs([inp], [out / rel])
 
 
 def run(args) -> int:
-    from ..pipeline import DatasetError, DatasetOptions, build_dataset
+    from ..pipeline import DatasetError, DatasetOptions, build_dataset, item_names
 
     if args.out.strip() == "":
         raise UsageError("--out: must name a directory")
@@ -77,16 +128,23 @@ def run(args) -> int:
     try:
         opts = DatasetOptions(scenes=args.scenes, seed=args.seed,
                               spp=dict(zip(("pinhole", "focused", "sweep", "stopped"), args.spp)),
-                              light_levels_lux=tuple(args.lux))
+                              light_levels_lux=tuple(args.lux), methods=args.methods)
     except DatasetError as exc:  # name the option, not the field
         field, _, rest = str(exc).partition(":")
         raise UsageError(f"{_OPTION_OF.get(field.split('[')[0], field)}:{rest}") from None
     out = Path(args.out)
-    check_dataset_outputs([args.setup], out, opts)
-    manifest = build_dataset(setup, out, opts, executor=args.executor, jobs=args.jobs,
-                             wait=args.wait)
+    if args.scheduler and args.executor not in (None, "dask"):
+        raise UsageError(f"--scheduler: needs --executor dask (or no --executor), got "
+                         f"--executor {args.executor}")
+    check_dataset_outputs([args.setup], out, opts, args.shard)
+    manifest = build_dataset(setup, out, opts, executor=args.executor or "serial",
+                             jobs=args.jobs, scheduler=args.scheduler, shard=args.shard,
+                             retries=args.retries, wait=args.wait)
     if args.json:
         print_json(manifest)
-    else:
+    elif manifest.get("complete"):
         print(f"{len(manifest['items'])} items in {args.out}/ (manifest.json)")
+    else:  # a shard whose dataset other shards have yet to finish
+        print(f"{len(manifest['items'])} of {len(item_names(opts))} items in {args.out}/ "
+              f"(shard {args.shard}; the last shard to finish completes manifest.json)")
     return 0

@@ -43,7 +43,7 @@ import numpy as np
 from .atomic import atomic_path
 
 __all__ = ["IPSFBank", "save_bank", "load_bank", "BankError", "optics_sections",
-           "optics_fingerprint", "OPTICS_SECTIONS"]
+           "optics_fingerprint", "OPTICS_SECTIONS", "bank_kernel_size"]
 
 BANK_FORMAT = "mitsweep-ipsf-bank/2"
 #: Formats :func:`load_bank` reads; /1 predates the optics fingerprint.
@@ -160,8 +160,13 @@ class IPSFBank:
         return int(self.kernels.shape[-1])
 
 
-def save_bank(path: str | Path, bank: IPSFBank) -> Path:
-    """Write ``bank`` to ``path`` (.npz) atomically."""
+def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = False) -> Path:
+    """Write ``bank`` to ``path`` (.npz) atomically.
+
+    ``reproducible=True`` stores every archive member with one fixed timestamp
+    (1980-01-01, the ZIP epoch) instead of the time of writing, so that one bank always
+    gives the same bytes (datasets compare their files by SHA-256).
+    """
     p = Path(path)
     if p.suffix != ".npz":
         raise BankError(f"{p}: a bank file must end in .npz")
@@ -189,8 +194,29 @@ def save_bank(path: str | Path, bank: IPSFBank) -> Path:
     arrays["header"] = np.array(json.dumps(header, default=_default))
     with atomic_path(p, suffix=".npz") as tmp:
         with open(tmp, "wb") as f:
-            np.savez_compressed(f, **arrays)
+            if reproducible:
+                _savez_fixed_time(f, arrays)
+            else:
+                np.savez_compressed(f, **arrays)
     return p
+
+
+#: The archive members' timestamp of a reproducible bank: the earliest a ZIP can hold.
+_ZIP_EPOCH = (1980, 1, 1, 0, 0, 0)
+
+
+def _savez_fixed_time(f, arrays: Mapping[str, np.ndarray]) -> None:
+    """What ``np.savez_compressed`` writes, with every member dated :data:`_ZIP_EPOCH`
+    (NumPy dates them by the clock)."""
+    import zipfile
+
+    with zipfile.ZipFile(f, mode="w", compression=zipfile.ZIP_DEFLATED,
+                         allowZip64=True) as zf:
+        for key, value in arrays.items():
+            info = zipfile.ZipInfo(f"{key}.npy", date_time=_ZIP_EPOCH)
+            info.compress_type = zipfile.ZIP_DEFLATED
+            with zf.open(info, "w", force_zip64=True) as member:
+                np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
 
 
 def _default(o):
@@ -265,3 +291,14 @@ def _header(p: Path, raw) -> dict:
     if not isinstance(header, dict):
         raise BankError(f"{p}: the bank header must be a JSON object")
     return header
+
+
+def bank_kernel_size(pixel_pitch: float) -> int:
+    """Kernel size K (odd, px) that holds the IPSFs of the paper's sweeps.
+
+    31 px at the demo's 18 µm pixels (the largest peripheral IPSF spans ~0.5 mm on the
+    sensor), scaled inversely with the pitch (mm) so finer pixels do not truncate the
+    kernels; never below 31.
+    """
+    half = int(math.ceil(15 * 0.018 / pixel_pitch))
+    return 2 * max(half, 15) + 1

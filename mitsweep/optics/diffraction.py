@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy.special import j1
 
-__all__ = ["airy_kernel", "WAVELENGTH_MM"]
+__all__ = ["airy_kernel", "add_diffraction", "WAVELENGTH_MM"]
 
 #: Default wavelength, mm (green, the peak of photopic sensitivity).
 WAVELENGTH_MM = 550e-6
@@ -54,3 +54,33 @@ def airy_kernel(f_number: float, pixel_pitch: float, *, wavelength: float = WAVE
     fine = amp * amp
     kernel = fine.reshape(k, oversample, k, oversample).sum(axis=(1, 3))
     return kernel / kernel.sum()
+
+
+def add_diffraction(image: np.ndarray, f_number: float, pixel_pitch: float) -> np.ndarray:
+    """Convolve a geometric render with the lens's pixel-integrated Airy PSF.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        Linear radiance; each channel is convolved (``"same"`` size, zero outside).
+    f_number : float
+        Working f-number N of the lens.
+    pixel_pitch : float
+        Pixel size, mm.
+
+    Returns
+    -------
+    ndarray
+        Same shape and dtype as ``image``; ``image`` itself when the kernel
+        (:func:`airy_kernel` at :data:`WAVELENGTH_MM`) is a single pixel.
+    """
+    from scipy.signal import fftconvolve
+
+    k = airy_kernel(f_number, pixel_pitch)
+    if k.shape[0] == 1:
+        return image
+    img = np.asarray(image)
+    chans = img[..., None] if img.ndim == 2 else img
+    out = np.stack([fftconvolve(chans[..., c], k, mode="same") for c in range(chans.shape[2])],
+                   axis=-1).astype(img.dtype)
+    return out[..., 0] if img.ndim == 2 else out

@@ -1,0 +1,199 @@
+"""A dataset directory: its manifest's schema, and :func:`build_dataset`."""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import json
+import math
+from pathlib import Path, PurePosixPath, PureWindowsPath
+from typing import Any
+
+from ..config import Setup, setup_to_dict
+from .options import DatasetOptions, _is_int, _is_real, _require, options_from_dict
+from .runner import (DEFAULT_RETRIES, LOG_DIR, MANIFEST, SHARD_DIR, DatasetError, Shard,
+                     run_tasks)
+from .tasks import item_names, plan
+
+__all__ = ["build_dataset", "load_manifest", "read_manifest", "validate_manifest",
+           "dataset_inputs", "FORMAT"]
+
+FORMAT = "mitsweep-dataset/1"
+
+
+def read_manifest(path: str | Path) -> dict:
+    """Read and validate a manifest file (the directory's, or a shard's)."""
+    p = Path(path)
+    try:
+        manifest = json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"{p}: corrupt manifest ({exc})") from None
+    directory = p.parent if p.parent.parent.name != SHARD_DIR else p.parent.parent.parent
+    try:
+        validate_manifest(manifest, directory)
+    except DatasetError as exc:
+        raise DatasetError(f"{p}: invalid manifest: {exc}") from None
+    return manifest
+
+
+def load_manifest(directory: str | Path) -> dict:
+    """Read and validate ``directory/manifest.json`` (see :func:`validate_manifest`)."""
+    p = Path(directory) / MANIFEST
+    if not p.is_file():
+        raise DatasetError(f"{directory}: no {MANIFEST} (not a mitsweep dataset)")
+    return read_manifest(p)
+
+
+def validate_manifest(manifest: Any, directory: str | Path) -> DatasetOptions:
+    """Check a manifest's schema before anything trusts it; return its options.
+
+    The top level is an object with ``format`` (``mitsweep-dataset/1``), ``setup`` (an
+    object), ``options`` (validated as :class:`DatasetOptions`, the limits of the
+    command line) and ``items``: an object whose keys are items of a dataset with those
+    options (relative paths such as ``scene_000/sweep.exr``, never absolute, never with
+    ``..``, never resolving outside ``directory`` through a symlink) and whose values
+    hold ``params`` (object), ``sha256`` (64 hex digits), ``bytes`` (integer >= 0) and,
+    in datasets written before the per-task logs, ``seconds`` (number >= 0).
+    ``complete``, when present, is ``true`` and then every item of the dataset is
+    listed. Raises :class:`DatasetError` naming the field.
+    """
+    _require(isinstance(manifest, dict), "top level",
+             f"must be a JSON object, got {type(manifest).__name__}")
+    _require(manifest.get("format") == FORMAT, "format",
+             f"must be {FORMAT!r}, got {manifest.get('format')!r}")
+    _require(isinstance(manifest.get("setup"), dict), "setup",
+             f"must be an object, got {type(manifest.get('setup')).__name__}")
+    opts = options_from_dict(manifest.get("options"))
+    items = manifest.get("items")
+    _require(isinstance(items, dict), "items", f"must be an object, got {type(items).__name__}")
+    root = Path(directory).resolve()
+    expected = set(item_names(opts))
+    for name, item in items.items():
+        key = f"items[{name!r}]"
+        posix = PurePosixPath(name)
+        _require(name != "" and not posix.is_absolute() and "\\" not in name
+                 and not PureWindowsPath(name).drive, key, "must be a relative path")
+        _require(".." not in posix.parts, key, "must stay inside the dataset directory")
+        _require(name in expected, key, f"is not an item of a dataset with these options "
+                                        f"({opts.scenes} scenes)")
+        _require((root / name).resolve().is_relative_to(root), key,
+                 "resolves outside the dataset directory (symlink)")
+        _require(isinstance(item, dict), key, f"must be an object, got {type(item).__name__}")
+        _require(isinstance(item.get("params"), dict), f"{key}.params", "must be an object")
+        sha = item.get("sha256")
+        _require(isinstance(sha, str) and len(sha) == 64
+                 and all(c in "0123456789abcdef" for c in sha), f"{key}.sha256",
+                 f"must be 64 lowercase hex digits, got {sha!r}")
+        _require(_is_int(item.get("bytes")) and item["bytes"] >= 0, f"{key}.bytes",
+                 f"must be an integer >= 0, got {item.get('bytes')!r}")
+        if "seconds" in item:
+            _require(_is_real(item["seconds"]) and math.isfinite(item["seconds"])
+                     and item["seconds"] >= 0, f"{key}.seconds",
+                     f"must be a finite number >= 0, got {item['seconds']!r}")
+    if "complete" in manifest:
+        _require(manifest["complete"] is True, "complete",
+                 f"must be true when present, got {manifest['complete']!r}")
+        missing = sorted(expected - set(items))
+        if missing:
+            more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
+            raise DatasetError(f"items: a complete dataset lists every item; missing "
+                               f"{missing[0]}{more}")
+    return opts
+
+
+def _versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for pkg in ("mitsweep", "mitsuba", "drjit", "numpy", "scipy", "scikit-image", "OpenEXR"):
+        try:
+            out[pkg] = version(pkg)
+        except PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def dataset_inputs(directory: str | Path) -> list[Path]:
+    """Every file of a dataset that evaluating it reads: the manifest and the items (for
+    :func:`~mitsweep.cli.common.check_outputs`)."""
+    root = Path(directory)
+    manifest = load_manifest(root)
+    return [root / MANIFEST] + [root / name for name in manifest["items"]]
+
+
+def written_paths(opts: DatasetOptions, shard: Shard | None = None) -> set[str]:
+    """Paths (relative to the dataset directory) a run with ``opts`` may write."""
+    from ..io.lock import LOCK_FILE
+
+    names = item_names(opts)
+    out = {MANIFEST, LOCK_FILE, *names, *(f"{LOG_DIR}/{n}.log" for n in names)}
+    if shard is not None:
+        out |= {f"{SHARD_DIR}/{shard.dirname}/{MANIFEST}",
+                f"{SHARD_DIR}/{shard.dirname}/{LOCK_FILE}"}
+    return out
+
+
+def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | None = None, *,
+                  executor: str | cf.Executor = "serial", jobs: int = 2,
+                  scheduler: str | None = None, shard: Shard | str | None = None,
+                  retries: int = DEFAULT_RETRIES, progress: bool = True,
+                  wait: float | None = None) -> dict:
+    """Render, trace, add noise and deconvolve a synthetic dataset (resumable).
+
+    Parameters
+    ----------
+    setup : Setup
+    out_dir : path
+        Created if needed. A directory holding a manifest for another setup is refused.
+    options : DatasetOptions
+    executor : {"serial", "process", "dask"} or concurrent.futures.Executor
+        Run the tasks in this process; in ``jobs`` local processes; on Dask (a
+        ``LocalCluster`` of ``jobs`` single-threaded worker processes, or the cluster of
+        ``scheduler``); or on any executor (``Client.get_executor()``, ...), which is
+        left running. Workers set up the backend themselves
+        (:func:`~mitsweep.pipeline.executors.init_worker`).
+    jobs : int
+        Processes or Dask workers of the embedded pool or cluster.
+    scheduler : str, optional
+        ``tcp://HOST:PORT`` of a running Dask scheduler (implies ``"dask"``).
+    shard : Shard or "K/N", optional
+        Make only shard K of N (a deterministic subset: the scenes ``i`` with
+        ``i mod N = K - 1``, and the bank); the shard that completes the dataset
+        merges the manifests (:mod:`mitsweep.pipeline.runner`).
+    retries : int
+        Submissions of a task again after its worker was lost.
+    progress : bool
+        A tqdm bar on stderr.
+    wait : float or None
+        The directory (or shard) is locked for the run
+        (:class:`~mitsweep.io.lock.DirectoryLock`): another run on it is refused at
+        once (``None``) or after waiting this many seconds for it (``math.inf``: for
+        ever).
+
+    Returns
+    -------
+    dict
+        The manifest (also written to ``out_dir/manifest.json``): ``complete`` only once
+        every item's file matches the SHA-256 recorded when it was written. The same
+        setup and options give the same bytes in every item and in the manifest,
+        whichever executor or shards made them.
+    """
+    from .executors import open_executor
+
+    if wait is not None and not (wait >= 0):
+        raise DatasetError(f"wait: must be >= 0 seconds, got {wait!r}")
+    if isinstance(shard, str):
+        shard = Shard.parse(shard)
+    opts = options or DatasetOptions()
+    sd = setup_to_dict(setup)
+    header = {"format": FORMAT, "setup": sd, "options": opts.as_dict(),
+              "versions": _versions()}
+
+    def same_setup(manifest: dict, path: Path) -> None:
+        if manifest["setup"] != sd:
+            raise DatasetError(f"{Path(out_dir)}: holds a dataset of another setup "
+                               f"({manifest['setup'].get('name')!r}); use a new directory")
+
+    with open_executor(executor, jobs=jobs, scheduler=scheduler) as (pool, lost):
+        return run_tasks(out_dir, plan(opts), setup, header, read_manifest=read_manifest,
+                         check_header=same_setup, executor=pool, lost=lost, shard=shard,
+                         wait=wait, progress=progress, retries=retries, desc="dataset")

@@ -1,0 +1,110 @@
+"""Scores of a dataset: its EDOF, focused, stopped and noisy images against the ground
+truth, inside the mirror's image (PSNR and SSIM overall, per radius, per depth band)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..optics.pixels import optical_center_px
+from .dataset import load_manifest
+from .runner import DatasetError, sha256
+from .tasks import read_rgb, white_level
+
+__all__ = ["evaluate_dataset", "DEPTH_BANDS_MM"]
+
+DEPTH_BANDS_MM = (0.0, 300.0, 1000.0, 3000.0, math.inf)
+
+
+def _checked_items(root: Path, manifest: dict) -> dict[str, Path]:
+    """The items of a complete dataset, each file present and unchanged since written."""
+    if manifest.get("complete") is not True:
+        raise DatasetError(f"{root}: incomplete dataset (rerun `mitsweep dataset` with the "
+                           f"same options to finish it)")
+    files = {}
+    for name, item in sorted(manifest["items"].items()):
+        p = root / name
+        if not p.is_file():
+            raise DatasetError(f"{p}: listed in the manifest but missing (rerun `mitsweep "
+                               f"dataset` to redo it)")
+        if p.stat().st_size != item["bytes"] or sha256(p) != item["sha256"]:
+            raise DatasetError(f"{p}: changed since it was written (size or SHA-256 differs "
+                               f"from the manifest; rerun `mitsweep dataset` to redo it)")
+        files[name] = p
+    return files
+
+
+def _read_finite(path: Path) -> tuple[np.ndarray, dict, dict]:
+    img, chans, meta = read_rgb(path)
+    for name, arr in {"image": img, **chans}.items():
+        if not np.all(np.isfinite(arr)):
+            raise DatasetError(f"{path}: holds NaN or inf pixels (channel {name}); cannot "
+                               f"score it (rerun `mitsweep dataset` to redo it)")
+    return img, chans, meta
+
+
+def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
+    """Score EDOF against focused and stopped images, on the ground truth.
+
+    Returns per scene and averaged: PSNR (dB) and SSIM inside the mirror's image, per
+    radial bin (pixels from the optical axis) and per depth band (mm), for ``edof``
+    (Wiener), ``edof_<method>`` (every other restoration method the dataset holds),
+    ``focused``, ``stopped``, ``sweep`` (not deconvolved) and the noisy variants
+    (``_<lux>lux``), each under its item's name.
+
+    The manifest is validated (:func:`load_manifest`); the dataset must be complete,
+    with every item's file present and unchanged, and every image finite.
+    """
+    from ..deconv import per_depth_band, per_radius, psnr, ssim
+
+    root = Path(directory)
+    manifest = load_manifest(root)
+    files = _checked_items(root, manifest)
+    n_scenes = manifest["options"]["scenes"]
+    results: dict[str, Any] = {"dataset": str(root), "scenes": {}}
+    for i in range(n_scenes):
+        d = root / f"scene_{i:03d}"
+        gt, chans, _ = _read_finite(d / "pinhole.exr")
+        mask = chans.get("mask.Y")
+        if mask is None:
+            raise DatasetError(f"{d}/pinhole.exr: no mask.Y channel (mirror mask AOV)")
+        m = mask > 0.5
+        if not np.any(m):
+            raise DatasetError(f"{d}/pinhole.exr: the mirror mask is empty (nothing to score)")
+        depth = chans.get("depth.Z", np.full(mask.shape, np.nan, dtype=np.float32))
+        depth = np.where(m & (depth > 0), depth, np.nan)
+        level = white_level(gt, mask)
+        ref = gt / level
+        ys, xs = np.nonzero(m)
+        cy, cx = optical_center_px(m.shape)
+        r_max = float(np.max(np.hypot(ys - cy, xs - cx))) + 0.5
+        edges = np.linspace(0.0, r_max, n_radial_bins + 1)
+        scene_res: dict[str, Any] = {"white_level": level, "mirror_radius_px": r_max}
+        for name, path in files.items():  # every image of the scene, every EDOF
+            if not name.startswith(f"{d.name}/") or path.suffix != ".exr" \
+                    or path.stem == "pinhole":
+                continue
+            img = _read_finite(path)[0] / level
+            if img.shape != ref.shape:
+                raise DatasetError(f"{path}: shape {img.shape} differs from the ground "
+                                   f"truth's {ref.shape}")
+            # An image leaves the mirror's disc alone outside the mask: score inside only.
+            entry = {"psnr": psnr(img, ref, mask=m), "ssim": ssim(img, ref, mask=m),
+                     "per_radius": _listify(per_radius(img, ref, edges, mask=m)),
+                     "per_depth_band": _listify(per_depth_band(img, ref, depth,
+                                                               list(DEPTH_BANDS_MM), mask=m))}
+            scene_res[path.stem] = entry
+        results["scenes"][d.name] = scene_res
+    names = sorted({k for s in results["scenes"].values() for k, v in s.items()
+                    if isinstance(v, dict)})
+    results["mean"] = {n: {"psnr": float(np.nanmean([s[n]["psnr"] for s in results["scenes"].values() if n in s])),
+                           "ssim": float(np.nanmean([s[n]["ssim"] for s in results["scenes"].values() if n in s]))}
+                       for n in names}
+    return results
+
+
+def _listify(d: dict) -> dict:
+    return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in d.items()}

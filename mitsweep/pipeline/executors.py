@@ -1,0 +1,137 @@
+"""Where dataset tasks run: here, a local process pool, Dask, or any Executor.
+
+:func:`open_executor` turns ``"serial"``, ``"process"``, ``"dask"`` (or an
+:class:`concurrent.futures.Executor` given by the caller) into what
+:func:`~mitsweep.pipeline.runner.run_tasks` takes. Mitsuba has no distributed rendering
+of its own, and a worker process inherits nothing from the submitting one: it must
+select the Dr.Jit backend, set the Mitsuba variant and register the ``focalsweep``
+sensor itself, or a render fails with "Plugin not found". :func:`init_worker` does that
+when a pool process or a Dask worker starts (a process-pool initializer, a Dask worker
+plugin), and the render and tracing tasks do it again themselves
+(:func:`mitsweep.render.sensor.register`, idempotent), so a task also runs on an
+executor that was never initialised.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import logging
+import multiprocessing
+import re
+from typing import Iterator
+
+from .runner import DatasetError
+
+__all__ = ["EXECUTORS", "open_executor", "init_worker", "check_scheduler_address",
+           "CONNECT_TIMEOUT_S"]
+
+logger = logging.getLogger(__name__)
+
+EXECUTORS = ("serial", "process", "dask")
+#: Seconds to reach a Dask scheduler given by address before giving up.
+CONNECT_TIMEOUT_S = 10
+_ADDRESS = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9][A-Za-z0-9.-]*):"
+                      r"([0-9]{1,5})$")
+
+
+def check_scheduler_address(address: str) -> str:
+    """``tcp://HOST:PORT`` (or ``tls://``), port 1–65535; :class:`DatasetError` else."""
+    m = _ADDRESS.match(str(address).strip())
+    if m is None or not 1 <= int(m.group(3)) <= 65535:
+        raise DatasetError(f"scheduler: must be a Dask scheduler address tcp://HOST:PORT "
+                           f"(port 1-65535), got {address!r}")
+    return str(address).strip()
+
+
+def init_worker() -> None:
+    """Prepare a fresh worker process for renders: backend, variant, sensor plugin.
+
+    The backend is chosen on the worker (``MITSWEEP_BACKEND`` as the worker sees it),
+    never copied from the submitting process. A failure is logged, not raised: the
+    task that needs the backend raises it with its own message.
+    """
+    logging.getLogger("mitsweep").setLevel(logging.INFO)  # for the per-task logs
+    try:
+        from ..render.sensor import register
+
+        variant = register()  # selects the backend and the variant first
+        logger.info("worker ready: mitsuba variant %s, focalsweep sensor registered",
+                    variant)
+    except Exception as exc:  # BackendError, a missing library: the tasks will say
+        logger.warning("worker set-up failed (%s); its render tasks will fail", exc)
+
+
+class _ProcessPool(cf.Executor):
+    """A spawn-context process pool that replaces itself once broken (a process was
+    killed), so that the runner can submit the lost tasks again."""
+
+    def __init__(self, jobs: int) -> None:
+        self._jobs = jobs
+        self._pool = self._new()
+
+    def _new(self) -> cf.ProcessPoolExecutor:
+        return cf.ProcessPoolExecutor(max_workers=self._jobs, initializer=init_worker,
+                                      mp_context=multiprocessing.get_context("spawn"))
+
+    def submit(self, fn, /, *args, **kwargs):
+        try:
+            return self._pool.submit(fn, *args, **kwargs)
+        except cf.BrokenExecutor:
+            logger.warning("a worker process died; starting a new pool of %d", self._jobs)
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = self._new()
+            return self._pool.submit(fn, *args, **kwargs)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        self._pool.shutdown(wait=wait, cancel_futures=cancel_futures)
+
+
+@contextlib.contextmanager
+def open_executor(executor: str | cf.Executor = "serial", *, jobs: int = 2,
+                  scheduler: str | None = None
+                  ) -> Iterator[tuple[cf.Executor | None, tuple[type, ...]]]:
+    """The executor for a run and the exceptions that mean a lost worker.
+
+    Yields ``(None, ())`` for ``"serial"`` (the runner runs tasks itself). A pool or
+    cluster started here is shut down on exit; an Executor passed in is the caller's
+    and stays up.
+    """
+    if scheduler is not None:
+        scheduler = check_scheduler_address(scheduler)
+        if executor not in ("dask", "serial") or isinstance(executor, cf.Executor):
+            raise DatasetError(f"scheduler: needs the 'dask' executor, got {executor!r}")
+        executor = "dask"
+    if isinstance(executor, cf.Executor):
+        yield executor, _dask_lost_errors()
+        return
+    if executor not in EXECUTORS:
+        raise DatasetError(f"executor: must be one of {', '.join(EXECUTORS)} or a "
+                           f"concurrent.futures.Executor, got {executor!r}")
+    if not (isinstance(jobs, int) and not isinstance(jobs, bool) and jobs >= 1):
+        raise DatasetError(f"jobs: must be a positive integer, got {jobs!r}")
+    if executor == "serial":
+        yield None, ()
+    elif executor == "process":
+        pool = _ProcessPool(jobs)
+        try:
+            yield pool, ()
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+    else:
+        from .cluster import dask_executor
+
+        with dask_executor(jobs=jobs, scheduler=scheduler) as pool:
+            yield pool, _dask_lost_errors()
+
+
+def _dask_lost_errors() -> tuple[type, ...]:
+    """Dask's exceptions for a task whose workers died (when Dask is loaded)."""
+    import sys
+
+    if "distributed" not in sys.modules:
+        return ()
+    from distributed import KilledWorker
+    from distributed.comm import CommClosedError
+
+    return (KilledWorker, CommClosedError)

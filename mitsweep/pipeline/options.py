@@ -1,0 +1,150 @@
+"""What a dataset holds: :class:`DatasetOptions`, validated for the command line and
+for a manifest read back alike."""
+
+from __future__ import annotations
+
+import math
+import numbers
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from ..render.api import MODES  # the camera modes; render imports Mitsuba only when rendering
+from .runner import DatasetError
+
+__all__ = ["DatasetOptions", "options_from_dict", "MAX_SCENES", "MAX_LIGHT_LEVELS",
+           "MAX_BANK_DEPTHS", "MAX_SEED"]
+
+#: Most scene variations a dataset may hold (``DatasetOptions.scenes``); a manifest that
+#: claims more is refused before any work starts.
+MAX_SCENES = 10_000
+#: Most light levels and bank depths a dataset may hold.
+MAX_LIGHT_LEVELS = 32
+MAX_BANK_DEPTHS = 64
+#: Mitsuba's sampler seeds are 32-bit: scene i renders with seed + i.
+MAX_SEED = 2**32 - 1
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+
+def _is_real(v: Any) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+
+def _require(ok: bool, key: str, message: str) -> None:
+    if not ok:
+        raise DatasetError(f"{key}: {message}")
+
+
+def _positive_reals(values: Any, key: str, lo_count: int, hi_count: int) -> tuple[float, ...]:
+    _require(isinstance(values, (list, tuple)) and lo_count <= len(values) <= hi_count, key,
+             f"must be a list of {lo_count} to {hi_count} numbers, got {values!r}")
+    for v in values:
+        _require(_is_real(v) and math.isfinite(v) and v > 0, key,
+                 f"every value must be a finite number > 0, got {v!r}")
+    return tuple(float(v) for v in values)
+
+
+def _methods(values: Any) -> tuple[str, ...]:
+    from ..deconv import METHODS  # read now: the restoration methods known at run time
+
+    allowed = ", ".join(METHODS)
+    _require(isinstance(values, (list, tuple)) and len(values) >= 1, "methods",
+             f"must be a list of 1 or more of {allowed}, got {values!r}")
+    for m in values:
+        _require(isinstance(m, str) and m in METHODS, "methods",
+                 f"unknown restoration method {m!r}; allowed: {allowed}")
+    _require(len(set(values)) == len(values), "methods",
+             f"each method at most once, got {list(values)}")
+    return tuple(values)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatasetOptions:
+    """What a dataset holds. Seeds: scene i renders with ``seed + i`` (texture layout
+    ``scene.texture_seed + i``); noise of scene i at level j uses ``(seed, i, j)``.
+
+    Every field is validated here, for the command line and for a manifest read back
+    alike (:func:`options_from_dict`): ``scenes`` in [1, ``MAX_SCENES``], ``seed`` >= 0
+    with ``seed + scenes - 1`` <= ``MAX_SEED``, ``spp`` a positive integer per mode,
+    light levels (at most ``MAX_LIGHT_LEVELS``, distinct as file names) and bank depths
+    (1 to ``MAX_BANK_DEPTHS``) finite and > 0, ``methods`` names of
+    :data:`mitsweep.deconv.METHODS` (each makes its own EDOF images: ``wiener`` the
+    ``edof*`` items, another method ``m`` the ``edof_m*`` items).
+    """
+
+    scenes: int = 1
+    seed: int = 0
+    spp: dict = field(default_factory=lambda: {"pinhole": 16, "focused": 64, "sweep": 128,
+                                               "stopped": 64})
+    light_levels_lux: tuple[float, ...] = (50.0, 2.0, 0.5)
+    bank_depths_mm: tuple[float, ...] = (500.0,)
+    bank_rays: int | None = None
+    grid: tuple[int, int] = (9, 9)
+    stopped_f_number: float = 11.0
+    diffraction: bool = True
+    methods: tuple[str, ...] = ("wiener",)
+
+    def __post_init__(self) -> None:
+        _require(_is_int(self.scenes) and 1 <= self.scenes <= MAX_SCENES, "scenes",
+                 f"must be an integer in [1, {MAX_SCENES}], got {self.scenes!r}")
+        _require(_is_int(self.seed) and 0 <= self.seed <= MAX_SEED - (self.scenes - 1), "seed",
+                 f"must be an integer in [0, {MAX_SEED - (self.scenes - 1)}] (scene i uses "
+                 f"seed + i, a 32-bit seed), got {self.seed!r}")
+        _require(isinstance(self.spp, dict) and set(self.spp) == set(MODES), "spp",
+                 f"must give samples per pixel for exactly {', '.join(MODES)}, got "
+                 f"{self.spp!r}")
+        for mode in MODES:
+            v = self.spp[mode]
+            _require(_is_int(v) and v > 0, f"spp[{mode!r}]",
+                     f"must be a positive integer, got {v!r}")
+        lux = _positive_reals(self.light_levels_lux, "light_levels_lux", 0, MAX_LIGHT_LEVELS)
+        names = [f"{x:g}" for x in lux]
+        _require(len(set(names)) == len(names), "light_levels_lux",
+                 f"levels must differ (as file names: {', '.join(names)})")
+        depths = _positive_reals(self.bank_depths_mm, "bank_depths_mm", 1, MAX_BANK_DEPTHS)
+        _require(self.bank_rays is None or (_is_int(self.bank_rays) and self.bank_rays > 0),
+                 "bank_rays", f"must be a positive integer or null, got {self.bank_rays!r}")
+        _require(isinstance(self.grid, (list, tuple)) and len(self.grid) == 2
+                 and all(_is_int(g) and 1 <= g <= 256 for g in self.grid), "grid",
+                 f"must be two integers in [1, 256], got {self.grid!r}")
+        _require(_is_real(self.stopped_f_number) and math.isfinite(self.stopped_f_number)
+                 and self.stopped_f_number > 0, "stopped_f_number",
+                 f"must be a finite number > 0, got {self.stopped_f_number!r}")
+        _require(isinstance(self.diffraction, bool), "diffraction",
+                 f"must be true or false, got {self.diffraction!r}")
+        methods = _methods(self.methods)
+        object.__setattr__(self, "spp", {m: int(self.spp[m]) for m in MODES})
+        object.__setattr__(self, "light_levels_lux", lux)
+        object.__setattr__(self, "bank_depths_mm", depths)
+        object.__setattr__(self, "grid", tuple(int(g) for g in self.grid))
+        object.__setattr__(self, "methods", methods)
+
+    def as_dict(self) -> dict:
+        return {"scenes": self.scenes, "seed": self.seed, "spp": dict(self.spp),
+                "light_levels_lux": list(self.light_levels_lux),
+                "bank_depths_mm": list(self.bank_depths_mm), "bank_rays": self.bank_rays,
+                "grid": list(self.grid), "stopped_f_number": self.stopped_f_number,
+                "diffraction": self.diffraction, "methods": list(self.methods)}
+
+
+#: Keys a manifest's options may omit (datasets written before they existed), with the
+#: value those datasets were made with.
+_ADDED_LATER = {"methods": ["wiener"]}
+
+
+def options_from_dict(d: Any) -> DatasetOptions:
+    """:class:`DatasetOptions` from a manifest's ``options`` (the keys of
+    :meth:`DatasetOptions.as_dict`, all required but ``methods``, no others); raises
+    :class:`DatasetError` naming the field."""
+    names = [f.name for f in fields(DatasetOptions)]
+    _require(isinstance(d, dict), "options", f"must be an object, got {type(d).__name__}")
+    unknown = sorted(set(d) - set(names))
+    missing = [k for k in names if k not in d and k not in _ADDED_LATER]
+    _require(not unknown, "options", f"unknown keys {unknown}")
+    _require(not missing, "options", f"missing keys {missing}")
+    try:
+        return DatasetOptions(**{**_ADDED_LATER, **d})
+    except DatasetError as exc:
+        raise DatasetError(f"options.{exc}") from None

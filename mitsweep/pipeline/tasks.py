@@ -1,0 +1,227 @@
+"""The dataset's tasks, each declared once (:func:`plan`), and what they compute.
+
+Per scene variation: the pinhole ground truth (with the depth and mirror-mask AOVs), the
+``focused``, ``sweep`` and ``stopped`` renders, noisy versions at chosen light levels
+(the paper's Fig. 10 settings: sweep F2.8 0.6 s ISO 100, stopped F11 0.6 s ISO 1600),
+and EDOF images deconvolved from the sweeps with the IPSF bank, traced once for the
+dataset. Every task function takes the :class:`~mitsweep.config.Setup` itself, the path
+it writes and its inputs and parameters as keywords; what it returns (timings) goes to
+the task's log, not into its file, so one task always writes the same bytes.
+
+Diffraction: the renders are geometric; the thin-lens images (focused, sweep, stopped)
+are convolved with the lens's pixel-integrated Airy PSF at 550 nm (``diffraction=True``),
+which is what the paper holds against stopping down. The ground truth stays ideal.
+
+Radiometry: renders are linear radiance. Relative exposure 1.0 (the noise model's
+reference level, reflectance ``SensorNoise.reflectance`` under the scene illuminance) is
+the 99th percentile of the ground truth inside the mirror's image; all images of a scene
+are divided by that same level before noise and metrics (data range 1).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import Setup
+from ..io import read_exr, write_exr
+from ..io.exr import stack_channels
+from ..render.api import MODES  # the camera modes; render imports Mitsuba only when rendering
+from .options import DatasetOptions
+from .runner import DatasetError, Task
+
+__all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "trace_bank",
+           "add_noise", "restore", "edof_name", "NOISE_PIXEL_MM", "DECONV_PRIOR",
+           "WHITE_PERCENTILE", "BANK"]
+
+logger = logging.getLogger(__name__)
+
+WHITE_PERCENTILE = 99.0
+#: Pixel of the camera whose noise the noisy images carry, mm: a DSLR of the paper's
+#: era (6.4 µm, whose ~60 000 e⁻ full well is the noise model's default). The renders
+#: use larger synthetic pixels so that the mirror's image fits a small frame; each
+#: rendered pixel gets the noise of one such camera pixel (not of an 18 µm pixel, which
+#: would collect 8× the light and saturate the modelled full well).
+NOISE_PIXEL_MM = 0.0064
+#: Wiener prior of the EDOF images (see :func:`restore`).
+DECONV_PRIOR = "natural"
+#: The dataset's IPSF bank (one for every scene).
+BANK = "bank.npz"
+#: Run information the renderer puts in its metadata that differs between runs: it
+#: goes to the task's log, not into the file.
+_RENDER_TIMINGS = ("render_s", "load_and_render_s", "aov_s")
+
+
+def scene_setup(setup: Setup, index: int) -> Setup:
+    """Scene variation ``index``: the texture layout ``scene.texture_seed + index``."""
+    return replace(setup, scene=replace(setup.scene,
+                                        texture_seed=setup.scene.texture_seed + index))
+
+
+def read_rgb(path) -> tuple[np.ndarray, dict, dict]:
+    """An EXR's RGB image (H, W, 3), all its channels and its metadata."""
+    chans, meta = read_exr(path)
+    return stack_channels(chans), chans, meta
+
+
+def white_level(pinhole: np.ndarray, mask: np.ndarray) -> float:
+    """Relative exposure 1.0: the 99th percentile of the ground truth in the mask."""
+    values = pinhole[mask > 0] if mask is not None and np.any(mask > 0) else pinhole
+    level = float(np.percentile(values, WHITE_PERCENTILE))
+    if not level > 0:
+        raise DatasetError("the ground-truth image is black inside the mirror: nothing to "
+                           "normalise by (check the scene's lighting)")
+    return level
+
+
+# -- the tasks --------------------------------------------------------------------------
+
+def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: int,
+           f_number: float | None, diffraction: bool) -> dict:
+    """Render scene variation ``scene`` in ``mode`` (the pinhole one with the depth and
+    mask AOVs); ``f_number``: the stopped mode's; ``diffraction``: add the lens's."""
+    from ..optics.diffraction import add_diffraction
+    from ..render import render_image, render_to_exr
+
+    s = scene_setup(setup, scene)
+    aovs = ("depth", "mask") if mode == "pinhole" else ()
+    result = render_image(s, mode, spp=spp, seed=seed, aovs=aovs, f_number=f_number)
+    timings = {k: result.metadata.pop(k) for k in _RENDER_TIMINGS if k in result.metadata}
+    result.metadata["scene_index"] = scene
+    if diffraction:
+        n = f_number if mode == "stopped" else s.lens.f_number
+        result.image = add_diffraction(result.image, n, s.sensor.pixel_pitch)
+        result.metadata["diffraction"] = {"f_number": n, "wavelength_nm": 550.0,
+                                          "model": "pixel-integrated Airy PSF"}
+    render_to_exr(out, result)
+    return timings
+
+
+def trace_bank(setup: Setup, out: Path, *, depths: list, rays: int | None, grid: list,
+               seed: int) -> dict:
+    """Trace the IPSF bank: radial for a rotationally symmetric setup, else a grid."""
+    from ..io.bank import bank_kernel_size, save_bank
+    from ..tracer import ipsf_bank
+
+    kind = "radial" if setup.mirror.is_symmetric else "grid"
+    kw: dict[str, Any] = {"kind": kind, "depths": tuple(depths), "seed": seed,
+                          "kernel_size": bank_kernel_size(setup.sensor.pixel_pitch)}
+    if rays:
+        kw["rays"] = rays
+    if kind == "grid":
+        kw["grid"] = tuple(grid)
+    bank = ipsf_bank(setup, **kw)
+    seconds = bank.metadata.pop("seconds", None)
+    save_bank(out, bank, reproducible=True)
+    return {"trace_s": seconds}
+
+
+def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: float,
+              f_number: float, iso: float, exposure_s: float, pixel_pitch: float,
+              seed: list) -> dict:
+    """The sensor noise of ``lux`` with these camera settings on ``image``, in relative
+    exposure (the ground truth's white level); stored in the renders' units."""
+    from ..deconv import SensorNoise
+
+    gt, chans, _ = read_rgb(ground_truth)
+    level = white_level(gt, chans.get("mask.Y"))
+    img, _, meta = read_rgb(image)
+    noise = SensorNoise(illuminance_lux=lux, exposure_s=exposure_s, f_number=f_number,
+                        pixel_pitch=pixel_pitch, iso=iso)
+    info: dict = {}
+    noisy = noise.apply(np.maximum(img / level, 0.0).astype(np.float32),
+                        np.random.default_rng(list(seed)), info=info)
+    meta = dict(meta, noise=noise.as_dict(), noise_seed=list(seed), white_level=level,
+                units="relative exposure", nsr=noise.nsr(0.5), **info)
+    write_exr(out, noisy * level, metadata=meta)
+    return {}
+
+
+def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
+            nsr: float | None) -> dict:
+    """Deconvolve ``image`` with ``method``; Wiener with NSR = max(the noise model's,
+    the image's own estimate).
+
+    The noise model's NSR (``nsr``) covers sensor noise only; Monte Carlo noise of the
+    render and the residual mismatch between the bank and the image are not in it, and a
+    Wiener filter regularised below them amplifies them without bound (measured: 50-lux
+    EDOF at the model's NSR 5e-5 lost 9 dB against the un-deconvolved sweep). The image's
+    estimate assumes a white signal spectrum, so it goes with the natural-image (1/f²)
+    prior: on the demo's sphere that pair came within 0.1 dB of the best hand-tuned
+    constant NSR at 50 and 2 lux and beat it at 0.5 and 0.1 lux (README). Other methods
+    get the same NSR, their noise level.
+    """
+    from ..deconv import deconvolve, estimate_nsr
+    from ..io.bank import load_bank
+
+    img, _, meta = read_rgb(image)
+    ipsf = load_bank(bank)
+    estimated = estimate_nsr(img)
+    used = max(estimated, nsr) if nsr is not None else estimated
+    kw: dict[str, Any] = {"nsr": used}
+    if method == "wiener":
+        kw["prior"] = DECONV_PRIOR
+    t0 = time.perf_counter()
+    restored = deconvolve(img.astype(np.float32), ipsf, method=method, **kw)
+    seconds = time.perf_counter() - t0
+    meta = dict(meta, deconvolved_from=Path(image).name, bank=Path(bank).name,
+                method=method, nsr=used, nsr_model=nsr, nsr_estimated=estimated)
+    write_exr(out, restored, metadata=meta)
+    return {"deconvolve_s": seconds}
+
+
+# -- the plan ---------------------------------------------------------------------------
+
+def edof_name(method: str, suffix: str = "") -> str:
+    """The EDOF image's stem: ``edof`` for Wiener (its evaluation key since the first
+    datasets), ``edof_<method>`` for another method; ``suffix`` e.g. ``_50lux``."""
+    return ("edof" if method == "wiener" else f"edof_{method}") + suffix
+
+
+def plan(opts: DatasetOptions) -> list[Task]:
+    """Every task of a dataset with ``opts``, inputs first; each scene is one shard
+    group, the bank is shared. Task names are the items' paths in the directory."""
+    from ..deconv import paper_fig10_settings
+
+    tasks = [Task(BANK, trace_bank, {"depths": list(opts.bank_depths_mm),
+                                     "rays": opts.bank_rays, "grid": list(opts.grid),
+                                     "seed": opts.seed})]
+    settings = [paper_fig10_settings(NOISE_PIXEL_MM, lux) for lux in opts.light_levels_lux]
+    for i in range(opts.scenes):
+        d = f"scene_{i:03d}"
+
+        def add(name: str, fn, params: dict, inputs: dict | None = None) -> None:
+            tasks.append(Task(f"{d}/{name}", fn, params, inputs or {}, group=i))
+
+        for mode in MODES:
+            add(f"{mode}.exr", render,
+                {"scene": i, "mode": mode, "spp": opts.spp[mode], "seed": opts.seed + i,
+                 "f_number": opts.stopped_f_number if mode == "stopped" else None,
+                 "diffraction": opts.diffraction and mode != "pinhole"})
+        for m in opts.methods:
+            add(f"{edof_name(m)}.exr", restore, {"method": m, "nsr": None},
+                {"image": f"{d}/sweep.exr", "bank": BANK})
+        for j, lux in enumerate(opts.light_levels_lux):
+            for mode in ("sweep", "stopped"):
+                s = settings[j][mode]
+                add(f"{mode}_{lux:g}lux.exr", add_noise,
+                    {"lux": lux, "f_number": s.f_number, "iso": s.iso,
+                     "exposure_s": s.exposure_s, "pixel_pitch": NOISE_PIXEL_MM,
+                     "seed": [opts.seed, i, j]},
+                    {"ground_truth": f"{d}/pinhole.exr", "image": f"{d}/{mode}.exr"})
+            nsr = settings[j]["sweep"].nsr(0.5)
+            for m in opts.methods:
+                add(f"{edof_name(m, f'_{lux:g}lux')}.exr", restore,
+                    {"method": m, "nsr": nsr},
+                    {"image": f"{d}/sweep_{lux:g}lux.exr", "bank": BANK})
+    return tasks
+
+
+def item_names(opts: DatasetOptions) -> list[str]:
+    """The items (paths relative to the dataset directory) of a dataset with ``opts``."""
+    return [t.name for t in plan(opts)]
