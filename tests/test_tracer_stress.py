@@ -64,7 +64,7 @@ def test_random_setups_trace_cleanly(case):
     # QMC with 2^16 / 2^19 rays: relative error ~1e-3; bound 2 %.
     def flux(p, n):
         r = trace_arrays(geom, p, n)
-        area = (p.a1 - p.a0) * (p.b1 - p.b0)
+        area = p.area  # the fitted ellipse's, or the box's
         return r["weight"][r["landed_free"]].sum() * area / n, r
     e_fit, r = flux(params, 1 << 16)
     for key in ("Au", "Av", "Bu", "Bv", "weight"):

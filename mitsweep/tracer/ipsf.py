@@ -20,7 +20,8 @@ image (−v), column = right (+u), the chief-ray image at ``[K//2, K//2]``.
 
 Sampling is importance-driven and adaptive: rays are drawn in a box of the aim plane
 (perpendicular to the chief ray at the mirror point) fitted by pilot passes to the
-rays that reach the lens aperture, so typically ~75 % of traced rays land.
+rays that reach the lens aperture, or in an ellipse fitted inside it, so typically ~90 %
+of traced rays land.
 """
 
 from __future__ import annotations
@@ -71,12 +72,17 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
     edge and shrink it to their bounding box (plus three lattice spacings) while it is
     loose; the box returned is always one a pilot pass found no landed ray near the
     edges of. The rim is ignored here so that the vignetted fraction can be measured.
+    Where a validated ellipse around the footprint is smaller than the box, the rays are
+    drawn in the ellipse instead (:func:`_fit_ellipse`): ~90 % of them then land, against
+    ~71 % (an ellipse fills π/4 of its bounding box).
 
     Returns
     -------
     params : TraceParams
     info : dict
-        ``pilot_rays`` traced, ``box_mm`` (a0, a1, b0, b1).
+        ``pilot_rays`` traced, ``box_mm`` (a0, a1, b0, b1), ``ellipse_mm`` (the
+        sampling ellipse ``(ca, cb, m00, m01, m10, m11)`` of :class:`TraceParams`, or None
+        where the box is used).
 
     Raises
     ------
@@ -147,7 +153,55 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
         a0, a1 = min(a0, sa.min() - 3 * ga), max(a1, sa.max() + 3 * ga)
         b0, b1 = min(b0, sb.min() - 3 * gb), max(b1, sb.max() + 3 * gb)
     params = TraceParams(a0, a1, b0, b1, seed=seed)
-    return params, {"pilot_rays": traced, "box_mm": [a0, a1, b0, b1]}
+    ellipse, n_pilot = _fit_ellipse(geom, params, seed=seed, double=double)
+    traced += n_pilot
+    if ellipse is not None:
+        params = TraceParams(a0, a1, b0, b1, seed=seed, ellipse=ellipse)
+    return params, {"pilot_rays": traced, "box_mm": [a0, a1, b0, b1],
+                    "ellipse_mm": None if ellipse is None else list(ellipse)}
+
+
+def _fit_ellipse(geom, box: TraceParams, *, seed: int, double: bool):
+    """An ellipse around the footprint the box holds, if it is validated and smaller.
+
+    The landed rays of a pilot pass in the box are whitened by their covariance; the
+    ellipse is their largest whitened radius ρ plus three lattice spacings
+    ``ρ √(π / n_landed)``. A pilot pass in the ellipse then must find no landed ray within
+    1.5 of its lattice spacings of its edge (else it grows by 25 %, at most 3 times); an ellipse not
+    smaller than 0.9 of the box is not used. Returns ``(ellipse or None, pilot rays)``.
+    """
+    r = trace_arrays(geom, box, _PILOT, double=double, keys=_PILOT_KEYS)
+    traced = _PILOT
+    ok = r["landed_free"]
+    if ok.sum() < 256:
+        return None, traced
+    pts = np.stack([r["a"][ok], r["b"][ok]], axis=1)
+    centre = pts.mean(axis=0)
+    try:
+        chol = np.linalg.cholesky(np.cov(pts, rowvar=False))
+    except np.linalg.LinAlgError:  # a degenerate (line-like) footprint
+        return None, traced
+    rho = np.sqrt(((np.linalg.solve(chol, (pts - centre).T)) ** 2).sum(axis=0)).max()
+    spacing = rho * math.sqrt(math.pi / ok.sum())
+    radius = rho + 3.0 * spacing
+    for _ in range(4):
+        m = chol * radius
+        ellipse = (float(centre[0]), float(centre[1]), float(m[0, 0]), float(m[0, 1]),
+                   float(m[1, 0]), float(m[1, 1]))
+        trial = TraceParams(box.a0, box.a1, box.b0, box.b1, seed=seed + 15485863,
+                            ellipse=ellipse)
+        if trial.area > 0.9 * box.area:
+            return None, traced
+        r = trace_arrays(geom, trial, _PILOT, double=double, keys=_PILOT_KEYS)
+        traced += _PILOT
+        ok = r["landed_free"]
+        pts = np.stack([r["a"][ok], r["b"][ok]], axis=1)
+        z = np.sqrt(((np.linalg.solve(chol, (pts - centre).T)) ** 2).sum(axis=0))
+        # the trial's own lattice spacing, whitened: radius · sqrt(π / n)
+        if not ok.any() or z.max() < radius * (1.0 - 1.5 * math.sqrt(math.pi / _PILOT)):
+            return (ellipse if ok.any() else None), traced
+        radius *= 1.25
+    return None, traced
 
 
 def sweep_cdf(motion: MotionProfile, n: int = _SENSOR_TABLE) -> np.ndarray | None:
@@ -273,6 +327,7 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         "depth_mm": source.depth,
         "reference_sensor_distance_mm": source.reference_sensor_distance,
         "box_mm": box_info["box_mm"],
+        "ellipse_mm": box_info["ellipse_mm"],
         "seed": int(seed),
         "seconds": elapsed,
         "precision": "float64" if double else "float32",

@@ -108,13 +108,31 @@ class Geometry:
 
 @dataclass(frozen=True)
 class TraceParams:
-    """Sampling box in the aim plane (mm) and the sample stream."""
+    """Sampling domain in the aim plane (mm) and the sample stream.
+
+    Samples are uniform in the box ``[a0, a1] × [b0, b1]``, or, with ``ellipse =
+    (ca, cb, m00, m01, m10, m11)``, uniform in the ellipse ``(a, b) = c + M x`` over the
+    unit disc ``|x| ≤ 1`` (the lattice mapped by the area-preserving polar map
+    ``x = √u (cos 2πv, sin 2πv)``), which fits a pupil's footprint more closely than its
+    bounding box. The polar map keeps the rank-1 lattice's quality (periodic in ``v``;
+    measured: the same or lower L1 per ray than the box, where Shirley & Chiu's
+    concentric map, with its kinks on the diagonals, gave 1.3–1.5× higher).
+    """
 
     a0: float
     a1: float
     b0: float
     b1: float
     seed: int = 0
+    ellipse: tuple | None = None
+
+    @property
+    def area(self) -> float:
+        """Area of the sampling domain, mm² (the flux estimate's scale)."""
+        if self.ellipse is not None:
+            m00, m01, m10, m11 = self.ellipse[2:]
+            return math.pi * abs(m00 * m11 - m01 * m10)
+        return (self.a1 - self.a0) * (self.b1 - self.b0)
 
 
 def _types(double: bool):
@@ -148,8 +166,16 @@ def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: boo
 
     ua, ub, ut = lattice(0), lattice(1), lattice(2)
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731 - compile once, update values
-    a = op(params.a0) + (op(params.a1) - op(params.a0)) * ua
-    b = op(params.b0) + (op(params.b1) - op(params.b0)) * ub
+    if params.ellipse is None:
+        a = op(params.a0) + (op(params.a1) - op(params.a0)) * ua
+        b = op(params.b0) + (op(params.b1) - op(params.b0)) * ub
+    else:
+        rad = dr.sqrt(ua)  # uniform on the unit disc
+        sin_p, cos_p = dr.sincos((2.0 * math.pi) * ub)
+        xd, yd = rad * cos_p, rad * sin_p
+        ca, cb, m00, m01, m10, m11 = (op(x) for x in params.ellipse)
+        a = ca + m00 * xd + m01 * yd
+        b = cb + m10 * xd + m11 * yd
 
     inv_l = 0.0 if math.isinf(geom.depth) else 1.0 / geom.depth
     inv_l = op(inv_l)
