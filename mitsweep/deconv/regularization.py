@@ -70,7 +70,7 @@ def noise_sigma(image: np.ndarray, noise=None) -> float:
         σ, at least 1 % of the image's standard deviation (as
         :data:`~mitsweep.deconv.wiener.DEFAULT_NSR_FLOOR`: a noiseless render still
         carries ~1e-4 relative error, and a zero σ would leave spectral zeros
-        unregularised); 0 only for a constant image.
+        unregularised), and at least 1e-6 (1 + max |image|).
     """
     img = np.asarray(image, dtype=np.float64)
     floor = float(np.sqrt(DEFAULT_NSR_FLOOR)) * float(np.std(img))
@@ -84,7 +84,9 @@ def noise_sigma(image: np.ndarray, noise=None) -> float:
         s = float(np.sqrt(noise.variance(max(float(np.mean(img)), 0.0))))
     else:
         raise ValueError(f"noise must be a SensorNoise, a sigma or None, got {noise!r}")
-    return max(s, floor)
+    # and never exactly 0: a constant image would otherwise get no regularisation,
+    # which a kernel's spectral zeros turn into a division by zero
+    return max(s, floor, 1e-6 * (1.0 + float(np.max(np.abs(img), initial=0.0))))
 
 
 def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,

@@ -1,0 +1,200 @@
+"""Prior-based restoration (HQS with TV / hyper-Laplacian, damped Richardson–Lucy) and
+its calibrated regularisation, on images and blurs the constants were not tuned on."""
+
+import numpy as np
+import pytest
+from skimage import color, data
+
+from mitsweep.deconv import METHODS, deconvolve
+from mitsweep.deconv.metrics import disk_mask, psnr
+from mitsweep.deconv.regularization import discrepancy_nsr, noise_sigma
+from mitsweep.deconv.solvers import (hqs_deconvolve, richardson_lucy,
+                                     shrink_hyper_laplacian, shrink_tv)
+from mitsweep.deconv.spatial import spatially_varying_blur
+from mitsweep.deconv.synthetic import synthetic_grid_bank, synthetic_radial_bank
+from mitsweep.deconv.operators import polar_operator
+from mitsweep.deconv.wiener import wiener_deconvolve
+
+S = 128
+# the validation blur: wider than the one the weights were tuned on (core 0.7, radial
+# 2.5, tangential 1.5, K = 15)
+BLUR = dict(core=1.0, radial=3.5, tangential=2.0)
+KS = 15
+
+
+def _scene():
+    """Photographs the tuning mosaic does not use, 64 px tiles, in [0, 1]."""
+    tiles = []
+    for name in ("immunohistochemistry", "hubble_deep_field", "retina", "cat"):
+        im = getattr(data, name)()
+        im = color.rgb2gray(im[..., :3]) if im.ndim == 3 else im / 255.0
+        tiles.append(im[200:264, 200:264])
+    x = np.vstack([np.hstack(tiles[:2]), np.hstack(tiles[2:])])
+    return x / x.max()
+
+
+@pytest.fixture(scope="module")
+def problem():
+    m = disk_mask((S, S), 0.47 * S)
+    sharp = np.where(m, _scene(), 0.0)
+    fine = synthetic_grid_bank((S, S), (25, 25), size=KS, r_max_px=0.47 * S, **BLUR)
+    blurred = spatially_varying_blur(sharp, fine)
+    bank = synthetic_radial_bank((S, S), size=KS, r_max_px=0.47 * S, n_radii=13, **BLUR)
+    return dict(sharp=sharp, blurred=blurred, bank=bank, mask=m)
+
+
+def _noisy(p, sigma, seed=1):
+    rng = np.random.default_rng(seed)
+    return (p["blurred"] + sigma * rng.standard_normal(p["blurred"].shape)).astype(np.float32)
+
+
+def _score(p, x):
+    return psnr(x, p["sharp"], mask=p["mask"])
+
+
+@pytest.mark.parametrize("prior", ["tv", "hyperlaplacian"])
+@pytest.mark.parametrize("sigma", [0.003, 0.02])
+def test_prior_methods_beat_calibrated_wiener_on_unseen_images_and_blur(problem, prior, sigma):
+    y = _noisy(problem, sigma)
+    wien = _score(problem, deconvolve(y, problem["bank"], method="wiener"))
+    hqs = _score(problem, deconvolve(y, problem["bank"], method=prior))
+    # at 256 px with 50 lux noise these images gained 1.5-1.8 dB over calibrated
+    # Wiener; 0.5 dB is the bar for 128 px (a wrong x-step or sign loses all of it)
+    assert hqs > wien + 0.5
+
+
+@pytest.mark.parametrize("prior", ["tv", "hyperlaplacian"])
+@pytest.mark.parametrize("sigma", [
+    0.003,
+    pytest.param(0.01, marks=pytest.mark.xfail(
+        strict=True, reason="known shortfall: at σ = 0.01 on these 128 px images the "
+        "MAP weight over-regularises (TV measured 0.73 dB below the best of the sweep)"))])
+def test_calibrated_weight_is_near_the_best_of_a_sweep(problem, prior, sigma):
+    y = _noisy(problem, sigma)
+    info = {}
+    calibrated = _score(problem, hqs_deconvolve(y, problem["bank"], prior=prior, info=info))
+    lam = info["weight"]
+    best = max(_score(problem, hqs_deconvolve(y, problem["bank"], prior=prior, weight=lam * f))
+               for f in (0.25, 0.5, 2.0, 4.0))
+    # measured at 256 px: within 0.35 dB of the best of λ/4 … 4λ; 0.5 dB is the bar
+    assert calibrated > best - 0.5
+
+
+@pytest.mark.xfail(strict=True, reason="open: the re-blurred residual's rms is 1.14 σ, not "
+                   "σ (measured); the Fourier-domain residual and this check disagree")
+def test_discrepancy_nsr_leaves_the_noise_as_residual():
+    rng = np.random.default_rng(5)
+    sharp = color.rgb2gray(data.astronaut())[:128, :128]
+    psf = np.outer(np.hanning(9), np.hanning(9))
+    psf /= psf.sum()
+    from scipy.signal import fftconvolve
+    blurred = fftconvolve(sharp, psf, mode="same")
+    sigma = 0.01
+    y = blurred + sigma * rng.standard_normal(blurred.shape)
+    nsr = discrepancy_nsr(y, psf, sigma)
+    x = wiener_deconvolve(y, psf, nsr=nsr, pad=0, pad_mode="wrap")
+    res = y - fftconvolve(x, psf, mode="same")
+    inner = (slice(16, -16),) * 2
+    # the residual's rms equals σ by construction (the Fourier-domain residual is
+    # computed without padding, so the border is left out here); 10 % covers it
+    assert abs(np.sqrt(np.mean(res[inner] ** 2)) / sigma - 1) < 0.1
+
+
+def test_noise_sigma_from_model_number_or_image():
+    from mitsweep.deconv.noise import SensorNoise
+    img = np.full((64, 64), 0.5) + 0.01 * np.random.default_rng(0).standard_normal((64, 64))
+    assert abs(noise_sigma(img) / 0.01 - 1) < 0.1
+    assert noise_sigma(img, 0.02) == 0.02
+    model = SensorNoise(illuminance_lux=50, exposure_s=0.6, f_number=2.8, pixel_pitch=0.0064)
+    assert noise_sigma(img, model) == pytest.approx(np.sqrt(model.variance(0.5)), rel=1e-3)
+    with pytest.raises(ValueError, match="noise"):
+        noise_sigma(img, "loud")
+
+
+def test_hyper_laplacian_shrinkage_is_the_brute_force_minimiser():
+    v = np.linspace(-3, 3, 121)
+    tau, alpha = 0.7, 2 / 3
+    w = np.linspace(-4, 4, 80001)
+    brute = w[np.argmin(tau * np.abs(w[None]) ** alpha + 0.5 * (w[None] - v[:, None]) ** 2,
+                        axis=1)]
+    # grid step 1e-4; the table is interpolated on a 4096-point geometric grid
+    np.testing.assert_allclose(shrink_hyper_laplacian(v, tau, alpha), brute, atol=2e-3)
+
+
+def test_tv_shrinkage_soft_thresholds_the_gradient_magnitude():
+    g1, g2 = np.array([3.0, 0.3]), np.array([4.0, 0.4])
+    z1, z2 = shrink_tv(g1, g2, 1.0)
+    np.testing.assert_allclose(np.hypot(z1, z2), [4.0, 0.0])
+
+
+def _box_bank(kind):
+    # a 5x5 box: its transfer function has exact zeros
+    if kind == "radial":
+        bank = synthetic_radial_bank((64, 64), size=5, n_radii=5)
+    else:
+        bank = synthetic_grid_bank((64, 64), (3, 3), size=5)
+    bank.kernels[:] = 1.0 / 25
+    return bank
+
+
+_RL_BORDER = pytest.mark.xfail(strict=True, reason="open: RL's zero-boundary operator "
+                               "loses light at the image border and the mismatch walks "
+                               "inward; a saturated constant comes back 6-13 % off inside")
+
+
+@pytest.mark.parametrize("kind", ["radial", "grid"])
+@pytest.mark.parametrize("method,case", [
+    (m, c) if (m, c) != ("rl", "saturated") else pytest.param(m, c, marks=_RL_BORDER)
+    for m in METHODS for c in ("black", "saturated", "noise-free", "noisy")])
+def test_methods_stay_finite_on_spectral_zeros_black_and_saturated_images(kind, method, case):
+    bank = _box_bank(kind)
+    rng = np.random.default_rng(0)
+    base = rng.random((64, 64))
+    img = {"black": np.zeros((64, 64)), "saturated": np.full((64, 64), 1.53),
+           "noise-free": base, "noisy": base + 0.3 * rng.standard_normal((64, 64))}[case]
+    out = deconvolve(img.astype(np.float32), bank, method=method)
+    assert out.dtype == np.float32
+    assert np.all(np.isfinite(out))
+    # no blow-up: bounded by a few times the input's range
+    assert np.max(np.abs(out)) <= 10 * max(1.0, float(np.max(np.abs(img))))
+    if case in ("black", "saturated"):
+        # a constant is restored as itself (unit-sum kernels, DC exempt)
+        np.testing.assert_allclose(out[16:-16, 16:-16], img[0, 0], atol=1e-3 * (1 + img[0, 0]))
+
+
+def test_richardson_lucy_restores_and_stops_by_its_rule(problem):
+    y = _noisy(problem, 0.003)
+    op = polar_operator(problem["bank"], (S, S))
+    info = {}
+    x = richardson_lucy(y, op, info=info)
+    assert info["stopped_by"] in ("discrepancy", "converged", "iterations")
+    assert np.all(x >= 0) and np.all(np.isfinite(x))
+    # measured +3 dB over the blurred image at 256 px (50 lux); 1.5 dB is the bar
+    assert _score(problem, x) > _score(problem, y) + 1.5
+
+
+def test_hqs_on_a_grid_bank_restores_too(problem):
+    grid = synthetic_grid_bank((S, S), (5, 5), size=KS, r_max_px=0.47 * S, **BLUR)
+    y = _noisy(problem, 0.003)
+    x = deconvolve(y, grid, method="tv")
+    # the tiled x-step: measured +4 dB over the blurred image; 2 dB is the bar
+    assert _score(problem, x) > _score(problem, y) + 2
+
+
+def test_time_limit_bounds_the_iterations(problem):
+    y = _noisy(problem, 0.003)
+    info = {}
+    hqs_deconvolve(y, problem["bank"], iterations=50, time_limit_s=0.0, info=info)
+    assert info["steps"] == 1
+
+
+def test_deconvolve_refuses_arguments_a_method_does_not_take(problem):
+    y = _noisy(problem, 0.003)
+    with pytest.raises(ValueError, match="allowed: wiener, rl, tv, hyperlaplacian"):
+        deconvolve(y, problem["bank"], method="lucy")
+    with pytest.raises(ValueError, match="no weight"):
+        deconvolve(y, problem["bank"], method="rl", weight=1.0)
+    with pytest.raises(ValueError, match="not iterative"):
+        deconvolve(y, problem["bank"], method="wiener", iterations=3)
+    with pytest.raises(ValueError, match="weight must be"):
+        deconvolve(y, problem["bank"], method="tv", weight=-1.0)
