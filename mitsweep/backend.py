@@ -2,11 +2,18 @@
 
 Dr.Jit's LLVM (CPU) backend aborts the whole process on libLLVM < 19 ("LLVM ERROR:
 Cannot select … fminimum"). :func:`select_backend` inspects the library without
-compiling anything and picks, in order: CUDA when a GPU is usable, LLVM when
-libLLVM >= 19 is loaded, otherwise it raises :class:`BackendError` with a one-line
-instruction. ``MITSWEEP_BACKEND=cuda|llvm|scalar`` forces a choice; ``scalar`` is the
+compiling anything and picks, in order: CUDA when a GPU is usable (Dr.Jit initialised
+its CUDA backend and found a device), LLVM when libLLVM >= 19 is loaded, otherwise it
+raises :class:`BackendError` with a one-line instruction. ``MITSWEEP_BACKEND=cuda|llvm|
+scalar`` forces a choice (``llvm`` keeps a GPU machine on the CPU); ``scalar`` is the
 documented slow fallback for Mitsuba only (Python sensors run ~40× slower there, and the
-tracer refuses it).
+tracer refuses it). The tracer then uses ``drjit.cuda`` or ``drjit.llvm``
+(:func:`drjit_module`) and Mitsuba ``cuda_ad_rgb`` or ``llvm_ad_rgb``
+(:func:`set_mitsuba_variant`); a CUDA variant that Mitsuba cannot set (no OptiX in the
+driver) falls back to LLVM with a warning unless CUDA was asked for.
+
+:func:`describe_machine` says what a benchmark ran on (CPU, cores, memory, load, GPU,
+the versions and the backend chosen), without compiling a kernel.
 """
 
 from __future__ import annotations
@@ -14,9 +21,13 @@ from __future__ import annotations
 import functools
 import logging
 import os
+import platform
+import shutil
+import subprocess
+import sys
 
 __all__ = ["BackendError", "MIN_LLVM", "llvm_version", "select_backend", "mitsuba_variant",
-           "set_mitsuba_variant", "drjit_module"]
+           "set_mitsuba_variant", "drjit_module", "cuda_devices", "describe_machine"]
 
 logger = logging.getLogger(__name__)
 
@@ -89,13 +100,29 @@ def mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str:
 
 
 def set_mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str:
-    """Select the Mitsuba variant (idempotent) and return its name."""
+    """Select the Mitsuba variant (idempotent) and return its name.
+
+    An automatic CUDA choice that Mitsuba refuses (its CUDA variants also need OptiX,
+    which comes with the NVIDIA driver) falls back to the LLVM variant with a warning;
+    a requested one (``prefer`` or ``$MITSWEEP_BACKEND``) raises :class:`BackendError`.
+    """
     import mitsuba as mi
 
     variant = mitsuba_variant(spectrum, prefer)
-    if mi.variant() != variant:
+    if mi.variant() == variant:
+        return variant
+    try:
         mi.set_variant(variant)
-        logger.info("mitsuba variant %s", variant)
+    except Exception as exc:  # Mitsuba raises ImportError or RuntimeError here
+        requested = prefer or os.environ.get("MITSWEEP_BACKEND")
+        if not variant.startswith("cuda_") or requested == "cuda":
+            raise BackendError(f"Mitsuba variant {variant} cannot be set: {exc}") from exc
+        logger.warning("Mitsuba variant %s cannot be set (%s); using llvm_ad_%s",
+                       variant, exc, spectrum)
+        variant = mitsuba_variant(spectrum, "llvm")
+        if mi.variant() != variant:
+            mi.set_variant(variant)
+    logger.info("mitsuba variant %s", variant)
     return variant
 
 
@@ -107,3 +134,102 @@ def drjit_module(prefer: str | None = None):
     import importlib
 
     return importlib.import_module(f"drjit.{backend}")
+
+
+def cuda_devices() -> list[dict]:
+    """NVIDIA GPUs as ``nvidia-smi`` lists them (name, memory in MiB, driver), or ``[]``
+    when there is no ``nvidia-smi`` or it finds none. Independent of Dr.Jit's view."""
+    exe = shutil.which("nvidia-smi")
+    if exe is None:
+        return []
+    try:
+        out = subprocess.run([exe, "--query-gpu=name,memory.total,driver_version",
+                              "--format=csv,noheader,nounits"], capture_output=True,
+                             text=True, timeout=10, check=True).stdout
+    except (OSError, subprocess.SubprocessError):
+        return []
+    devices = []
+    for line in out.splitlines():
+        parts = [p.strip() for p in line.split(",")]
+        if len(parts) == 3:
+            devices.append({"name": parts[0], "memory_mib": float(parts[1]),
+                            "driver": parts[2]})
+    return devices
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _memory_total_bytes() -> int | None:
+    try:
+        with open("/proc/meminfo", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemTotal:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def _version(dist: str) -> str | None:
+    from importlib import metadata
+
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def describe_machine() -> dict:
+    """What a benchmark ran on, as a JSON-ready dict; compiles no kernel.
+
+    Keys: ``cpu`` (model), ``cores_logical`` (``os.cpu_count``), ``cores_usable`` (this
+    process's affinity), ``memory_gib``, ``load_average`` (1, 5, 15 min: a loaded
+    machine makes wall times incomparable), ``os``, ``python``, the versions of
+    ``numpy``, ``scipy``, ``drjit``, ``mitsuba`` and ``mitsweep``, ``llvm`` (the libLLVM
+    Dr.Jit loaded), ``gpus`` (:func:`cuda_devices`), ``backend`` and ``variant`` (what
+    :func:`select_backend` and :func:`mitsuba_variant` choose here, or the reason none
+    can be chosen).
+    """
+    from . import __version__
+
+    try:
+        usable = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        usable = os.cpu_count()
+    mem = _memory_total_bytes()
+    try:
+        load = [round(x, 2) for x in os.getloadavg()]
+    except OSError:  # pragma: no cover
+        load = None
+    info = {
+        "cpu": _cpu_model(), "cores_logical": os.cpu_count(), "cores_usable": usable,
+        "memory_gib": None if mem is None else round(mem / 2 ** 30, 1),
+        "load_average": load, "os": platform.platform(),
+        "python": sys.version.split()[0],
+        **{name: _version(name) for name in ("numpy", "scipy", "drjit", "mitsuba")},
+        "mitsweep": __version__,
+    }
+    try:
+        v = llvm_version()
+        info["llvm"] = None if v is None else ".".join(map(str, v))
+    except ImportError as exc:
+        info["llvm"] = f"unknown ({exc})"
+    info["gpus"] = cuda_devices()
+    try:
+        info["backend"] = select_backend()
+        info["variant"] = mitsuba_variant()
+    except (BackendError, ImportError) as exc:
+        info["backend"] = info["variant"] = f"none ({exc})"
+    return info
