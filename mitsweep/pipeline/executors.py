@@ -64,14 +64,16 @@ def init_worker() -> None:
 
 class _ProcessPool(cf.Executor):
     """A spawn-context process pool that replaces itself once broken (a process was
-    killed), so that the runner can submit the lost tasks again."""
+    killed), so that the runner can submit the lost tasks again. ``initializer`` runs
+    in each new process."""
 
-    def __init__(self, jobs: int) -> None:
+    def __init__(self, jobs: int, initializer=init_worker) -> None:
         self._jobs = jobs
+        self._initializer = initializer
         self._pool = self._new()
 
     def _new(self) -> cf.ProcessPoolExecutor:
-        return cf.ProcessPoolExecutor(max_workers=self._jobs, initializer=init_worker,
+        return cf.ProcessPoolExecutor(max_workers=self._jobs, initializer=self._initializer,
                                       mp_context=multiprocessing.get_context("spawn"))
 
     def submit(self, fn, /, *args, **kwargs):

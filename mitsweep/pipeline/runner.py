@@ -343,10 +343,14 @@ def _sources(root: Path, read_manifest, check_header) -> list[dict]:
 
 
 def _complete_entries(root: Path, tasks: Iterable[Task], sources: list[dict]) -> dict:
-    """The entries of ``tasks`` some manifest records with the task's parameters and
-    whose file still has the recorded SHA-256 (each file hashed once), sorted."""
+    """The entries of ``tasks`` (inputs first) some manifest records with the task's
+    parameters, whose file still has the recorded SHA-256 (each file hashed once) and
+    whose inputs are complete too (an item made from an input that is redone is
+    redone), sorted."""
     found = {}
     for t in tasks:
+        if not all(d in found for d in t.deps):
+            continue
         params = t.entry_params()
         p = root / t.name
         digest = None
@@ -374,9 +378,15 @@ def _prepare_directories(root: Path, todo: list[Task], shard: Shard | None) -> N
         except OSError as exc:
             raise WriteError(exc.errno, exc.strerror, str(p.parent)) from None
         if shard is None or t.group is not None:
-            for tmp in p.parent.glob(f".{p.name}.*"):
-                tmp.unlink(missing_ok=True)
-                logger.debug("removed %s, left by an interrupted write", tmp)
+            _remove_temporaries(p)
+
+
+def _remove_temporaries(path: Path) -> None:
+    """The temporaries of ``path`` left by a worker killed while writing it (the atomic
+    writers name them ``.NAME.*``)."""
+    for tmp in path.parent.glob(f".{path.name}.*"):
+        tmp.unlink(missing_ok=True)
+        logger.debug("removed %s, left by an interrupted write", tmp)
 
 
 def _submit(executor: cf.Executor | None, task: Task, context: Any, root: Path,
@@ -433,6 +443,7 @@ def _execute(root: Path, home: Path, manifest: dict, todo: list[Task], context: 
                 try:
                     result = fut.result()
                 except lost as exc:
+                    _remove_temporaries(root / t.name)  # its worker died writing it
                     if attempts[t.name] > retries:
                         raise DatasetError(
                             f"{t.name}: its worker was lost {attempts[t.name]} times "
@@ -461,8 +472,9 @@ def _execute(root: Path, home: Path, manifest: dict, todo: list[Task], context: 
         if left:
             raise DatasetError("tasks with unmet dependencies: " + ", ".join(left))
     except BaseException:
-        for fut in running:
-            fut.cancel()
+        for fut, t in running.items():
+            if fut.cancel() or fut.done():  # nothing writes it any more
+                _remove_temporaries(root / t.name)
         try:  # keep what finished; the failure itself is what the caller must see
             _write_manifest(home, manifest)
         except OSError as exc:
