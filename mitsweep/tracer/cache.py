@@ -35,7 +35,7 @@ from ..io.cache import cache_root
 from ..io.lock import DirectoryLock
 from ..optics.reference import reference_geometry
 from .bank import BANK_RAYS, ipsf_bank
-from .ipsf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES
+from .ipsf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, METHODS
 
 __all__ = ["CachedBank", "cached_bank", "bank_cache_key", "bank_cache_dir"]
 
@@ -43,6 +43,8 @@ logger = logging.getLogger(__name__)
 
 #: Bumped when the cache's layout or the meaning of its key changes.
 CACHE_LAYOUT = 1
+#: The tracing method of cached banks (that of :func:`mitsweep.tracer.ipsf_bank`).
+DEFAULT_METHOD = "exact"
 
 
 @dataclass(frozen=True)
@@ -59,10 +61,10 @@ def bank_cache_dir(cache_dir: str | Path | None = None) -> Path:
     return Path(cache_dir) if cache_dir is not None else cache_root() / "banks"
 
 
-def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed) -> dict:
+def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed, method) -> dict:
     out = {"kind": kind, "depths_mm": ["inf" if math.isinf(d) else float(d) for d in depths],
            "rays": int(rays), "kernel_size": int(kernel_size), "seed": int(seed),
-           "method": "continuous", "time_samples": DEFAULT_TIME_SAMPLES,
+           "method": method, "time_samples": DEFAULT_TIME_SAMPLES,
            "version": __version__, "layout": CACHE_LAYOUT}
     if kind == "radial":
         out["n_radii"] = int(n_radii)
@@ -73,7 +75,8 @@ def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed) -> dic
 
 def bank_cache_key(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
                    rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
-                   n_radii: int = 19, grid=(9, 9), seed: int = 0) -> tuple[str, dict, dict]:
+                   n_radii: int = 19, grid=(9, 9), seed: int = 0,
+                   method: str = DEFAULT_METHOD) -> tuple[str, dict, dict]:
     """``(entry name, optics, trace settings)`` of the bank :func:`cached_bank` returns."""
     kind = kind or ("radial" if setup.mirror.is_symmetric else "grid")
     if kind not in ("radial", "grid"):
@@ -81,14 +84,16 @@ def bank_cache_key(setup, *, motion=None, kind: str | None = None, depths=(500.0
     geometry = reference_geometry(setup, motion=motion)
     optics = optics_sections(setup_to_dict(setup), geometry.motion.as_dict())
     depths = [float(d) for d in np.atleast_1d(np.asarray(depths, dtype=float))]
-    trace = _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed)
+    if method not in METHODS:
+        raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
+    trace = _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed, method)
     digest = hashlib.sha256(json.dumps(trace, sort_keys=True).encode()).hexdigest()
     return f"{kind}-{optics_fingerprint(optics)[:16]}-{digest[:12]}", optics, trace
 
 
 def cached_bank(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
                 rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
-                n_radii: int = 19, grid=(9, 9), seed: int = 0,
+                n_radii: int = 19, grid=(9, 9), seed: int = 0, method: str = DEFAULT_METHOD,
                 cache_dir: str | Path | None = None, progress=None) -> CachedBank:
     """The IPSF bank of ``setup`` and ``motion``, from the cache or traced into it.
 
@@ -102,7 +107,7 @@ def cached_bank(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
         bank's reference sensor distance (mid-travel).
     kind : {"radial", "grid"}, optional
         Default: radial for rotationally symmetric setups, grid for tilted ones.
-    depths, rays, kernel_size, n_radii, grid, seed, progress
+    depths, rays, kernel_size, n_radii, grid, seed, method, progress
         As :func:`mitsweep.tracer.ipsf_bank`.
     cache_dir : path, optional
         Default :func:`bank_cache_dir`.
@@ -113,7 +118,8 @@ def cached_bank(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
     """
     name, optics, trace = bank_cache_key(setup, motion=motion, kind=kind, depths=depths,
                                          rays=rays, kernel_size=kernel_size,
-                                         n_radii=n_radii, grid=grid, seed=seed)
+                                         n_radii=n_radii, grid=grid, seed=seed,
+                                         method=method)
     entry = bank_cache_dir(cache_dir) / name
     entry.mkdir(parents=True, exist_ok=True)
     path = entry / "bank.npz"
@@ -134,7 +140,8 @@ def cached_bank(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
                     trace["kind"], len(trace["depths_mm"]), entry)
         kw = {"n_radii": n_radii} if trace["kind"] == "radial" else {"grid": tuple(grid)}
         bank = ipsf_bank(setup, kind=trace["kind"], depths=depths, rays=rays,
-                         kernel_size=kernel_size, seed=seed, motion=geometry.motion,
+                         kernel_size=kernel_size, seed=seed, method=method,
+                         motion=geometry.motion,
                          sweep=geometry.sweep, progress=progress, **kw)
         bank.metadata["cache"] = {"entry": name, "trace": trace}
         save_bank(path, bank)
