@@ -43,7 +43,7 @@ logger = logging.getLogger(__name__)
 POLAR_GOAL_S = 1.5
 SPATIAL_GOAL_S = 5.0
 #: Richardson–Lucy's time bound in the bench (s): it stops after the iteration past it.
-RL_TIME_LIMIT_S = 120.0
+RL_TIME_LIMIT_S = 60.0
 
 
 MOSAIC = ("camera", "brick", "grass", "gravel", "astronaut", "coffee", "chelsea", "text",

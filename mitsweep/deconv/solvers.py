@@ -77,15 +77,23 @@ def _bar(total, desc, enabled):
 
 def shrink_tv(g1: np.ndarray, g2: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
     r"""Isotropic soft threshold: :math:`\arg\min_z \tau |z| + \tfrac12 |z - g|^2`."""
-    mag = np.sqrt(g1 * g1 + g2 * g2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(mag > tau, 1 - tau / mag, 0).astype(g1.dtype, copy=False)
+    dt = g1.dtype.type
+    s = np.hypot(g1, g2)
+    np.maximum(s, dt(tau), out=s)                 # |g| <= τ: factor 1 − τ/τ = 0
+    np.divide(dt(tau), s, out=s)
+    np.subtract(dt(1), s, out=s)
     return g1 * s, g2 * s
 
 
-def _hl_table(alpha: float, n: int = 4096):
-    """(v, w): w(v) = argmin_w |w|^α + (w − v)²/2 for v ≥ 0, on a geometric grid."""
-    v = np.concatenate([[0.0], np.geomspace(1e-3, 1e4, n)])
+#: Table of the α-shrinkage for τ = 1: uniform on [0, _HL_VMAX] (beyond, the one-term
+#: asymptote w = v − α v^(α−1) is within 1e-4 of the root).
+_HL_VMAX = 400.0
+_HL_N = 32768
+
+
+def _hl_table(alpha: float) -> np.ndarray:
+    """w(v) = argmin_w |w|^α + (w − v)²/2 on ``_HL_N + 1`` uniform v in [0, _HL_VMAX]."""
+    v = np.linspace(0.0, _HL_VMAX, _HL_N + 1)
     # the minimiser is 0 below the threshold, else the larger root of
     # α w^(α−1) + w − v = 0 in (0, v): Newton from w = v, which stays above the root
     w = v.copy()
@@ -96,8 +104,8 @@ def _hl_table(alpha: float, n: int = 4096):
         w = np.clip(wp - f / fp, 0, v)
     e_w = np.abs(w) ** alpha + 0.5 * (w - v) ** 2
     e_0 = 0.5 * v * v
-    ok = (e_w < e_0) & (np.abs(alpha * np.maximum(w, 1e-12) ** (alpha - 1) + w - v) < 1e-6 * (1 + v))
-    return v, np.where(ok, w, 0.0)
+    root = np.abs(alpha * np.maximum(w, 1e-12) ** (alpha - 1) + w - v) < 1e-6 * (1 + v)
+    return np.where((e_w < e_0) & root, w, 0.0)
 
 
 _HL_TABLES: dict = {}
@@ -107,21 +115,30 @@ def shrink_hyper_laplacian(g: np.ndarray, tau: float, alpha: float = 2.0 / 3.0) 
     r""":math:`\arg\min_z \tau |z|^\alpha + \tfrac12 (z - g)^2`, elementwise.
 
     With :math:`s = \tau^{1/(2-\alpha)}` the problem is :math:`s\, w(g / s)` for the
-    τ = 1 minimiser w, tabulated once (Newton on the stationarity condition, checked
-    against z = 0) and interpolated (Krishnan and Fergus's lookup table).
+    τ = 1 minimiser w, tabulated once on a uniform grid (Newton on the stationarity
+    condition, checked against z = 0) and read by linear interpolation at an index
+    computed directly (Krishnan and Fergus's lookup table).
     """
     if alpha not in _HL_TABLES:
-        _HL_TABLES[alpha] = _hl_table(alpha)
-    v, w = _HL_TABLES[alpha]
+        _HL_TABLES[alpha] = _hl_table(alpha).astype(g.dtype if g.dtype == np.float32
+                                                    else np.float64)
+    tab = _HL_TABLES[alpha]
     s = float(tau) ** (1.0 / (2.0 - alpha))
     if s == 0:
         return g.copy()
-    a = np.abs(g) / s
-    out = np.interp(a, v, w, right=np.nan)
-    far = np.isnan(out)
-    if far.any():           # beyond the table: w ≈ v − α v^(α−1), one Newton-exact term
-        out[far] = a[far] - alpha * a[far] ** (alpha - 1)
-    return (np.sign(g) * s * out).astype(g.dtype, copy=False)
+    dt = g.dtype.type
+    pos = np.abs(g) * dt(_HL_N / (_HL_VMAX * s))           # fractional table index
+    far = pos >= _HL_N
+    np.minimum(pos, dt(_HL_N - 1e-3), out=pos)
+    i = pos.astype(np.int32)
+    pos -= i
+    lo = tab[i]
+    out = lo + pos * (tab[i + 1] - lo)
+    if far.any():
+        a = np.abs(g[far]) / dt(s)
+        out[far] = a - dt(alpha) * a ** dt(alpha - 1)
+    out *= dt(s)
+    return np.copysign(out, g).astype(g.dtype, copy=False)
 
 
 def _shrink(g1, g2, tau, alpha):
@@ -148,18 +165,27 @@ def _sym_ext(a: np.ndarray, L: int) -> tuple[np.ndarray, int]:
 
 
 class _PolarProblem:
-    """HQS on a polar grid: x-steps band by band, gradients along radius and arc."""
+    """HQS on a polar grid: x-steps band by band, gradients along radius and arc.
 
-    def __init__(self, y, kernels, rad, *, center, r_max, band_spacing, dt):
+    The grid is sampled less finely than polar Wiener's (1.25 rows per pixel of radius,
+    one angle per pixel of the rim; context 2 K around each band): on the bench's
+    1024 px problem that halved the time for 0.05 dB (30.93 against 30.98 dB; 1.0 and
+    1.0 lost 0.2 dB), and a 3 K context gained nothing.
+    """
+
+    def __init__(self, y, kernels, rad, *, center, r_max, band_spacing, dt,
+                 oversampling=(1.25, 1.0), margin_k=2.0):
         self.dt = dt
         self.cdt = np.complex64 if dt == np.float32 else np.complex128
         K = kernels.shape[-1]
         self.grid = g = polar_grid(y.shape, center=center, r_max=r_max, inner_px=8.0,
-                                   outer_px=8.0)
+                                   outer_px=8.0, radial_oversampling=oversampling[0],
+                                   angular_oversampling=oversampling[1])
         self.n_a = g.n_angles
         self.r_in = max(2.0 * K, 8.0)
         self.spec_y = sfft.rfft(to_polar(y, g), axis=1, workers=-1).astype(self.cdt)
-        self.bands = polar_bands(kernels, rad, g, band_spacing=band_spacing, margin_px=3 * K,
+        self.bands = polar_bands(kernels, rad, g, band_spacing=band_spacing,
+                                 margin_px=margin_k * K,
                                  r_in=self.r_in, dtype=dt)
         self.dr = g.radial_step
         dth = g.angle_step
