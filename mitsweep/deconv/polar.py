@@ -16,6 +16,15 @@ axis 1) the blur is *circulant in angle*. The pipeline:
 
 The small disk around the centre, where a polar grid cannot describe a kernel, is
 restored in Cartesian coordinates with the centre IPSF and blended in smoothly.
+
+Speed: both resamplings are sparse matrices (cubic B-spline weights, 16 a point;
+:func:`spline_sampling_matrix`) that depend only on the grid and the image shape. They
+are built at the first call for a grid and kept (the last two grids) for the next
+calls, e.g. every frame of a sequence; when the pole is the image centre they hold a
+quarter of the points, applied to four mirror views of the data. Sparse products,
+spline prefilters and the radial bands run across threads (scipy and NumPy release the
+GIL); the result does not depend on the thread count. :func:`polar_resampling` gives
+the full matrices, whose transposes are the exact adjoints.
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ import functools
 import logging
 import math
 import os
+import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -171,7 +181,7 @@ def _channels(image: np.ndarray) -> tuple[np.ndarray, bool]:
 # points and are applied to four flipped copies of the coefficients at once.
 
 _TAPS = 16                       # a cubic B-spline in 2-D reads 4 x 4 coefficients
-_BUILD_CHUNK = 1 << 16           # points per chunk while a matrix is built (cache-sized temporaries)
+_BUILD_CHUNK = 1 << 13           # points per chunk while a matrix is built (cache-sized)
 _FLIPS_4 = ((False, False), (True, False), (False, True), (True, True))   # (rows, cols)
 _FLIPS_1 = ((False, False),)
 
@@ -189,17 +199,18 @@ def _mirror_index(i: np.ndarray, n: int) -> np.ndarray:
 
 
 def _bspline_taps(x: np.ndarray, dtype) -> tuple[np.ndarray, np.ndarray]:
-    """First tap index (int64) and the four cubic B-spline weights (n, 4) at ``x``."""
+    """First tap index (int64, from float64 ``x``) and the four cubic B-spline weights
+    (4, n), computed in ``dtype``."""
     f = np.floor(x)
-    t = x - f
-    s = 1.0 - t
+    t = (x - f).astype(dtype, copy=False)
+    s = 1 - t
+    w = np.empty((4,) + x.shape, dtype=dtype)
+    np.multiply(s * s, s * dtype.type(1 / 6), out=w[0])
     t2 = t * t
-    w = np.empty(x.shape + (4,))
-    w[:, 0] = s * s * s / 6
-    w[:, 1] = (3 * t2 * t - 6 * t2 + 4) / 6
-    w[:, 3] = t2 * t / 6
-    w[:, 2] = 1 - w[:, 0] - w[:, 1] - w[:, 3]
-    return f.astype(np.int64) - 1, w.astype(dtype, copy=False)
+    np.multiply(t2, t * dtype.type(1 / 6), out=w[3])
+    np.subtract(dtype.type(2 / 3) + 0.5 * t2 * t, t2, out=w[1])      # (3t³ - 6t² + 4) / 6
+    np.subtract(1 - w[0] - w[3], w[1], out=w[2])
+    return f.astype(np.int64) - 1, w
 
 
 def spline_sampling_matrix(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], *,
@@ -230,6 +241,7 @@ def spline_sampling_matrix(rows: np.ndarray, cols: np.ndarray, shape: tuple[int,
     """
     r = np.asarray(rows, dtype=np.float64).ravel()
     c = np.asarray(cols, dtype=np.float64).ravel()
+    dtype = np.dtype(dtype)
     if r.shape != c.shape:
         raise ValueError(f"rows and cols must have the same size, got {r.size} and {c.size}")
     H, W = int(shape[0]), int(shape[1])
@@ -238,17 +250,28 @@ def spline_sampling_matrix(rows: np.ndarray, cols: np.ndarray, shape: tuple[int,
     data = np.empty((n, _TAPS), dtype=dtype)
     indices = np.empty((n, _TAPS), dtype=it)
     taps = np.arange(4)[:, None]
-    # tap-major products (long inner loops), then one transposing copy per chunk:
-    # NumPy's loops over a last axis of 4 are several times slower
+    pairs = indices.view(np.int64) if it == np.int32 and sys.byteorder == "little" else None
+    # entries are point-major but computed tap by tap (NumPy's loops over a last axis
+    # of 4 are several times slower): each weight column a strided write, and int32
+    # index pairs (taps b = 0, 1 and 2, 3 of a row) one int64 sum each
     for s in range(0, n, _BUILD_CHUNK):
         e = min(n, s + _BUILD_CHUNK)
         ri, wr = _bspline_taps(r[s:e], dtype)
         ci, wc = _bspline_taps(c[s:e], dtype)
-        ri = _mirror_index(ri[None, :] + taps, H).astype(it) * it(W)          # (4, m)
+        ri = _mirror_index(ri[None, :] + taps, H) * W                          # (4, m)
         ci = ci[None, :] + taps
-        ci = (np.mod(ci, W) if periodic_cols else _mirror_index(ci, W)).astype(it)
-        indices[s:e] = (ri[:, None, :] + ci[None, :, :]).reshape(_TAPS, e - s).T
-        data[s:e] = (wr.T[:, None, :] * wc.T[None, :, :]).reshape(_TAPS, e - s).T
+        ci = np.mod(ci, W) if periodic_cols else _mirror_index(ci, W)
+        for a in range(4):
+            for b in range(4):
+                np.multiply(wr[a], wc[b], out=data[s:e, 4 * a + b])
+        if pairs is not None:
+            c01, c23 = ci[0] | (ci[1] << 32), ci[2] | (ci[3] << 32)
+            for a in range(4):
+                ra = ri[a] * ((1 << 32) + 1)
+                np.add(ra, c01, out=pairs[s:e, 2 * a])
+                np.add(ra, c23, out=pairs[s:e, 2 * a + 1])
+        else:
+            indices[s:e] = (ri[:, None, :] + ci[None, :, :]).reshape(_TAPS, e - s).T
     indptr = np.arange(0, _TAPS * n + 1, _TAPS, dtype=it)
     return sp.csr_array((data.reshape(-1), indices.reshape(-1), indptr), shape=(n, H * W))
 
@@ -344,12 +367,33 @@ def _image_views(coef: np.ndarray, lev: "_Level") -> np.ndarray:
     return out.reshape(-1, len(lev.flips))
 
 
+def _runs(index: np.ndarray) -> list[tuple[slice, slice]]:
+    """``index`` (an angle permutation's values) cut into runs of step +1 or -1, as
+    (slice of ``index``'s positions, slice of the values): copies along such runs are
+    plain strided copies, several times faster than fancy indexing."""
+    index = np.asarray(index)
+    out, a, n = [], 0, index.size
+    while a < n:
+        step = int(index[a + 1] - index[a]) if a + 1 < n else 1
+        if step not in (1, -1):
+            step = 1
+        b = a + 1
+        while b < n and index[b] - index[b - 1] == step:
+            b += 1
+        lo, hi = int(index[a]), int(index[b - 1])
+        vals = slice(lo, hi + 1) if step == 1 else slice(lo, hi - 1 if hi > 0 else None, -1)
+        out.append((slice(a, b), vals))
+        a = b
+    return out
+
+
 def _polar_views(coef: np.ndarray, lev: "_Level") -> np.ndarray:
     """(rows x window, V): the angle window of the level's polar coefficients seen
     through each mirror view (angles permuted as :func:`_angle_index`), flattened."""
     out = np.empty((coef.shape[0], lev.src_index.shape[1], len(lev.flips)), dtype=coef.dtype)
-    for v in range(len(lev.flips)):
-        out[..., v] = coef[:, lev.src_index[v]]
+    for v, runs in enumerate(lev.src_runs):
+        for pos, vals in runs:
+            out[:, pos, v] = coef[:, vals]
     return out.reshape(-1, len(lev.flips))
 
 
@@ -371,6 +415,14 @@ class _Level:
     r0: int = 0                           # the polar rows read, r0:r1,
     r1: int = 0
     src_index: np.ndarray | None = None   # the angles each view reads
+
+    @functools.cached_property
+    def angle_runs(self) -> list:
+        return [_runs(a) for a in self.angle_index]
+
+    @functools.cached_property
+    def src_runs(self) -> list:
+        return [_runs(a) for a in self.src_index]
 
     @property
     def nbytes(self) -> int:
@@ -533,8 +585,9 @@ def _scatter_angles(lev: _Level, res: np.ndarray, out: np.ndarray) -> None:
     """Write a to-polar level's canonical samples ``res`` (points, views) into ``out``
     (rows of the level, angles)."""
     res = res.reshape(out.shape[0], -1, len(lev.flips))
-    for v in range(len(lev.flips)):
-        out[:, lev.angle_index[v]] = res[..., v]
+    for v, runs in enumerate(lev.angle_runs):
+        for pos, vals in runs:
+            out[:, vals] = res[:, pos, v]
 
 
 def to_polar(image: np.ndarray, grid: PolarGrid) -> np.ndarray:
