@@ -15,9 +15,13 @@ a wrong pixel pitch or lens–mirror distance:
 1. *Coarse search* on a copy reduced so that the outline's radius is 32-64 px:
    the gradient's double-angle orientation field (sign-free: a rim may be brighter or
    darker than what surrounds it) correlated by FFT with the outline's normals, for
-   scales ``k`` in ``[1/3, 3]``. At the best position, of the scale peaks within half
-   the best score, the one nearest the predicted size is kept: a holder around the
-   mirror is a concentric outline too, and the rim is the one the setup predicts.
+   scales ``k`` within the plausible ±15% of the prediction (and, only when that finds
+   no mirror, in ``[1/3, 3]``, to tell a wrong setup from a missing mirror). The score
+   is the mean alignment times the square root of the outline's length (a mean over
+   ~perimeter samples), so that a small outline on busy texture does not outscore the
+   rim. At the best position, of the scale peaks within half the best score, the one
+   nearest the predicted size is kept: a holder around the mirror is a concentric
+   outline too, and the rim is the one the setup predicts.
 2. *Refinement* at full resolution: along the outline's normal at each of N points,
    the intensity profile's derivative (one sign, the dominant one) gives a sub-pixel
    edge position as its centroid, which is the mean chief-ray position of a defocused,
@@ -59,13 +63,26 @@ MIN_INLIER_FRACTION = 0.4
 #: Smallest ratio of the gradient on the fitted outline to the gradient beside it
 #: (:func:`_edge_prominence`): a mirror's rim stands out, texture does not.
 MIN_EDGE_PROMINENCE = 3.0
+#: Gaussian smoothing (px) of the image the edge profiles are sampled on: it lowers
+#: the noise; on a rim of radius R it moves the edge inward by only ~σ²/(2R).
+PROFILE_SMOOTHING_PX = 1.2
+#: Edge contrast-to-noise ratio above which edges count as equally precise (the
+#: limit is then the texture, not the noise).
+MAX_EDGE_SNR = 30.0
 #: Largest RMS normal residual (px) of the inliers of an accepted fit.
 MAX_RESIDUAL_RMS_PX = 1.0
 #: Radius (px) of the outline in the reduced copy used for the coarse search (at least).
 COARSE_RADIUS_PX = 32.0
-#: Scales searched coarsely, geometric from 1/3 to 3 (steps of 4%: ~1.3 px at 32 px):
-#: wider than plausible, so that a setup far off is reported as such, not as no mirror.
-COARSE_SCALES = np.geomspace(1.0 / 3.0, 3.0, 57)
+#: Relative step of the scales searched coarsely (4%: ~1.3 px at 32 px).
+COARSE_SCALE_STEP = 1.04
+#: The wide band of scales searched when the plausible one finds no mirror, so that a
+#: setup far off is reported as such, not as a photo without a mirror.
+WIDE_SCALES = (1.0 / 3.0, 3.0)
+
+
+def _scales(lo: float, hi: float) -> np.ndarray:
+    n = max(2, int(math.ceil(math.log(hi / lo) / math.log(COARSE_SCALE_STEP))) + 1)
+    return np.geomspace(lo, hi, n)
 
 
 class CalibrationError(ValueError):
@@ -217,7 +234,7 @@ def _reduce(img: np.ndarray, factor: int) -> np.ndarray:
     return img[:H, :W].reshape(H // factor, factor, W // factor, factor).mean(axis=(1, 3))
 
 
-def _coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray):
+def _coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray, scales: np.ndarray):
     """Best ``(center (row, col), scale)`` of the outline in full-resolution pixels."""
     from scipy.fft import irfft2, next_fast_len, rfft2
 
@@ -235,19 +252,22 @@ def _coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray):
     # Template normals as image-axis angles: gradient (gy, gx) along (drow, dcol).
     c2 = nrm[:, 1] ** 2 - nrm[:, 0] ** 2
     s2 = 2.0 * nrm[:, 0] * nrm[:, 1]
-    extent = int(np.ceil(np.abs(pts).max() * COARSE_SCALES[-1] / factor)) + 2
+    extent = int(np.ceil(np.abs(pts).max() * scales[-1] / factor)) + 2
     shape = (next_fast_len(H + 2 * extent), next_fast_len(W + 2 * extent))
     F1, F2 = rfft2(j1, shape), rfft2(j2, shape)
     best = None
     per_scale = []
-    for k in COARSE_SCALES:
+    for k in scales:
         p = pts * k / factor
         flat = (np.round(p[:, 0]).astype(int) % shape[0]) * shape[1] \
             + np.round(p[:, 1]).astype(int) % shape[1]
         t1 = np.bincount(flat, weights=c2, minlength=shape[0] * shape[1]).reshape(shape)
         t2 = np.bincount(flat, weights=s2, minlength=shape[0] * shape[1]).reshape(shape)
         score = irfft2(F1 * np.conj(rfft2(t1)) + F2 * np.conj(rfft2(t2)), shape)[:H, :W]
-        score /= len(p)  # mean alignment along the outline, comparable across scales
+        # Mean alignment along the outline, times the square root of its length: the
+        # significance of a mean over ~perimeter independent samples, so that a small
+        # outline on busy texture does not outscore the rim.
+        score *= math.sqrt(k) / len(p)
         i = int(np.argmax(score))
         per_scale.append(score)
         if best is None or score.flat[i] > best[0]:
@@ -260,18 +280,25 @@ def _coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray):
     peaks = [j for j in range(len(local))
              if local[j] >= 0.5 * top and (j == 0 or local[j] >= local[j - 1])
              and (j == len(local) - 1 or local[j] >= local[j + 1])]
-    j = min(peaks, key=lambda q: abs(math.log(COARSE_SCALES[q]))) if peaks else \
+    j = min(peaks, key=lambda q: abs(math.log(scales[q]))) if peaks else \
         int(np.argmax(local))
     s = per_scale[j]
     win = s[max(0, row - 2):row + 3, max(0, col - 2):col + 3]
     dr, dc = np.unravel_index(int(np.argmax(win)), win.shape)
     row, col = max(0, row - 2) + dr, max(0, col - 2) + dc
     centre = ((row + 0.5) * factor - 0.5, (col + 0.5) * factor - 0.5)
-    return centre, float(COARSE_SCALES[j]), float(local[j])
+    return centre, float(scales[j]), float(local[j])
 
 
-def _edge_offsets(lum_s: np.ndarray, centre, scale, pts, nrm, half: float):
-    """Sub-pixel edge offset along each normal (NaN where no edge), and its contrast."""
+def _edge_offsets(lum_s: np.ndarray, centre, scale, pts, nrm, half: float, *,
+                  outermost: bool = False):
+    """Sub-pixel edge offset along each normal (NaN where no edge), and its contrast.
+
+    The edge is the lobe of the dominant-sign derivative around its highest peak, or,
+    with ``outermost``, around the outermost peak at least half as high: the rim is
+    the outer boundary of the mirror's content, whose own edges (sharp: the reflection
+    is what the sweep focuses on) lie inside it, while what surrounds the mirror is
+    usually far out of focus."""
     from scipy.ndimage import map_coordinates
 
     step = 0.25
@@ -288,9 +315,22 @@ def _edge_offsets(lum_s: np.ndarray, centre, scale, pts, nrm, half: float):
     sign[sign == 0] = 1.0
     ds = d * sign
     peak = ds.max(axis=1, keepdims=True)
-    # Centroid of the dominant-sign derivative above a fifth of its peak: the mean edge
-    # position of a symmetric blur, with the texture's small wiggles left out.
-    wgt = np.where(ds > 0.2 * peak, ds, 0.0)
+    # Centroid of the dominant-sign derivative's lobe around its peak, above a fifth of
+    # the peak: the mean edge position of a symmetric blur, without the texture's small
+    # wiggles or a separate edge of the content nearby.
+    above = ds > 0.2 * peak
+    k = np.arange(ds.shape[1])[None, :]
+    at = np.argmax(ds, axis=1)[:, None]
+    if outermost:
+        prev = np.pad(ds[:, :-1], ((0, 0), (1, 0)), constant_values=-np.inf)
+        nxt = np.pad(ds[:, 1:], ((0, 0), (0, 1)), constant_values=-np.inf)
+        high = (ds >= prev) & (ds >= nxt) & (ds >= 0.5 * peak)
+        at = (ds.shape[1] - 1 - np.argmax(high[:, ::-1], axis=1))[:, None]
+    gap_left = np.maximum.accumulate(np.where(~above, k, -1), axis=1)
+    gap_right = np.minimum.accumulate(np.where(~above, k, ds.shape[1])[:, ::-1], axis=1)[:, ::-1]
+    left = np.take_along_axis(gap_left, at, axis=1)
+    right = np.take_along_axis(gap_right, at, axis=1)
+    wgt = np.where(above & (k > left) & (k < right), ds, 0.0)
     total = wgt.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         off = (wgt * t[None, :]).sum(axis=1) / total
@@ -332,6 +372,7 @@ def _noise_sigma(lum: np.ndarray) -> float:
 
 
 def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
+            scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
             max_iterations: int = 30, edge_half_width_px: float | None = None) -> RimFit:
     """Find the predicted outline in a photograph (see the module docstring).
 
@@ -343,6 +384,9 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         The setup's prediction (:func:`predicted_outline`).
     pitch : float
         Pixel pitch of the photograph, mm.
+    scale_range : (float, float)
+        Outline sizes searched, relative to the prediction (default: the plausible
+        ±:data:`PLAUSIBLE_SCALE`).
     max_iterations : int
         Refinement passes at most (each resamples the edges at the current fit).
     edge_half_width_px : float, optional
@@ -368,11 +412,12 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
     if radius < 8:
         raise CalibrationError(f"the setup predicts a mirror image of radius {radius:.3g} px "
                                f"at pitch {pitch:g} mm: too small to calibrate on")
-    centre, scale, coarse_score = _coarse_search(lum, pts, nrm)
+    scales = _scales(*scale_range)
+    centre, scale, coarse_score = _coarse_search(lum, pts, nrm, scales)
     logger.info("coarse rim search: centre (%.1f, %.1f) px, scale %.3f (score %.3g)",
                 *centre, scale, coarse_score)
     half = edge_half_width_px or max(4.0, 0.015 * radius * scale)
-    lum_s = _smooth(lum, 0.7)
+    lum_s = _smooth(lum, PROFILE_SMOOTHING_PX)
     sigma = _noise_sigma(lum)
     n = len(pts)
     off = np.full(n, np.nan)
@@ -381,11 +426,12 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
     it = 0
     # The first window covers the coarse search's steps: a reduced pixel and a scale step.
     factor = max(1, int(radius / COARSE_RADIUS_PX))
-    search = max(half, 1.5 * factor + (COARSE_SCALES[1] / COARSE_SCALES[0] - 1) * radius * scale)
+    search = max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
     for it in range(1, max_iterations + 1):
-        off, strength, _ = _edge_offsets(lum_s, centre, scale, pts, nrm, search)
-        # An edge must rise clearly above the noise (a step of 8 σ) to count.
-        good = np.isfinite(off) & (strength > 8.0 * sigma + 1e-12)
+        off, strength, _ = _edge_offsets(lum_s, centre, scale, pts, nrm, search,
+                                         outermost=search <= half)
+        # An edge must rise above the noise (a step of 3 σ of one pixel) to count.
+        good = np.isfinite(off) & (strength > 3.0 * sigma + 1e-12)
         if good.sum() < max(8, MIN_INLIER_FRACTION * n):
             raise CalibrationError(
                 f"no visible mirror: only {int(good.sum())} of {n} points of the predicted "
@@ -394,14 +440,21 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         # Normal displacement of point j: n_j · dc + dk (p_j · n_j).
         A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])[good]
         b = off[good]
+        # An edge's position is as uncertain as noise / contrast (down to a floor set by
+        # the texture): residuals are standardised by that before the robust weights, so
+        # that a few sharp edges off the rim (content touching it) are rejected rather
+        # than hidden in the spread of the many faint ones.
+        snr = np.minimum(strength[good] / (sigma + 1e-30), MAX_EDGE_SNR)
+        unc = 1.0 / snr
         wts = np.ones(len(b))
         for _ in range(10):
-            sw = np.sqrt(wts)
+            sw = np.sqrt(wts) / unc
             x, *_ = np.linalg.lstsq(A * sw[:, None], b * sw, rcond=None)
-            res = b - A @ x
-            s = 1.4826 * np.median(np.abs(res - np.median(res))) + 1e-3
-            u = res / (4.685 * s)
+            z = (b - A @ x) / unc
+            s = 1.4826 * np.median(np.abs(z - np.median(z))) + 1e-6
+            u = z / (4.685 * s)
             wts = np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        res = b - A @ x
         centre = (centre[0] + x[0], centre[1] + x[1])
         scale += x[2]
         inl = wts > 0
@@ -550,7 +603,16 @@ def calibrate_photo(image: np.ndarray, setup, *, pixel_pitch: float | None = Non
     pitch = float(pixel_pitch or setup.sensor.pixel_pitch)
     outline = predicted_outline(setup)
     predicted = outline.equivalent_radius_px(pitch)
-    fit = fit_rim(image, outline, pitch)
+    try:
+        fit = fit_rim(image, outline, pitch,
+                      scale_range=(1 - plausible_scale, 1 + plausible_scale))
+    except CalibrationError as within:
+        try:  # a mirror far off the predicted size is a wrong setup, not a missing mirror
+            fit = fit_rim(image, outline, pitch, scale_range=WIDE_SCALES)
+        except CalibrationError:
+            raise within from None
+        if abs(fit.scale - 1.0) <= plausible_scale:  # found on the second look after all
+            logger.info("rim found in the wide search: %s", within)
     measured = predicted * fit.scale
     shape = (int(np.shape(image)[0]), int(np.shape(image)[1]))
     r0, c0 = optical_center_px(shape)

@@ -335,17 +335,21 @@ def test_calibrate_photo_raises_calibration_error_for_a_blank_image():
 # ----------------------------------------------------------- a rendered sweep photo
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["paraboloid", "paraboloid_tilted"])
-def test_calibrate_finds_a_rendered_sweep_placed_off_centre(tmp_path, capsys, name):
-    """A Mitsuba sweep render (the real optics, independent of the outline code),
-    shifted by a known sub-pixel offset into a larger frame, saved as 16-bit TIFF."""
+def test_calibrate_finds_a_rendered_sweep_placed_off_centre(tmp_path, capsys):
+    """A Mitsuba sweep render of the paraboloid (the real optics, independent of the
+    outline code: breathing, defocus, Monte Carlo noise), shifted by a known sub-pixel
+    offset into a larger frame, saved as 16-bit TIFF.
+
+    The tilted paraboloid is not rendered here: in the default scene its rim shows
+    little contrast (the walls it reflects near the rim look like the walls behind it),
+    so a render is no calibration photo for it; the ray-cast photos above cover it."""
     from scipy.ndimage import fourier_shift
 
     pytest.importorskip("mitsuba")
     from mitsweep.render.api import render_image
 
-    setup = small_setup(name)
-    res = render_image(setup, "sweep", spp=64, seed=3)
+    setup = small_setup("paraboloid")
+    res = render_image(setup, "sweep", spp=128, seed=3, mirror_only=False)
     W, H = setup.sensor.resolution
     frame = np.zeros(FRAME + (3,))
     top, left = 12, 40  # integer part; the sub-pixel part by a Fourier shift
@@ -353,8 +357,7 @@ def test_calibrate_finds_a_rendered_sweep_placed_off_centre(tmp_path, capsys, na
     sub = (0.37, -0.61)
     frame = np.stack([np.real(np.fft.ifft2(fourier_shift(np.fft.fft2(frame[..., c]), sub)))
                       for c in range(3)], axis=-1)
-    frame = np.clip(frame, 0, None)
-    photo = save_photo(frame, tmp_path / "render.tif", "tif")
+    photo = save_photo(np.clip(frame, 0, None), tmp_path / "render.tif", "tif")
     out = calibrate_json(capsys, photo, "--setup", setup_file(tmp_path, setup))
     want = np.asarray(optical_center_px((H, W))) + np.array([top, left]) + np.array(sub)
     assert np.abs(np.asarray(out["center_px"]) - want).max() < CENTRE_TOL_PX
