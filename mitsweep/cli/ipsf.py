@@ -259,7 +259,7 @@ def _report(args, out: dict) -> int:
     if args.json:
         print_json(out)
         return 0
-    skip = {"motion", "box_mm", "mirror_point_mm", "points_uv_mm", "version"}
+    skip = {"motion", "box_mm", "ellipse_mm", "mirror_point_mm", "points_uv_mm", "version"}
     for key, value in out.items():
         if key in skip:
             continue
