@@ -15,7 +15,7 @@ r"""Regularisation chosen from the noise model and the image, not guessed.
   with one constant :math:`\kappa_\alpha` per prior (:data:`PRIOR_WEIGHT_SCALE`).
 
 The constants were tuned on one set of images, blurs and noise levels and checked on
-others (``tests/test_deconv_solvers.py``, docs/design.md).
+others (``tests/test_deconv_solvers.py``).
 
 References
 ----------
