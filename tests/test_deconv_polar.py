@@ -216,16 +216,21 @@ def test_spline_sampling_matrix_matches_map_coordinates(periodic):
     np.testing.assert_allclose(M @ coef.ravel(), ref, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("center", [None, (60.25, 70.8)])
-def test_polar_resampling_matrices_are_to_polar_and_from_polar(center):
+@pytest.mark.parametrize("rows,center,views", [(128, None, 8), (120, None, 4),
+                                               (120, (60.25, 70.8), 1)])
+def test_polar_resampling_matrices_are_to_polar_and_from_polar(rows, center, views):
     """The public matrices (all points, no mirror views) agree with the fast paths
-    (a quarter of the points seen through four mirror views when the pole is the image
-    centre, every point otherwise) to float64 round-off."""
+    (an eighth of the points seen through eight mirror views when the pole is the
+    centre of a square image, a quarter through four on another, every point when the
+    pole is elsewhere) to float64 round-off."""
     import scipy.ndimage as ndi
 
+    from mitsweep.deconv import polar
     from mitsweep.deconv.polar import polar_resampling, polar_spline_coefficients
 
-    img = _gray("camera", 128)[:120]                 # 120 x 128: not square
+    img = _gray("camera", 128)[:rows]
+    assert len(polar._to_polar_plan(polar_grid(img.shape, center=center, r_max=55),
+                                    img.shape, "float64", False)[0].flips) == views
     g = polar_grid(img.shape, center=center, r_max=55)
     T, B = polar_resampling(g, img.shape)
     assert T.shape == (g.n_radii * g.n_angles, img.size) and B.shape == T.shape[::-1]
@@ -237,7 +242,7 @@ def test_polar_resampling_matrices_are_to_polar_and_from_polar(center):
     # from_polar rebuilds the rows near the pole at fewer angles: compare where it
     # reads the full grid (2π (r + 8) 0.75 >= n/4 - 8 harmonics)
     cy, cx = g.center
-    rr = np.hypot(*np.mgrid[0:120, 0:128] - np.array([cy, cx])[:, None, None])
+    rr = np.hypot(*np.mgrid[0:rows, 0:128] - np.array([cy, cx])[:, None, None])
     full = (rr <= g.r_max) & (2 * np.pi * (rr + 8) * 0.75 >= g.n_angles / 4 - 8)
     assert full.sum() > 0.5 * (rr <= g.r_max).sum()
     np.testing.assert_allclose(back[full], via_b[full], atol=1e-12)

@@ -20,8 +20,9 @@ restored in Cartesian coordinates with the centre IPSF and blended in smoothly.
 Speed: both resamplings are sparse matrices (cubic B-spline weights, 16 a point;
 :func:`spline_sampling_matrix`) that depend only on the grid and the image shape. They
 are built at the first call for a grid and kept (the last two grids) for the next
-calls, e.g. every frame of a sequence; when the pole is the image centre they hold a
-quarter of the points, applied to four mirror views of the data. Sparse products,
+calls, e.g. every frame of a sequence; when the pole is the image centre they hold an
+eighth of the points (a quarter if the image is not square), applied to eight (four)
+mirror views of the data. Sparse products,
 spline prefilters and the radial bands run across threads (scipy and NumPy release the
 GIL); the result does not depend on the thread count. :func:`polar_resampling` gives
 the full matrices, whose transposes are the exact adjoints.
@@ -177,13 +178,16 @@ def _channels(image: np.ndarray) -> tuple[np.ndarray, bool]:
 # point) built once per grid and cached; applying one is a sparse product, split over
 # threads (scipy's sparse kernels release the GIL). For a grid centred on the image the
 # mirror images of a quarter of the points are the other three quarters (flip rows:
-# angle -θ; flip columns: π - θ; both: π + θ), so the matrices hold a quarter of the
-# points and are applied to four flipped copies of the coefficients at once.
+# angle -θ; flip columns: π - θ; both: π + θ), and on a square image the transpose
+# (3π/2 - θ) halves that again: the matrices hold an eighth (a quarter) of the points
+# and are applied to eight (four) mirrored copies of the coefficients at once.
 
 _TAPS = 16                       # a cubic B-spline in 2-D reads 4 x 4 coefficients
 _BUILD_CHUNK = 1 << 13           # points per chunk while a matrix is built (cache-sized)
-_FLIPS_4 = ((False, False), (True, False), (False, True), (True, True))   # (rows, cols)
-_FLIPS_1 = ((False, False),)
+# mirror views: (flip rows, flip columns, transpose first)
+_FLIPS_1 = ((False, False, False),)
+_FLIPS_4 = tuple((fr, fc, False) for fr in (False, True) for fc in (False, True))
+_FLIPS_8 = _FLIPS_4 + tuple((fr, fc, True) for fr, fc, _ in _FLIPS_4)
 
 
 def _mirror_index(i: np.ndarray, n: int) -> np.ndarray:
@@ -318,23 +322,32 @@ class _RowBlocks:
         return out
 
 
-def _flips(grid: PolarGrid, shape, n_angles: int) -> tuple[tuple[bool, bool], ...]:
-    """The four mirror views when the pole is the image centre and the angles are
-    symmetric under θ → π − θ (an even count), else the identity alone."""
+def _flips(grid: PolarGrid, shape, n_angles: int) -> tuple[tuple[bool, bool, bool], ...]:
+    """The mirror views that map the grid onto itself: with the pole at the image
+    centre and an angle count that is a multiple of 4, the eight of a square image or
+    the four flips of another; otherwise the identity alone."""
     centred = tuple(grid.center) == optical_center_px(shape)
-    return _FLIPS_4 if centred and n_angles % 2 == 0 else _FLIPS_1
+    if not centred or n_angles % 4:
+        return _FLIPS_1
+    return _FLIPS_8 if shape[0] == shape[1] else _FLIPS_4
 
 
-def _angle_index(k: np.ndarray, n: int, flip: tuple[bool, bool]) -> np.ndarray:
+def _canonical_angles(n: int, flips) -> np.ndarray:
+    """Angle indices whose mirror views cover all n: θ in [0, π/4] for eight views,
+    [0, π/2] for four, all otherwise."""
+    return np.arange({8: n // 8 + 1, 4: n // 4 + 1}.get(len(flips), n))
+
+
+def _angle_index(k: np.ndarray, n: int, flip: tuple[bool, bool, bool]) -> np.ndarray:
     """Angle index reached from canonical index ``k`` (of ``n``) by a mirror view."""
-    fr, fc = flip
+    fr, fc, tr = flip
     if fr and fc:
-        return (n // 2 + k) % n          # π + θ
-    if fr:
-        return (-k) % n                  # −θ
-    if fc:
-        return (n // 2 - k) % n          # π − θ
-    return k
+        k = (n // 2 + k) % n             # π + θ
+    elif fr:
+        k = (-k) % n                     # −θ
+    elif fc:
+        k = (n // 2 - k) % n             # π − θ
+    return (3 * n // 4 - k) % n if tr else k      # transposed: 3π/2 − θ
 
 
 def _spline_filter(a: np.ndarray, axes: tuple[int, ...], dtype) -> np.ndarray:
@@ -362,8 +375,9 @@ def _image_views(coef: np.ndarray, lev: "_Level") -> np.ndarray:
     mirror view (flipped rows, columns), flattened."""
     y0, y1, x0, x1 = lev.box
     out = np.empty((y1 - y0, x1 - x0, len(lev.flips)), dtype=coef.dtype)
-    for v, (fr, fc) in enumerate(lev.flips):
-        out[..., v] = coef[::-1 if fr else 1, ::-1 if fc else 1][y0:y1, x0:x1]
+    for v, (fr, fc, tr) in enumerate(lev.flips):
+        a = coef.T if tr else coef
+        out[..., v] = a[::-1 if fr else 1, ::-1 if fc else 1][y0:y1, x0:x1]
     return out.reshape(-1, len(lev.flips))
 
 
@@ -438,9 +452,9 @@ def _decimation(reach: np.ndarray, n: int) -> np.ndarray:
 
 
 def _level_angles(n: int, q: int) -> int:
-    """Angles of decimation level q of n: n/q rounded up to an even fast length (even,
-    so that the angles are symmetric under θ → π − θ)."""
-    return n if q == 1 else _fast_multiple(-(-n // q), 2)
+    """Angles of decimation level q of n: n/q rounded up to a fast length that is a
+    multiple of 4, so that the angles have the mirror symmetries of the image."""
+    return n if q == 1 else _fast_multiple(-(-n // q), 4)
 
 
 @functools.lru_cache(maxsize=2)
@@ -459,7 +473,7 @@ def _to_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
             continue
         nl = _level_angles(n, q)
         flips = _flips(grid, shape, nl)
-        ks = np.arange(nl // 4 + 1) if len(flips) == 4 else np.arange(nl)
+        ks = _canonical_angles(nl, flips)
         th = ks * (2 * math.pi / nl)
         rr = r[rows_i][:, None]
         y = (cy - rr * np.sin(th)[None, :]).ravel()
@@ -475,6 +489,17 @@ def _to_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
     return tuple(out)
 
 
+def _view_pixels(y: np.ndarray, x: np.ndarray, shape, flip) -> np.ndarray:
+    """Flat indices of the pixels that mirror view ``flip`` maps pixels (y, x) to: at
+    the angle :func:`_angle_index` gives, at the same radius."""
+    H, W = shape
+    fr, fc, tr = flip
+    y, x = (H - 1 - y if fr else y), (W - 1 - x if fc else x)
+    if tr:
+        y, x = x, y
+    return y * W + x
+
+
 @functools.lru_cache(maxsize=2)
 def _from_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
                      n_up: int) -> tuple[_Level, ...]:
@@ -485,14 +510,17 @@ def _from_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
     R = grid.r_max
     by0, by1 = max(0, int(math.floor(cy - R))), min(H, int(math.ceil(cy + R)) + 1)
     bx0, bx1 = max(0, int(math.floor(cx - R))), min(W, int(math.ceil(cx + R)) + 1)
-    # every level's angle count is even, so a centred grid needs one quadrant only
-    flips = _flips(grid, shape, 2)
-    if len(flips) == 4:
+    # every level's angle count is a multiple of 4, so a centred grid needs the pixels
+    # of one quadrant (θ in [0, π/2]) or, on a square image, one octant ([0, π/4])
+    flips = _flips(grid, shape, 4)
+    if len(flips) > 1:
         by1, bx0 = int(math.floor(cy)) + 1, int(math.ceil(cx))
     y = np.arange(by0, by1)[:, None]
     x = np.arange(bx0, bx1)[None, :]
     rr = np.hypot(cy - y, x - cx)
     ok = rr <= R
+    if len(flips) == 8:
+        ok &= (cy - y) <= (x - cx)
     y, x = np.broadcast_to(y, ok.shape)[ok], np.broadcast_to(x, ok.shape)[ok]
     rr = rr[ok]
     th = np.mod(np.arctan2(cy - y, x - cx), 2 * math.pi)
@@ -507,8 +535,7 @@ def _from_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
         r0 = max(0, int(math.floor(grid.row_of(rr[sel].min() - _SPLINE_PX))))
         r1 = min(grid.n_radii, int(math.ceil(grid.row_of(rr[sel].max() + _SPLINE_PX))) + 1)
         ys, xs = y[sel], x[sel]
-        targets = np.stack([(H - 1 - ys if fr else ys) * W + (W - 1 - xs if fc else xs)
-                            for fr, fc in flips])
+        targets = np.stack([_view_pixels(ys, xs, (H, W), f) for f in flips])
         col = th[sel] * (nq / (2 * math.pi))
         k0, k1 = int(np.floor(col.min())) - 1, int(np.floor(col.max())) + 3
         if k1 - k0 >= nq:                 # all angles, periodic
@@ -541,7 +568,7 @@ def polar_resampling(grid: PolarGrid, shape: tuple[int, int], *,
 
     Their transposes are the exact adjoints. Each stores 16 entries a point: for a
     2048² image on the default grid about 1.5 GB and 0.4 GB (float32 weights, int32
-    indices), so :func:`polar_deconvolve` uses a quarter of each (its mirror views).
+    indices), so :func:`polar_deconvolve` keeps an eighth of each (its mirror views).
     """
     H, W = int(shape[0]), int(shape[1])
     dt = working_dtype(np.empty(0, dtype=dtype))
@@ -706,7 +733,7 @@ def _from_angle_spectrum(spec, grid, shape, *, upsample, outside, dtype):
 def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype) -> float:
     """Peak bytes of :func:`polar_deconvolve` on ``grid``.
 
-    The cached resampling matrices (16 weights and indices a point; a quarter of the
+    The cached resampling matrices (16 weights and indices a point; an eighth or a quarter of the
     points when the pole is the image centre), the angle spectrum, its filtered
     accumulator and the bands in flight (complex, half-length), the mirror views of
     the coefficients, the angle-upsampled rows on the way back and three copies of the
@@ -719,7 +746,7 @@ def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype) -> 
     H, W = image_shape[0], image_shape[1]
     cells = float(grid.n_radii) * float(grid.n_angles)
     disk = min(float(H) * W, math.pi * grid.r_max ** 2)
-    views = len(_flips(grid, (H, W), 2))
+    views = len(_flips(grid, (H, W), 4))
     matrices = _TAPS * (it + 4) * (cells + disk) / views + 8.0 * disk
     return (matrices + cells * it * (2 * C + 2 + 3 * C)
             + float(H) * W * it * (3 * C + 4))
