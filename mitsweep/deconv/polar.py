@@ -733,13 +733,13 @@ def _from_angle_spectrum(spec, grid, shape, *, upsample, outside, dtype):
 def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype) -> float:
     """Peak bytes of :func:`polar_deconvolve` on ``grid``.
 
-    The cached resampling matrices (16 weights and indices a point; an eighth or a quarter of the
-    points when the pole is the image centre), the angle spectrum, its filtered
+    The cached resampling matrices (16 weights and indices a point; an eighth or a quarter
+    of the points when the pole is the image centre), the angle spectrum, its filtered
     accumulator and the bands in flight (complex, half-length), the mirror views of
     the coefficients, the angle-upsampled rows on the way back and three copies of the
-    image. For 2048² float32 with the benchmark's bank this says 0.9 GiB; measured
-    (tracemalloc) 594 MiB at the first call, 414 MiB of it the matrices kept for the
-    next call on the same grid.
+    image. For 2048² float32 with the benchmark's bank this says 0.7 GiB; measured
+    (tracemalloc) 407 MiB at the first call, 227 MiB of it the matrices kept for the
+    next call on the same grid, and 218 MiB above those at a later call.
     """
     it = np.dtype(dtype).itemsize
     C = image_shape[2] if len(image_shape) == 3 else 1
