@@ -1,4 +1,5 @@
-"""``mitsweep evaluate``: PSNR/SSIM of EDOF, focused and stopped images on ground truth."""
+"""``mitsweep evaluate``: PSNR/SSIM of EDOF (every restoration method the dataset holds),
+focused and stopped images on ground truth."""
 
 from __future__ import annotations
 
@@ -45,7 +46,9 @@ def run(args) -> int:
     if args.json:
         print_json(results)
     else:
-        sys.stdout.write(f"{'image':<22s} {'PSNR dB':>8s} {'SSIM':>7s}\n")
+        # Every image the manifest holds: one EDOF per restoration method and light level.
+        width = max([22, *(len(name) for name in results["mean"])])
+        sys.stdout.write(f"{'image':<{width}s} {'PSNR dB':>8s} {'SSIM':>7s}\n")
         for name, m in sorted(results["mean"].items()):
-            sys.stdout.write(f"{name:<22s} {m['psnr']:8.2f} {m['ssim']:7.4f}\n")
+            sys.stdout.write(f"{name:<{width}s} {m['psnr']:8.2f} {m['ssim']:7.4f}\n")
     return 0
