@@ -75,7 +75,7 @@ def synthetic_mirror_photo(setup, shape, center_offset_px, *, supersample: int =
     """A linear RGB "photo" (H, W, 3) of the setup's mirror, its axis at
     ``center_offset_px = (drow, dcol)`` from the image centre.
 
-    Built by ray casting, independently of :mod:`mitsweep.calibration`: each of
+    Built by ray casting, independently of :mod:`mitsweep.optics.calibration`: each of
     ``supersample²`` sub-pixel chief rays per pixel, at ``sweep_samples`` sensor
     distances evenly over the sweep (the magnification breathes as in a sweep), is
     intersected with the mirror (:func:`mitsweep.optics.chief_ray.intersect_mirror`);

@@ -19,7 +19,7 @@ import pytest
 
 from camera_files import synthetic_mirror_photo, write_dng
 from cli_contract import refused
-from mitsweep.calibration import (CalibrationError, calibrate_photo, predicted_outline)
+from mitsweep.optics.calibration import (CalibrationError, calibrate_photo, predicted_outline)
 from mitsweep.cli.main import main
 from mitsweep.config import (Sensor, SetupError, load_setup, setup_from_dict, setup_to_dict,
                              setup_to_toml)

@@ -2,10 +2,11 @@
 
 Reads the photo (RAW, TIFF, PNG, JPEG or EXR, :mod:`mitsweep.io.camera`), predicts the
 mirror's outline from the setup and fits it to sub-pixel precision
-(:mod:`mitsweep.calibration`). Reports the optical axis's pixel (``center_px``), the rim
-radius measured and predicted, and the pixel pitch or lens–mirror distance the
-difference implies; ``--write`` saves a setup for this camera and photo (resolution,
-pitch, ``sensor.center_offset_px``) that every other command accepts.
+(:mod:`mitsweep.optics.calibration`). Reports the optical axis's pixel
+(``center_px``), the rim radius measured and predicted, and the pixel pitch or
+lens–mirror distance the difference implies; ``--write`` saves a setup for this camera
+and photo (resolution, pitch, ``sensor.center_offset_px``) that every other command
+accepts.
 
 Exit status 2, one line: an unreadable photo, no visible mirror, or a rim whose size
 disagrees with the setup by more than 15%.
@@ -56,7 +57,7 @@ def _sha256(path: str) -> str:
 
 def run(args) -> int:
     from .. import __version__
-    from ..calibration import calibrate_photo
+    from ..optics.calibration import calibrate_photo
     from ..config import setup_to_toml
     from ..io import write_text_atomic
     from ..io.camera import read_camera_image

@@ -43,10 +43,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .optics.chief_ray import chief_ray, image_point
-from .optics.placement import placement_of
-from .optics.pixels import optical_center_px
-from .optics.reference import reference_geometry
+from .chief_ray import chief_ray, image_point
+from .placement import placement_of
+from .pixels import optical_center_px
+from .reference import reference_geometry
 
 __all__ = ["CalibrationError", "RimOutline", "RimFit", "Calibration", "predicted_outline",
            "fit_rim", "calibrate_photo", "luminance", "PLAUSIBLE_SCALE", "WARN_SCALE"]
@@ -509,7 +509,7 @@ class Calibration:
 
     def calibrated_setup(self, setup):
         """The setup for this camera and photo: resolution, pitch, centre offset."""
-        from .config import Sensor
+        from ..config import Sensor
 
         H, W = self.image_shape
         return replace(setup, sensor=Sensor(resolution=(W, H), pixel_pitch=self.pixel_pitch,
@@ -539,7 +539,7 @@ def _implied_vertex_distance(setup, pitch: float, radius_px: float) -> float | N
     moves smoothly with the mirror)."""
     from scipy.optimize import brentq
 
-    from .config import Mirror, SetupError
+    from ..config import Mirror, SetupError
 
     m = setup.mirror
 
