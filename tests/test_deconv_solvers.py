@@ -64,11 +64,7 @@ def test_prior_methods_beat_calibrated_wiener_on_unseen_images_and_blur(problem,
 
 
 @pytest.mark.parametrize("prior", ["tv", "hyperlaplacian"])
-@pytest.mark.parametrize("sigma", [
-    0.003,
-    pytest.param(0.01, marks=pytest.mark.xfail(
-        strict=True, reason="known shortfall: at σ = 0.01 on these 128 px images the "
-        "MAP weight over-regularises (TV measured 0.73 dB below the best of the sweep)"))])
+@pytest.mark.parametrize("sigma", [0.003, 0.01])
 def test_calibrated_weight_is_near_the_best_of_a_sweep(problem, prior, sigma):
     y = _noisy(problem, sigma)
     info = {}
@@ -76,7 +72,7 @@ def test_calibrated_weight_is_near_the_best_of_a_sweep(problem, prior, sigma):
     lam = info["weight"]
     best = max(_score(problem, hqs_deconvolve(y, problem["bank"], prior=prior, weight=lam * f))
                for f in (0.25, 0.5, 2.0, 4.0))
-    # measured at 256 px: within 0.35 dB of the best of λ/4 … 4λ; 0.5 dB is the bar
+    # κ tuned on the bench mosaic only; on these images 0.5 dB is the bar
     assert calibrated > best - 0.5
 
 
