@@ -1,0 +1,185 @@
+"""``mitsweep deconvolve`` on a "real photo": camera files in, the bank of the photo's
+geometry traced and cached, the mirror's centre from calibration.
+
+The photo is a Mitsuba sweep render placed off-centre by a known sub-pixel offset in a
+larger frame (as tests/test_calibrate.py makes it), saved as a 16-bit sRGB TIFF. From
+that file alone (``calibrate --write``, then ``deconvolve`` without a bank) the EDOF
+image must come within 0.5 dB, inside the mirror, of what the synthetic pipeline
+(:mod:`mitsweep.pipeline.tasks`: its bank and its restoration) makes of the original
+render, against the pinhole ground truth.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from camera_files import synthetic_mirror_photo
+from mitsweep.cli.main import main
+from mitsweep.config import Sensor, load_setup, setup_to_dict, setup_to_toml
+from mitsweep.deconv.metrics import psnr
+from mitsweep.io import read_exr, write_exr
+from mitsweep.io.png import linear_to_srgb
+
+from conftest import SCENES
+
+#: The issue's bar.
+EDOF_TOL_DB = 0.5
+FRAME = (230, 262)
+SMALL = Sensor(resolution=(200, 200), pixel_pitch=0.06)
+
+
+def small_setup(name: str):
+    return replace(load_setup(SCENES / f"{name}.toml"), sensor=SMALL)
+
+
+def write_tiff16(path, linear: np.ndarray) -> None:
+    import tifffile
+
+    tifffile.imwrite(path, np.round(linear_to_srgb(np.clip(linear, 0, 1)) * 65535)
+                     .astype(np.uint16), photometric="rgb")
+
+
+def fourier_shift(img: np.ndarray, shift) -> np.ndarray:
+    """Shift (H, W, C) by a sub-pixel ``shift`` (rows, cols), band-limited, circularly."""
+    from scipy.ndimage import fourier_shift as fs
+
+    return np.stack([np.real(np.fft.ifft2(fs(np.fft.fft2(img[..., c]), shift)))
+                     for c in range(img.shape[2])], axis=-1)
+
+
+@pytest.fixture
+def cache_dir(tmp_path, monkeypatch):
+    d = tmp_path / "cache"
+    monkeypatch.setenv("MITSWEEP_CACHE_DIR", str(d))
+    return d
+
+
+def run_json(capsys, *argv) -> dict:
+    capsys.readouterr()
+    rc = main([*map(str, argv), "--json"])
+    out, err = capsys.readouterr()
+    assert rc == 0, err
+    return json.loads(out)
+
+
+#: Where the render sits in the photo: integer part, then a sub-pixel Fourier shift.
+TOP, LEFT, SUB = 12, 40, (0.37, -0.61)
+
+
+@pytest.fixture(scope="module")
+def photo(tmp_path_factory):
+    """Per setup: the renders, the pipeline's EDOF of the render and the TIFF photo."""
+    made = {}
+
+    def get(name):
+        if name in made:
+            return made[name]
+        pytest.importorskip("mitsuba")
+        from mitsweep.pipeline.tasks import restore, trace_bank
+        from mitsweep.render.api import render_image, render_to_exr
+
+        d = tmp_path_factory.mktemp(name)
+        setup = small_setup(name)
+        W, H = setup.sensor.resolution
+        sweep = render_image(setup, "sweep", spp=128, seed=3)
+        truth = render_image(setup, "pinhole", spp=128, seed=4, aovs=("mask",))
+        render_to_exr(d / "sweep.exr", sweep)
+        trace_bank(setup, d / "bank.npz", depths=[500.0], rays=None, grid=[9, 9], seed=0)
+        restore(setup, d / "edof_pipeline.exr", image=d / "sweep.exr", bank=d / "bank.npz",
+                method="wiener", nsr=None)
+        chans, _ = read_exr(d / "edof_pipeline.exr")
+        pipeline = np.stack([chans[c] for c in "RGB"], axis=-1)
+        frame = np.zeros(FRAME + (3,))
+        frame[TOP:TOP + H, LEFT:LEFT + W] = sweep.image
+        frame = np.clip(fourier_shift(frame, SUB), 0, None)
+        scale = 0.9 / frame.max()
+        write_tiff16(d / "photo.tif", frame * scale)
+        (d / "setup.toml").write_text(setup_to_toml(setup))
+        made[name] = dict(dir=d, setup=setup, sweep=sweep.image, truth=truth,
+                          pipeline=pipeline, scale=scale)
+        return made[name]
+    return get
+
+
+def edof_psnrs(p, edof_path):
+    """PSNR (dB, inside the mirror) against the ground truth of: the EDOF image from
+    the photo (moved back onto the render's pixels), the pipeline's, the raw sweep."""
+    H, W = p["sweep"].shape[:2]
+    chans, _ = read_exr(edof_path)
+    edof = np.stack([chans[c] for c in "RGB"], axis=-1) / p["scale"]
+    back = fourier_shift(edof, (-SUB[0], -SUB[1]))[TOP:TOP + H, LEFT:LEFT + W]
+    mask = p["truth"].aovs["mask"] > 0
+    gt = p["truth"].image
+    level = float(np.percentile(gt[mask], 99))
+    return tuple(psnr(x, gt, mask=mask, data_range=level)
+                 for x in (back, p["pipeline"], p["sweep"]))
+
+
+@pytest.mark.slow
+def test_edof_from_a_tiff_alone_matches_the_pipeline_on_the_render(tmp_path, capsys,
+                                                                   cache_dir, photo):
+    """calibrate --write, then deconvolve with the calibrated setup and no bank (the
+    command's default regulariser; the pipeline's is its NSR estimate of the render)."""
+    p = photo("paraboloid")
+    d = p["dir"]
+    cal = run_json(capsys, "calibrate", d / "photo.tif", "--setup", d / "setup.toml",
+                   "--write", tmp_path / "camera.toml")
+    report = run_json(capsys, "deconvolve", d / "photo.tif", "--setup",
+                      tmp_path / "camera.toml", "--out", tmp_path / "edof.exr")
+    assert report["bank_traced"] and report["center_from"].startswith("the setup")
+    assert np.abs(np.array(report["center_rc"]) - np.array(cal["center_px"])).max() < 1e-9
+    ours, theirs, sweep_db = edof_psnrs(p, tmp_path / "edof.exr")
+    print(f"paraboloid: EDOF from the TIFF {ours:.2f} dB, pipeline {theirs:.2f} dB, "
+          f"sweep {sweep_db:.2f} dB")
+    assert ours > sweep_db and ours > theirs - EDOF_TOL_DB, (ours, theirs, sweep_db)
+    # the next photo of this camera finds its bank in the cache; a display PNG out
+    again = run_json(capsys, "deconvolve", d / "photo.tif", "--setup",
+                     tmp_path / "camera.toml", "--out", tmp_path / "edof.png")
+    assert not again["bank_traced"] and again["bank"] == report["bank"]
+    _, meta = read_exr(tmp_path / "edof.exr")
+    assert meta["bank_cache"]["traced"] and meta["input_kind"] == "tiff"
+    assert meta["setup"]["sensor"]["resolution"] == [FRAME[1], FRAME[0]]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["paraboloid", "paraboloid_tilted"])
+def test_edof_from_a_tiff_with_its_centre_matches_the_pipeline(tmp_path, capsys, cache_dir,
+                                                               photo, name):
+    """The TIFF, the setup (the render's pitch, not the frame's size) and the true
+    centre: a radial bank as the pole of the polar deconvolution, a grid bank (tilted
+    mirror) on the photo shifted by whole pixels onto the centre. (On this tilted
+    render calibrate itself refuses the outline: reported to its owner.)"""
+    from mitsweep.optics.pixels import optical_center_px
+
+    p = photo(name)
+    d = p["dir"]
+    H, W = p["sweep"].shape[:2]
+    r0, c0 = optical_center_px((H, W))
+    centre = (r0 + TOP + SUB[0], c0 + LEFT + SUB[1])
+    _, pmeta = read_exr(d / "edof_pipeline.exr")
+    # the pipeline's own regulariser (its NSR estimate of the render): like for like
+    report = run_json(capsys, "deconvolve", d / "photo.tif", "--setup", d / "setup.toml",
+                      "--center", *centre, "--nsr", pmeta["nsr"], "--out",
+                      tmp_path / "edof.exr")
+    assert report["operator"] == ("polar" if name == "paraboloid" else "grid")
+    ours, theirs, sweep_db = edof_psnrs(p, tmp_path / "edof.exr")
+    print(f"{name}: EDOF from the TIFF {ours:.2f} dB, pipeline {theirs:.2f} dB, "
+          f"sweep {sweep_db:.2f} dB (NSR {pmeta['nsr']:.3g} both)")
+    if name == "paraboloid":
+        assert abs(ours - theirs) < EDOF_TOL_DB, (ours, theirs, sweep_db)
+    else:
+        # Measured: 27.5 dB from the TIFF, 25.7 dB for the pipeline, 27.0 dB for the raw
+        # sweep. The pipeline's grid bank spans only the 200 px render; the same
+        # deconvolution with a bank over the 262x230 frame, on the render zero-padded
+        # into it, gives 27.6 dB: the difference is the pipeline's, not the photo's.
+        assert ours > theirs - EDOF_TOL_DB and ours > sweep_db, (ours, theirs, sweep_db)
+    # the command's default regulariser (calibrated) loses nothing against it
+    run_json(capsys, "deconvolve", d / "photo.tif", "--setup", d / "setup.toml",
+             "--center", *centre, "--out", tmp_path / "edof_default.exr")
+    default, _, _ = edof_psnrs(p, tmp_path / "edof_default.exr")
+    print(f"{name}: default NSR {default:.2f} dB")
+    assert default > theirs - EDOF_TOL_DB, (default, theirs)
