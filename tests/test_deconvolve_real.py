@@ -183,3 +183,90 @@ def test_edof_from_a_tiff_with_its_centre_matches_the_pipeline(tmp_path, capsys,
     default, _, _ = edof_psnrs(p, tmp_path / "edof_default.exr")
     print(f"{name}: default NSR {default:.2f} dB")
     assert default > theirs - EDOF_TOL_DB, (default, theirs)
+
+
+# ------------------------------------------------------------------ fast: files, refusals
+
+COARSE = Sensor(resolution=(96, 96), pixel_pitch=0.1)
+
+
+@pytest.fixture(scope="module")
+def coarse_files(tmp_path_factory):
+    """A coarse sphere setup, a photo of it in three formats and a capture record."""
+    from PIL import Image
+
+    from mitsweep.optics.reference import reference_geometry
+    from mitsweep.rig.record import FORMAT, VERSION
+
+    d = tmp_path_factory.mktemp("coarse")
+    setup = replace(load_setup(SCENES / "sphere.toml"), sensor=COARSE)
+    (d / "setup.toml").write_text(setup_to_toml(setup))
+    rng = np.random.default_rng(0)
+    img = np.clip(0.4 + 0.2 * rng.standard_normal((96, 96, 3)), 0, 1)
+    write_tiff16(d / "photo.tif", img)
+    Image.fromarray(np.round(linear_to_srgb(img) * 255).astype(np.uint8)).save(
+        d / "photo.jpg", quality=95)
+    (d / "truncated.tif").write_bytes((d / "photo.tif").read_bytes()[:300])
+    g = reference_geometry(setup)
+    t = np.linspace(0, 1, 5)
+    i = g.motion.start + (g.motion.end - g.motion.start) * t
+    record = {"format": FORMAT, "version": VERSION, "complete": True, "status": "complete",
+              "error": None, "setup": setup_to_dict(setup),
+              "measured": {"motion": {"time_s": t.tolist(), "sensor_distance_mm": i.tolist(),
+                                      "position_mm": i.tolist()}},
+              "reference": g.as_dict()}
+    (d / "capture.json").write_text(json.dumps(record))
+    other = dict(record, setup=setup_to_dict(replace(
+        setup, mirror=replace(setup.mirror, vertex_distance=300.0))))
+    (d / "other_mirror.json").write_text(json.dumps(other))
+    (d / "incomplete.json").write_text(json.dumps(dict(record, complete=False,
+                                                       status="interrupted")))
+    return d
+
+
+def test_an_8bit_jpeg_is_restored_with_a_warning(coarse_files, tmp_path, capsys, caplog,
+                                                 cache_dir):
+    d = coarse_files
+    report = run_json(capsys, "deconvolve", d / "photo.jpg", "--setup", d / "setup.toml",
+                      "--rays", "20000", "--out", tmp_path / "edof.exr")
+    assert any("8-bit" in w for w in report["warnings"]) and "8-bit" in caplog.text
+    _, meta = read_exr(tmp_path / "edof.exr")
+    assert meta["input_kind"] == "jpeg" and meta["input_bit_depth"] == 8
+
+
+def test_a_record_shapes_the_traced_bank(coarse_files, tmp_path, capsys, cache_dir):
+    d = coarse_files
+    report = run_json(capsys, "deconvolve", d / "photo.tif", "--setup", d / "setup.toml",
+                      "--record", d / "capture.json", "--rays", "20000",
+                      "--out", tmp_path / "edof.exr")
+    _, meta = read_exr(tmp_path / "edof.exr")
+    assert meta["motion"]["kind"] == "tabulated" and meta["record"].endswith("capture.json")
+    from mitsweep.io.bank import load_bank
+
+    assert load_bank(report["bank"]).optics["motion"]["kind"] == "tabulated"
+
+
+@pytest.mark.parametrize("args,message", [
+    (["{d}/truncated.tif", "--setup", "{d}/setup.toml"], "truncated.tif"),
+    (["{d}/photo.bmp", "--setup", "{d}/setup.toml"], "no such image file"),
+    (["{d}/photo.tif"], "give --setup"),
+    (["{d}/photo.tif", "--setup", "{d}/setup.toml", "--record", "{d}/other_mirror.json"],
+     "another mirror"),
+    (["{d}/photo.tif", "--setup", "{d}/setup.toml", "--record", "{d}/incomplete.json"],
+     "incomplete"),
+    (["{d}/photo.tif", "--setup", "{d}/setup.toml", "--record", "{d}/setup.toml"],
+     "capture record"),
+    (["{d}/photo.tif", "--setup", "{d}/setup.toml", "--force"], "--bank"),
+    (["{d}/photo.tif", "--setup", "{d}/setup.toml", "--operator", "grid", "--grid", "500"],
+     "at most"),
+])
+def test_bad_real_input_gets_one_line_and_status_2(coarse_files, tmp_path, capsys, cache_dir,
+                                                   args, message):
+    d = coarse_files
+    argv = ["deconvolve", *[a.format(d=d) for a in args], "--rays", "20000",
+            "--out", str(tmp_path / "never.exr")]
+    capsys.readouterr()
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("mitsweep: error:") and message in err and "\n" not in err, err
+    assert not (tmp_path / "never.exr").exists()
