@@ -304,9 +304,19 @@ def run(args) -> int:
     H, W = image.shape[:2]
     center, center_from = _resolve_center(args, setup, (H, W))
 
+    def check_operator(kind: str) -> None:
+        """Refuse what the operator cannot do with a bank of ``kind`` (before tracing)."""
+        if operator == "polar" and kind != "radial":
+            raise UsageError("--operator polar needs a radial bank (an untilted mirror)")
+        max_grid = max(1, min(H, W) // 4)
+        if operator == "grid" and kind == "radial" and args.grid > max_grid:
+            raise UsageError(f"--grid {args.grid}: at most {max_grid} for a {W}x{H} image "
+                             f"(grid cells of at least 4 px)")
+
     cache = None
     if args.bank is not None:
         bank = load_bank(args.bank)
+        check_operator(bank.kind)
         if pitch is None:
             logger.warning("%s: no pixel pitch in the metadata; assuming the bank's %g mm",
                            src, bank.pixel_pitch)
@@ -325,6 +335,7 @@ def run(args) -> int:
     else:
         if args.force:
             raise UsageError("--force applies to a given --bank only")
+        check_operator("radial" if setup.mirror.is_symmetric else "grid")
         got, _ = _traced_bank(args, setup, (H, W), pitch, motion, depth)
         bank, cache = got.bank, {"path": str(got.path), "traced": got.traced}
         identity = {"checked_against": "traced for the photo's geometry", "forced": False,
@@ -332,12 +343,6 @@ def run(args) -> int:
         bank_source = str(got.path)
 
     explicit_center = args.center is not None or center_from != "the image centre"
-    if operator == "polar" and bank.kind != "radial":
-        raise UsageError("--operator polar needs a radial bank (an untilted mirror)")
-    max_grid = max(1, min(H, W) // 4)
-    if operator == "grid" and bank.kind == "radial" and args.grid > max_grid:
-        raise UsageError(f"--grid {args.grid}: at most {max_grid} for a {W}x{H} image "
-                         f"(grid cells of at least 4 px)")
     if deprecated is not None:
         logger.warning("--method %s is deprecated: --method now names the restoration method "
                        "(%s); use --operator %s", deprecated, "wiener", deprecated)
