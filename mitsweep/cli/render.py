@@ -28,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(pixels that see the mirror); repeatable")
     p.add_argument("--f-number", type=positive_float, metavar="N",
                    help="f-number of --mode stopped (default 11)")
+    p.add_argument("--sampler", choices=["multijitter", "independent"],
+                   help="how a pixel's samples are drawn (default: the mode's; multijitter "
+                        "is stratified, independent for the sweep)")
     p.add_argument("--full-frame", action="store_true",
                    help="also render pixels outside the mirror's image (default: skip them)")
     p.add_argument("--preview", metavar="FILE.png", help="also write a tone-mapped PNG")
@@ -62,7 +65,8 @@ def run(args) -> int:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
     result = render_image(setup, args.mode, spp=args.spp, seed=args.seed,
                           aovs=tuple(dict.fromkeys(args.aov)), f_number=args.f_number,
-                          mirror_only=not args.full_frame, progress=sys.stderr.isatty())
+                          mirror_only=not args.full_frame, progress=sys.stderr.isatty(),
+                          sampler=args.sampler)
     render_to_exr(args.out, result)
     if args.preview:
         from ..io.png import write_png
@@ -70,6 +74,7 @@ def run(args) -> int:
         write_png(args.preview, result.image, max_width=args.preview_size)
     m = result.metadata
     summary = {"out": args.out, "mode": args.mode, "spp": args.spp, "seed": args.seed,
+               "sampler": m["sampler"],
                "render_s": m["render_s"], "aovs": sorted(result.aovs),
                "reference_sensor_distance_mm": m["reference_sensor_distance_mm"],
                "mean": float(result.image.mean())}

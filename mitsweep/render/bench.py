@@ -11,6 +11,14 @@ Sections of the result:
   sensor positions at the same total spp, with their render times.
 - ``savings``: item 5 of the issue — rendering only the mirror's window, the integrator
   depth chosen from the scene, the analytic sphere instead of a mesh, AOVs on demand.
+- ``ground_truth``: what the demo's renders cost before and after (issue 14): for each
+  spp, the old way (Mitsuba's ``path`` integrator, independent samples) and the new
+  (``mirrorview``, the mode's sampler, :data:`~mitsweep.render.api.MODE_SAMPLERS`), the
+  second render's wall and CPU seconds (``time.process_time``; the first compiled the
+  kernels of that spp; both ways run in this process, so a loaded machine slows both
+  alike) and the two-seed agreement: PSNR between renders
+  of seeds 1 and 2 inside the mirror's image, normalised by the first one's 99th
+  percentile there, as the demo's evaluation does.
 - ``mesh_accuracy``: the sphere meshed at several bounds against the analytic sphere:
   triangles, measured errors, render time and the L1 difference of a focused
   point-source image (same seed, so the Monte Carlo noise largely cancels).
@@ -196,6 +204,49 @@ def _mesh_accuracy(setup, tols, spp):
     return rows
 
 
+def _window_render(setup, mode, spp, seed, *, integrator=None, sampler=None):
+    """One render of the mirror's window as :func:`render_image` makes it, optionally
+    with another integrator: (image, wall s, CPU s)."""
+    from .api import MODE_SAMPLERS, _render_passes, camera_dict, mirror_image_bbox, mode_camera
+    from .scene import build_scene
+
+    kw, desc = mode_camera(setup, mode, None, None)
+    crop = mirror_image_bbox(setup, desc["reference_sensor_distance_mm"], margin_px=8)
+    cam = camera_dict(setup, spp=spp, crop=crop, sampler=sampler or MODE_SAMPLERS[mode], **kw)
+    d, _ = build_scene(setup, cam)
+    if integrator is not None:
+        d["integrator"] = integrator
+    c0 = time.process_time()
+    img, _, wall = _render_passes(d, spp, seed, progress=False)
+    return img, wall, time.process_time() - c0
+
+
+def _ground_truth(setup, budgets, modes=("pinhole",)):
+    """Old (path, independent) against new (mirrorview, the mode's sampler) renders."""
+    from .api import mirror_image_bbox, reference_sensor_distance
+    from .api import render_image
+
+    from ..deconv import psnr
+
+    i_ref = reference_sensor_distance(setup)
+    x, y, w, h = mirror_image_bbox(setup, i_ref, margin_px=8)
+    mask = render_image(setup, "pinhole", spp=1, aovs=("mask",)).aovs["mask"][y:y + h, x:x + w]
+    inside = mask > 0.5
+    old = {"type": "path", "max_depth": 2, "hide_emitters": False}
+    rows = []
+    for mode in modes:
+        for spp in budgets:
+            for name, kw in (("old", dict(integrator=old, sampler="independent")),
+                             ("new", {})):
+                a, _, _ = _window_render(setup, mode, spp, 1, **kw)   # compiles this spp
+                b, wall, cpu = _window_render(setup, mode, spp, 2, **kw)
+                level = float(np.percentile(a[inside], 99.0))
+                rows.append({"mode": mode, "spp": spp, "method": name, "render_s": wall,
+                             "cpu_s": cpu,
+                             "two_seed_psnr_db": psnr(a / level, b / level, mask=inside)})
+    return rows
+
+
 def run_bench(args) -> dict:
     """All render benchmarks; ``args.quick`` shrinks sizes for a smoke run."""
     from .sensor import register
@@ -210,6 +261,9 @@ def run_bench(args) -> dict:
     out["error_vs_time"] = _error_vs_time(_setup("sphere", 48 if quick else 128),
                                           [8, 32] if quick else [16, 64, 256], 8)
     out["savings"] = _savings(_setup("paraboloid", n), spp)
+    out["ground_truth"] = _ground_truth(
+        _setup("sphere", 128 if quick else 512), [4, 16] if quick else [16, 64, 256],
+        ("pinhole",) if quick else ("pinhole", "focused", "sweep", "stopped"))
     out["mesh_accuracy"] = _mesh_accuracy(
         _setup("sphere", 512), [1e-2, 1e-3] if quick else [1e-2, 1e-3, 1e-4],
         2048 if quick else 16384)

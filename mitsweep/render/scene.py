@@ -12,7 +12,10 @@ mirror axis), facing the mirror and never inside the camera's line of sight.
 Lighting: ``emissive`` makes every surface a textured area emitter with a black BSDF,
 so a camera ray needs one bounce off the mirror (integrator ``max_depth = 2``) and the
 only noise is the lens and pixel sampling; ``lit`` uses diffuse textured surfaces under
-a ceiling light (``max_depth = 3``: mirror, diffuse surface, light).
+a ceiling light (``max_depth = 3``: mirror, diffuse surface, light). Emissive scenes are
+rendered by the ``mirrorview`` integrator (:mod:`mitsweep.render.integrator`: the
+``path`` integrator's image, bit for bit, at a quarter of its cost), lit ones by
+``path``.
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import math
 import numpy as np
 
 from ..optics import placement_of
+from .integrator import INTEGRATOR_NAME, integrator_dict, register_integrator
 from .mirror import mirror_shape
 from .textures import TEXTURE_NAMES, texture
 
@@ -195,19 +199,43 @@ def build_scene(setup, sensor: dict, *, surroundings: bool = True, extra: dict |
         Mesh bounds (default: the setup's ``scene.mesh_sag_tol``/``mesh_normal_tol``).
     max_depth : int, optional
         Integrator depth (default :func:`integrator_depth`).
+
+    The integrator is ``mirrorview`` where it is exact (emissive lighting, a finite
+    depth, every extra object black; not in scalar variants), else ``path``; the
+    description's ``integrator`` says which.
     """
     sc = setup.scene
     shape, info = mirror_shape(setup.mirror, force_mesh=mirror_mesh,
                                sag_tol=sag_tol or sc.mesh_sag_tol,
                                normal_tol=normal_tol or sc.mesh_normal_tol)
     depth = integrator_depth(setup) if max_depth is None else max_depth
-    d = {"type": "scene",
-         "integrator": {"type": "path", "max_depth": depth, "hide_emitters": False},
-         "sensor": sensor, "mirror": shape}
+    black = all(_is_black(obj) for obj in (extra or {}).values())
+    integrator = _integrator(sc.lighting if black else "lit", depth)
+    d = {"type": "scene", "integrator": integrator, "sensor": sensor, "mirror": shape}
     if surroundings:
         d.update(_room(setup))
         d.update(_boards(setup))
     if extra:
         d.update(extra)
     return d, {"mirror": info, "max_depth": depth, "lighting": sc.lighting,
-               "surroundings": surroundings}
+               "surroundings": surroundings, "integrator": integrator["type"]}
+
+
+def _is_black(obj) -> bool:
+    """Whether a scene object reflects nothing: a black ``diffuse`` BSDF."""
+    bsdf = obj.get("bsdf") if isinstance(obj, dict) else None
+    return (isinstance(bsdf, dict) and bsdf.get("type") == "diffuse"
+            and bsdf.get("reflectance") in (0, 0.0))
+
+
+def _integrator(lighting: str, depth: int) -> dict:
+    """``mirrorview`` where it is exact and fast (vectorised variants), else ``path``."""
+    import mitsuba as mi
+
+    if mi.variant() is None or mi.variant().startswith("scalar"):
+        # Python integrators run per sample in scalar variants: keep the C++ one there.
+        return integrator_dict("lit", depth)
+    d = integrator_dict(lighting, depth)
+    if d["type"] == INTEGRATOR_NAME:
+        register_integrator()
+    return d

@@ -1,0 +1,116 @@
+"""The ``mirrorview`` integrator: camera → delta reflections → emitter, nothing else.
+
+.. list-table:: Plugin parameters
+   :header-rows: 1
+
+   * - name
+     - type
+     - meaning
+   * - ``max_depth``
+     - int
+     - Longest path, in segments, as Mitsuba's ``path`` integrator counts them
+       (1 ≤ max_depth ≤ :data:`MAX_DEPTH`; default 2: camera → mirror → emitter).
+
+In the ``emissive`` surroundings (:mod:`mitsweep.render.scene`) every surface but the
+mirror is a textured area emitter with a black diffuse BSDF, so the only light paths
+are: camera → emitter, and camera → one or more delta (mirror) reflections → emitter.
+This integrator follows exactly those: at each hit it adds the surface's emission and
+continues only through a delta reflection, whose sample consumes no random numbers.
+
+Mitsuba's ``path`` integrator on such a scene computes the same estimate (emitter
+sampling at the black surfaces adds zero; at the mirror it is skipped, and the MIS
+weight of a delta-sampled hit is 1), but evaluates emitter sampling, shadow rays and
+MIS for every lane of its recorded loop. With the same sampler and seed the images are
+bit for bit identical (``tests/test_render_integrator.py``) and about 4× cheaper
+(``mitsweep bench render``). :func:`integrator_dict` picks it only where it is exact:
+emissive lighting and a finite depth.
+"""
+
+from __future__ import annotations
+
+import logging
+
+__all__ = ["INTEGRATOR_NAME", "MAX_DEPTH", "integrator_dict", "register_integrator"]
+
+logger = logging.getLogger(__name__)
+
+INTEGRATOR_NAME = "mirrorview"
+#: Deepest path the integrator unrolls (delta bounces are unrolled at trace time).
+MAX_DEPTH = 8
+
+_registered_for: set[str] = set()
+
+
+def integrator_dict(lighting: str, max_depth: int) -> dict:
+    """The integrator of a scene: ``mirrorview`` where it is exact, else ``path``.
+
+    ``mirrorview`` needs ``lighting == "emissive"`` (every non-mirror BSDF black) and
+    ``1 <= max_depth <= MAX_DEPTH``; ``path`` (``hide_emitters`` off) takes the rest,
+    e.g. ``lit`` surroundings or an unlimited depth (-1).
+    """
+    if lighting == "emissive" and 1 <= max_depth <= MAX_DEPTH:
+        return {"type": INTEGRATOR_NAME, "max_depth": int(max_depth)}
+    return {"type": "path", "max_depth": int(max_depth), "hide_emitters": False}
+
+
+def _make_class():
+    import drjit as dr
+    import mitsuba as mi
+
+    class MirrorViewIntegrator(mi.SamplingIntegrator):
+        """Emission seen directly or through delta reflections (see the module)."""
+
+        def __init__(self, props):
+            super().__init__(props)
+            depth = int(props.get("max_depth", 2))
+            if not 1 <= depth <= MAX_DEPTH:
+                raise ValueError(f"{INTEGRATOR_NAME}: max_depth must be in 1..{MAX_DEPTH}, "
+                                 f"got {depth}")
+            self.max_depth = depth
+
+        def sample(self, scene, sampler, ray, medium=None, active=True):
+            ray = mi.Ray3f(ray)
+            ctx = mi.BSDFContext()
+            throughput = mi.Spectrum(1.0)
+            result = mi.Spectrum(0.0)
+            first_valid = None
+            alive = mi.Bool(active)
+            # Python loop: unrolled at trace time (max_depth is a small constant).
+            for depth in range(self.max_depth):
+                si = scene.ray_intersect(ray, alive)
+                alive &= si.is_valid()
+                if first_valid is None:
+                    first_valid = mi.Bool(alive)
+                emitter = si.emitter(scene, alive)
+                result += dr.select(alive, throughput * emitter.eval(si, alive), 0.0)
+                if depth + 1 == self.max_depth:
+                    break
+                bsdf = si.bsdf(ray)
+                bs, weight = bsdf.sample(ctx, si, sampler.next_1d(alive),
+                                         sampler.next_2d(alive), alive)
+                alive &= mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta) & (dr.max(weight) > 0)
+                throughput *= weight
+                ray = si.spawn_ray(si.to_world(bs.wo))
+            return result, first_valid, []
+
+        def aov_names(self):
+            return []
+
+        def to_string(self):
+            return f"MirrorViewIntegrator[max_depth={self.max_depth}]"
+
+    return MirrorViewIntegrator
+
+
+def register_integrator() -> None:
+    """Register ``mirrorview`` for the current Mitsuba variant (idempotent)."""
+    import mitsuba as mi
+
+    variant = mi.variant()
+    if variant is None:
+        raise RuntimeError(f"{INTEGRATOR_NAME}: select a Mitsuba variant first")
+    if variant not in _registered_for:
+        cls = _make_class()
+        mi.register_integrator(INTEGRATOR_NAME, lambda props: cls(props))
+        _registered_for.add(variant)
+        logger.debug("registered %s for %s", INTEGRATOR_NAME, variant)
