@@ -6,7 +6,9 @@ on a pool of 2 processes, each into a fresh directory. Per executor: the start-u
 of its workers, the run time, items per second, the speed-up over serial and the
 per-task overhead, ``(run time × workers − Σ task seconds) / items``, the worker time
 each task costs beyond its own work (scheduling, transfers, checksums, the manifest);
-and whether its files are byte-identical to the serial run's. The serial run's task
+and whether its files are byte-identical to the serial run's. (A process pool starts
+its processes at its first task, so their start-up is in its run time; a Dask cluster
+is up, its workers initialised, before the run starts.) The serial run's task
 logs give the per-item costs, from which ``projection`` gives scenes and items per
 hour on N machines of W workers: ``N W 3600 / (scene seconds + items per scene ×
 overhead)``, with the bank (traced once per dataset) left out.
