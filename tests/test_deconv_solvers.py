@@ -196,3 +196,15 @@ def test_deconvolve_refuses_arguments_a_method_does_not_take(problem):
         deconvolve(y, problem["bank"], method="wiener", iterations=3)
     with pytest.raises(ValueError, match="weight must be"):
         deconvolve(y, problem["bank"], method="tv", weight=-1.0)
+
+
+def test_discrepancy_without_a_solution_falls_back_to_the_image_estimate():
+    # an unblurred random image "blurred" by a wide kernel with σ far below its detail:
+    # no NSR leaves only σ² of residual; the least regularised NSR (the floor) would be
+    # the worst answer, the image's own estimate is returned instead
+    from mitsweep.deconv.wiener import DEFAULT_NSR_FLOOR, estimate_nsr
+    y = np.random.default_rng(0).random((64, 64))
+    psf = np.ones((15, 15))
+    nsr = discrepancy_nsr(y, psf, 1e-4)
+    assert nsr == pytest.approx(estimate_nsr(y))
+    assert nsr > DEFAULT_NSR_FLOOR
