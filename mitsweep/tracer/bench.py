@@ -134,13 +134,13 @@ BANK_METHODS = (
 
 
 def bank_error_per_second(setup, *, n_radii: int = 19, depths=(500.0, 1000.0, 5000.0, 10000.0),
-                          reference_rays: int = 1 << 22, max_rays: int = 1 << 21,
+                          reference_rays: int = 1 << 21, max_rays: int = 1 << 19,
                           target: float = BANK_L1_TARGET, methods=BANK_METHODS) -> dict:
     """Time to a radial bank whose every kernel is within ``target`` (L1) of the true IPSF.
 
     The reference bank is the exact method at ``reference_rays`` per kernel with other
     seeds (its own error, the L1 between it and a second reference at the first depth, is
-    reported). Each method traces the whole bank at rays per kernel doubling from 2^14
+    reported). Each method traces the whole bank at rays per kernel doubling from 2^12
     up to ``max_rays``; the first count at which the worst kernel meets ``target`` is
     the method's, and that bank's wall time (pilot passes included, as
     :func:`mitsweep.tracer.ipsf_bank` runs it) is its time. The paper's plane sum
@@ -164,7 +164,7 @@ def bank_error_per_second(setup, *, n_radii: int = 19, depths=(500.0, 1000.0, 50
     self_l1 = float(np.abs(ref[:1] - ref2).sum(axis=(2, 3)).max())
 
     def ladder(extra, reference):
-        rows, rays = [], 1 << 14
+        rows, rays = [], 1 << 12
         while rays <= max_rays:
             t0 = time.perf_counter()
             bank = ipsf_bank(setup, rays=rays, seed=0, **extra, **kw)
@@ -248,9 +248,10 @@ def run_bench(args) -> dict:
     if quick:
         out["bank_error_per_second"] = bank_error_per_second(
             setup, n_radii=3, depths=(500.0, 10000.0), reference_rays=1 << 20,
-            max_rays=1 << 19)
+            max_rays=1 << 18)
     else:
-        out["bank_error_per_second"] = bank_error_per_second(setup, max_rays=1 << 20)
+        out["bank_error_per_second"] = bank_error_per_second(
+            setup, reference_rays=1 << 21, max_rays=1 << 19)
     if not quick:
         # Bounded memory: 1e9 rays in chunks of 2^22 (no per-ray arrays are stored).
         rss0 = _peak_rss_mb()

@@ -51,17 +51,28 @@ import numpy as np
 
 from ..backend import drjit_module
 
-__all__ = ["Geometry", "TraceParams", "trace_arrays", "deposit", "deposit_segments"]
+__all__ = ["Geometry", "TraceParams", "trace_arrays", "deposit", "deposit_segments",
+           "TRACE_REVISION"]
 
-# Golden-ratio generalisation for a 3-D rank-1 lattice (Roberts' R3 sequence):
-# φ₃ is the real root of x⁴ = x + 1; the generators are 1/φ₃, 1/φ₃², 1/φ₃³.
+#: Bumped whenever the rays a seed produces or the way they are deposited change, so that
+#: kernels cached under an unchanged package version are not served stale (2: R2 lattice
+#: for (a, b), the elliptic sampling domain and the exact segment deposit).
+TRACE_REVISION = 2
+
+# Golden-ratio generalisations for rank-1 lattices (Roberts' R_d sequences): φ_d is the
+# real root of x^(d+1) = x + 1 and the generators are 1/φ_d, ..., 1/φ_d^d. R3 samples
+# (a, b, t) of the stratified method; every other trace samples (a, b) only, with R2:
+# a projection of R3 onto two coordinates is a poor 2-D sequence (measured on the
+# sphere's bank: L1 6e-3 at 2^16 rays with R3's first two generators, 3.5e-4 with R2).
 _PHI3 = 1.2207440846057596
+_PHI2 = 1.3247179572447460
 # Reduction mode of the deposits. Plain atomics (Direct) measured 1.3-1.9x faster than
 # per-thread buffer copies (Expand) and packet-local pre-reduction (Local) on the 2-core
 # LLVM machine, for compact (centre) and spread (periphery) IPSFs alike.
 _MODE = None
 
 _R3 = tuple(int(round((1.0 / _PHI3 ** (j + 1)) % 1.0 * 2 ** 32)) & 0xFFFFFFFF for j in range(3))
+_R2 = tuple(int(round((1.0 / _PHI2 ** (j + 1)) % 1.0 * 2 ** 32)) & 0xFFFFFFFF for j in range(2))
 
 
 @dataclass(frozen=True)
@@ -142,13 +153,15 @@ def _types(double: bool):
     return m, m.Float, m.Array3f
 
 
-def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: bool):
+def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: bool,
+           time_dim: bool = False):
     """Trace ``n`` rays (sample indices ``offset … offset+n−1``); Dr.Jit values out.
 
     Returns a dict of Dr.Jit arrays: ``landed`` (reaches the sensor through the rim and
     the aperture), ``landed_free`` (would, without the rim), ``weight``, ``Au, Av, Bu,
-    Bv`` (sensor hit ``A + B i``, upright image mm), ``a, b`` (aim-plane sample), ``xi_t``
-    (a third low-discrepancy coordinate in [0, 1) for time).
+    Bv`` (sensor hit ``A + B i``, upright image mm), ``a, b`` (aim-plane sample) and, with
+    ``time_dim``, ``xi_t`` (a third low-discrepancy coordinate in [0, 1) for time: the
+    samples are then R3's, else R2's).
     """
     import drjit as dr
 
@@ -160,11 +173,14 @@ def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: boo
         0, 2 ** 32, size=3, dtype=np.uint64)
     shifts = [dr.opaque(UInt32, int(x)) for x in shift_vals]
 
+    gen = _R3 if time_dim else _R2
+
     def lattice(j):
         # Exact fixed-point frac(idx * g_j + shift_j); top 24 bits -> [0, 1).
-        return Float((idx * UInt32(_R3[j]) + shifts[j]) >> 8) * (2.0 ** -24)
+        return Float((idx * UInt32(gen[j]) + shifts[j]) >> 8) * (2.0 ** -24)
 
-    ua, ub, ut = lattice(0), lattice(1), lattice(2)
+    ua, ub = lattice(0), lattice(1)
+    ut = lattice(2) if time_dim else None
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731 - compile once, update values
     if params.ellipse is None:
         a = op(params.a0) + (op(params.a1) - op(params.a0)) * ua
@@ -333,7 +349,7 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
     Acc = m.Float64  # float32 sums of millions of rays drift by ~1 %: accumulate in float64
     if buffer is None:
         buffer = dr.zeros(Acc, KK + 2)
-    out = _trace(geom, params, n, offset, double)
+    out = _trace(geom, params, n, offset, double, time_dim=times is None)
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731
     landed, weight = out["landed"], out["weight"]
     inv_p = op(1.0 / pitch)
