@@ -38,7 +38,7 @@ from .wiener import (DEFAULT_NSR_FLOOR, MAX_NSR, estimate_noise_sigma, estimate_
                      fast_shape, kernel_spectrum, natural_prior_scale)
 
 __all__ = ["noise_sigma", "discrepancy_nsr", "calibrated_nsr", "surrogate_kernel",
-           "prior_weight", "PRIOR_WEIGHT_SCALE", "DISCREPANCY_TAU"]
+           "prior_weight", "PRIOR_WEIGHT_SCALE", "DISCREPANCY_TAU", "discrepancy"]
 
 logger = logging.getLogger(__name__)
 
@@ -95,6 +95,16 @@ def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
                     tau: float = DISCREPANCY_TAU, mask: np.ndarray | None = None) -> float:
     r"""Natural-prior Wiener NSR whose residual power equals ``tau · σ²`` per pixel.
 
+    See :func:`discrepancy`, which also returns the residual's level.
+    """
+    return discrepancy(image, psf, sigma, tau=tau, mask=mask)[0]
+
+
+def discrepancy(image: np.ndarray, psf: np.ndarray, sigma: float, *,
+                tau: float = DISCREPANCY_TAU,
+                mask: np.ndarray | None = None) -> tuple[float, float]:
+    r"""Natural-prior Wiener NSR whose residual power equals ``tau · σ²`` per pixel.
+
     The residual of the Wiener estimate with kernel spectrum H and regulariser
     :math:`R = \text{nsr}\cdot c\,|f|^2` is :math:`(1 - H G) Y = R/(|H|^2 + R)\, Y`;
     its power is increasing in the NSR, so a bisection on log NSR finds the one that
@@ -102,9 +112,12 @@ def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
     removal and the pixel count to a region (the mirror disk); outside, the image is
     set to its mean there.
 
-    Returns the NSR clamped to [DEFAULT_NSR_FLOOR, MAX_NSR]. When even the smallest
-    NSR leaves more residual than the noise, the principle has no solution and the
-    image's own estimate (:func:`~mitsweep.deconv.wiener.estimate_nsr`) is returned.
+    Returns ``(nsr, residual_sigma)``: the NSR clamped to [DEFAULT_NSR_FLOOR, MAX_NSR]
+    and the rms residual it leaves (σ √τ when the principle is met). When even the
+    smallest NSR leaves more residual than the noise, the principle has no solution;
+    the image's own estimate (:func:`~mitsweep.deconv.wiener.estimate_nsr`) is
+    returned with its residual, larger than σ: the level of what the model does not
+    explain, which the prior-based solvers then take as the noise.
     """
     img = np.asarray(image, dtype=np.float64)
     if img.ndim == 3:
@@ -112,7 +125,7 @@ def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
     vals = img[mask] if mask is not None else img.ravel()
     n = float(vals.size)
     if n == 0 or sigma <= 0:
-        return float(DEFAULT_NSR_FLOOR)
+        return float(DEFAULT_NSR_FLOOR), float(sigma)
     x = img - float(vals.mean())
     if mask is not None:
         x = np.where(mask, x, 0.0)
@@ -145,9 +158,9 @@ def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
         nsr = estimate_nsr(image, mask=mask)
         logger.info("discrepancy principle has no solution (residual above the noise at "
                     "every NSR): the image's NSR estimate %.3g is used", nsr)
-        return float(nsr)
+        return float(nsr), float(np.sqrt(residual(np.log(nsr)) / n))
     if residual(hi) <= target:
-        return float(MAX_NSR)
+        return float(MAX_NSR), float(np.sqrt(residual(hi) / n))
     for _ in range(40):
         mid = 0.5 * (lo + hi)
         if residual(mid) < target:
@@ -156,7 +169,7 @@ def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
             hi = mid
     nsr = float(np.exp(0.5 * (lo + hi)))
     logger.info("discrepancy NSR %.3g (sigma %.3g)", nsr, sigma)
-    return nsr
+    return nsr, float(np.sqrt(tau) * sigma)
 
 
 def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,

@@ -47,7 +47,7 @@ from ..io.bank import BankError, IPSFBank
 from .kernels import check_bank_matches, interpolate_radial, radii_px, select_depth
 from .operators import BlurOperator, polar_bands
 from .polar import from_polar, polar_grid, to_polar
-from .regularization import discrepancy_nsr, noise_sigma, prior_weight, surrogate_kernel
+from .regularization import discrepancy, noise_sigma, prior_weight, surrogate_kernel
 from .spatial import _support, grid_axes_px, grid_windows
 from .wiener import check_image_values, fast_shape, kernel_spectrum, working_dtype
 
@@ -418,7 +418,11 @@ def hqs_deconvolve(image: np.ndarray, bank: IPSFBank, *, prior: str = "hyperlapl
         for c in range(img.shape[2]):
             y = img[..., c]
             sigma = noise_sigma(y, noise)
-            nsr_c = discrepancy_nsr(y, k_mid, sigma) if nsr is None else float(nsr)
+            nsr_d, sigma_res = discrepancy(y, k_mid, sigma)
+            nsr_c = nsr_d if nsr is None else float(nsr)
+            # what blur plus σ cannot explain (the principle had no solution: Monte
+            # Carlo noise, bank mismatch) is noise to the prior's weight too
+            sigma = max(sigma, sigma_res)
             # natural-prior Wiener: R = nsr · 2π ln(n/2) |f|², β D^T D ≈ β 4π² |f|²
             beta_w = nsr_c * math.log(max(n_px / 2, 2.0)) / (2 * math.pi)
             # no restoration of y may exceed 4 times its range: HQS is stopped there
