@@ -26,7 +26,7 @@ pytestmark = pytest.mark.slow
 OPTS = DatasetOptions(scenes=2, spp={"pinhole": 1, "focused": 1, "sweep": 2, "stopped": 1},
                       bank_rays=1 << 12, light_levels_lux=(50.0,))
 #: The same options on the command line.
-CLI_ARGS = ["--scenes", "2", "--spp", "1", "1", "2", "1", "--lux", "50"]
+CLI_ARGS = ["--scenes", "2", "--spp", "1", "1", "2", "1", "--lux", "50", "--bank-rays", "4096"]
 
 
 def files_of(root) -> dict:

@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    default=[16, 64, 128, 64], help="samples per pixel per mode (default 16 64 128 64)")
     p.add_argument("--lux", type=positive_float, nargs="*", default=[50.0, 2.0, 0.5],
                    help="light levels for the noisy images, lux (default 50 2 0.5)")
+    p.add_argument("--bank-rays", type=positive_int, default=None, metavar="N",
+                   help="rays traced per IPSF of the bank (default: the tracer's)")
     p.add_argument("--methods", type=_methods, default=("wiener",), metavar="M[,M...]",
                    help="restoration methods of the EDOF images, comma-separated (default "
                         "wiener; wiener writes edof*.exr, another method M edof_M*.exr)")
@@ -96,7 +98,7 @@ def _non_negative_int(text: str) -> int:
 
 #: DatasetOptions fields → the options that set them, for messages.
 _OPTION_OF = {"scenes": "--scenes", "seed": "--seed", "spp": "--spp",
-              "light_levels_lux": "--lux", "methods": "--methods"}
+              "light_levels_lux": "--lux", "methods": "--methods", "bank_rays": "--bank-rays"}
 
 
 def check_dataset_outputs(inputs: list, out: Path, opts, shard=None) -> None:
@@ -128,7 +130,8 @@ def run(args) -> int:
     try:
         opts = DatasetOptions(scenes=args.scenes, seed=args.seed,
                               spp=dict(zip(("pinhole", "focused", "sweep", "stopped"), args.spp)),
-                              light_levels_lux=tuple(args.lux), methods=args.methods)
+                              light_levels_lux=tuple(args.lux), methods=args.methods,
+                              bank_rays=args.bank_rays)
     except DatasetError as exc:  # name the option, not the field
         field, _, rest = str(exc).partition(":")
         raise UsageError(f"{_OPTION_OF.get(field.split('[')[0], field)}:{rest}") from None
