@@ -64,7 +64,7 @@ def test_non_finite_pixels_are_refused(files, capsys, bad):
     img = np.ones((SIZE, SIZE))
     img[3, 4] = bad
     raw_exr(files / "image.exr", img)
-    assert "image holds NaN or inf values" in refused(capsys, argv(files))
+    assert "holds NaN or infinite values" in refused(capsys, argv(files))
 
 
 def _calls(img):
