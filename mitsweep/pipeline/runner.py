@@ -298,7 +298,7 @@ def run_tasks(root: str | Path, tasks: Sequence[Task], context: Any, header: Map
             logger.info("resuming: %d of %d items already complete", len(mine) - len(todo),
                         len(mine))
         _write_manifest(home, manifest)  # entries that no longer verify are gone
-        _prepare_directories(root, todo, shard)
+        _prepare_directories(root, mine, todo, shard)
         _execute(root, home, manifest, todo, context, executor, lost=lost,
                  progress=progress, retries=retries, desc=desc)
         _verify(root, home, manifest, mine)
@@ -368,25 +368,40 @@ def _complete_entries(root: Path, tasks: Iterable[Task], sources: list[dict]) ->
     return dict(sorted(found.items()))
 
 
-def _prepare_directories(root: Path, todo: list[Task], shard: Shard | None) -> None:
-    """Parent folders of the items to make, and no temporaries left there by a worker
-    that was killed while writing one (only those of items no other shard writes)."""
+def _prepare_directories(root: Path, mine: list[Task], todo: list[Task],
+                         shard: Shard | None) -> None:
+    """Parent folders of the items to make, and no temporaries left by a worker killed
+    while writing an item or its log (only of items no other shard writes)."""
     for t in todo:
         p = root / t.name
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise WriteError(exc.errno, exc.strerror, str(p.parent)) from None
-        if shard is None or t.group is not None:
-            _remove_temporaries(p)
+    ours = [t.name for t in mine if shard is None or t.group is not None]
+    _sweep_temporaries(root, ours + [f"{LOG_DIR}/{n}.log" for n in ours])
+
+
+def _sweep_temporaries(root: Path, names: Iterable[str]) -> None:
+    """Remove the temporaries of these items (the atomic writers name them
+    ``.NAME.*`` beside NAME), listing each folder once."""
+    by_dir: dict[Path, set[str]] = {}
+    for n in names:
+        p = root / n
+        by_dir.setdefault(p.parent, set()).add(p.name)
+    for folder, basenames in by_dir.items():
+        try:
+            entries = [e.name for e in os.scandir(folder) if e.name.startswith(".")]
+        except FileNotFoundError:
+            continue
+        for entry in entries:
+            if any(entry.startswith(f".{b}.") for b in basenames):
+                (folder / entry).unlink(missing_ok=True)
+                logger.debug("removed %s, left by an interrupted write", folder / entry)
 
 
 def _remove_temporaries(path: Path) -> None:
-    """The temporaries of ``path`` left by a worker killed while writing it (the atomic
-    writers name them ``.NAME.*``)."""
-    for tmp in path.parent.glob(f".{path.name}.*"):
-        tmp.unlink(missing_ok=True)
-        logger.debug("removed %s, left by an interrupted write", tmp)
+    _sweep_temporaries(path.parent, [path.name])
 
 
 def _submit(executor: cf.Executor | None, task: Task, context: Any, root: Path,
@@ -403,9 +418,11 @@ def _submit(executor: cf.Executor | None, task: Task, context: Any, root: Path,
 
 #: Most tasks submitted to an executor and not yet finished (memory of huge runs).
 MAX_IN_FLIGHT = 1024
-#: Seconds between rewrites of the manifest during a run (a huge manifest rewritten
-#: after every item would cost more than the items); a coordinator killed loses at most
-#: the entries of this long, whose items a rerun makes again.
+#: The manifest is rewritten after every item up to this many entries; beyond, at most
+#: every :data:`MANIFEST_INTERVAL_S` (rewriting a huge manifest after every item would
+#: cost more than the items): a coordinator killed then loses the entries of that last
+#: second, whose items a rerun makes again.
+MANIFEST_EVERY_ITEM_UP_TO = 2000
 MANIFEST_INTERVAL_S = 1.0
 
 
@@ -458,7 +475,8 @@ def _execute(root: Path, home: Path, manifest: dict, todo: list[Task], context: 
                 manifest["items"][t.name] = {"params": t.entry_params(),
                                              "sha256": result["sha256"],
                                              "bytes": result["bytes"]}
-                if time.monotonic() - written >= MANIFEST_INTERVAL_S:
+                if (len(manifest["items"]) <= MANIFEST_EVERY_ITEM_UP_TO
+                        or time.monotonic() - written >= MANIFEST_INTERVAL_S):
                     _write_manifest(home, manifest)
                     written = time.monotonic()
                 bar.update(1)
