@@ -20,20 +20,6 @@ median of the finest diagonal Haar wavelet band), not by scikit-image.
 
 from __future__ import annotations
 
-import numpy as np
-
-from ..io.bank import BankError, IPSFBank
-from .kernels import (check_bank_matches, grid_bank_from_radial, optical_center,
-                      select_depth)
-from .metrics import per_depth_band, per_radius, psnr, ssim
-from .noise import SensorNoise, paper_fig10_settings
-from .operators import BlurOperator, polar_operator, product_convolution_operator
-from .regularization import calibrated_nsr, noise_sigma
-from .solvers import hqs_deconvolve, richardson_lucy
-from .polar import PolarGrid, from_polar, polar_deconvolve, polar_grid, to_polar
-from .spatial import scatter_blur, spatially_varying_blur, spatially_varying_deconvolve
-from .wiener import estimate_nsr, wiener_deconvolve
-
 __all__ = ["deconvolve", "METHODS", "wiener_deconvolve", "polar_deconvolve",
            "spatially_varying_deconvolve", "spatially_varying_blur", "scatter_blur",
            "estimate_nsr", "SensorNoise", "paper_fig10_settings", "psnr", "ssim",
@@ -43,99 +29,70 @@ __all__ = ["deconvolve", "METHODS", "wiener_deconvolve", "polar_deconvolve",
            "product_convolution_operator", "blur_operator", "richardson_lucy",
            "hqs_deconvolve", "calibrated_nsr", "noise_sigma"]
 
-
 #: Restoration methods :func:`deconvolve` accepts (``method=``); every command that makes
 #: an EDOF image offers these names.
 METHODS: tuple[str, ...] = ("wiener", "rl", "tv", "hyperlaplacian")
 
+#: Where each public name lives. The submodules are imported on first use (PEP 562), so
+#: that ``import mitsweep.deconv`` — and every command line, which reads :data:`METHODS`
+#: to build its options — does not pay for SciPy's signal and statistics modules.
+_SOURCES = {
+    "BankError": "bank", "IPSFBank": "bank",
+    "check_bank_matches": "kernels", "grid_bank_from_radial": "kernels",
+    "optical_center": "kernels", "select_depth": "kernels",
+    "per_depth_band": "metrics", "per_radius": "metrics", "psnr": "metrics",
+    "ssim": "metrics",
+    "SensorNoise": "noise", "paper_fig10_settings": "noise",
+    "BlurOperator": "operators", "polar_operator": "operators",
+    "product_convolution_operator": "operators",
+    "calibrated_nsr": "regularization", "noise_sigma": "regularization",
+    "hqs_deconvolve": "solvers", "richardson_lucy": "solvers",
+    "PolarGrid": "polar", "from_polar": "polar", "polar_deconvolve": "polar",
+    "polar_grid": "polar", "to_polar": "polar",
+    "scatter_blur": "spatial", "spatially_varying_blur": "spatial",
+    "spatially_varying_deconvolve": "spatial",
+    "estimate_nsr": "wiener", "wiener_deconvolve": "wiener",
+    "deconvolve": "restore", "blur_operator": "restore",
+}
 
-def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
-                  depth_mm: float | str | None = None,
-                  center: tuple[float, float] | None = None) -> BlurOperator:
-    """The bank's blur on (H, W) images: polar for a radial bank, product-convolution
-    for a grid bank."""
-    shape = tuple(int(n) for n in image_shape[:2])
-    if bank.kind == "radial":
-        return polar_operator(bank, shape, depth_mm=depth_mm, center=center)
-    if bank.kind == "grid":
-        if center is not None:
-            raise ValueError("center applies to radial banks (polar deconvolution) only")
-        return product_convolution_operator(bank, shape, depth_mm=depth_mm)
-    raise BankError(f"unknown bank kind {bank.kind!r}")
+
+def _submodule(short: str):
+    """Import one submodule by its short name; literal imports, so that the architecture
+    check (tests/test_architecture.py) reads every edge."""
+    if short == "bank":
+        from ..io import bank as mod
+    elif short == "kernels":
+        from . import kernels as mod
+    elif short == "metrics":
+        from . import metrics as mod
+    elif short == "noise":
+        from . import noise as mod
+    elif short == "operators":
+        from . import operators as mod
+    elif short == "regularization":
+        from . import regularization as mod
+    elif short == "solvers":
+        from . import solvers as mod
+    elif short == "polar":
+        from . import polar as mod
+    elif short == "spatial":
+        from . import spatial as mod
+    elif short == "wiener":
+        from . import wiener as mod
+    else:
+        from . import restore as mod
+    return mod
 
 
-def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
-               weight: float | None = None, iterations: int | None = None, noise=None,
-               progress: bool = False, **kw) -> np.ndarray:
-    """Restore a focal-sweep image with ``method`` and the right operator for ``bank``.
+def __getattr__(name: str):
+    try:
+        short = _SOURCES[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(_submodule(short), name)
+    globals()[name] = value
+    return value
 
-    Parameters
-    ----------
-    image : (H, W) or (H, W, C) ndarray
-        Focal-sweep image on the bank's reference pixel grid; float32 stays float32.
-    bank : IPSFBank
-        ``kind="radial"`` (polar operators and filters) or ``kind="grid"``
-        (product-convolution).
-    method : {"wiener", "rl", "tv", "hyperlaplacian"}
-        ``"wiener"``: :func:`polar_deconvolve` or :func:`spatially_varying_deconvolve`;
-        ``"rl"``: damped Richardson–Lucy (:func:`~mitsweep.deconv.solvers.richardson_lucy`)
-        with :func:`blur_operator`; ``"tv"``, ``"hyperlaplacian"``: half-quadratic
-        splitting (:func:`~mitsweep.deconv.solvers.hqs_deconvolve`).
-    weight : float, optional
-        Wiener: the NSR; TV / hyper-Laplacian: the prior weight λ; None: calibrated
-        from the noise and the image (Wiener: discrepancy principle,
-        :func:`~mitsweep.deconv.regularization.calibrated_nsr`, natural prior only;
-        priors: :func:`~mitsweep.deconv.regularization.prior_weight`). Richardson–Lucy
-        has no weight (its regularisation is its stopping rule).
-    iterations : int, optional
-        RL iterations or HQS β steps; None: the method's stopping rule / schedule.
-        Wiener is not iterative.
-    noise : SensorNoise, float or None
-        The image's noise (:func:`~mitsweep.deconv.regularization.noise_sigma`); None:
-        estimated from the image.
-    progress : bool
-        A tqdm bar on stderr for the iterative methods.
-    **kw
-        Passed on: ``depth_mm`` and ``center`` (radial banks) for every method;
-        ``nsr`` and ``prior`` for Wiener (``nsr`` is the former name of ``weight``);
-        for TV / hyper-Laplacian ``nsr`` fixes the NSR of their first (Wiener) step
-        (default: calibrated) and ``time_limit_s`` bounds their time; for RL ``nsr``
-        has no meaning and is ignored, ``damping`` and ``time_limit_s`` are RL's.
-    """
-    if method not in METHODS:
-        raise ValueError(f"unknown restoration method {method!r}; allowed: {', '.join(METHODS)}")
-    if bank.kind not in ("radial", "grid"):
-        raise BankError(f"unknown bank kind {bank.kind!r}")
-    if method == "wiener":
-        if iterations is not None:
-            raise ValueError("method 'wiener' is not iterative: iterations must be None")
-        nsr = kw.pop("nsr", None)
-        if weight is not None and nsr is not None:
-            raise ValueError("give weight or nsr (its former name), not both")
-        nsr = weight if weight is not None else nsr
-        if nsr is None and kw.get("prior", "natural") == "natural":
-            nsr = calibrated_nsr(image, bank, noise=noise, depth_mm=kw.get("depth_mm"),
-                                 center=kw.get("center"))
-        if bank.kind == "radial":
-            return polar_deconvolve(image, bank, nsr=nsr, **kw)
-        if "center" in kw and kw["center"] is not None:
-            raise ValueError("center applies to radial banks (polar deconvolution) only")
-        kw.pop("center", None)
-        return spatially_varying_deconvolve(image, bank, nsr=nsr, **kw)
-    if "prior" in kw:
-        raise ValueError(f"prior= is Wiener's; method {method!r} sets its own prior")
-    if method == "rl":
-        if weight is not None:
-            raise ValueError("method 'rl' takes no weight: its stopping rule regularises")
-        kw.pop("nsr", None)
-        img = np.asarray(image)
-        op = blur_operator(bank, img.shape, depth_mm=kw.pop("depth_mm", None),
-                           center=kw.pop("center", None))
-        if img.ndim == 2:
-            return richardson_lucy(img, op, iterations=iterations, noise=noise,
-                                   progress=progress, **kw)
-        return np.stack([richardson_lucy(img[..., c], op, iterations=iterations, noise=noise,
-                                         progress=progress, **kw)
-                         for c in range(img.shape[2])], axis=-1)
-    return hqs_deconvolve(image, bank, prior=method, weight=weight, iterations=iterations,
-                          noise=noise, progress=progress, **kw)
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
