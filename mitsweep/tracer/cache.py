@@ -36,12 +36,15 @@ from ..io.lock import DirectoryLock
 from ..optics.reference import reference_geometry
 from .bank import BANK_RAYS, ipsf_bank
 from .ipsf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, METHODS
+from .kernel import TRACE_REVISION
 
 __all__ = ["CachedBank", "cached_bank", "bank_cache_key", "bank_cache_dir"]
 
 logger = logging.getLogger(__name__)
 
-#: Bumped when the cache's layout or the meaning of its key changes.
+#: Bumped when the cache's layout or the meaning of its key changes. The tracer's own
+#: revision (:data:`mitsweep.tracer.kernel.TRACE_REVISION`) is part of every key too, so a
+#: bank traced by an older tracer under the same package version is not served.
 CACHE_LAYOUT = 1
 #: The tracing method of cached banks (that of :func:`mitsweep.tracer.ipsf_bank`).
 DEFAULT_METHOD = "exact"
@@ -65,7 +68,7 @@ def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed, method
     out = {"kind": kind, "depths_mm": ["inf" if math.isinf(d) else float(d) for d in depths],
            "rays": int(rays), "kernel_size": int(kernel_size), "seed": int(seed),
            "method": method, "time_samples": DEFAULT_TIME_SAMPLES,
-           "version": __version__, "layout": CACHE_LAYOUT}
+           "version": __version__, "layout": CACHE_LAYOUT, "trace_revision": TRACE_REVISION}
     if kind == "radial":
         out["n_radii"] = int(n_radii)
     else:
