@@ -23,15 +23,15 @@ import hashlib
 import json
 import logging
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..io.cache import cache_root
 from ..optics import Profile, placement_of, profile_of
 
-__all__ = ["MirrorMesh", "tessellate", "mesh_errors", "cache_dir", "mirror_shape",
+__all__ = ["MirrorMesh", "tessellate", "mesh_errors", "mirror_shape",
            "uses_analytic_sphere", "DEFAULT_SAG_TOL", "DEFAULT_NORMAL_TOL"]
 
 logger = logging.getLogger(__name__)
@@ -44,12 +44,6 @@ DEFAULT_NORMAL_TOL = 1e-4
 GRAZING_LIMIT_DEG = 75.0
 _MAX_TRIANGLES = 8_000_000
 _MESH_VERSION = 1
-
-
-def cache_dir() -> Path:
-    """``$MITSWEEP_CACHE`` or ``~/.cache/mitsweep`` (created on demand)."""
-    root = os.environ.get("MITSWEEP_CACHE") or os.path.join(Path.home(), ".cache", "mitsweep")
-    return Path(root)
 
 
 @dataclass(frozen=True)
@@ -242,7 +236,7 @@ def cached_mesh_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
     """The PLY file of the mirror's mesh (built and cached on first use) and its stats."""
     profile = profile_of(mirror)
     key = _cache_key(profile, mirror.rim_radius, sag_tol, normal_tol)
-    folder = cache_dir() / "meshes"
+    folder = cache_root() / "meshes"
     path = folder / f"mirror-{key}.ply"
     meta_path = folder / f"mirror-{key}.json"
     if path.is_file() and meta_path.is_file():
