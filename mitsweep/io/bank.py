@@ -160,12 +160,13 @@ class IPSFBank:
         return int(self.kernels.shape[-1])
 
 
-def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = False) -> Path:
+def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = True) -> Path:
     """Write ``bank`` to ``path`` (.npz) atomically.
 
-    ``reproducible=True`` stores every archive member with one fixed timestamp
+    ``reproducible`` (default) stores every archive member with one fixed timestamp
     (1980-01-01, the ZIP epoch) instead of the time of writing, so that one bank always
-    gives the same bytes (datasets compare their files by SHA-256).
+    gives the same bytes (datasets and caches compare files by SHA-256); False keeps
+    NumPy's timestamps.
     """
     p = Path(path)
     if p.suffix != ".npz":

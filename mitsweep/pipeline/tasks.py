@@ -31,7 +31,7 @@ import numpy as np
 from ..config import Setup
 from ..io import read_exr, write_exr
 from ..io.exr import stack_channels
-from ..render.api import MODES  # the camera modes; render imports Mitsuba only when rendering
+from ..render.api import MODE_SAMPLERS, MODES  # render imports Mitsuba only when rendering
 from .options import DatasetOptions
 from .runner import DatasetError, Task
 
@@ -82,15 +82,17 @@ def white_level(pinhole: np.ndarray, mask: np.ndarray) -> float:
 # -- the tasks --------------------------------------------------------------------------
 
 def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: int,
-           f_number: float | None, diffraction: bool) -> dict:
+           f_number: float | None, diffraction: bool, sampler: str) -> dict:
     """Render scene variation ``scene`` in ``mode`` (the pinhole one with the depth and
-    mask AOVs); ``f_number``: the stopped mode's; ``diffraction``: add the lens's."""
+    mask AOVs) with ``sampler``; ``f_number``: the stopped mode's; ``diffraction``: add
+    the lens's."""
     from ..optics.diffraction import add_diffraction
     from ..render import render_image, render_to_exr
 
     s = scene_setup(setup, scene)
     aovs = ("depth", "mask") if mode == "pinhole" else ()
-    result = render_image(s, mode, spp=spp, seed=seed, aovs=aovs, f_number=f_number)
+    result = render_image(s, mode, spp=spp, seed=seed, aovs=aovs, f_number=f_number,
+                          sampler=sampler)
     timings = {k: result.metadata.pop(k) for k in _RENDER_TIMINGS if k in result.metadata}
     result.metadata["scene_index"] = scene
     if diffraction:
@@ -202,7 +204,8 @@ def plan(opts: DatasetOptions) -> list[Task]:
             add(f"{mode}.exr", render,
                 {"scene": i, "mode": mode, "spp": opts.spp[mode], "seed": opts.seed + i,
                  "f_number": opts.stopped_f_number if mode == "stopped" else None,
-                 "diffraction": opts.diffraction and mode != "pinhole"})
+                 "diffraction": opts.diffraction and mode != "pinhole",
+                 "sampler": MODE_SAMPLERS[mode]})
         for m in opts.methods:
             add(f"{edof_name(m)}.exr", restore, {"method": m, "nsr": None},
                 {"image": f"{d}/sweep.exr", "bank": BANK})
