@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from ..io.bank import BankError, IPSFBank
@@ -11,18 +13,21 @@ from .polar import polar_deconvolve
 from .regularization import calibrated_nsr
 from .solvers import hqs_deconvolve, richardson_lucy
 from .spatial import spatially_varying_deconvolve
+from .wiener import working_dtype
 
 __all__ = ["deconvolve", "blur_operator"]
 
 
 def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
                   depth_mm: float | str | None = None,
-                  center: tuple[float, float] | None = None) -> BlurOperator:
+                  center: tuple[float, float] | None = None,
+                  dtype=np.float64) -> BlurOperator:
     """The bank's blur on (H, W) images: polar for a radial bank, product-convolution
-    for a grid bank."""
+    for a grid bank. ``dtype`` is the polar operator's working precision (the
+    product-convolution operator works in its input's)."""
     shape = tuple(int(n) for n in image_shape[:2])
     if bank.kind == "radial":
-        return polar_operator(bank, shape, depth_mm=depth_mm, center=center)
+        return polar_operator(bank, shape, depth_mm=depth_mm, center=center, dtype=dtype)
     if bank.kind == "grid":
         if center is not None:
             raise ValueError("center applies to radial banks (polar deconvolution) only")
@@ -66,7 +71,8 @@ def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
         ``nsr`` and ``prior`` for Wiener (``nsr`` is the former name of ``weight``);
         for TV / hyper-Laplacian ``nsr`` fixes the NSR of their first (Wiener) step
         (default: calibrated) and ``time_limit_s`` bounds their time; for RL ``nsr``
-        has no meaning and is ignored, ``damping`` and ``time_limit_s`` are RL's.
+        has no meaning and is ignored, ``damping``, ``boundary`` and ``time_limit_s`` are
+        RL's (its limit bounds the whole call, operator built and all channels).
     """
     if method not in METHODS:
         raise ValueError(f"unknown restoration method {method!r}; allowed: {', '.join(METHODS)}")
@@ -94,14 +100,20 @@ def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
         if weight is not None:
             raise ValueError("method 'rl' takes no weight: its stopping rule regularises")
         kw.pop("nsr", None)
+        t0 = time.perf_counter()
         img = np.asarray(image)
         op = blur_operator(bank, img.shape, depth_mm=kw.pop("depth_mm", None),
-                           center=kw.pop("center", None))
-        if img.ndim == 2:
-            return richardson_lucy(img, op, iterations=iterations, noise=noise,
-                                   progress=progress, **kw)
-        return np.stack([richardson_lucy(img[..., c], op, iterations=iterations, noise=noise,
-                                         progress=progress, **kw)
-                         for c in range(img.shape[2])], axis=-1)
+                           center=kw.pop("center", None), dtype=working_dtype(img))
+        limit = kw.pop("time_limit_s", None)
+        chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
+        outs = []
+        for c, chan in enumerate(chans):
+            # the limit is the whole call's (building the operator counts), shared
+            # evenly by the channels still to do
+            left = None if limit is None else \
+                max(0.0, (float(limit) - (time.perf_counter() - t0)) / (len(chans) - c))
+            outs.append(richardson_lucy(chan, op, iterations=iterations, noise=noise,
+                                        progress=progress, time_limit_s=left, **kw))
+        return outs[0] if img.ndim == 2 else np.stack(outs, axis=-1)
     return hqs_deconvolve(image, bank, prior=method, weight=weight, iterations=iterations,
                           noise=noise, progress=progress, **kw)
