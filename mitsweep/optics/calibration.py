@@ -72,8 +72,17 @@ PROFILE_SMOOTHING_PX = 1.2
 #: Edge contrast-to-noise ratio above which edges count as equally precise (the
 #: limit is then the texture, not the noise).
 MAX_EDGE_SNR = 30.0
-#: Largest RMS normal residual (px) of the inliers of an accepted fit.
-MAX_RESIDUAL_RMS_PX = 1.0
+#: Largest standard error (px) of the fitted centre, from the inliers' scatter (half
+#: the issue's 0.25 px bar: a fit whose own scatter leaves its centre uncertain by more
+#: is no clear rim). A bar on the precision, not on the scatter itself: a rim of little
+#: contrast against a detailed reflection (the rendered tilted paraboloid) scatters its
+#: edge points by 1.2 px RMS and still gives the centre within 0.2 px.
+MAX_CENTRE_SE_PX = 0.125
+#: Outline length (px) over which neighbouring edge points count as one independent
+#: measurement (the profiles overlap in the smoothing and the rim's blur).
+EDGE_CORRELATION_PX = 2.0
+#: Scale (px) of the fine detail whose local energy is the coarse search's second cue.
+TEXTURE_SCALE_PX = 1.0
 #: Radius (px) of the outline in the reduced copy used for the coarse search (at least).
 COARSE_RADIUS_PX = 32.0
 #: Relative step of the scales searched coarsely (4%: ~1.3 px at 32 px).
@@ -237,20 +246,34 @@ def _reduce(img: np.ndarray, factor: int) -> np.ndarray:
     return img[:H, :W].reshape(H // factor, factor, W // factor, factor).mean(axis=(1, 3))
 
 
+def _texture_energy(lum: np.ndarray) -> np.ndarray:
+    """Local RMS (H, W) of the image's fine detail: the high-pass at
+    :data:`TEXTURE_SCALE_PX`, its square smoothed over the same scale."""
+    detail = lum - _smooth(lum, TEXTURE_SCALE_PX)
+    return np.sqrt(_smooth(detail * detail, TEXTURE_SCALE_PX))
+
+
 def _coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray, scales: np.ndarray):
     """Best ``(center (row, col), scale)`` of the outline in full-resolution pixels."""
     from scipy.fft import irfft2, next_fast_len, rfft2
 
     radius = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
     factor = max(1, int(radius / COARSE_RADIUS_PX))
-    small = _smooth(_reduce(lum, factor), 1.0)
-    gy, gx = np.gradient(small)
-    mag = np.hypot(gx, gy)
-    # Sign-free orientation field, magnitude compressed so that a few very bright edges
-    # (a lamp in the reflection) do not outweigh the rim.
-    cap = np.percentile(mag, 99.5) + 1e-30
-    w = np.minimum(mag, cap) / (mag * mag + 1e-300) / cap  # |(j1, j2)| = min(|g|, cap)/cap
-    j1, j2 = (gx * gx - gy * gy) * w, (2.0 * gx * gy) * w
+    j1 = j2 = 0.0
+    # Two cues, each an orientation field of unit strength at most: the luminance, and
+    # the local texture energy, where a rim of little contrast (a reflection as bright
+    # as what surrounds the mirror, as on the rendered tilted paraboloid) still shows:
+    # the reflection is detailed, what surrounds it far out of focus.
+    for cue in (lum, _texture_energy(lum)):
+        small = _smooth(_reduce(cue, factor), 1.0)
+        gy, gx = np.gradient(small)
+        mag = np.hypot(gx, gy)
+        # Sign-free orientation field, magnitude compressed so that a few very bright
+        # edges (a lamp in the reflection) do not outweigh the rim.
+        cap = np.percentile(mag, 99.5) + 1e-30
+        w = np.minimum(mag, cap) / (mag * mag + 1e-300) / cap  # |j| = min(|g|, cap)/cap
+        j1 = j1 + (gx * gx - gy * gy) * w
+        j2 = j2 + (2.0 * gx * gy) * w
     H, W = small.shape
     # Template normals as image-axis angles: gradient (gy, gx) along (drow, dcol).
     c2 = nrm[:, 1] ** 2 - nrm[:, 0] ** 2
@@ -384,6 +407,20 @@ def _noise_sigma(lum: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / 2.0)
 
 
+def _centre_standard_error(A: np.ndarray, residuals: np.ndarray, length_px: float) -> float:
+    """Standard error (px) of the fitted centre (the larger of row and column): the
+    least-squares covariance ``s² (AᵀA)⁻¹`` of the inliers' design ``A`` (M, 3) and
+    residuals, with the points counted as ``length_px / EDGE_CORRELATION_PX``
+    independent measurements, not M."""
+    m = len(residuals)
+    if m <= A.shape[1]:
+        return math.inf
+    s2 = float(np.sum(residuals ** 2)) / (m - A.shape[1])
+    independent = max(A.shape[1] + 1.0, min(m, length_px / EDGE_CORRELATION_PX))
+    cov = s2 * np.linalg.pinv(A.T @ A) * (m / independent)
+    return float(math.sqrt(max(cov[0, 0], cov[1, 1])))
+
+
 def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
             scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
             max_iterations: int = 30, edge_half_width_px: float | None = None) -> RimFit:
@@ -486,11 +523,15 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
             f"no visible mirror: the best outline found (radius {radius * scale:.1f} px) is "
             f"no clearer an edge than its surroundings (prominence {prominence:.2f}, need "
             f"{MIN_EDGE_PROMINENCE:g}); check that the photo shows the mirror of this setup")
-    if n_used < MIN_INLIER_FRACTION * n or rms > MAX_RESIDUAL_RMS_PX:
+    centre_se = _centre_standard_error(A[inl], res[inl], n_used / n * radius * scale
+                                       * 2.0 * math.pi) if inl.any() else math.inf
+    logger.info("rim fit: centre standard error %.3f px", centre_se)
+    if n_used < MIN_INLIER_FRACTION * n or not centre_se <= MAX_CENTRE_SE_PX:
         raise CalibrationError(
             f"no visible mirror: the best outline found fits {n_used} of {n} points with "
-            f"rms {rms:.2f} px (need {MIN_INLIER_FRACTION:.0%} within "
-            f"{MAX_RESIDUAL_RMS_PX:g} px); check that the photo shows the mirror of this setup")
+            f"rms {rms:.2f} px, which leaves its centre uncertain by {centre_se:.2f} px "
+            f"(need {MIN_INLIER_FRACTION:.0%} of the points and at most "
+            f"{MAX_CENTRE_SE_PX:g} px); check that the photo shows the mirror of this setup")
     edges = np.asarray(centre)[None, :] + scale * pts + off[:, None] * nrm
     return RimFit(center_px=(float(centre[0]), float(centre[1])), scale=float(scale),
                   points_used=n_used, points_total=n, residual_rms_px=rms,
