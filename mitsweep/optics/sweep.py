@@ -19,12 +19,12 @@ import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.optimize import brentq, minimize_scalar
 
 from ..config import SetupError
 from .chief_ray import chief_ray
 from .coddington import focal_image_axial_distances
 from .placement import placement_of
+from .solve import bounded_minimum, bracketed_root
 from .thinlens import image_distance
 
 __all__ = ["MirrorZone", "SweepRange", "mirror_zone", "optimal_sweep_range",
@@ -136,7 +136,7 @@ def _visible_limit(placement, x_lo: float, x_hi: float) -> float:
     j = int(np.argmin(vis))  # first invisible
     f = lambda x: float(chief_ray(placement, placement.surface(np.array(x), np.array(0.0)))
                         .cos_incidence)
-    return brentq(f, xs[j - 1], xs[j], xtol=1e-12)
+    return bracketed_root(f, xs[j - 1], xs[j], xtol=1e-12)
 
 
 def max_fov_deg(setup) -> float:
@@ -177,7 +177,7 @@ def mirror_zone(setup, fov_deg: float | None = None, *, reach_only: bool = False
                              f"camera; the largest FOV it gives is {reach:.2f}°")
         j = int(np.searchsorted(ang, half))
         g = lambda x: float(_reflected_angles(placement, np.array([x]))[1][0]) - half
-        end_fov = xs[0] if j == 0 else brentq(g, xs[j - 1], xs[j], xtol=1e-12)
+        end_fov = xs[0] if j == 0 else bracketed_root(g, xs[j - 1], xs[j], xtol=1e-12)
         return MirrorZone(start, float(end_fov), fov, reach)
 
     # Tilted: start at the rim nearest the camera, walk across the tilt plane.
@@ -212,7 +212,7 @@ def mirror_zone(setup, fov_deg: float | None = None, *, reach_only: bool = False
         p = np.unwrap(_reflected_angles(placement, xx)[2])
         return float(np.max(p) - np.min(p)) - target
 
-    end_fov = xs[0] if j == 0 else brentq(h, xs[j - 1], xs[j], xtol=1e-10)
+    end_fov = xs[0] if j == 0 else bracketed_root(h, xs[j - 1], xs[j], xtol=1e-10)
     return MirrorZone(start, float(end_fov), fov, reach)
 
 
@@ -229,10 +229,9 @@ def _extreme(setup, zone: MirrorZone, depths, sign: float):
                 focal_image_axial_distances(setup, np.array(x), depth)[k])
             x_best, v_best = float(xs[j]), float(sign * dd[j])
             if hi > lo:
-                res = minimize_scalar(f, bounds=(min(lo, hi), max(lo, hi)), method="bounded",
-                                      options={"xatol": 1e-10})
-                if res.fun < v_best:
-                    x_best, v_best = float(res.x), float(res.fun)
+                x_min, f_min = bounded_minimum(f, lo, hi, xatol=1e-10)
+                if f_min < v_best:
+                    x_best, v_best = x_min, f_min
             cand = (v_best, {"surface": name, "rho_mm": x_best, "depth_mm": float(depth)})
             if best is None or cand[0] < best[0]:
                 best = cand

@@ -38,7 +38,6 @@ import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.optimize import brentq, minimize, minimize_scalar
 
 from ..config import SetupError
 from ..optics import chief_ray, object_distance, optimal_sweep_range, placement_of
@@ -262,6 +261,7 @@ def _search_segment(foci: _LineFoci, xs, depths, which: int, sign: float, *,
     (ends included; the last is the field's boundary, the first too unless it is the
     axis of an untilted mirror): the grid, then a bounded Brent search between the best
     point's neighbours (stops on a bracket of :data:`FIELD_TOL_MM`)."""
+    from scipy.optimize import minimize_scalar  # imported here: a second of start-up
     best = min((sign * foci(x, 0.0, d)[which], j, d) for d in depths for j, x in enumerate(xs))
     v, j, depth = best
     history = [{"stage": "grid", "evaluations": foci.evaluations, "focus_mm": sign * v}]
@@ -311,6 +311,8 @@ class _StarField:
                 if out.size:
                     k = int(out[0])
                     h = lambda s: float(self.angle(*(self.p0 + s * u)) - self.limit)  # noqa: E731
+                    from scipy.optimize import brentq
+
                     s_b = brentq(h, ss[k - 1], ss[k], xtol=1e-12)
             self._s[theta] = s_b
         return self._s[theta]
@@ -339,6 +341,7 @@ def _search_disc(foci: _LineFoci, field: _StarField, n_rings, depths, which: int
     point (an extreme of a smooth function on a region is inside or on the boundary):
     Nelder–Mead in (t, θ) inside, Brent along the boundary; both stop at
     :data:`FIELD_TOL_MM` (of focus, and of t, θ times the field's size)."""
+    from scipy.optimize import minimize, minimize_scalar
     pts, dt, dth = _polar_grid(n_rings)
     f = lambda t, th, d: sign * foci(*field.point(t, th), d)[which]  # noqa: E731
     scored = [(f(t, th, d), t, th, d) for d in depths for t, th in pts]
@@ -393,6 +396,7 @@ def _disc_samples(rim: float, p0=(0.0, 0.0), s_b=None):
 
 def _fov_field(setup, fov_deg) -> tuple[_StarField, float]:
     """The 2-D FOV field of a tilted mirror (see :data:`FIELDS`), and its half angle."""
+    from scipy.optimize import minimize_scalar
     pl = placement_of(setup.mirror)
     zone = mirror_zone(setup, fov_deg)
     xs = zone.grid()
