@@ -18,7 +18,8 @@ import argparse
 import hashlib
 import logging
 
-from .common import check_outputs, load_setup_arg, positive_float, print_json
+from .common import (add_photo_arguments, check_outputs, load_setup_arg, photo_options,
+                     print_json)
 
 logger = logging.getLogger(__name__)
 
@@ -28,7 +29,6 @@ HELP = ("find the mirror in a photo: its centre and rim radius (sub-pixel) again
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..io.camera import TRANSFERS, WHITE_BALANCES
 
     p.add_argument("photo", help="photo of the mirror: RAW (DNG, CR2, NEF, ARW, ...), TIFF, "
                                  "PNG, JPEG or EXR")
@@ -37,14 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--write", metavar="CALIBRATED.toml",
                    help="write the setup for this camera and photo: resolution, pixel "
                         "pitch and sensor.center_offset_px")
-    p.add_argument("--pixel-pitch", type=positive_float, metavar="MM",
-                   help="the photo's pixel pitch, mm, when its metadata has none "
-                        "(default: the setup's sensor.pixel_pitch)")
-    p.add_argument("--white-balance", choices=WHITE_BALANCES, default="camera",
-                   help="RAW white balance (default: camera, the as-shot multipliers)")
-    p.add_argument("--transfer", choices=TRANSFERS, default=None,
-                   help="force the transfer function of a TIFF, PNG or JPEG (default: "
-                        "from its metadata; see the README)")
+    add_photo_arguments(p)
 
 
 def _sha256(path: str) -> str:
@@ -64,8 +57,7 @@ def run(args) -> int:
 
     check_outputs([args.photo, args.setup], [args.write])
     setup = load_setup_arg(args.setup)
-    photo = read_camera_image(args.photo, pixel_pitch=args.pixel_pitch,
-                              white_balance=args.white_balance, transfer=args.transfer)
+    photo = read_camera_image(args.photo, **photo_options(args))
     pitch = photo.pixel_pitch or setup.sensor.pixel_pitch
     pitch_source = photo.meta.get("pixel_pitch_source") or "setup"
     cal = calibrate_photo(photo.data, setup, pixel_pitch=pitch)
@@ -103,7 +95,8 @@ def run(args) -> int:
         f"{'n/a' if vd is None else f'{vd:.3f} mm'} (setup "
         f"{setup.mirror.vertex_distance:g})",
         f"fit              {cal.fit.points_used} of {cal.fit.points_total} rim points, "
-        f"rms {cal.fit.residual_rms_px:.3f} px",
+        f"rms {cal.fit.residual_rms_px:.3f} px (centre standard error "
+        f"{cal.fit.center_se_px:.3f} px)",
     ]
     if args.write:
         lines.append(f"written          {args.write}")

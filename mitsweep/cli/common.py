@@ -134,6 +134,30 @@ def positive_int(text: str) -> int:
     return x
 
 
+def add_photo_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of every command that reads a camera file
+    (:func:`mitsweep.io.camera.read_camera_image`): ``--pixel-pitch``,
+    ``--white-balance`` (RAW) and ``--transfer`` (TIFF, PNG, JPEG); pass them on with
+    :func:`photo_options`."""
+    from ..io.camera import TRANSFERS, WHITE_BALANCES
+
+    p.add_argument("--pixel-pitch", type=positive_float, metavar="MM",
+                   help="the photo's pixel pitch, mm, when its metadata has none "
+                        "(default: the file's, else the setup's sensor.pixel_pitch)")
+    p.add_argument("--white-balance", choices=WHITE_BALANCES, default="camera",
+                   help="RAW files: white balance of the decoding (default: camera, the "
+                        "as-shot multipliers)")
+    p.add_argument("--transfer", choices=TRANSFERS, default=None,
+                   help="force the transfer function of a TIFF, PNG or JPEG (default: "
+                        "from its metadata; see the README)")
+
+
+def photo_options(args) -> dict:
+    """``read_camera_image`` keyword arguments from :func:`add_photo_arguments`'s options."""
+    return {"pixel_pitch": args.pixel_pitch, "white_balance": args.white_balance,
+            "transfer": args.transfer}
+
+
 def configure_logging(verbose: int) -> None:
     level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s",

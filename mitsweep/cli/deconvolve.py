@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
-                     print_json)
+from .common import (UsageError, add_photo_arguments, check_outputs, load_setup_arg,
+                     photo_options, positive_float, positive_int, print_json)
 
 NAME = "deconvolve"
 HELP = ("deconvolve a focal-sweep photo (RAW, TIFF, PNG, JPEG or EXR) into an EDOF image, "
@@ -49,7 +49,6 @@ def _nsr(text: str) -> float:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from ..deconv import METHODS
-    from ..io.camera import WHITE_BALANCES
 
     p.add_argument("image", help="focal-sweep photo: RAW (DNG, CR2, NEF, ARW, ...), TIFF, "
                                  "PNG, JPEG, or EXR (Y or R,G,B channels, linear)")
@@ -86,11 +85,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--center", type=float, nargs=2, metavar=("ROW", "COL"),
                    help="pixel position of the mirror axis (default: the setup's calibrated "
                         "centre, else the image centre, H/2-0.5, W/2-0.5)")
-    p.add_argument("--pixel-pitch", type=positive_float, metavar="MM",
-                   help="the photo's pixel pitch, mm, when its metadata does not say "
-                        "(default: the file's, else the setup's)")
-    p.add_argument("--white-balance", choices=WHITE_BALANCES, default="camera",
-                   help="RAW files: white balance of the decoding (default camera, as shot)")
+    add_photo_arguments(p)
     p.add_argument("--rays", type=positive_int, default=None, metavar="N",
                    help="rays per IPSF when tracing the bank (default 1000000)")
     p.add_argument("--force", action="store_true",
@@ -277,8 +272,7 @@ def run(args) -> int:
         raise UsageError(f"--out must be an {', '.join(OUTPUT_SUFFIXES)} file, got {out}")
     check_outputs([src, args.bank, args.setup, args.record], [out])
     try:
-        photo = read_camera_image(src, pixel_pitch=args.pixel_pitch,
-                                  white_balance=args.white_balance)
+        photo = read_camera_image(src, **photo_options(args))
     except CameraFileError as exc:
         if src.suffix.lower() == ".exr" and "missing channels" in str(exc):
             raise UsageError(f"{src}: needs a Y channel or R, G, B channels ({exc})") from None

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import UsageError, check_outputs, load_setup_arg, positive_float, positive_int, \
-    print_json
+from .common import (UsageError, add_photo_arguments, check_outputs, load_setup_arg,
+                     photo_options, positive_float, positive_int, print_json)
 
 NAME = "unwarp"
 HELP = ("unwarp a catadioptric image (an EDOF image or a photo) into a cylindrical or "
@@ -52,8 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--center", type=float, nargs=2, metavar=("ROW", "COL"),
                    help="pixel position of the camera axis (default: the image's recorded "
                         "centre, else the setup's calibrated one, else the image centre)")
-    p.add_argument("--pixel-pitch", type=positive_float, metavar="MM",
-                   help="pixel pitch, mm (default: the file's, else the setup's)")
+    add_photo_arguments(p)
     p.add_argument("--sensor-distance", type=positive_float, metavar="MM",
                    help="sensor distance of the image's pixel grid, mm (default: the one "
                         "recorded in the image, else the setup's reference distance)")
@@ -89,7 +88,7 @@ def run(args) -> int:
                          f"be below HIGH")
     if args.size is not None and min(args.size) < 2:
         raise UsageError(f"--size {args.size[0]} {args.size[1]}: at least 2 x 2")
-    photo = read_camera_image(src, pixel_pitch=args.pixel_pitch)
+    photo = read_camera_image(src, **photo_options(args))
     meta = photo.meta.get("exr_header") or {}
     if args.setup is not None:
         setup = load_setup_arg(args.setup)

@@ -59,6 +59,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .atomic import atomic_path
+from .exr import _json_default
 from .exr import _openexr_chatter as _library_chatter  # collects C libraries' stderr
 from .png import linear_to_srgb
 
@@ -734,13 +735,3 @@ def write_display_image(path, image, *, white: float | None = None,
                              "minisblack", description=desc, metadata=None,
                              compression="zlib")
     return p
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON-serialisable: {type(o).__name__}")
