@@ -9,6 +9,11 @@ r"""Regularisation chosen from the noise model and the image, not guessed.
   Wiener filter is analytic in the Fourier domain, so the search costs one FFT of the
   image; the spatially varying blur is stood in for by the bank's IPSF at the radius
   that halves the restored disk's area (the residual is a global sum).
+- :func:`gcv_noise`: the NSR by generalised cross-validation and the σ it implies,
+  with no noise model: the level of everything the blur and the prior leave
+  unexplained (heavy-tailed Monte Carlo noise, which the wavelet estimate's median
+  sees only the core of, a bank that does not fit the image). The prior-based solvers
+  take the largest of this, the given or estimated σ, and the discrepancy's leftover.
 - :func:`prior_weight`: the weight λ of a gradient prior :math:`\lambda \sum |\nabla x|^\alpha`
   as the MAP weight of a generalised-Gaussian gradient law fitted to a first estimate,
   :math:`\lambda = \kappa_\alpha\, \sigma^2 / (\alpha\, \overline{|\nabla x_0|^\alpha})`,
@@ -23,6 +28,10 @@ References
    regularization", Soviet Math. Dokl. 7, 414–417, 1966.
 .. [2] D. Krishnan and R. Fergus, "Fast image deconvolution using hyper-Laplacian
    priors", NIPS 2009.
+.. [3] G. H. Golub, M. Heath and G. Wahba, "Generalized cross-validation as a method
+   for choosing a good ridge parameter", Technometrics 21, 215–223, 1979.
+.. [4] G. Wahba, "Bayesian 'confidence intervals' for the cross-validated smoothing
+   spline", J. R. Stat. Soc. B 45, 133–150, 1983.
 """
 
 from __future__ import annotations
@@ -38,7 +47,7 @@ from .wiener import (DEFAULT_NSR_FLOOR, MAX_NSR, estimate_noise_sigma, estimate_
                      fast_shape, kernel_spectrum, natural_prior_scale)
 
 __all__ = ["noise_sigma", "discrepancy_nsr", "calibrated_nsr", "surrogate_kernel",
-           "prior_weight", "PRIOR_WEIGHT_SCALE", "DISCREPANCY_TAU", "discrepancy"]
+           "prior_weight", "PRIOR_WEIGHT_SCALE", "DISCREPANCY_TAU", "discrepancy", "gcv_noise"]
 
 logger = logging.getLogger(__name__)
 
@@ -91,6 +100,90 @@ def noise_sigma(image: np.ndarray, noise=None) -> float:
     return max(s, floor, 1e-6 * (1.0 + float(np.max(np.abs(img), initial=0.0))))
 
 
+def _residual_spectrum(image, psf, mask):
+    """(|Y|² with Parseval weights, |H|², natural-prior |f|² scale, pixel count, weights
+    of the rfft2 half plane) of the mean-removed image; None for an empty mask."""
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim == 3:
+        img = img.mean(axis=2)
+    vals = img[mask] if mask is not None else img.ravel()
+    n = float(vals.size)
+    if n == 0:
+        return None
+    x = img - float(vals.mean())
+    if mask is not None:
+        x = np.where(mask, x, 0.0)
+    H_, W_ = x.shape
+    M, N = fast_shape((H_, W_), (0, 0))
+    Y2 = np.abs(sfft.rfft2(x, s=(M, N), workers=-1)) ** 2
+    # rfft2 half plane: interior columns stand for two coefficients
+    wcol = np.full(N // 2 + 1, 2.0)
+    wcol[0] = 1.0
+    if N % 2 == 0:
+        wcol[-1] = 1.0
+    Y2 *= wcol[None, :] / (M * N)
+    Hk = np.abs(kernel_spectrum(psf, (M, N))) ** 2
+    fy = sfft.fftfreq(M)[:, None]
+    fx = sfft.rfftfreq(N)[None, :]
+    c = natural_prior_scale(float(np.sqrt(n))) * (fy * fy + fx * fx)
+    return Y2, Hk, c, n, np.broadcast_to(wcol[None, :] * (n / (M * N)), Y2.shape)
+
+
+def gcv_noise(image: np.ndarray, psf: np.ndarray, *,
+              mask: np.ndarray | None = None) -> tuple[float, float]:
+    r"""Wiener NSR by generalised cross-validation, and the noise σ it implies.
+
+    GCV [3]_ needs no σ: it minimises
+    :math:`V(\nu) = \frac{1}{N}\lVert (I - A G_\nu) y\rVert^2 /
+    \left(\frac{1}{N}\operatorname{tr}(I - A G_\nu)\right)^2`
+    over the natural-prior NSR ν, with :math:`I - A G_\nu` diagonal in the Fourier
+    domain, :math:`R/(|H|^2 + R)`. The noise variance then follows as
+    :math:`\hat\sigma^2 = \lVert (I - A G)y\rVert^2 / \operatorname{tr}(I - A G)`
+    (Wahba 1983 [4]_): everything the blur and the prior do not explain counts, Monte
+    Carlo noise and a kernel that does not quite fit included.
+
+    Returns ``(nsr, sigma)``; NSR in [DEFAULT_NSR_FLOOR, MAX_NSR].
+    """
+    return _gcv(_residual_spectrum(image, psf, mask))
+
+
+def _gcv(spec) -> tuple[float, float]:
+    if spec is None:
+        return float(DEFAULT_NSR_FLOOR), 0.0
+    Y2, Hk, c, n, wt = spec
+    ok = c > 0                              # the DC term: R = 0, r = 0
+    # float32 terms: ~35 evaluations cost less than the FFT before them (a regular
+    # subsample of the spectrum instead moved σ by 16 % on a 2048² mosaic)
+    a = (Hk[ok] / c[ok]).astype(np.float32)  # r = R / (|H|² + R) = ν / (a + ν)
+    Y2, wt = Y2[ok].astype(np.float32), wt[ok].astype(np.float32)
+
+    def terms(log_nsr):
+        nu = np.float32(np.exp(log_nsr))
+        r = a + nu
+        np.divide(nu, r, out=r)
+        return float(np.dot(Y2, r * r)), float(np.dot(wt, r))
+
+    def V(log_nsr):
+        rss, tr = terms(log_nsr)
+        return rss * n / max(tr, 1e-300) ** 2
+
+    lo, hi = np.log(DEFAULT_NSR_FLOOR), np.log(MAX_NSR)
+    grid = np.linspace(lo, hi, 17)
+    i = int(np.argmin([V(g) for g in grid]))
+    a_, b_ = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    for _ in range(16):                     # golden section on the bracket
+        m1, m2 = b_ - 0.618 * (b_ - a_), a_ + 0.618 * (b_ - a_)
+        if V(m1) < V(m2):
+            b_ = m2
+        else:
+            a_ = m1
+    log_nsr = 0.5 * (a_ + b_)
+    rss, tr = terms(log_nsr)
+    sigma = float(np.sqrt(rss / max(tr, 1e-300)))
+    logger.info("GCV NSR %.3g, sigma %.3g", float(np.exp(log_nsr)), sigma)
+    return float(np.exp(log_nsr)), sigma
+
+
 def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
                     tau: float = DISCREPANCY_TAU, mask: np.ndarray | None = None) -> float:
     r"""Natural-prior Wiener NSR whose residual power equals ``tau · σ²`` per pixel.
@@ -119,29 +212,13 @@ def discrepancy(image: np.ndarray, psf: np.ndarray, sigma: float, *,
     returned with its residual, larger than σ: the level of what the model does not
     explain, which the prior-based solvers then take as the noise.
     """
-    img = np.asarray(image, dtype=np.float64)
-    if img.ndim == 3:
-        img = img.mean(axis=2)
-    vals = img[mask] if mask is not None else img.ravel()
-    n = float(vals.size)
-    if n == 0 or sigma <= 0:
+    return _discrepancy(_residual_spectrum(image, psf, mask), sigma, tau, image, mask)
+
+
+def _discrepancy(spec, sigma, tau, image, mask) -> tuple[float, float]:
+    if spec is None or sigma <= 0:
         return float(DEFAULT_NSR_FLOOR), float(sigma)
-    x = img - float(vals.mean())
-    if mask is not None:
-        x = np.where(mask, x, 0.0)
-    H_, W_ = x.shape
-    M, N = fast_shape((H_, W_), (0, 0))
-    Y2 = np.abs(sfft.rfft2(x, s=(M, N), workers=-1)) ** 2
-    # rfft2 half plane: interior columns stand for two coefficients
-    wcol = np.full(N // 2 + 1, 2.0)
-    wcol[0] = 1.0
-    if N % 2 == 0:
-        wcol[-1] = 1.0
-    Y2 *= wcol[None, :] / (M * N)
-    Hk = np.abs(kernel_spectrum(psf, (M, N))) ** 2
-    fy = sfft.fftfreq(M)[:, None]
-    fx = sfft.rfftfreq(N)[None, :]
-    c = natural_prior_scale(float(np.sqrt(n))) * (fy * fy + fx * fx)
+    Y2, Hk, c, n, _ = spec
     target = tau * n * sigma * sigma
 
     def residual(log_nsr):
