@@ -289,3 +289,58 @@ def test_memory_estimate_bounds_the_measured_peak():
     # measured at 2048²: estimate 0.7 GiB for a 407 MiB peak; 3x is the bar for "not
     # wildly more"
     assert peak <= est <= 3 * peak, (peak, est)
+
+
+@pytest.mark.parametrize("dtype,tol", [(np.float32, 3e-6), (np.float64, 1e-13)])
+@pytest.mark.parametrize("shape", [(2048, 40), (300, 257), (40, 7), (3, 5)])
+def test_spline_prefilter_matches_ndimage(shape, dtype, tol):
+    import scipy.ndimage as ndi
+
+    from mitsweep.deconv.polar import _spline_filter
+
+    a = (np.random.default_rng(3).random(shape) * 4 - 1).astype(dtype)  # values in [-1, 3]
+    for axes in [(0,), (0, 1)]:
+        ref = a
+        for ax in axes:
+            ref = ndi.spline_filter1d(ref, order=3, axis=ax, output=dtype, mode="mirror")
+        got = _spline_filter(a, axes, dtype)
+        assert got.dtype == dtype
+        # rows filtered by recursions in the array's precision (ndimage: float64 lines);
+        # float32 differs by a few ulp of coefficients up to ~5
+        np.testing.assert_allclose(got, ref, rtol=0, atol=tol)
+
+
+def _band_transfer_by_fft(k, r, step, L, M, cdt):
+    """Reference: pixel kernel zero-padded to L step px, FFT, rows clipped to Nyquist."""
+    K0, K1 = k.shape
+    t = -(np.arange(K0) - K0 // 2)
+    T = np.einsum("ts,tm->sm", k, np.exp(-1j * np.outer(t, np.arange(M)) / r))
+    L_px = int(round(L * step))
+    big = np.zeros((L_px, M), complex)
+    big[np.arange(K1) - K1 // 2] = T
+    H = np.fft.fft(big, axis=0)
+    p = np.rint(np.fft.fftfreq(L) * L).astype(int)
+    return (H[np.clip(p, -(L_px // 2), (L_px - 1) // 2) % L_px] / k.sum()).astype(cdt)
+
+
+@pytest.mark.parametrize("L,step", [(45, 2 / 3), (300, 2 / 3), (64, 1.0), (90, 0.5)])
+@pytest.mark.parametrize("cdt,tol", [(np.complex64, 2e-6), (np.complex128, 1e-12)])
+def test_band_transfer_and_filter_match_their_definitions(L, step, cdt, tol):
+    from mitsweep.deconv.polar import _band_transfer, _band_wiener
+    from mitsweep.deconv.wiener import regulariser, wiener_filter
+
+    k = np.random.default_rng(4).random((9, 13))
+    H = _band_transfer(k, 40.0, step, L, 70, cdt)
+    assert H.dtype == cdt
+    np.testing.assert_allclose(H, _band_transfer_by_fft(k, 40.0, step, L, 70, cdt),
+                               rtol=0, atol=tol)
+    nu = np.fft.fftfreq(L, d=step)
+    ft = np.arange(70) / (2 * math.pi * 40.0)
+    for prior in ("natural", "constant"):
+        for nsr in (1e-3, 0.0):
+            R = regulariser(H.shape, nsr, prior, dtype=H.real.dtype,
+                            freqs=(nu[:, None], ft[None, :]), n_px=256.0)
+            ref = wiener_filter(H.copy(), R)
+            got = _band_wiener(H.copy(), nu, ft, nsr, prior, 256.0)
+            np.testing.assert_allclose(got, ref, rtol=20 * tol, atol=20 * tol)
+            assert got[0, 0] == pytest.approx(1.0)       # DC passes: R = 0 there
