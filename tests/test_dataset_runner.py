@@ -216,12 +216,14 @@ def test_lost_worker_retries_are_bounded_and_a_rerun_resumes(tmp_path, serial):
     finally:
         pool.shutdown()
     # A dead process breaks the whole pool: the tasks running beside it are lost too
-    # and count their attempts, so the first to run out may be one of them.
+    # and count their attempts, so the first to run out may be one of them (on a loaded
+    # machine even shared.bin, still running when the pool broke).
     msg = str(info.value)
-    assert re.match(r"g\d/[ab]\.bin: its worker was lost 2 times \(BrokenProcessPool", msg)
+    assert re.match(r"(g\d/[ab]|shared)\.bin: its worker was lost 2 times "
+                    r"\(BrokenProcessPool", msg)
     assert "rerun the same command to resume" in msg
     partial = read_toy(tmp_path / MANIFEST)
-    assert "complete" not in partial and "shared.bin" in partial["items"]
+    assert "complete" not in partial and "g1/a.bin" not in partial["items"]
     for name, item in partial["items"].items():  # what is listed is what is on disk
         assert item["sha256"] == sha256(tmp_path / name)
     run(tmp_path, toy_plan())
