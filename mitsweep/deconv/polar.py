@@ -860,9 +860,13 @@ def _band_wiener(Hb: np.ndarray, nu: np.ndarray, ft: np.ndarray, nsr: float, pri
     else:
         den[0, 0] -= den.dtype.type(nsr)                # so that R = 0 at DC
         den += den.dtype.type(nsr)
-    # |H|^2 + R > 0 everywhere: R > 0 off DC, |H| = 1 at DC
-    np.conjugate(Hb, out=Hb)
-    Hb /= den
+    # |H|^2 + R > 0 everywhere: R > 0 off DC, |H| = 1 at DC. G = conj(H) / den, as
+    # real products on the two parts (a complex division costs several times more)
+    np.reciprocal(den, out=den)
+    re, im = Hb.real, Hb.imag
+    re *= den
+    np.negative(den, out=den)
+    im *= den
     return Hb
 
 
