@@ -11,6 +11,8 @@ import functools
 
 import numpy as np
 
+from ..io.camera import srgb_to_linear
+
 __all__ = ["siemens_star", "bar_chart", "checkerboard", "skimage_texture", "texture",
            "TEXTURE_NAMES", "srgb_to_linear"]
 
@@ -18,12 +20,6 @@ __all__ = ["siemens_star", "bar_chart", "checkerboard", "skimage_texture", "text
 _SKIMAGE = ("astronaut", "camera", "coffee", "chelsea", "brick", "grass", "gravel", "text",
             "rocket", "retina")
 TEXTURE_NAMES = ("siemens", "bars", "checker") + _SKIMAGE
-
-
-def srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    """The sRGB transfer function inverted (IEC 61966-2-1), elementwise on [0, 1]."""
-    x = np.asarray(x, dtype=np.float32)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
 def _rgb(gray: np.ndarray) -> np.ndarray:
