@@ -46,7 +46,7 @@ import scipy.fft as sfft
 from ..io.bank import BankError, IPSFBank
 from .kernels import check_bank_matches, interpolate_radial, radii_px, select_depth
 from .operators import BlurOperator, polar_bands
-from .polar import from_polar, polar_grid, to_polar
+from .polar import _channels, from_polar, polar_grid, to_polar
 from .regularization import (DISCREPANCY_TAU, _discrepancy, _gcv, _residual_spectrum,
                              noise_sigma, prior_weight, surrogate_kernel)
 from .spatial import _support, grid_axes_px, grid_windows
@@ -335,15 +335,6 @@ def _run_hqs(prob, *, beta_wiener, sigma, alpha, weight, steps, time_limit_s, ba
             logger.info("HQS stopped by its time limit after %d steps", done)
             break
     return u, lam, done
-
-
-def _channels(image):
-    img = np.asarray(image)
-    if img.ndim == 2:
-        return img[..., None], True
-    if img.ndim == 3:
-        return img, False
-    raise ValueError(f"image must be (H, W) or (H, W, C), got shape {img.shape}")
 
 
 def hqs_deconvolve(image: np.ndarray, bank: IPSFBank, *, prior: str = "hyperlaplacian",

@@ -153,6 +153,18 @@ def _types(double: bool):
     return m, m.Float, m.Array3f
 
 
+def _deposit_types(double: bool):
+    """``(module, Float, UInt32, Int32)`` of a deposit; sets the scatter mode once
+    (:data:`_MODE`: direct scatters on LLVM, Dr.Jit's choice elsewhere)."""
+    import drjit as dr
+
+    global _MODE
+    m, Float, _ = _types(double)
+    if _MODE is None:
+        _MODE = dr.ReduceMode.Direct if m.__name__.endswith("llvm") else dr.ReduceMode.Auto
+    return m, Float, m.UInt32, m.Int32
+
+
 def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: bool,
            time_dim: bool = False):
     """Trace ``n`` rays (sample indices ``offset … offset+n−1``); Dr.Jit values out.
@@ -339,13 +351,9 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
     """
     import drjit as dr
 
-    m, Float, _ = _types(double)
-    UInt32, Int32 = m.UInt32, m.Int32
+    m, Float, UInt32, Int32 = _deposit_types(double)
     K = int(kernel_size)
     KK = K * K
-    global _MODE
-    if _MODE is None:
-        _MODE = dr.ReduceMode.Direct if m.__name__.endswith("llvm") else dr.ReduceMode.Auto
     Acc = m.Float64  # float32 sums of millions of rays drift by ~1 %: accumulate in float64
     if buffer is None:
         buffer = dr.zeros(Acc, KK + 2)
@@ -422,13 +430,9 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
     """
     import drjit as dr
 
-    m, Float, _ = _types(double)
-    UInt32, Int32 = m.UInt32, m.Int32
+    m, Float, UInt32, Int32 = _deposit_types(double)
     K = int(kernel_size)
     KK = K * K
-    global _MODE
-    if _MODE is None:
-        _MODE = dr.ReduceMode.Direct if m.__name__.endswith("llvm") else dr.ReduceMode.Auto
     Acc = m.Float64
     if buffer is None:
         buffer = dr.zeros(Acc, KK + 2)
