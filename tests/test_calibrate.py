@@ -355,7 +355,6 @@ def test_calibrate_finds_a_rendered_sweep_placed_off_centre(tmp_path, capsys, na
     within 0.10-0.18 px, radius within 0.28-0.42 px."""
     from scipy.ndimage import fourier_shift
 
-    pytest.importorskip("mitsuba")
     from mitsweep.render.api import render_image
 
     setup = small_setup(name)

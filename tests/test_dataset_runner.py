@@ -265,7 +265,7 @@ def test_a_directory_of_another_setup_is_refused(tmp_path):
 
 @pytest.fixture(scope="module")
 def dask_client():
-    distributed = pytest.importorskip("distributed")
+    import distributed  # a core dependency: a missing one must fail, not skip
     from mitsweep.pipeline.cluster import local_cluster
 
     cluster = local_cluster(2)

@@ -17,11 +17,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from camera_files import synthetic_mirror_photo
 from mitsweep.cli.main import main
 from mitsweep.config import Sensor, load_setup, setup_to_dict, setup_to_toml
 from mitsweep.deconv.metrics import psnr
-from mitsweep.io import read_exr, write_exr
+from mitsweep.io import read_exr
 from mitsweep.io.png import linear_to_srgb
 
 from conftest import SCENES
@@ -78,7 +77,6 @@ def photo(tmp_path_factory):
     def get(name):
         if name in made:
             return made[name]
-        pytest.importorskip("mitsuba")
         from mitsweep.pipeline.tasks import restore, trace_bank
         from mitsweep.render.api import render_image, render_to_exr
 

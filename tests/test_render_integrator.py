@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,27 +10,17 @@ import mitsuba as mi  # noqa: E402
 
 from mitsweep.config import load_setup  # noqa: E402
 from mitsweep.render.api import (SAMPLERS, _multijitter_count, camera_dict,  # noqa: E402
-                                 mirror_image_bbox, mode_camera, pass_counts)
+                                 mode_camera, pass_counts)
 from mitsweep.render.integrator import INTEGRATOR_NAME, integrator_dict  # noqa: E402
 from mitsweep.render.scene import build_scene  # noqa: E402
 from mitsweep.render.sensor import register  # noqa: E402
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
-
-
-@pytest.fixture(autouse=True)
-def _mesh_cache(tmp_path_factory, monkeypatch):
-    monkeypatch.setenv("MITSWEEP_CACHE", str(tmp_path_factory.getbasetemp() / "cache"))
+from test_render_api import SCENES, _mesh_cache, small as _small  # noqa: F401 (autouse fixture)
 
 
 def small(name: str, n: int = 48, **scene):
-    """A paper setup at n×n pixels over the same sensor area, coarse mirror meshes."""
-    s = load_setup(SCENES / f"{name}.toml")
-    W, _ = s.sensor.resolution
-    sensor = dataclasses.replace(s.sensor, resolution=(n, n),
-                                 pixel_pitch=s.sensor.pixel_pitch * W / n)
-    sc = dataclasses.replace(s.scene, mesh_sag_tol=1e-3, mesh_normal_tol=1e-3, **scene)
-    return dataclasses.replace(s, sensor=sensor, scene=sc)
+    """test_render_api's reduced paper setup, at 48 px by default here."""
+    return _small(name, n, **scene)
 
 
 def _scene(setup, mode, spp, sampler="independent", integrator=None):
