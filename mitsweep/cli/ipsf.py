@@ -9,6 +9,7 @@ from pathlib import Path
 
 from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
                      print_json)
+from .motion import add_motion_argument, motion_from_args
 
 NAME = "ipsf"
 HELP = ("trace the integrated PSF of a point source over the focal sweep (or a PSF at one "
@@ -86,14 +87,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def _geometry(setup, table_path):
+def _geometry(setup, table_path, designed=None):
     """The reference geometry of the run: the setup's sweep and motion (measured, from
-    ``--motion-table``, for ``sweep.profile = 'tabulated'``) and its reference distance."""
+    ``--motion-table``, for ``sweep.profile = 'tabulated'``; or a motion-profile file,
+    ``--motion``) and its reference distance."""
     from ..config import SetupError
     from ..optics import optimal_sweep_range
     from ..optics.motion import MotionProfile, motion_for
     from ..optics.reference import reference_geometry
 
+    if designed is not None:  # a motion-profile file: its span sets the reference grid
+        return reference_geometry(setup, sweep=optimal_sweep_range(setup), motion=designed)
     table = None
     if table_path is not None:
         import numpy as np
@@ -133,7 +137,7 @@ def run(args) -> int:
     from ..tracer import integrated_psf, ipsf_bank, psf
     from ..tracer.source import source_from_image
 
-    check_outputs([args.setup, args.motion_table], [args.output, args.plot])
+    check_outputs([args.setup, args.motion_table, args.motion], [args.output, args.plot])
     if args.plot:  # before the traces, not after
         from ..plots import check_figure_path
 
@@ -150,7 +154,9 @@ def run(args) -> int:
         raise UsageError(f"--radii {args.radii}: at most {max(W, H)} for the {W}x{H} sensor")
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
-    geometry = _geometry(setup, args.motion_table)
+    if args.motion is not None and args.motion_table is not None:
+        raise UsageError("--motion and --motion-table both give the stage motion: give one")
+    geometry = _geometry(setup, args.motion_table, motion_from_args(args, setup))
     sweep, motion, i_ref = geometry.sweep, geometry.motion, geometry.sensor_distance
     common = dict(rays=args.rays, kernel_size=args.kernel_size, seed=args.seed)
     out: dict = {"setup": setup.name, "version": __version__}
