@@ -42,6 +42,7 @@ __all__ = [
     "Sensor",
     "Sweep",
     "Scene",
+    "Placement",
     "Rig",
     "Setup",
     "load_setup",
@@ -59,6 +60,8 @@ MAX_NESTING = 8
 MIRROR_KINDS = ("conic", "sphere", "paraboloid", "asphere")
 MOTION_PROFILES = ("linear", "trapezoidal", "tabulated")
 SCENE_LIGHTING = ("emissive", "lit")
+#: Length units of a user's Mitsuba scene (:attr:`Scene.unit`).
+SCENE_UNITS = ("mm", "cm", "m")
 
 
 class SetupError(ValueError):
@@ -299,6 +302,25 @@ class Sweep:
 
 
 @dataclass(frozen=True, kw_only=True)
+class Placement:
+    """Where a user's scene sits in the mirror's frame (after its conversion to mm).
+
+    ``rotate_deg = [rx, ry, rz]``: rotations about the frame's x, y, then z axes
+    (degrees); then ``translate = [x, y, z]`` (mm).
+    """
+
+    translate: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotate_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for name in ("translate", "rotate_deg"):
+            v = getattr(self, name)
+            _require(isinstance(v, (tuple, list)) and len(v) == 3, f"scene.placement.{name}",
+                     f"must be [x, y, z], got {v!r}")
+            _assign(self, **{name: tuple(_finite(x, f"scene.placement.{name}") for x in v)})
+
+
+@dataclass(frozen=True, kw_only=True)
 class Scene:
     """Synthetic surroundings for rendering (owned by ``mitsweep.render``).
 
@@ -309,6 +331,13 @@ class Scene:
     mirror suffices, noise only from the lens) or ``"lit"`` (diffuse textured surfaces
     under a ceiling light, two bounces). ``mesh_sag_tol`` (mm) and
     ``mesh_normal_tol`` (rad) bound the mirror tessellation where a mesh is needed.
+
+    A user's own Mitsuba scene replaces the room (:mod:`mitsweep.render.user_scene`):
+    ``file`` is its XML file (relative to the setup file's folder when loaded from
+    TOML), ``unit`` its length unit (``"mm"``, ``"cm"`` or ``"m"``; default mm) and
+    ``placement = {translate = [x, y, z], rotate_deg = [rx, ry, rz]}`` where it sits in
+    the mirror's frame: after the conversion to mm, rotated by ``rx``, ``ry`` then ``rz``
+    degrees about the frame's x, y and z axes, then translated by ``translate`` mm.
     """
 
     room_size: tuple[float, float, float] = (4000.0, 4000.0, 2500.0)
@@ -318,8 +347,23 @@ class Scene:
     lighting: str = "emissive"
     mesh_sag_tol: float = 1e-4
     mesh_normal_tol: float = 1e-4
+    file: str | None = None
+    unit: str | None = None
+    placement: Placement | None = None
 
     def __post_init__(self) -> None:
+        if self.file is not None:
+            _require(isinstance(self.file, (str, Path)) and str(self.file) != "", "scene.file",
+                     f"must be a path to a Mitsuba XML file, got {self.file!r}")
+            _assign(self, file=str(self.file))
+        if self.unit is not None:
+            _choice(self.unit, "scene.unit", SCENE_UNITS)
+        if self.placement is not None and not isinstance(self.placement, Placement):
+            _require(isinstance(self.placement, Mapping), "scene.placement",
+                     f"must be a table {{translate = [x, y, z], rotate_deg = [rx, ry, rz]}}, "
+                     f"got {self.placement!r}")
+            _reject_unknown(self.placement, {"translate", "rotate_deg"}, "scene.placement")
+            _assign(self, placement=Placement(**self.placement))
         rs = self.room_size
         _require(isinstance(rs, (tuple, list)) and len(rs) == 3, "scene.room_size",
                  f"must be [x, y, z] in mm, got {rs!r}")
@@ -548,7 +592,13 @@ def load_setup(path: str | Path) -> Setup:
     except RecursionError:  # the scan above should have caught it; tomllib recurses
         raise SetupError(f"{p}: arrays or inline tables nested deeper than {MAX_NESTING} "
                          f"levels") from None
-    return setup_from_dict(data, name=p.stem)
+    setup = setup_from_dict(data, name=p.stem)
+    file = setup.scene.file
+    if file is not None and not Path(file).is_absolute():
+        # A setup's scene file is found beside the setup, wherever it is run from.
+        scene = dataclasses.replace(setup.scene, file=str(p.parent / file))
+        setup = dataclasses.replace(setup, scene=scene)
+    return setup
 
 
 def toml_nesting(source: str) -> tuple[int, int]:
@@ -626,6 +676,8 @@ def _toml_value(value: Any) -> str:
         return json.dumps(value, ensure_ascii=False)  # a TOML basic string
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, Mapping):  # an inline table (scene.placement)
+        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
     raise TypeError(f"cannot write {type(value).__name__} {value!r} to TOML")
 
 

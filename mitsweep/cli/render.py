@@ -10,8 +10,8 @@ from .common import (UsageError, check_outputs, load_setup_arg, positive_float, 
                      print_json)
 
 NAME = "render"
-HELP = ("render a setup's scene through the mirror (pinhole ground truth, focused, "
-        "focal sweep, stopped-down) to an EXR with provenance")
+HELP = ("render a setup's scene, or your own Mitsuba scene, through the mirror (pinhole "
+        "ground truth, focused, focal sweep, stopped-down) to an EXR with provenance")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,6 +36,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preview", metavar="FILE.png", help="also write a tone-mapped PNG")
     p.add_argument("--preview-size", type=positive_int, metavar="PX",
                    help="shrink the preview by an integer factor to at most PX wide")
+    p.add_argument("--scene", metavar="SCENE.xml",
+                   help="render this Mitsuba scene instead of the built-in room (its "
+                        "sensors and integrators are replaced; default: the setup's "
+                        "[scene] file, if any)")
+    p.add_argument("--scene-unit", choices=["mm", "cm", "m"],
+                   help="length unit of the scene file (default: the setup's [scene] unit, "
+                        "else mm)")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
 
 
@@ -54,7 +61,7 @@ def run(args) -> int:
     from ..render import render_image, render_to_exr
 
     setup = load_setup_arg(args.setup)
-    check_outputs([args.setup], [args.out, args.preview])
+    check_outputs([args.setup, args.scene or setup.scene.file], [args.out, args.preview])
     _check_out(args.out, ".exr")
     if args.preview:
         _check_out(args.preview, ".png")
@@ -63,10 +70,13 @@ def run(args) -> int:
                          "the setup's lens.f_number)")
     if args.seed < 0:
         raise UsageError(f"--seed: must be >= 0, got {args.seed}")
+    if args.scene_unit is not None and args.scene is None and setup.scene.file is None:
+        raise UsageError("--scene-unit applies to a scene file (--scene, or [scene] file in "
+                         "the setup)")
     result = render_image(setup, args.mode, spp=args.spp, seed=args.seed,
                           aovs=tuple(dict.fromkeys(args.aov)), f_number=args.f_number,
                           mirror_only=not args.full_frame, progress=sys.stderr.isatty(),
-                          sampler=args.sampler)
+                          sampler=args.sampler, scene=args.scene, scene_unit=args.scene_unit)
     render_to_exr(args.out, result)
     if args.preview:
         from ..io.png import write_png
@@ -80,6 +90,8 @@ def run(args) -> int:
                "mean": float(result.image.mean())}
     if args.preview:
         summary["preview"] = args.preview
+    if "user_scene" in m:
+        summary["scene"] = {k: m["user_scene"][k] for k in ("source", "sha256", "unit", "replaced")}
     if args.json:
         print_json(summary)
     else:

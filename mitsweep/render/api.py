@@ -271,12 +271,8 @@ def pass_counts(spp: int, per_pass: int, sampler: str = "independent") -> list[i
     return counts
 
 
-def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render"):
-    """Render ``spp`` samples in passes (memory bound, progress).
-
-    Returns the mean image (h, w, C), the loaded scene and the seconds spent rendering
-    (the passes only, not the scene load).
-    """
+def _load_passes(scene_dict, spp):
+    """Load ``scene_dict`` for ``spp`` samples in passes (memory bound): (scene, counts)."""
     import mitsuba as mi
 
     film = scene_dict["sensor"]["film"]
@@ -284,24 +280,42 @@ def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render"):
     h = film.get("crop_height", film["height"])
     sampler = scene_dict["sensor"]["sampler"]["type"]
     counts = pass_counts(spp, max(1, min(spp, _MAX_LANES // max(1, w * h))), sampler)
-    n_pass = len(counts)
     scene_dict["sensor"]["sampler"]["sample_count"] = counts[0]
-    scene = mi.load_dict(scene_dict)
+    return mi.load_dict(scene_dict), counts
+
+
+def _render_loaded(scene, counts, seed, *, progress=True, desc="render"):
+    """Mean image (h, w, C) of a loaded scene over passes of ``counts`` samples, and
+    the seconds spent rendering."""
+    import mitsuba as mi
+
+    spp = sum(counts)
     acc = None
     bar = None
-    if progress and n_pass > 1:
+    if progress and len(counts) > 1:
         from tqdm import tqdm
 
         bar = tqdm(total=spp, desc=desc, unit="spp", leave=False)
     t0 = _time.perf_counter()
-    for k, (s, c) in enumerate(zip(_pass_seeds(seed, n_pass), counts)):
+    for k, (s, c) in enumerate(zip(_pass_seeds(seed, len(counts)), counts)):
         img = np.array(mi.render(scene, seed=s, spp=c), dtype=np.float64)
         acc = img * c if acc is None else acc + img * c
         if bar is not None:
             bar.update(c)
     if bar is not None:
         bar.close()
-    return (acc / spp).astype(np.float32), scene, _time.perf_counter() - t0
+    return (acc / spp).astype(np.float32), _time.perf_counter() - t0
+
+
+def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render"):
+    """Render ``spp`` samples in passes (memory bound, progress).
+
+    Returns the mean image (h, w, C), the loaded scene and the seconds spent rendering
+    (the passes only, not the scene load).
+    """
+    scene, counts = _load_passes(scene_dict, spp)
+    img, t = _render_loaded(scene, counts, seed, progress=progress, desc=desc)
+    return img, scene, t
 
 
 def _aovs(scene, setup, i_ref: float, wanted) -> dict:
@@ -317,8 +331,8 @@ def _aovs(scene, setup, i_ref: float, wanted) -> dict:
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     ray = mi.Ray3f(mi.Point3f(0.0, 0.0, vd), mi.Vector3f(d[:, 0], d[:, 1], d[:, 2]))
     si = scene.ray_intersect(ray)
-    bsdf = si.bsdf(ray)
-    on_mirror = si.is_valid() & mi.has_flag(bsdf.flags(), mi.BSDFFlags.DeltaReflection)
+    mirror = [s for s in scene.shapes() if s.id() == "mirror"]
+    on_mirror = si.is_valid() & (si.shape == mi.ShapePtr(mirror[0]))
     out = {}
     if "mask" in wanted:
         out["mask"] = np.array(mi.Float(on_mirror), dtype=np.float32).reshape(H, W)
@@ -334,8 +348,10 @@ def _aovs(scene, setup, i_ref: float, wanted) -> dict:
 def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=None,
                  motion: MotionProfile | None = None, f_number: float | None = None, mirror_only: bool = True,
                  progress: bool = False, max_depth: int | None = None,
-                 sampler: str | None = None) -> RenderResult:
-    """Render the setup's scene through the mirror in one of :data:`MODES`.
+                 sampler: str | None = None, scene=None,
+                 scene_unit: str | None = None) -> RenderResult:
+    """Render the setup's scene, or a user's Mitsuba scene, through the mirror in one of
+    :data:`MODES`.
 
     Parameters
     ----------
@@ -367,10 +383,25 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
         :data:`MODE_SAMPLERS`). ``multijitter`` is stratified: on the demo's sphere the
         ground truth's two seeds agree to 42 dB at 64 spp, where independent samples
         agree to 30 dB (``mitsweep bench render``).
+    scene : str, Path or dict, optional
+        A user's Mitsuba scene instead of the built-in room: an XML file or a scene dict
+        (``{"type": "scene", ...}`` as :func:`mitsuba.load_dict` takes). Default: the
+        setup's ``scene.file`` if it has one, else the built-in room. Its sensors, films
+        and integrators are replaced (each logged), the rest is moved to mm in the
+        mirror's frame (:mod:`mitsweep.render.user_scene`), and a scene that hides the
+        mirror or leaves nothing in its view raises
+        :class:`~mitsweep.render.user_scene.UserSceneError` before rendering.
+    scene_unit : {"mm", "cm", "m"}, optional
+        The user scene's length unit (default: the setup's ``scene.unit``, else mm).
 
     Returns
     -------
     RenderResult
+        With a user scene, ``metadata["user_scene"]`` holds its source (file path and
+        SHA-256, or ``"dict"`` and the SHA-256 of its canonical JSON), unit, placement,
+        what was replaced and the kept objects; the integrator depth is
+        ``scene.max_depth`` if set, else the user's integrator's ``max_depth`` + 1 (the
+        mirror's bounce), else unlimited (-1).
     """
     from .. import __version__
     from ..config import setup_to_dict
@@ -392,10 +423,26 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
                      render_memory_bytes((W, H), crop[2:], spp, aovs=bool(aovs)))
     variant = register()
     cam = camera_dict(setup, spp=spp, crop=crop, sampler=sampler, **kwargs)
-    scene_dict, info = build_scene(setup, cam, max_depth=max_depth)
+    source = scene if scene is not None else setup.scene.file
+    if source is None and scene_unit is not None:
+        raise ValueError("scene_unit: applies to a user scene only (give scene=...)")
+    user = None
+    if source is None:
+        scene_dict, info = build_scene(setup, cam, max_depth=max_depth)
+    else:
+        from .user_scene import check_view, load_user_scene
+
+        user = load_user_scene(setup, source, unit=scene_unit)
+        depth = max_depth if max_depth is not None else user_scene_depth(setup, user.max_depth)
+        scene_dict, info = build_scene(setup, cam, surroundings=False, extra=user.objects,
+                                       max_depth=depth)
+        info["lighting"] = "user scene"
     t0 = _time.perf_counter()
-    img, scene, t_render = _render_passes(scene_dict, spp, seed, progress=progress,
-                                          desc=f"{mode}")
+    scene, counts = _load_passes(scene_dict, spp)
+    if user is not None:
+        user.provenance["view"] = check_view(scene, setup, i_ref, label=user.label,
+                                             aperture_radius=kwargs["aperture_radius"])
+    img, t_render = _render_loaded(scene, counts, seed, progress=progress, desc=f"{mode}")
     t_total = _time.perf_counter() - t0
     full = np.zeros((H, W, 3), dtype=np.float32)
     x, y, w, h = crop
@@ -407,7 +454,19 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
             "sampler": sampler,
             "version": __version__, "variant": variant, "crop": list(crop),
             "render_s": t_render, "load_and_render_s": t_total, "aov_s": t_aov, **desc, **{"scene": info}}
+    if user is not None:
+        meta["user_scene"] = user.provenance
     return RenderResult(full, layers, meta)
+
+
+def user_scene_depth(setup, user_depth: int | None) -> int:
+    """Integrator depth of a user scene: ``scene.max_depth`` if set, else the user's
+    integrator's ``max_depth`` plus the mirror's bounce, else unlimited (-1)."""
+    if setup.scene.max_depth > 0:
+        return setup.scene.max_depth
+    if user_depth is not None and user_depth > 0:
+        return user_depth + 1
+    return -1
 
 
 def render_to_exr(path, result: RenderResult) -> Path:

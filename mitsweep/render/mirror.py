@@ -13,8 +13,10 @@ profile, the same number of vertices on every ring. Starting from the chord esti
 errors satisfy both bounds: the sag error (distance along the normal from the flat
 triangle to the surface, at edge midpoints and centroids) ``≤ sag_tol`` mm and the
 angle between the interpolated shading normal and the true normal ``≤ normal_tol``
-rad at the same points. Meshes are cached as PLY under ``$MITSWEEP_CACHE`` (default
-``~/.cache/mitsweep``)/``meshes``, keyed by the profile and both bounds.
+rad at the same points. The mesh reaches Mitsuba as an in-memory ``mi.Mesh`` built from
+the arrays (:func:`mirror_shape`; no file is written for it). The arrays are cached
+(NumPy ``.npz``) under :func:`mitsweep.io.cache.cache_root`/``meshes``, keyed by the
+profile, the rim and both bounds, unless ``MITSWEEP_CACHE=0`` (or ``cache=False``).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import hashlib
 import json
 import logging
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,8 +34,8 @@ import numpy as np
 from ..io.cache import cache_root
 from ..optics import Profile, placement_of, profile_of
 
-__all__ = ["MirrorMesh", "tessellate", "mesh_errors", "mirror_shape",
-           "uses_analytic_sphere", "DEFAULT_SAG_TOL", "DEFAULT_NORMAL_TOL"]
+__all__ = ["MirrorMesh", "tessellate", "mesh_errors", "mirror_mesh", "mirror_shape",
+           "cache_enabled", "uses_analytic_sphere", "DEFAULT_SAG_TOL", "DEFAULT_NORMAL_TOL"]
 
 logger = logging.getLogger(__name__)
 
@@ -43,7 +46,7 @@ DEFAULT_NORMAL_TOL = 1e-4
 #: Mesh errors are measured where the surface normal is within this angle of the axis.
 GRAZING_LIMIT_DEG = 75.0
 _MAX_TRIANGLES = 8_000_000
-_MESH_VERSION = 1
+_MESH_VERSION = 2  # 2: cached as .npz arrays (was PLY)
 
 
 @dataclass(frozen=True)
@@ -209,79 +212,151 @@ def _cache_key(profile: Profile, rim: float, sag_tol: float, normal_tol: float) 
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
 
-def _write_ply(path: Path, mesh: MirrorMesh) -> None:
-    """Binary little-endian PLY with normals, written atomically."""
+def cache_enabled() -> bool:
+    """Whether meshes are cached on disk: not where ``$MITSWEEP_CACHE`` is ``0``/``off``."""
+    return os.environ.get("MITSWEEP_CACHE", "").strip().lower() not in ("0", "off", "false", "no")
+
+
+def _read_cached(path: Path) -> tuple[MirrorMesh, dict] | None:
+    try:
+        with np.load(path) as z:
+            stats = json.loads(str(z["stats"]))
+            mesh = MirrorMesh(z["positions"], z["normals"], z["faces"], stats["rings"],
+                              stats["segments"], stats["sag_error_mm"], stats["normal_error_rad"])
+        return mesh, stats
+    except (OSError, ValueError, KeyError) as exc:
+        logger.warning("mesh cache %s: unreadable (%s), rebuilding", path, exc)
+        return None
+
+
+def _write_cached(path: Path, mesh: MirrorMesh, stats: dict) -> None:
     from ..io import atomic_path
 
-    v = np.concatenate([mesh.positions, mesh.normals], axis=-1).astype("<f4")
-    f = np.empty(mesh.faces.shape[0], dtype=[("n", "u1"), ("i", "<u4", (3,))])
-    f["n"] = 3
-    f["i"] = mesh.faces
-    header = (f"ply\nformat binary_little_endian 1.0\n"
-              f"comment mitsweep mirror rings={mesh.n_rings} segments={mesh.n_segments} "
-              f"sag_error={mesh.sag_error:.6g} normal_error={mesh.normal_error:.6g}\n"
-              f"element vertex {v.shape[0]}\nproperty float x\nproperty float y\n"
-              f"property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
-              f"element face {f.shape[0]}\nproperty list uchar uint vertex_indices\n"
-              f"end_header\n").encode()
-    with atomic_path(path, suffix=".ply") as tmp:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path, suffix=".npz") as tmp:
         with open(tmp, "wb") as fh:
-            fh.write(header)
-            fh.write(v.tobytes())
-            fh.write(f.tobytes())
+            np.savez(fh, positions=mesh.positions, normals=mesh.normals, faces=mesh.faces,
+                     stats=json.dumps(stats))
 
 
-def cached_mesh_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
-                     normal_tol: float = DEFAULT_NORMAL_TOL) -> tuple[Path, dict]:
-    """The PLY file of the mirror's mesh (built and cached on first use) and its stats."""
+def mirror_mesh(mirror, *, sag_tol: float = DEFAULT_SAG_TOL, normal_tol: float = DEFAULT_NORMAL_TOL,
+                cache: bool | None = None) -> tuple[MirrorMesh, dict]:
+    """The mirror's mesh within both bounds (:func:`tessellate`) and its statistics.
+
+    ``cache`` (default :func:`cache_enabled`) keeps the arrays in
+    ``cache_root()/meshes/mirror-KEY.npz``, keyed by the profile, the rim and both
+    bounds: a fine mesh takes seconds to build and milliseconds to read.
+
+    Returns
+    -------
+    mesh : MirrorMesh
+        In the mirror's local frame.
+    stats : dict
+        ``triangles``, ``rings``, ``segments``, ``sag_error_mm``, ``normal_error_rad``
+        (measured, :func:`mesh_errors`), ``sag_tol_mm``, ``normal_tol_rad``.
+    """
     profile = profile_of(mirror)
-    key = _cache_key(profile, mirror.rim_radius, sag_tol, normal_tol)
-    folder = cache_root() / "meshes"
-    path = folder / f"mirror-{key}.ply"
-    meta_path = folder / f"mirror-{key}.json"
-    if path.is_file() and meta_path.is_file():
-        try:
-            return path, json.loads(meta_path.read_text())
-        except ValueError:
-            logger.warning("mesh cache %s: unreadable stats, rebuilding", meta_path)
-    folder.mkdir(parents=True, exist_ok=True)
+    path = cache_file(mirror, sag_tol=sag_tol, normal_tol=normal_tol)
+    use_cache = cache_enabled() if cache is None else bool(cache)
+    if use_cache and path.is_file():
+        hit = _read_cached(path)
+        if hit is not None:
+            return hit
     mesh = tessellate(profile, mirror.rim_radius, sag_tol=sag_tol, normal_tol=normal_tol)
-    _write_ply(path, mesh)
     stats = {"triangles": mesh.n_triangles, "rings": mesh.n_rings,
              "segments": mesh.n_segments, "sag_error_mm": mesh.sag_error,
              "normal_error_rad": mesh.normal_error, "sag_tol_mm": sag_tol,
              "normal_tol_rad": normal_tol}
-    from ..io import write_text_atomic
+    logger.info("mirror mesh: %d triangles (sag %.2g mm, normal %.2g rad)%s",
+                mesh.n_triangles, mesh.sag_error, mesh.normal_error,
+                f", cached as {path}" if use_cache else "")
+    if use_cache:
+        _write_cached(path, mesh, stats)
+    return mesh, stats
 
-    write_text_atomic(meta_path, json.dumps(stats))
-    logger.info("mirror mesh %s: %d triangles (sag %.2g mm, normal %.2g rad)", path.name,
-             mesh.n_triangles, mesh.sag_error, mesh.normal_error)
-    return path, stats
+
+def cache_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
+               normal_tol: float = DEFAULT_NORMAL_TOL) -> Path:
+    """Where :func:`mirror_mesh` caches this mesh (it may not exist)."""
+    key = _cache_key(profile_of(mirror), mirror.rim_radius, sag_tol, normal_tol)
+    return cache_root() / "meshes" / f"mirror-{key}.npz"
 
 
-def mirror_shape(mirror, *, force_mesh: bool = False, sag_tol: float = DEFAULT_SAG_TOL,
-                 normal_tol: float = DEFAULT_NORMAL_TOL) -> tuple[dict, dict]:
-    """A Mitsuba shape dict for the mirror (perfect conductor) and a description.
+def cached_mesh_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
+                     normal_tol: float = DEFAULT_NORMAL_TOL) -> tuple[Path, dict]:
+    """The cache file of the mirror's mesh (built and cached on first use) and its stats."""
+    _, stats = mirror_mesh(mirror, sag_tol=sag_tol, normal_tol=normal_tol, cache=True)
+    return cache_file(mirror, sag_tol=sag_tol, normal_tol=normal_tol), stats
+
+
+def _mitsuba_mesh(mesh: MirrorMesh, rotation, bsdf: dict):
+    """An in-memory ``mi.Mesh`` of ``mesh`` rotated into the world frame (no file)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    props = mi.Properties()
+    props["bsdf"] = mi.load_dict(bsdf)
+    out = mi.Mesh("mirror", mesh.positions.shape[0], mesh.faces.shape[0], props=props,
+                  has_vertex_normals=True)
+    # Rotated in float64, stored in float32 as Mitsuba keeps vertices.
+    pos = (mesh.positions @ np.asarray(rotation).T).astype(np.float32)
+    nrm = (mesh.normals @ np.asarray(rotation).T).astype(np.float32)
+    params = mi.traverse(out)
+    params["vertex_positions"] = dr.ravel(mi.Point3f(pos[:, 0], pos[:, 1], pos[:, 2]))
+    params["vertex_normals"] = dr.ravel(mi.Vector3f(nrm[:, 0], nrm[:, 1], nrm[:, 2]))
+    params["faces"] = mi.UInt32(mesh.faces.astype(np.uint32).ravel())
+    params.update()
+    return out
+
+
+def mirror_shape(mirror, *, force_mesh: bool = False, sag_tol: float | None = None,
+                 normal_tol: float | None = None, cache: bool | None = None) -> tuple[object, dict]:
+    """The setup's mirror as a Mitsuba shape (a perfect conductor), for any scene.
+
+    Parameters
+    ----------
+    mirror : mitsweep.config.Setup or mitsweep.config.Mirror
+        A setup (its mirror, and its ``scene.mesh_sag_tol``/``mesh_normal_tol`` as the
+        default bounds) or a mirror section.
+    force_mesh : bool
+        Mesh the mirror even where the analytic sphere is exact (accuracy studies).
+    sag_tol, normal_tol : float, optional
+        Mesh bounds, mm and rad (default: the setup's, else :data:`DEFAULT_SAG_TOL`
+        and :data:`DEFAULT_NORMAL_TOL`).
+    cache : bool, optional
+        Keep the mesh's arrays in the disk cache (:func:`mirror_mesh`; default
+        :func:`cache_enabled`). Off, the mesh is built in memory every call.
 
     Returns
     -------
-    shape : dict
-        For :func:`mitsuba.load_dict` (world frame, mm).
+    shape : dict or mitsuba.Mesh
+        A value for :func:`mitsuba.load_dict` in the mirror's world frame (mm: vertex at
+        the origin, axis +z toward the camera at ``(0, 0, vertex_distance)``): the
+        analytic ``sphere`` dict where it is exact (a full hemisphere), else an
+        in-memory ``mi.Mesh`` with analytic vertex normals.
     info : dict
-        ``{"kind": "sphere"|"mesh", ...}`` with the mesh statistics.
-    """
-    import mitsuba as mi
+        ``kind`` (``"sphere"`` or ``"mesh"``), ``sag_error_mm`` and ``normal_error_rad``
+        (the measured bounds; 0 for the sphere) and, for a mesh, its statistics.
 
+    Examples
+    --------
+    >>> shape, info = mirror_shape(setup)                       # doctest: +SKIP
+    >>> scene = mi.load_dict({"type": "scene", "mirror": shape,
+    ...                       "sensor": camera_dict(setup, sensor_distance=52.0),
+    ...                       "world": {"type": "constant"}})     # doctest: +SKIP
+    """
+    sc = getattr(mirror, "scene", None)
+    if hasattr(mirror, "mirror"):
+        mirror = mirror.mirror
+    if sag_tol is None:
+        sag_tol = sc.mesh_sag_tol if sc is not None else DEFAULT_SAG_TOL
+    if normal_tol is None:
+        normal_tol = sc.mesh_normal_tol if sc is not None else DEFAULT_NORMAL_TOL
     bsdf = {"type": "conductor", "material": "none"}  # perfect mirror, reflectance 1
-    placement = placement_of(mirror)
-    rot = placement.rotation
+    rot = placement_of(mirror).rotation
     if uses_analytic_sphere(mirror) and not force_mesh:
         centre = rot @ np.array([0.0, 0.0, -mirror.radius])
         return ({"type": "sphere", "center": centre.tolist(), "radius": mirror.radius,
-                 "bsdf": bsdf}, {"kind": "sphere"})
-    path, stats = cached_mesh_file(mirror, sag_tol=sag_tol, normal_tol=normal_tol)
-    m = np.eye(4)
-    m[:3, :3] = rot
-    shape = {"type": "ply", "filename": str(path), "face_normals": False,
-             "to_world": mi.ScalarTransform4f(m.tolist()), "bsdf": bsdf}
-    return shape, {"kind": "mesh", **stats}
+                 "bsdf": bsdf}, {"kind": "sphere", "sag_error_mm": 0.0, "normal_error_rad": 0.0})
+    mesh, stats = mirror_mesh(mirror, sag_tol=sag_tol, normal_tol=normal_tol, cache=cache)
+    return _mitsuba_mesh(mesh, rot, bsdf), {"kind": "mesh", **stats}

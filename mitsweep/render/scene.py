@@ -205,9 +205,8 @@ def build_scene(setup, sensor: dict, *, surroundings: bool = True, extra: dict |
     description's ``integrator`` says which.
     """
     sc = setup.scene
-    shape, info = mirror_shape(setup.mirror, force_mesh=mirror_mesh,
-                               sag_tol=sag_tol or sc.mesh_sag_tol,
-                               normal_tol=normal_tol or sc.mesh_normal_tol)
+    shape, info = mirror_shape(setup, force_mesh=mirror_mesh, sag_tol=sag_tol,
+                               normal_tol=normal_tol)
     depth = integrator_depth(setup) if max_depth is None else max_depth
     black = all(_is_black(obj) for obj in (extra or {}).values())
     integrator = _integrator(sc.lighting if black else "lit", depth)
