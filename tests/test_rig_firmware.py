@@ -82,7 +82,9 @@ def test_sketch_speaks_the_drivers_protocol():
     assert sent_events == set(driver.EVENT_NAMES)
     commands = set(re.findall(r'!strcmp\(text, "([A-Z]+)"\)', src))
     assert commands == {"ID", "STATE", "CHK", "LIMITS", "HOME", "MOVE", "SWEEP", "SHUTTER",
-                        "CLOSE", "STOP", "WATCHDOG", "PING"}
+                        "CLOSE", "STOP", "WATCHDOG", "PING", "TABLE", "SEG", "TSWEEP"}
+    assert f"const uint8_t MAX_TABLE_SEGMENTS = {driver.MAX_TABLE_SEGMENTS};" in src
+    assert f"const long MAX_SEGMENT_STEPS = {driver.MAX_SEGMENT_STEPS}L;" in src
     assert f"const long MAX_WATCHDOG_MS = {driver.MAX_WATCHDOG_MS}L;" in src
     assert 'fault("WATCHDOG")' in src
 
@@ -101,7 +103,7 @@ def test_firmware_boots_under_simavr_and_greets_driver(firmware):
     with expected_protocol(lambda t: driver.ArduinoSweepController(t, steps_per_mm=400),
                            [(None, lines[0].encode() + b"\n")]) as board:
         assert board.wait_ready(0.1)
-    assert board.ready_line == f"READY {driver.FIRMWARE_NAME} 1.1 {driver.PROTOCOL_VERSION}"
+    assert board.ready_line == f"READY {driver.FIRMWARE_NAME} 1.2 {driver.PROTOCOL_VERSION}"
 
 
 # -- the sketch's own code on the host, against the Python driver ------------------------
@@ -202,8 +204,9 @@ def test_sketch_runs_a_capture_with_the_python_driver(host_firmware, tmp_path):
 
 # -- the simulator and the firmware answer alike ------------------------------------------
 # (command, expected reply, events that must follow before the next command). Replies are
-# compared on their first words (OK <CMD> / ERR <CODE>); events by name. ramp for rate
-# 400 and accel 4000 is ceil(400² / (2·4000)) = 20 steps.
+# matched as regular expressions from their start (OK <CMD> / ERR <CODE>); events by
+# name. ramp for rate 400 and accel 4000 is ceil(400² / (2·4000)) = 20 steps; for 200,
+# 5 steps.
 CONFORMANCE = [
     ("MOVE 100 400 4000", "ERR HOME", []),
     ("LIMITS 0 10000", "OK LIMITS 0 10000", []),
@@ -213,7 +216,29 @@ CONFORMANCE = [
     ("MOVE 200 4000 40000", "OK MOVE", ["DONE"]),
     ("SWEEP 0 400 4000 190 10", "ERR RANGE", []),          # opens inside the ramp
     ("SWEEP 0 400 4000 170 30", "OK SWEEP", ["START", "OPEN", "CLOSE", "DONE"]),
-    ("STATE", "OK STATE", []),
+    # a step-rate table: 40 steps in 0.1 s (400 steps/s), then 20 in 0.1 s (200 steps/s)
+    ("TSWEEP 300 4000 100 160", "ERR RANGE", []),            # no table yet
+    ("TABLE 0", "ERR RANGE", []),
+    (f"TABLE {driver.MAX_TABLE_SEGMENTS + 1}", "ERR RANGE", []),
+    ("TABLE 2", "OK TABLE 2$", []),
+    ("SEG 1 40 100000", "ERR RANGE", []),                    # out of order
+    ("SEG 0 40 100000", "OK SEG 0 40 100000$", []),
+    ("SEG 1 500 100000", "ERR RANGE", []),                   # 5000 steps/s
+    ("TSWEEP 300 4000 100 160", "ERR RANGE", []),            # the table is incomplete
+    ("SEG 1 20 100000", "OK SEG 1 60 200000$", []),
+    ("TSWEEP 300 4000 10 70", "ERR RANGE", []),              # opens inside the ramp
+    ("TSWEEP 300 4000 100 170", "ERR RANGE", []),            # close is not open + 60
+    ("TSWEEP 162 4000 100 160", "ERR RANGE", []),            # no room for the exit ramp
+    ("TSWEEP 300 4000 100 160", "OK TSWEEP", ["START", "OPEN", "CLOSE", "DONE"]),
+    ("STATE", r"OK STATE \d+ 300 1 0 0$", []),
+    # a silent host in the middle of a table (shutter open): the board stops and
+    # releases it 0.25 s after the command (open after the 0.1 s ramp, table 0.5 s)
+    ("TABLE 1", "OK TABLE 1$", []),
+    ("SEG 0 200 500000", "OK SEG 0 200 500000$", []),
+    ("WATCHDOG 250", "OK WATCHDOG 250", []),
+    ("TSWEEP 1000 4000 320 520", "OK TSWEEP", ["START", "OPEN", "FAULT"]),
+    ("STATE", r"OK STATE \d+ \d+ 1 0 0$", []),             # at rest, shutter released
+    ("WATCHDOG 0", "OK WATCHDOG 0", []),
     ("PING", "OK PING", []),
     ("WATCHDOG 600001", "ERR RANGE", []),
     # a silent host: 0.1 s after its last line the board stops the 10 s move
@@ -256,7 +281,7 @@ def test_simulator_and_firmware_answer_alike(board_port):
             line = t.read_line()
             while line.startswith("EV POS"):
                 line = t.read_line()
-            assert line.startswith(reply), (command, line)
+            assert re.match(reply, line), (command, line)
             seen = []
             while len(seen) < len(events):
                 board._take_event(t.read_line(timeout_s=3.0))
@@ -272,6 +297,14 @@ def test_simulator_and_firmware_answer_alike(board_port):
                 # scheduling delay (HOST_TIMING_TOLERANCE_S), the simulator's are exact
                 tol = HOST_TIMING_TOLERANCE_S if kind == "firmware" else 2e-6
                 assert (closed.t_us - opened.t_us) * 1e-6 == pytest.approx(0.35, abs=tol)
+            if command.startswith("TSWEEP") and events[-1:] == ["DONE"]:
+                opened, closed, done = seen[1], seen[2], seen[3]
+                assert (opened.position, closed.position, done.position) == (100, 160, 300)
+                tol = HOST_TIMING_TOLERANCE_S if kind == "firmware" else 2e-6
+                assert (closed.t_us - opened.t_us) * 1e-6 == pytest.approx(0.2, abs=tol)
+            if command.startswith("TSWEEP") and events[-1:] == ["FAULT"]:
+                assert seen[-1].detail == "WATCHDOG"
+                assert seen[1].position == 320 < seen[-1].position < 520   # inside the table
             if events == ["FAULT"]:
                 assert seen[0].detail == "WATCHDOG"
                 # stopped ~0.1 s into the move (~20 of its 4000 steps: the ramp), not at its end

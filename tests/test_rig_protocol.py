@@ -23,14 +23,14 @@ def zaber(t, **kw):
 # -- the helper itself -------------------------------------------------------------------
 def test_expected_protocol_fails_on_unused_exchange():
     with pytest.raises(AssertionError, match="not used"):
-        with expected_protocol(arduino, [(b"ID\n", b"OK ID mitsweep-sweep 1.1 2\n"),
+        with expected_protocol(arduino, [(b"ID\n", b"OK ID mitsweep-sweep 1.2 3\n"),
                                          (b"STATE\n", b"OK STATE 1 0 0 0 0\n")]) as a:
             a.identify()
 
 
 def test_expected_protocol_fails_on_unexpected_write():
     with pytest.raises(AssertionError, match="unexpected write"):
-        with expected_protocol(arduino, [(b"ID\n", b"OK ID mitsweep-sweep 1.1 2\n")]) as a:
+        with expected_protocol(arduino, [(b"ID\n", b"OK ID mitsweep-sweep 1.2 3\n")]) as a:
             a.state()
 
 
@@ -43,16 +43,18 @@ def test_expected_protocol_fails_on_unread_reply():
 # -- Arduino sweep controller ------------------------------------------------------------
 def test_arduino_ready_and_identify():
     with expected_protocol(arduino, [
-            (None, b"READY mitsweep-sweep 1.1 2\n"),
-            (b"ID\n", b"OK ID mitsweep-sweep 1.1 2\n")]) as a:
+            (None, b"READY mitsweep-sweep 1.2 3\n"),
+            (b"ID\n", b"OK ID mitsweep-sweep 1.2 3\n")]) as a:
         assert a.wait_ready(0.1)
-        assert a.identify() == "mitsweep-sweep 1.1 (protocol 2)"
+        assert a.identify() == "mitsweep-sweep 1.2 (protocol 3)"
 
 
 @pytest.mark.parametrize("reply, error", [
     (b"OK ID other-board 1.0 1\n", "not 'mitsweep-sweep'"),
-    # a board still running protocol-1 firmware (no watchdog) is refused
-    (b"OK ID mitsweep-sweep 1.0 1\n", "protocol version 1, this driver speaks 2"),
+    # a board still running protocol-1 firmware (no watchdog) is refused, and one
+    # running protocol 2 (no step-rate tables)
+    (b"OK ID mitsweep-sweep 1.0 1\n", "protocol version 1, this driver speaks 3"),
+    (b"OK ID mitsweep-sweep 1.1 2\n", "protocol version 2, this driver speaks 3"),
     (b"OK IDENT mitsweep-sweep 1.0 1\n", "unexpected reply"),
     (b"OK ID mitsweep-sweep 1.0\n", "unexpected reply"),
 ])

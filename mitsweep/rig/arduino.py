@@ -6,7 +6,7 @@ optocoupler across the camera's remote-release lines, and speaks a line protocol
 accelerations steps/s², times the board's ``micros()`` (32-bit, wraps every ~71.6 min;
 the driver unwraps them).
 
-Protocol (version 2)
+Protocol (version 3)
 --------------------
 On reset (opening the port resets an Uno) the board prints
 ``READY mitsweep-sweep <firmware-version> <protocol>``.
@@ -24,6 +24,14 @@ host → board                                board → host
 ``MOVE <target> <rate> <accel>``            ``OK MOVE``; later ``EV DONE <t> <pos>``
 ``SWEEP <target> <rate> <accel> <open>      ``OK SWEEP``; events ``START``, ``OPEN``,
 <close>``                                   ``POS`` (every 50 ms), ``CLOSE``, ``DONE``
+``TABLE <n>``                               ``OK TABLE <n>``: a step-rate table of n
+                                            segments follows (1..64; replaces the last)
+``SEG <i> <steps> <duration_us>``           ``OK SEG <i> <total_steps> <total_us>``:
+                                            segment i (in order, from 0), steps >= 0,
+                                            duration >= 1 µs, at most 4000 steps/s;
+                                            the reply's running totals let the host
+                                            check the whole table
+``TSWEEP <target> <accel> <open> <close>``  ``OK TSWEEP``; events as for ``SWEEP``
 ``SHUTTER <delay_us> <duration_us>``        ``OK SHUTTER <t_us>``; later ``EV OPEN``,
                                             ``EV CLOSE``
 ``CLOSE``                                   ``OK CLOSE`` (shutter released now)
@@ -38,7 +46,16 @@ host → board                                board → host
 ``SWEEP`` ramps at ``accel`` to ``rate`` and back to rest at ``target``; the shutter is
 held open from the step that reaches ``open`` to the step that reaches ``close`` — both
 must lie in the constant-velocity part (the board checks: ``ERR RANGE``). Errors are
-``ERR <CODE> <text>`` with CODE in SYNTAX, RANGE, LIMIT, BUSY, HOME, CHECKSUM. Events are
+``ERR <CODE> <text>`` with CODE in SYNTAX, RANGE, LIMIT, BUSY, HOME, CHECKSUM.
+
+``TSWEEP`` (new in protocol 3) runs the loaded table: it ramps at ``accel`` from rest
+to the first segment's rate, cruises to ``open`` (shutter opens on that step), then runs
+segment after segment, each its steps evenly spread over its duration (timed from the
+open step on the board's µs clock, whole microseconds, no drift), closes the shutter on
+the table's last step (``close`` must be ``open`` ± the table's total steps), cruises at
+the last segment's rate and ramps down to rest at ``target``. The board checks that
+both ramps fit (``ERR RANGE``); what rate changes the stage can follow is the plan's
+business (:mod:`mitsweep.rig.profile`). Linear sweeps (``SWEEP``) are unchanged. Events are
 ``EV <NAME> <t_us> <pos> [<detail>]``; ``EV FAULT <t> <pos> <CODE>`` (e.g. HOME_SWITCH,
 LIMIT) means the board has already released the shutter and stopped the motor.
 
@@ -66,14 +83,20 @@ from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, XorChecksum
 
 __all__ = ["ArduinoSweepController", "BoardEvent", "BoardClock", "FIRMWARE_NAME",
            "PROTOCOL_VERSION", "MAX_STEP_RATE", "step_rate", "step_accel", "EVENT_NAMES", "ERROR_CODES",
-           "POS_EVENT_PERIOD_US", "MAX_WATCHDOG_MS", "HEARTBEATS_PER_TIMEOUT"]
+           "POS_EVENT_PERIOD_US", "MAX_WATCHDOG_MS", "HEARTBEATS_PER_TIMEOUT",
+           "MAX_TABLE_SEGMENTS", "MAX_SEGMENT_STEPS"]
 
 logger = logging.getLogger(__name__)
 
 FIRMWARE_NAME = "mitsweep-sweep"
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 #: Highest step rate the firmware generates reliably (steps/s), polling micros() on a 16 MHz Uno.
 MAX_STEP_RATE = 4000
+#: Segments a step-rate table holds (``TABLE <n>``): 6 bytes each of the Uno's 2 KiB SRAM
+#: (64 leave the stack and serial buffers the 512 B the firmware test asks for).
+MAX_TABLE_SEGMENTS = 64
+#: Steps one segment moves at most (a 16-bit count on the board).
+MAX_SEGMENT_STEPS = 65535
 
 
 def step_rate(mm_s: float, steps_per_mm: float) -> int:
@@ -231,6 +254,36 @@ class ArduinoSweepController(Stage, Shutter):
         acceleration are converted to the board's steps/s and steps/s². Events follow."""
         self._query(f"SWEEP {target} {self.rate(velocity_mm_s)} "
                     f"{self.accel(acceleration_mm_s2)} {open_at} {close_at}", n_fields=0)
+
+    def load_table(self, steps, durations_us) -> None:
+        """Upload a step-rate table: ``TABLE <n>``, then ``SEG <i> <steps> <us>`` for each
+        segment; the board acknowledges every segment with its running totals of steps
+        and µs, which must be the host's (a lost, repeated or altered segment fails here,
+        before any motion)."""
+        steps, durations_us = list(steps), list(durations_us)
+        n = len(steps)
+        if not 1 <= n <= MAX_TABLE_SEGMENTS or len(durations_us) != n:
+            raise DeviceError(f"{self.name}: a table has 1..{MAX_TABLE_SEGMENTS} segments "
+                              f"of (steps, duration), got {n} and {len(durations_us)}")
+        (got,) = self._ints(self._query(f"TABLE {n}", n_fields=1), "TABLE")
+        if got != n:
+            raise ProtocolError(f"{self.name}: TABLE echoed {got}, sent {n}")
+        total_steps = total_us = 0
+        for i, (k, us) in enumerate(zip(steps, durations_us)):
+            total_steps += int(k)
+            total_us += int(us)
+            echo = self._ints(self._query(f"SEG {i} {int(k)} {int(us)}", n_fields=3), "SEG")
+            if echo != [i, total_steps, total_us]:
+                raise ProtocolError(f"{self.name}: SEG {i} acknowledged with totals "
+                                    f"{echo[1:]}, the host has {[total_steps, total_us]}")
+
+    def start_table_sweep(self, *, target: int, acceleration_mm_s2: float, open_at: int,
+                          close_at: int) -> None:
+        """``TSWEEP``: ramp to the loaded table's entry rate, run the table from step
+        ``open_at`` (shutter opens) to ``close_at`` (shutter closes, its last step), then
+        ramp down to rest at ``target``. Events as for :meth:`start_sweep`."""
+        self._query(f"TSWEEP {target} {self.accel(acceleration_mm_s2)} {open_at} "
+                    f"{close_at}", n_fields=0)
 
     def fire(self, *, delay_us: int, duration_us: int) -> int:
         """``SHUTTER``: open after ``delay_us`` for ``duration_us``; returns the board time

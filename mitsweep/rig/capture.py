@@ -59,6 +59,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ..optics.kinematics import Trapezoid
 from .arduino import MAX_WATCHDOG_MS, ArduinoSweepController
 from .errors import (CaptureInterrupted, DeviceFault, HostTooSlow, PlanError, PortLost,
@@ -66,7 +68,7 @@ from .errors import (CaptureInterrupted, DeviceFault, HostTooSlow, PlanError, Po
 from .plan import CapturePlan, plan_capture
 from .record import CaptureRecord
 from .transport import CommandLog, LineTransport, open_port
-from .zaber import ZaberStage
+from .zaber import ZaberStage, accel_data, accel_mm_s2, speed_mm_s
 
 __all__ = ["RigPorts", "run_capture", "capture", "safety_summary", "status_of",
            "CAPTURE_SIGNALS"]
@@ -291,9 +293,15 @@ def _move_to_approach(stage, plan: CapturePlan, *, here_mm: float) -> None:
 
 def _sweep_arduino(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> None:
     a = dev.arduino
-    a.start_sweep(target=plan.end_steps, velocity_mm_s=plan.velocity_actual_mm_s,
-                  acceleration_mm_s2=plan.acceleration_mm_s2,
-                  open_at=plan.open_steps, close_at=plan.close_steps)
+    if plan.profile is None:
+        a.start_sweep(target=plan.end_steps, velocity_mm_s=plan.velocity_actual_mm_s,
+                      acceleration_mm_s2=plan.acceleration_mm_s2,
+                      open_at=plan.open_steps, close_at=plan.close_steps)
+    else:
+        a.load_table(plan.profile.steps, plan.profile.driver)
+        record.mark(f"table loaded ({len(plan.profile.steps)} segments)")
+        a.start_table_sweep(target=plan.end_steps, acceleration_mm_s2=plan.acceleration_mm_s2,
+                            open_at=plan.open_steps, close_at=plan.close_steps)
     record.mark("sweep started")
     deadline = _deadline(plan.sweep_duration_s)
     a.wait_event("DONE", deadline=deadline)
@@ -307,6 +315,10 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
     stopped and sent back to the approach position) before its exposure counts."""
     a, z = dev.arduino, dev.zaber
     allowed_s = _shutter_timing_allowance_s(plan)
+    if plan.profile is not None:
+        z.load_stream(_stream_lines(plan), accel=accel_data(plan.acceleration_mm_s2,
+                                                            plan.steps_per_mm))
+        record.mark(f"stream stored ({len(plan.profile.steps) + 2} lines)")
     for attempt in range(1, SHUTTER_ATTEMPTS + 1):
         placement_s = _start_zaber_sweep(dev, plan, record)
         if placement_s <= allowed_s:
@@ -348,6 +360,29 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
     record.set_stage_samples(z.samples)
 
 
+def _stream_lines(plan: CapturePlan) -> list[tuple[int, int]]:
+    """A profile's Zaber stream: ``(target microsteps, maxspeed data)`` of each line —
+    to the open position at the entry speed, one line per table segment, and on to the
+    end position at the exit speed."""
+    p = plan.profile
+    knots = plan.open_steps + plan.direction * np.cumsum(p.steps)
+    return ([(plan.open_steps, p.driver[0])]
+            + [(int(x), v) for x, v in zip(knots, p.driver)]
+            + [(plan.end_steps, p.driver[-1])])
+
+
+def _time_to_open_s(plan: CapturePlan) -> float:
+    """Time from the start of the sweep's move to the shutter's opening position."""
+    if plan.profile is None:
+        move = Trapezoid(abs(plan.end_mm - plan.approach_mm), plan.velocity_actual_mm_s,
+                         plan.acceleration_mm_s2)
+        return move.time_at(abs(plan.open_mm - plan.approach_mm))
+    # the stream's first line: ramp from rest at tanaccel, then the entry speed
+    v = speed_mm_s(plan.profile.driver[0], plan.steps_per_mm)
+    a = accel_mm_s2(accel_data(plan.acceleration_mm_s2, plan.steps_per_mm), plan.steps_per_mm)
+    return v / a + (abs(plan.open_mm - plan.approach_mm) - v * v / (2 * a)) / v
+
+
 def _shutter_timing_allowance_s(plan: CapturePlan) -> float:
     """How far (s) the host-timed shutter may open from its planned time with the whole
     exposure still at constant velocity: the settle distance at the sweep velocity."""
@@ -359,14 +394,16 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
     host's time from sending the move to the SHUTTER reply, which bounds how far from
     ``t_to_open`` after the move's start the shutter opens."""
     a, z = dev.arduino, dev.zaber
-    z.set_motion(plan.velocity_actual_mm_s, plan.acceleration_mm_s2)
+    if plan.profile is None:
+        z.set_motion(plan.velocity_actual_mm_s, plan.acceleration_mm_s2)
     # time from the start of the move to the open position: ramp, then cruise
-    move = Trapezoid(abs(plan.end_mm - plan.approach_mm), plan.velocity_actual_mm_s,
-                     plan.acceleration_mm_s2)
-    t_to_open = move.time_at(abs(plan.open_mm - plan.approach_mm))
+    t_to_open = _time_to_open_s(plan)
     z.samples.clear()
     t_move = record.log.now()
-    z.start_move(plan.end_mm)
+    if plan.profile is None:
+        z.start_move(plan.end_mm)
+    else:
+        z.start_stream()
     elapsed = record.log.now() - t_move
     delay_us = max(0, int(round((t_to_open - elapsed) * 1e6)))
     duration_us = int(round(plan.planned_exposure_s * 1e6))

@@ -29,10 +29,14 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass
 
+import numpy as np
+
 from ..optics.kinematics import Trapezoid
-from .arduino import MAX_STEP_RATE, step_accel, step_rate
+from .arduino import MAX_SEGMENT_STEPS, MAX_STEP_RATE, MAX_TABLE_SEGMENTS, step_accel, step_rate
 from .errors import PlanError
-from .zaber import accel_data, accel_mm_s2, speed_data, speed_mm_s
+from .profile import (ProfileTable, check_followable, max_deviation, profile_knots,
+                      quantise_table, ramp_steps)
+from .zaber import SPEED_UNIT, accel_data, accel_mm_s2, speed_data, speed_mm_s
 
 __all__ = ["CapturePlan", "plan_capture", "STAGE_KINDS"]
 
@@ -82,6 +86,12 @@ class CapturePlan:
     sweep_duration_s: float      # approach -> end, at the sweep velocity
     positioning_velocity_mm_s: float
     positioning_acceleration_mm_s2: float
+    #: A motion profile's step-rate table (None: the linear sweep). With one,
+    #: ``velocity_mm_s`` is the mean velocity (travel / exposure), ``velocity_actual_mm_s``
+    #: and ``ramp_mm`` those of the table's entry rate (run from the ramp to the open
+    #: step); the exit ramp is ``exit_ramp_mm``.
+    profile: ProfileTable | None = None
+    exit_ramp_mm: float = 0.0
 
     # -- derived ------------------------------------------------------------------------
     def mm(self, steps: float) -> float:
@@ -113,11 +123,15 @@ class CapturePlan:
         ``accel`` data values."""
         v, a, spm = self.velocity_actual_mm_s, self.acceleration_mm_s2, self.steps_per_mm
         if self.stage == "arduino":
-            return {"step_rate_steps_s": step_rate(v, spm), "accel_steps_s2": step_accel(a, spm)}
+            # a profile's entry rate need not be whole steps/s (the table is timed in µs)
+            rate = step_rate(v, spm) if self.profile is None else round(v * spm, 6)
+            return {"step_rate_steps_s": rate, "accel_steps_s2": step_accel(a, spm)}
         return {"maxspeed": speed_data(v, spm), "accel": accel_data(a, spm)}
 
     def as_dict(self) -> dict:
         d = asdict(self)
+        if self.profile is not None:
+            d["profile"] = self.profile.as_dict()
         d.update(approach_mm=self.approach_mm, open_mm=self.open_mm, close_mm=self.close_mm,
                  end_mm=self.end_mm,
                  open_sensor_distance_mm=self.sensor_distance(self.open_mm),
@@ -131,8 +145,10 @@ class CapturePlan:
             f"setup              {self.setup} (stage: {self.stage}, {self.steps_per_mm:g} steps/mm)",
             f"sensor distance    {self.sensor_start_mm:.4f} -> {self.sensor_end_mm:.4f} mm "
             f"(travel {self.translation_mm:.4f} mm)",
-            f"velocity           {self.velocity_mm_s:g} mm/s requested, "
-            f"{self.velocity_actual_mm_s:.6g} mm/s run",
+            (f"velocity           {self.velocity_mm_s:g} mm/s requested, "
+             f"{self.velocity_actual_mm_s:.6g} mm/s run" if self.profile is None else
+             f"velocity           {self.velocity_mm_s:.6g} mm/s mean (travel / exposure), "
+             f"entering at {self.velocity_actual_mm_s:.6g} mm/s"),
             f"exposure           {self.planned_exposure_s:.6f} s "
             f"(optical {self.exposure_s:.6f} s)",
             f"ramp / settle      {self.ramp_mm:.4f} mm ({self.ramp_time_s:.3f} s at "
@@ -144,7 +160,24 @@ class CapturePlan:
             f"{'+' if self.sensor_direction > 0 else '-'} x mm ({self.mapping})",
             f"sweep duration     {self.sweep_duration_s:.3f} s",
             self._driver_units_line(),
-        ])
+        ] + self._profile_lines())
+
+    def _profile_lines(self) -> list[str]:
+        p = self.profile
+        if p is None:
+            return []
+        spm = self.steps_per_mm
+        return [
+            f"motion profile     {len(p.steps)} segments, {p.total_steps} steps in "
+            f"{p.duration_s:.6f} s; entry {p.entry_rate / spm:.4g} mm/s, exit "
+            f"{p.exit_rate / spm:.4g} mm/s, peak {p.max_velocity_mm_s:.4g} mm/s, "
+            f"acceleration up to {p.max_acceleration_mm_s2:.4g} mm/s^2",
+            f"profile tolerance  table within {p.max_deviation_steps:.3f} steps "
+            f"({p.max_deviation_steps / spm * 1e3:.3f} um) of the profile"
+            + (f", re-knotted ({p.resample_deviation_mm * 1e3:.3f} um chords)"
+               if p.resample_deviation_mm else "")
+            + f"; a ramping stage within {p.ramp_deviation_mm * 1e3:.3f} um more",
+        ]
 
     def _driver_units_line(self) -> str:
         u = self.driver_units()
@@ -154,7 +187,8 @@ class CapturePlan:
         return f"zaber units        maxspeed {u['maxspeed']}, accel {u['accel']} (data values)"
 
 
-def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CapturePlan:
+def plan_capture(setup, *, stage: str = "arduino", sweep_range=None, motion=None,
+                 exposure_s: float | None = None) -> CapturePlan:
     """Resolve a setup's focal sweep into a stage move.
 
     Parameters
@@ -165,7 +199,14 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
     stage : {"arduino", "zaber"}
         Which controller moves the stage (sets the velocity quantisation).
     sweep_range : mitsweep.optics.SweepRange, optional
-        Default: ``optimal_sweep_range(setup)``.
+        Default: ``optimal_sweep_range(setup)``. Not with ``motion``.
+    motion : mitsweep.optics.motion.MotionProfile, optional
+        Run this profile (e.g. an optimised one from ``design-sweep``) instead of the
+        linear sweep: a step-rate table (:mod:`mitsweep.rig.profile`), checked against
+        ``rig.max_velocity`` and ``rig.acceleration``.
+    exposure_s : float, optional
+        The profile's exposure, s (default: its travel at ``sweep.velocity``, the linear
+        sweep's exposure over the same span).
 
     Raises
     ------
@@ -174,6 +215,12 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
     """
     if stage not in STAGE_KINDS:
         raise PlanError(f"stage must be one of {', '.join(STAGE_KINDS)}, got {stage!r}")
+    if motion is not None:
+        if sweep_range is not None:
+            raise ValueError("plan_capture: give a sweep_range or a motion profile, not both")
+        return _plan_profile(setup, stage, motion, exposure_s)
+    if exposure_s is not None:
+        raise ValueError("plan_capture: exposure_s is the exposure of a motion profile")
     if sweep_range is None:
         from ..optics import optimal_sweep_range
 
@@ -270,3 +317,108 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None) -> CaptureP
         end_steps=end_steps, planned_exposure_s=planned_exposure,
         ramp_time_s=sweep.ramp_time, sweep_duration_s=sweep.duration, positioning_velocity_mm_s=rig.max_velocity,
         positioning_acceleration_mm_s2=rig.acceleration)
+
+
+def _sensor_mapping(rig, lo_s: float, hi_s: float) -> tuple[float, str]:
+    """``s_0`` of ``s = s_0 + δ x`` and how it was found: the rig's calibration, or the
+    sensor span ``lo_s .. hi_s`` centred within the soft limits."""
+    if rig.sensor_distance_at_zero is not None:
+        return rig.sensor_distance_at_zero, "calibrated"
+    lo, hi = rig.soft_limit_min, rig.soft_limit_max
+    return 0.5 * (lo_s + hi_s) - rig.sensor_direction * 0.5 * (lo + hi), \
+        "centred (uncalibrated rig)"
+
+
+def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> CapturePlan:
+    """The capture plan of a motion profile: a step-rate table between a ramp from rest
+    to its entry rate and a ramp from its exit rate to rest (module
+    :mod:`mitsweep.rig.profile` says what is checked and how close the table is)."""
+    rig = setup.rig
+    spm = rig.steps_per_mm
+    t, p, chord = profile_knots(motion, max_segments=MAX_TABLE_SEGMENTS,
+                                focal_length_mm=setup.lens.focal_length)
+    travel = float(abs(p[-1] - p[0]))
+    if exposure_s is None:
+        exposure_s = travel / setup.sweep.velocity
+    if not (math.isfinite(exposure_s) and exposure_s > 0):
+        raise PlanError(f"motion profile: exposure must be a finite time > 0 s, got "
+                        f"{exposure_s!r}")
+    times = t * exposure_s
+    delta = rig.sensor_direction
+    s0, mapping = _sensor_mapping(rig, float(p.min()), float(p.max()))
+    x = (p - s0) / delta                       # stage positions at the knots, mm
+    direction = 1 if x[-1] > x[0] else -1
+    v_max, a_max, ramp_dev = check_followable(
+        times, direction * (x - x[0]), max_velocity=rig.max_velocity,
+        acceleration=rig.acceleration, sensor_mm=p)
+    open_steps = int(round(x[0] * spm))
+    travel_steps = direction * (x * spm - open_steps)    # from the open step, unrounded
+    steps, durations, driver = quantise_table(
+        times, travel_steps, stage=stage,
+        max_step_rate=MAX_STEP_RATE if stage == "arduino" else None,
+        speed_unit=SPEED_UNIT, max_segment_steps=MAX_SEGMENT_STEPS)
+    table_t = np.concatenate([[0.0], np.cumsum(durations)])
+    table_x = np.concatenate([[0], np.cumsum(steps)]).astype(float)
+    table = ProfileTable(
+        stage=stage, steps=steps, durations_s=durations, driver=driver,
+        knot_times_s=tuple(float(v) for v in times),
+        knot_travel_steps=tuple(float(v) for v in travel_steps),
+        max_deviation_steps=max_deviation(table_t, table_x, times, travel_steps),
+        ramp_deviation_mm=ramp_dev, resample_deviation_mm=chord,
+        max_velocity_mm_s=v_max, max_acceleration_mm_s2=a_max)
+
+    if stage == "arduino":
+        accel = step_accel(rig.acceleration, spm)          # steps/s², as the board runs it
+        a_run = accel / spm
+        entry_ramp = ramp_steps(table.entry_rate, accel)
+        exit_ramp = ramp_steps(table.exit_rate, accel)
+        planned_exposure = table.duration_s
+    else:
+        accel = accel_data(rig.acceleration, spm)
+        if accel < 1:
+            raise PlanError(f"acceleration {rig.acceleration:g} mm/s² is below the Zaber "
+                            f"stage's resolution at {spm:g} microsteps/mm")
+        a_run = accel_mm_s2(accel, spm)
+        entry_ramp = ramp_steps(table.entry_rate, a_run * spm)
+        exit_ramp = ramp_steps(table.exit_rate, a_run * spm)
+        planned_exposure = round(table.duration_s * 1e6) * 1e-6   # the Arduino's µs timer
+    if not rig.min_exposure_s <= planned_exposure <= rig.max_exposure_s:
+        raise PlanError(f"exposure {planned_exposure:.6g} s is outside the camera's range "
+                        f"{rig.min_exposure_s:g} .. {rig.max_exposure_s:g} s "
+                        f"(rig.min_exposure_s, rig.max_exposure_s)")
+    settle = math.ceil(rig.settle_distance * spm - 1e-9)
+    close_steps = open_steps + direction * table.total_steps
+    approach_steps = open_steps - direction * (entry_ramp + settle)
+    end_steps = close_steps + direction * (settle + exit_ramp)
+    lo, hi = rig.soft_limit_min, rig.soft_limit_max
+    span = abs(end_steps - approach_steps) / spm
+    if span > hi - lo + 1e-9:
+        raise PlanError(f"the profile needs {span:.4f} mm of stage travel (sensor travel "
+                        f"{travel:.4f} mm, ramps and settle distances), more than the soft "
+                        f"limits allow ({lo:g} .. {hi:g} mm = {hi - lo:g} mm)")
+    for name, steps_at in (("approach", approach_steps), ("end", end_steps)):
+        xs = steps_at / spm
+        if not lo - 1e-9 <= xs <= hi + 1e-9:
+            raise PlanError(f"the profile's {name} position {xs:.4f} mm (sensor distance "
+                            f"{s0 + delta * xs:.4f} mm) is outside the soft limits "
+                            f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
+    v_in, v_out = table.entry_rate / spm, table.exit_rate / spm
+    def ramp_and_settle_s(v: float, ramp: int) -> float:   # ramp at a_run, then cruise
+        return v / a_run + ((ramp + settle) / spm - v * v / (2 * a_run)) / v
+
+    duration = (ramp_and_settle_s(v_in, entry_ramp) + table.duration_s
+                + ramp_and_settle_s(v_out, exit_ramp))
+    return CapturePlan(
+        setup=setup.name, stage=stage, steps_per_mm=spm,
+        sensor_start_mm=float(p[0]), sensor_end_mm=float(p[-1]), translation_mm=travel,
+        exposure_s=float(exposure_s), velocity_mm_s=travel / exposure_s,
+        velocity_actual_mm_s=v_in, acceleration_mm_s2=a_run,
+        ramp_mm=entry_ramp / spm, settle_mm=settle / spm, direction=direction,
+        sensor_distance_at_zero_mm=s0, sensor_direction=delta, mapping=mapping,
+        soft_limit_min_mm=lo, soft_limit_max_mm=hi,
+        approach_steps=approach_steps, open_steps=open_steps, close_steps=close_steps,
+        end_steps=end_steps, planned_exposure_s=planned_exposure,
+        ramp_time_s=v_in / a_run, sweep_duration_s=duration,
+        positioning_velocity_mm_s=rig.max_velocity,
+        positioning_acceleration_mm_s2=rig.acceleration,
+        profile=table, exit_ramp_mm=exit_ramp / spm)

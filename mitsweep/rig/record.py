@@ -25,7 +25,9 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
                     makes safe), ok (the device confirmed it), reason and detail (why
                     not)
     measured        exposure: open/close times and positions, measured exposure;
-                    motion: time_s (from shutter open), position_mm, sensor_distance_mm
+                    motion: time_s (from shutter open), position_mm, sensor_distance_mm;
+                    profile (a motion-profile capture): the plan's position at those
+                    times and the largest deviation (:func:`planned_versus_measured`)
     reference       complete records: the reference geometry of the measured motion
                     (mitsweep.optics.reference.reference_geometry(setup, motion=the
                     tabulated measured profile).as_dict(): reference_sensor_distance_mm,
@@ -132,6 +134,7 @@ class CaptureRecord:
             x = np.array([p[1] for p in pts], dtype=float) / plan.steps_per_mm
             source = "arduino events (board micros clock)"
             uncertainty = 1e-6
+            sample_uncertainty = 2e-6           # two micros() stamps
         else:
             if self.clock_map is None or len(self.stage_samples) < 2:
                 if strict:
@@ -153,8 +156,13 @@ class CaptureRecord:
             near = lambda h: su[np.clip(np.searchsorted(st, h) + np.array([-1, 0]),  # noqa: E731
                                         0, len(st) - 1)].max()
             uncertainty = cm["uncertainty_s"] + max(near(h_open), near(h_close))
+            # a profile sample against the plan: its poll's time, the clock mapping, and
+            # where the host-timed shutter opened relative to the stage's start
+            sample_uncertainty = (cm["uncertainty_s"] + cm.get("placement_uncertainty_s", 0.0)
+                                  + max(near(h_open), near(h_close),
+                                        float(su[inside].max()) if inside.any() else 0.0))
         s = plan.sensor_distance(x)
-        return {
+        out = {
             "exposure": {
                 "measured_exposure_s": exposure,
                 "planned_exposure_s": plan.planned_exposure_s,
@@ -168,6 +176,9 @@ class CaptureRecord:
             "motion": {"time_s": t.tolist(), "position_mm": x.tolist(),
                        "sensor_distance_mm": s.tolist(), "source": source},
         }
+        if plan.profile is not None:
+            out["profile"] = planned_versus_measured(plan, t, x, sample_uncertainty)
+        return out
 
     # -- output -------------------------------------------------------------------------
     def as_dict(self) -> dict:
@@ -223,6 +234,33 @@ class CaptureRecord:
 
         write_text_atomic(self.path, json.dumps(_jsonable(self.as_dict()), indent=1) + "\n")
         return self.path
+
+
+def planned_versus_measured(plan, time_s, position_mm, timing_uncertainty_s: float) -> dict:
+    """A profile capture's measured motion against its plan, at the measured times.
+
+    ``planned_position_mm``: the step-rate table's commanded position (its travel from
+    the open step, the stepper at its floor); ``profile_sensor_distance_mm``: the motion
+    profile itself (unquantised). ``max_deviation_steps`` is the largest |measured −
+    planned|; ``tolerance_steps`` what the measurement allows: one step (the stepper's
+    floor) plus the table's peak rate over the timing uncertainty of a sample (the
+    simulator's 1 µs stamps, or the Zaber polls' half round trip and the host-timed
+    shutter's placement)."""
+    table = plan.profile
+    spm = plan.steps_per_mm
+    t = np.asarray(time_s, dtype=float)
+    travel = np.floor(table.travel_at(t) + 1e-9)
+    planned = (plan.open_steps + plan.direction * travel) / spm
+    ideal = (plan.open_steps + plan.direction * np.interp(t, table.knot_times_s,
+                                                          table.knot_travel_steps)) / spm
+    dev = np.abs(np.asarray(position_mm, dtype=float) - planned) * spm
+    peak_rate = max(k / d for k, d in zip(table.steps, table.durations_s))
+    return {"time_s": t.tolist(), "planned_position_mm": planned.tolist(),
+            "planned_sensor_distance_mm": plan.sensor_distance(planned).tolist(),
+            "profile_sensor_distance_mm": plan.sensor_distance(ideal).tolist(),
+            "max_deviation_steps": float(dev.max()),
+            "tolerance_steps": 1.0 + peak_rate * timing_uncertainty_s,
+            "table_max_deviation_steps": table.max_deviation_steps}
 
 
 def _jsonable(o):

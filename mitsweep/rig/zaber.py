@@ -15,6 +15,11 @@ microsteps/s² × 1.6384 / 10 (the protocol's native data units). ``steps_per_mm
 stage's microsteps per millimetre (1 / microstep size).
 
 Only one stage is driven; the Arduino only fires the shutter in this configuration.
+
+A motion profile runs as a stored stream (:meth:`ZaberStage.load_stream`): a chain of
+``line abs`` moves, each at its own ``maxspeed``, stored in a stream buffer before any
+motion and started by one command (``stream 1 call 1``), so the host times the shutter
+from one exchange as for a plain ``move abs``.
 """
 
 from __future__ import annotations
@@ -37,6 +42,9 @@ logger = logging.getLogger(__name__)
 SPEED_UNIT = 1.6384
 #: accel data value per microstep/s².
 ACCEL_UNIT = 1.6384 / 10.0
+#: The stream and the stream buffer a motion profile runs in.
+STREAM_ID = 1
+STREAM_BUFFER = 1
 FAULT_FLAGS = {"FF": "critical system error", "FD": "driver disabled", "FQ": "encoder error",
                "FS": "stalled and stopped", "FT": "excessive twist", "FB": "stream bounds error",
                "FP": "interpolated path deviation", "FE": "limit error",
@@ -209,6 +217,38 @@ class ZaberStage(Stage):
         target = self.steps(position_mm)
         self.command(f"move abs {target}")
         return target
+
+    def load_stream(self, lines, *, accel: int) -> None:
+        """Store a sequence of moves in stream buffer :data:`STREAM_BUFFER` and set up a
+        live stream on this axis, ready for :meth:`start_stream`.
+
+        ``lines`` are ``(target microsteps, maxspeed data value)``: each becomes ``stream
+        1 set maxspeed <v>`` and ``stream 1 line abs <target>``; ``accel`` (an ``accel``
+        data value) is the stream's ``tanaccel``. Sent as (Zaber ASCII protocol, streams)::
+
+            /1 0 stream 1 buffer 1 erase
+            /1 0 stream 1 setup store 1 1
+            /1 0 stream 1 set tanaccel <accel>
+            /1 0 stream 1 set maxspeed <v>      (each line)
+            /1 0 stream 1 line abs <target>
+            /1 0 stream 1 setup disable
+            /1 0 stream 1 setup live 1
+        """
+        s, b = STREAM_ID, STREAM_BUFFER
+        # a stream left live (or in error) by an earlier capture: disable it first
+        self.command(f"stream {s} setup disable", axis=0, allow_rejection=True)
+        self.command(f"stream {s} buffer {b} erase", axis=0)
+        self.command(f"stream {s} setup store {b} 1", axis=0)
+        self.command(f"stream {s} set tanaccel {int(accel)}", axis=0)
+        for target, speed in lines:
+            self.command(f"stream {s} set maxspeed {int(speed)}", axis=0)
+            self.command(f"stream {s} line abs {int(target)}", axis=0)
+        self.command(f"stream {s} setup disable", axis=0)
+        self.command(f"stream {s} setup live {self.axis}", axis=0)
+
+    def start_stream(self) -> None:
+        """``stream 1 call 1``: run the stored sequence now (the stage goes BUSY)."""
+        self.command(f"stream {STREAM_ID} call {STREAM_BUFFER}", axis=0)
 
     def move_to(self, position_mm: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
                 timeout_s: float) -> float:

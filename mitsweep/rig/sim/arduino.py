@@ -1,7 +1,9 @@
 """The Arduino sweep controller's firmware, in Python (protocol in
 :mod:`mitsweep.rig.arduino`): stepper with trapezoidal motion, home switch, soft limits,
 the shutter opto, events with ``micros()`` timestamps (optionally started near the
-32-bit wrap), and the firmware's watchdog (``WATCHDOG <ms>``: while it moves or an
+32-bit wrap), step-rate tables (``TABLE``/``SEG``/``TSWEEP``: the table's segments
+at constant rate, rate changes at once as the firmware's stepper makes them), and the
+firmware's watchdog (``WATCHDOG <ms>``: while it moves or an
 exposure is pending or open, a host silent for that long gets ``EV FAULT ... WATCHDOG``
 after the shutter was released and the motor stopped).
 """
@@ -11,14 +13,14 @@ from __future__ import annotations
 import math
 
 from ...optics.kinematics import Trapezoid
-from ..arduino import (FIRMWARE_NAME, MAX_STEP_RATE, MAX_WATCHDOG_MS, POS_EVENT_PERIOD_US,
-                       PROTOCOL_VERSION)
+from ..arduino import (FIRMWARE_NAME, MAX_SEGMENT_STEPS, MAX_STEP_RATE, MAX_TABLE_SEGMENTS,
+                       MAX_WATCHDOG_MS, POS_EVENT_PERIOD_US, PROTOCOL_VERSION)
 from ..transport import XorChecksum
-from .base import Model, Move, command
+from .base import Model, Move, PathMove, command, table_pieces
 
 __all__ = ["ArduinoModel", "FIRMWARE_VERSION"]
 
-FIRMWARE_VERSION = "1.1"
+FIRMWARE_VERSION = "1.2"
 
 
 class ArduinoModel(Model):
@@ -58,6 +60,8 @@ class ArduinoModel(Model):
         self.watchdog_s = 0.0                   # 0: off (the firmware's default)
         self.last_rx = 0.0                      # when the last line came from the host
         self.faults_seen: list[str] = []        # codes of the EV FAULTs sent
+        self.table_size = 0                     # TABLE <n>: segments announced
+        self.table: list[tuple[int, int]] = []  # (steps, us) received by SEG
 
     # -- clock, position ----------------------------------------------------------------
     def micros(self, t: float) -> int:
@@ -99,6 +103,7 @@ class ArduinoModel(Model):
         self.checksums = False
         self._fault_at = None
         self.watchdog_s = 0.0
+        self.table_size, self.table = 0, []
         self.boot(now)
 
     # -- input --------------------------------------------------------------------------
@@ -229,6 +234,12 @@ class ArduinoModel(Model):
             return [self._line("ERR RANGE open/close outside the constant-velocity part")]
         self._start_move(target, rate, accel, now)
         self.sweep_window = (open_at, close_at)
+        self._schedule_sweep(mv, x0, target, open_at, close_at, d_open, d_close, now)
+        return [self._line("OK SWEEP")]
+
+    def _schedule_sweep(self, mv, x0, target, open_at, close_at, d_open, d_close, now):
+        """The events of a sweep under way (``mv``): START, OPEN, POS every period,
+        CLOSE, DONE, and the shutter's plan."""
         t_open, t_close = mv.time_at(d_open), mv.time_at(d_close)
         late = self.take_fault("late_event")
         delay = late.delay_s if late else 0.0
@@ -246,7 +257,59 @@ class ArduinoModel(Model):
         self.schedule(t_ev + delay, line)
         self._set_shutter_plan(t_open, t_close)
         self.arm_motion_faults(mv)
-        return [self._line("OK SWEEP")]
+
+    @command("TABLE", nargs=1)
+    def _cmd_table(self, nums, now):
+        if self.moving(now):
+            return [self._line("ERR BUSY moving")]
+        if not 1 <= nums[0] <= MAX_TABLE_SEGMENTS:
+            return [self._line("ERR RANGE table size")]
+        self.table_size, self.table = nums[0], []
+        return [self._line(f"OK TABLE {nums[0]}")]
+
+    @command("SEG", nargs=3)
+    def _cmd_seg(self, nums, now):
+        i, steps, us = nums
+        if self.moving(now):
+            return [self._line("ERR BUSY moving")]
+        if i != len(self.table) or i >= self.table_size:
+            return [self._line("ERR RANGE segment order")]
+        # at most MAX_STEP_RATE steps/s, in integers as the firmware checks
+        if not (0 <= steps <= MAX_SEGMENT_STEPS and us >= 1
+                and steps * (1_000_000 // MAX_STEP_RATE) <= us):
+            return [self._line("ERR RANGE segment steps or duration")]
+        self.table.append((steps, us))
+        total_steps = sum(k for k, _ in self.table)
+        total_us = sum(u for _, u in self.table)
+        return [self._line(f"OK SEG {i} {total_steps} {total_us}")]
+
+    @command("TSWEEP", nargs=4)
+    def _cmd_tsweep(self, nums, now):
+        target, accel, open_at, close_at = nums
+        table = self.table
+        if (not table or len(table) != self.table_size or table[0][0] == 0
+                or table[-1][0] == 0):
+            return [self._line("ERR RANGE no complete table")]
+        rate_in = table[0][0] * 1e6 / table[0][1]
+        rate_out = table[-1][0] * 1e6 / table[-1][1]
+        if err := self._check_move(target, math.ceil(rate_in), accel, now):
+            return err
+        x0 = self.position(now)
+        sign = 1 if target >= x0 else -1
+        ramp_in = math.ceil(rate_in * rate_in / (2 * accel) - 1e-6)
+        ramp_out = math.ceil(rate_out * rate_out / (2 * accel) - 1e-6)
+        d_open, d_close = sign * (open_at - x0), sign * (close_at - x0)
+        length = abs(target - x0)
+        if (d_open < ramp_in or d_close - d_open != sum(k for k, _ in table)
+                or d_close > length - ramp_out):
+            return [self._line("ERR RANGE open/close do not fit the table and its ramps")]
+        pieces = table_pieces(rate_in, rate_out, accel, d_open, length - d_close,
+                              [(k, u * 1e-6) for k, u in table])
+        mv = PathMove(x0, sign, now, pieces)
+        self.move, self.stopped = mv, False
+        self.sweep_window = (open_at, close_at)
+        self._schedule_sweep(mv, x0, target, open_at, close_at, d_open, d_close, now)
+        return [self._line("OK TSWEEP")]
 
     @command("SHUTTER", nargs=2)
     def _cmd_shutter(self, nums, now):

@@ -9,11 +9,13 @@ method (tests do, to act in the middle of a sweep).
 
 from __future__ import annotations
 
+import bisect
+import math
 from dataclasses import dataclass
 
 from ...optics.kinematics import Trapezoid
 
-__all__ = ["Fault", "FAULT_KINDS", "Move", "Model", "command"]
+__all__ = ["Fault", "FAULT_KINDS", "Move", "PathMove", "table_pieces", "Model", "command"]
 
 FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event", "slow_reply")
 
@@ -69,6 +71,67 @@ class Move:
     @property
     def end_time(self) -> float:
         return self.t0 + self.duration
+
+
+class PathMove:
+    """Motion from rest at ``x0`` along ``sign`` through pieces of constant acceleration
+    ``(duration, start velocity, acceleration)`` starting at ``t0``: a table sweep (ramp,
+    cruise, constant-rate segments, cruise, ramp), with the interface of :class:`Move`.
+
+    Velocity changes between pieces are as given: a constant-rate segment follows the
+    last at its own rate at once (a stepper's rate jump; the plan bounds them)."""
+
+    def __init__(self, x0: float, sign: float, t0: float, pieces) -> None:
+        self.x0, self.sign, self.t0 = float(x0), float(sign), float(t0)
+        self.pieces = [(float(d), float(v), float(a)) for d, v, a in pieces]
+        self.starts_t = [0.0]
+        self.starts_d = [0.0]
+        for d, v, a in self.pieces:
+            self.starts_t.append(self.starts_t[-1] + d)
+            self.starts_d.append(self.starts_d[-1] + v * d + 0.5 * a * d * d)
+        self.length = self.starts_d[-1]
+        self.duration = self.starts_t[-1]
+        self.x1 = self.x0 + self.sign * round(self.length)
+
+    def _piece(self, i: int, tau: float) -> float:
+        d, v, a = self.pieces[i]
+        return self.starts_d[i] + v * tau + 0.5 * a * tau * tau
+
+    def distance(self, t: float) -> float:
+        tau = min(max(t - self.t0, 0.0), self.duration)
+        i = min(max(bisect.bisect_right(self.starts_t, tau) - 1, 0), len(self.pieces) - 1)
+        return self._piece(i, tau - self.starts_t[i])
+
+    def position(self, t: float) -> float:
+        return self.x0 + self.sign * self.distance(t)
+
+    def time_at(self, dist: float) -> float:
+        dist = min(max(dist, 0.0), self.length)
+        i = min(max(bisect.bisect_right(self.starts_d, dist) - 1, 0), len(self.pieces) - 1)
+        d, v, a = self.pieces[i]
+        rest = dist - self.starts_d[i]
+        if a == 0.0:
+            tau = rest / v if v > 0 else 0.0
+        else:   # v tau + a tau²/2 = rest, the root within the piece
+            tau = (-v + math.sqrt(max(v * v + 2.0 * a * rest, 0.0))) / a
+        return self.t0 + self.starts_t[i] + min(max(tau, 0.0), d)
+
+    @property
+    def end_time(self) -> float:
+        return self.t0 + self.duration
+
+
+def table_pieces(rate_in: float, rate_out: float, accel: float, d_open: float,
+                 d_after: float, segments) -> list[tuple[float, float, float]]:
+    """Pieces of a table sweep: ramp from rest to ``rate_in`` at ``accel``, cruise to
+    ``d_open``, the ``(steps, seconds)`` segments, cruise at ``rate_out`` and ramp down
+    to rest ``d_after`` past the table's end."""
+    ramp_in, ramp_out = rate_in ** 2 / (2 * accel), rate_out ** 2 / (2 * accel)
+    pieces = [(rate_in / accel, 0.0, accel), ((d_open - ramp_in) / rate_in, rate_in, 0.0)]
+    pieces += [(dur, steps / dur, 0.0) for steps, dur in segments]
+    pieces += [((d_after - ramp_out) / rate_out, rate_out, 0.0),
+               (rate_out / accel, rate_out, -accel)]
+    return pieces
 
 
 def command(*words: str, nargs: int | None = None):

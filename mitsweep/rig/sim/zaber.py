@@ -1,6 +1,15 @@
 """One Zaber ASCII-protocol axis, in Python (protocol in :mod:`mitsweep.rig.zaber`):
 replies, BUSY/IDLE, warning flags, ``WR`` until homed, device-side limits, checksums
-when the command carries one. It has no watchdog (see :mod:`mitsweep.rig.capture`).
+when the command carries one, and the subset of streams the driver uses: one stream
+buffer stored (``stream 1 setup store 1 1``: ``set maxspeed``, ``set tanaccel``, ``line
+abs``) and run in a live stream (``stream 1 setup live 1``, ``stream 1 call 1``). It
+has no watchdog (see :mod:`mitsweep.rig.capture`).
+
+A stream runs its lines from rest: the first ramps at ``tanaccel`` to its ``maxspeed``,
+each following line runs at its own ``maxspeed`` (the change made at once at the
+line's start: the simulator does not model the device's blending of speed changes at
+``tanaccel``, which :mod:`mitsweep.rig.profile` bounds), and the last decelerates at
+``tanaccel`` to rest on its target.
 
 Speeds and accelerations are held as the protocol's data values (``maxspeed``,
 ``accel``) and converted with the driver's units (:data:`~mitsweep.rig.zaber.SPEED_UNIT`,
@@ -13,7 +22,7 @@ import re
 
 from ..transport import ZaberChecksum
 from ..zaber import ACCEL_UNIT, SPEED_UNIT
-from .base import Model, Move, command
+from .base import Model, Move, PathMove, command
 
 __all__ = ["ZaberModel"]
 
@@ -52,6 +61,9 @@ class ZaberModel(Model):
         self.flags: set[str] = set()
         self.home_speed = home_speed
         self.link_lost_at: float | None = None
+        # streams: buffer number -> stored (command, value) list; the mode of stream 1
+        self.buffers: dict[int, list[tuple[str, int]]] = {}
+        self.stream_mode: tuple[str, int | None] = ("disabled", None)
 
     def position(self, now: float) -> int:
         if self.move is not None:
@@ -173,6 +185,92 @@ class ZaberModel(Model):
             return False, "BADDATA"
         self.move = Move(self.position(now), target, self.settings["maxspeed"] / SPEED_UNIT,
                          self.settings["accel"] / ACCEL_UNIT, now)
+        self.stopped = False
+        self.arm_motion_faults(self.move)
+        return True, "0"
+
+    @command("stream", nargs=None)
+    def _stream(self, args, now):
+        """``stream 1 ...``: buffer erase, setup store/live/disable, set maxspeed/tanaccel,
+        line abs, call."""
+        try:
+            words = [args[0], *args[1:]]
+            if int(words[0]) != 1:
+                return False, "BADDATA"
+        except (ValueError, IndexError):
+            return False, "BADCOMMAND"
+        rest = words[1:]
+        mode, buffer = self.stream_mode
+        try:
+            if rest[:1] == ["buffer"] and rest[2:] == ["erase"]:
+                self.buffers.pop(int(rest[1]), None)
+                return True, "0"
+            if rest[:2] == ["setup", "store"] and len(rest) == 4 and rest[3] == "1":
+                self.stream_mode = ("store", int(rest[2]))
+                self.buffers[int(rest[2])] = []
+                return True, "0"
+            if rest[:2] == ["setup", "live"] and rest[2:] == ["1"]:
+                self.stream_mode = ("live", None)
+                return True, "0"
+            if rest == ["setup", "disable"]:
+                self.stream_mode = ("disabled", None)
+                return True, "0"
+            if (rest[:1] == ["set"] and len(rest) == 3 and rest[1] in ("maxspeed", "tanaccel")
+                    or rest[:2] == ["line", "abs"] and len(rest) == 3):
+                key = rest[1] if rest[0] == "set" else "line"
+                value = int(rest[2])
+                if key != "line" and value < 1:
+                    return False, "BADDATA"
+                if key == "line" and not (self.settings["limit.min"] <= value
+                                          <= self.settings["limit.max"]):
+                    return False, "BADDATA"
+                if mode != "store":
+                    return False, "STATUSBUSY" if mode == "live" else "BADCOMMAND"
+                self.buffers[buffer].append((key, value))
+                return True, "0"
+            if rest[:1] == ["call"] and len(rest) == 2:
+                if mode != "live" or int(rest[1]) not in self.buffers:
+                    return False, "BADDATA"
+                return self._run_stream(self.buffers[int(rest[1])], now)
+        except ValueError:
+            return False, "BADDATA"
+        return False, "BADCOMMAND"
+
+    def _run_stream(self, stored, now):
+        if self.moving(now) or any(f.startswith("F") for f in self.flags):
+            return False, "BADDATA"
+        speed, accel = self.settings["maxspeed"], self.settings["accel"]
+        lines = []
+        for key, value in stored:
+            if key == "maxspeed":
+                speed = value
+            elif key == "tanaccel":
+                accel = value
+            else:
+                lines.append((value, speed / SPEED_UNIT))
+        if not lines:
+            return False, "BADDATA"
+        x0 = self.position(now)
+        sign = 1.0 if lines[-1][0] >= x0 else -1.0
+        a = accel / ACCEL_UNIT
+        pieces, here = [], x0
+        for i, (target, v) in enumerate(lines):
+            length = sign * (target - here)
+            if length < 0:
+                return False, "BADDATA"          # a stream that turns back: not modelled
+            cruise = length
+            if i == 0:
+                pieces.append((v / a, 0.0, a))
+                cruise -= v * v / (2 * a)
+            if i == len(lines) - 1:
+                cruise -= v * v / (2 * a)
+            if cruise < -1e-9:
+                return False, "BADDATA"          # no room for the ramp at tanaccel
+            pieces.append((max(cruise, 0.0) / v, v, 0.0))
+            if i == len(lines) - 1:
+                pieces.append((v / a, v, -a))
+            here = target
+        self.move = PathMove(x0, sign, now, pieces)
         self.stopped = False
         self.arm_motion_faults(self.move)
         return True, "0"

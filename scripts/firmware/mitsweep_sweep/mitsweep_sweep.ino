@@ -15,6 +15,10 @@
 //   MOVE <target> <rate> <accel>        -> OK MOVE; EV DONE <t> <pos>
 //   SWEEP <target> <rate> <accel> <open> <close>
 //                                       -> OK SWEEP; EV START/OPEN/POS.../CLOSE/DONE
+//   TABLE <n>                           -> OK TABLE <n>  (a step-rate table follows)
+//   SEG <i> <steps> <duration_us>       -> OK SEG <i> <total_steps> <total_us>
+//   TSWEEP <target> <accel> <open> <close>
+//                                       -> OK TSWEEP; EV START/OPEN/POS.../CLOSE/DONE
 //   SHUTTER <delay_us> <duration_us>    -> OK SHUTTER <t>; EV OPEN <t> <pos>; EV CLOSE ...
 //   CLOSE                               -> OK CLOSE
 //   STOP                                -> OK STOP <t> <pos> (shutter released first)
@@ -29,6 +33,12 @@
 // limits are refused; motion is refused until homed. Watchdog: with WATCHDOG <ms> set,
 // a host silent for <ms> while the motor runs or a SHUTTER exposure is pending or open
 // (a killed or crashed host cannot stop anything) is a WATCHDOG fault.
+//
+// Table sweep (TSWEEP): ramp at <accel> to the first segment's rate, cruise to <open>
+// (shutter opens on that step), run the table -- segment k's steps evenly spread over
+// its duration, timed from the open step in whole microseconds (Bresenham: no drift) --
+// close the shutter on its last step (<close> = <open> +- the table's steps), cruise at
+// the last segment's rate and ramp down to rest at <target>.
 
 #include <Arduino.h>
 #include <math.h>
@@ -36,8 +46,8 @@
 #include <string.h>
 
 #define FW_NAME "mitsweep-sweep"
-#define FW_VERSION "1.1"
-#define PROTOCOL_VERSION 2
+#define FW_VERSION "1.2"
+#define PROTOCOL_VERSION 3
 
 // Pins (change to match the wiring).
 const uint8_t PIN_STEP = 2;
@@ -52,8 +62,11 @@ const uint32_t POS_PERIOD_US = 50000UL;   // EV POS period during a sweep
 const long MAX_HOME_STEPS = 2000000L;     // give up homing after this many steps
 const uint8_t LINE_MAX = 80;
 const long MAX_WATCHDOG_MS = 600000L;     // longest watchdog timeout accepted
+const uint8_t MAX_TABLE_SEGMENTS = 64;    // step-rate table: 6 bytes a segment (SRAM)
+const long MAX_SEGMENT_STEPS = 65535L;
 
-enum Mode { IDLE, MOVING, SWEEPING, HOMING };
+enum Mode { IDLE, MOVING, SWEEPING, HOMING, TABLE_SWEEPING };
+enum TablePhase { BEFORE_OPEN, IN_TABLE, AFTER_CLOSE };
 
 static Mode mode = IDLE;
 static long pos = 0;
@@ -69,6 +82,18 @@ static float moveRate = 0, moveAccel = 0;
 static uint32_t nextStepUs = 0;
 static uint32_t lastPosEventUs = 0;
 static long openAt = 0, closeAt = 0;
+
+// step-rate table (TABLE/SEG) and its execution (TSWEEP)
+static uint16_t tabSteps[MAX_TABLE_SEGMENTS];
+static uint32_t tabUs[MAX_TABLE_SEGMENTS];
+static uint8_t tabLen = 0, tabLoaded = 0;   // announced, received
+static long tabTotalSteps = 0;
+static uint32_t tabTotalUs = 0;
+static uint8_t tabPhase = BEFORE_OPEN;
+static uint8_t seg = 0;                    // segment of the next table step
+static uint16_t segDone = 0;               // its steps scheduled so far
+static uint32_t segStartOff = 0, segOff = 0, segQ = 0, segR = 0, segAcc = 0;
+static uint32_t tableOriginUs = 0;         // when the open step was due
 
 // shutter
 static bool shutterOpen = false;
@@ -178,13 +203,57 @@ static float stepIntervalUs() {
   return 1e6f / v;
 }
 
-static void stepOnce(uint32_t now) {
+// Table: set up segment `seg` (skipping dwells, which only take their time).
+static void tableSegmentStart() {
+  while (seg < tabLen && tabSteps[seg] == 0) segStartOff += tabUs[seg++];
+  segDone = 0;
+  segOff = segStartOff;
+  segAcc = 0;
+  if (seg < tabLen) {
+    segQ = tabUs[seg] / tabSteps[seg];
+    segR = tabUs[seg] % tabSteps[seg];
+  }
+}
+
+// Offset (µs from the open step) of the next table step: floor(j * D / n) for the
+// j-th step of a segment of n steps over D µs.
+static uint32_t tableNextOffset() {
+  if (segDone >= tabSteps[seg]) {
+    segStartOff += tabUs[seg++];
+    tableSegmentStart();
+  }
+  segOff += segQ;
+  segAcc += segR;
+  if (segAcc >= tabSteps[seg]) {
+    segOff++;
+    segAcc -= tabSteps[seg];
+  }
+  segDone++;
+  return segOff;
+}
+
+static void stepOnce(uint32_t now, uint32_t due) {
   digitalWrite(PIN_STEP, HIGH);
   delayMicroseconds(2);
   digitalWrite(PIN_STEP, LOW);
   pos += moveDir;
   moveDone++;
-  if (mode == SWEEPING) {
+  if (mode == TABLE_SWEEPING) {
+    if (tabPhase == BEFORE_OPEN && pos == openAt) {
+      shutterWrite(true);
+      sendEvent("OPEN", now, pos, "");
+      tabPhase = IN_TABLE;
+      tableOriginUs = due;   // the table is timed from when this step was due
+      seg = 0;
+      segStartOff = 0;
+      tableSegmentStart();
+    } else if (tabPhase == IN_TABLE && pos == closeAt) {
+      shutterWrite(false);
+      sendEvent("CLOSE", now, pos, "");
+      tabPhase = AFTER_CLOSE;
+      moveRate = (float)tabSteps[tabLen - 1] * 1e6f / (float)tabUs[tabLen - 1];
+    }
+  } else if (mode == SWEEPING) {
     if (pos == openAt) {
       shutterWrite(true);
       sendEvent("OPEN", now, pos, "");
@@ -224,9 +293,15 @@ static void runMotion() {
     sendEvent("DONE", now, pos, "");
     return;
   }
-  stepOnce(now);
-  nextStepUs += (uint32_t)(stepIntervalUs() + 0.5f);
-  if (mode == SWEEPING && (uint32_t)(now - lastPosEventUs) >= POS_PERIOD_US) {
+  uint32_t due = nextStepUs;
+  stepOnce(now, due);
+  if (mode == TABLE_SWEEPING && tabPhase == IN_TABLE) {
+    nextStepUs = tableOriginUs + tableNextOffset();
+  } else {
+    nextStepUs += (uint32_t)(stepIntervalUs() + 0.5f);
+  }
+  if ((mode == SWEEPING || mode == TABLE_SWEEPING) &&
+      (uint32_t)(now - lastPosEventUs) >= POS_PERIOD_US) {
     lastPosEventUs += POS_PERIOD_US;
     sendEvent("POS", now, pos, "");
   }
@@ -339,6 +414,57 @@ static void handleLine(char *text) {
     sendLine("OK SWEEP");
     openAt = v[3]; closeAt = v[4];
     startMove(v[0], v[1], v[2], SWEEPING);
+    sendEvent("START", nextStepUs, pos, "");
+  } else if (!strcmp(text, "TABLE")) {
+    if (!parseLongs(args, v, 1)) { sendErr("SYNTAX", "TABLE"); return; }
+    if (mode != IDLE) { sendErr("BUSY", "moving"); return; }
+    if (v[0] < 1 || v[0] > MAX_TABLE_SEGMENTS) { sendErr("RANGE", "table size"); return; }
+    tabLen = (uint8_t)v[0];
+    tabLoaded = 0;
+    tabTotalSteps = 0;
+    tabTotalUs = 0;
+    snprintf(buf, sizeof buf, "OK TABLE %d", (int)tabLen);
+    sendLine(buf);
+  } else if (!strcmp(text, "SEG")) {
+    if (!parseLongs(args, v, 3)) { sendErr("SYNTAX", "SEG"); return; }
+    if (mode != IDLE) { sendErr("BUSY", "moving"); return; }
+    if (v[0] != (long)tabLoaded || tabLoaded >= tabLen) { sendErr("RANGE", "segment order"); return; }
+    // steps * 1e6 / us <= MAX_STEP_RATE steps/s, in integers (1e6 / 4000 = 250 µs)
+    if (v[1] < 0 || v[1] > MAX_SEGMENT_STEPS || v[2] < 1 ||
+        (uint32_t)v[1] * (uint32_t)(1000000L / MAX_STEP_RATE) > (uint32_t)v[2]) {
+      sendErr("RANGE", "segment steps or duration");
+      return;
+    }
+    tabSteps[tabLoaded] = (uint16_t)v[1];
+    tabUs[tabLoaded] = (uint32_t)v[2];
+    tabLoaded++;
+    tabTotalSteps += v[1];
+    tabTotalUs += (uint32_t)v[2];
+    snprintf(buf, sizeof buf, "OK SEG %ld %ld %lu", v[0], tabTotalSteps,
+             (unsigned long)tabTotalUs);
+    sendLine(buf);
+  } else if (!strcmp(text, "TSWEEP")) {
+    if (!parseLongs(args, v, 4)) { sendErr("SYNTAX", "TSWEEP"); return; }
+    if (tabLen == 0 || tabLoaded != tabLen || tabSteps[0] == 0 || tabSteps[tabLen - 1] == 0) {
+      sendErr("RANGE", "no complete table");
+      return;
+    }
+    float rateIn = (float)tabSteps[0] * 1e6f / (float)tabUs[0];
+    if (!checkMove(v[0], (long)ceil(rateIn), v[1])) return;
+    float rateOut = (float)tabSteps[tabLen - 1] * 1e6f / (float)tabUs[tabLen - 1];
+    long rampIn = (long)ceil((double)rateIn * rateIn / (2.0 * (double)v[1]) - 1e-6);
+    long rampOut = (long)ceil((double)rateOut * rateOut / (2.0 * (double)v[1]) - 1e-6);
+    int8_t dir = (v[0] >= pos) ? 1 : -1;
+    long dOpen = dir * (v[2] - pos), dClose = dir * (v[3] - pos), length = labs(v[0] - pos);
+    if (dOpen < rampIn || dClose - dOpen != tabTotalSteps || dClose > length - rampOut) {
+      sendErr("RANGE", "open/close do not fit the table and its ramps");
+      return;
+    }
+    sendLine("OK TSWEEP");
+    openAt = v[2]; closeAt = v[3];
+    tabPhase = BEFORE_OPEN;
+    startMove(v[0], 1, v[1], TABLE_SWEEPING);
+    moveRate = rateIn;
     sendEvent("START", nextStepUs, pos, "");
   } else if (!strcmp(text, "SHUTTER")) {
     if (!parseLongs(args, v, 2)) { sendErr("SYNTAX", "SHUTTER"); return; }
