@@ -66,7 +66,8 @@ import numpy as np
 
 from ..backend import set_mitsuba_variant
 
-__all__ = ["register", "motion_table", "PLUGIN_NAME", "MOTION_TABLE_SIZE"]
+__all__ = ["register", "motion_table", "NotDifferentiableError", "PLUGIN_NAME",
+           "MOTION_TABLE_SIZE"]
 
 logger = logging.getLogger(__name__)
 
@@ -78,6 +79,14 @@ PLUGIN_NAME = "focalsweep"
 MOTION_TABLE_SIZE = 65536
 
 _registered_for: set[str] = set()
+
+#: Differentiable parameters (``mi.traverse`` keys) for each kind of motion.
+_DIFFERENTIABLE = {"fixed": ("sensor_distance",), "linear": ("sensor_start", "sensor_end"),
+                   "trapezoidal": ("sensor_start", "sensor_end"), "tabulated": ("positions",)}
+
+
+class NotDifferentiableError(ValueError):
+    """A gradient was asked of a ``focalsweep`` parameter that is not differentiable."""
 
 
 def _floats(value, name: str) -> np.ndarray:
@@ -136,14 +145,14 @@ def _make_class():
             if not (0 < self.near_clip < self.far_clip):
                 raise ValueError(f"focalsweep: need 0 < near_clip < far_clip, got "
                                  f"{self.near_clip}, {self.far_clip}")
-            self.motion = self._motion_from(props)
+            self.motion_kind, self._start, self._end = self._motion_from(props)
             lo, hi = self.motion_span
             if not lo > self.focal_length:
                 raise ValueError(
                     f"focalsweep: the sensor distance reaches {lo:g} mm, at or inside the "
                     f"focal length ({self.focal_length:g} mm); every sensor distance of the "
                     f"sweep must be > focal_length")
-            if self.motion[0] != "fixed" and not self.shutter_open_time() > 0:
+            if self.motion_kind != "fixed" and not self.shutter_open_time() > 0:
                 raise ValueError("focalsweep: a moving sensor needs shutter_close > "
                                  "shutter_open (the exposure interval)")
             film = self.film()
@@ -156,6 +165,9 @@ def _make_class():
 
         # -- parameters --------------------------------------------------------------
         def _motion_from(self, props):
+            """Set the motion: its kind, start and end (mm), and the trapezoid's normalised
+            shape or the tabulated profile's normalised times and positions."""
+            self._shape = self._times = self._positions = None
             has_fixed = ("sensor_distance" in props)
             has_range = ("sensor_start" in props) or ("sensor_end" in props)
             if has_fixed == has_range:
@@ -163,18 +175,20 @@ def _make_class():
                                  "sensor_start and sensor_end (a sweep)")
             if has_fixed:
                 i = float(props.get("sensor_distance"))
-                return ("fixed", np.array([i]))
+                return "fixed", i, i
             if not (("sensor_start" in props) and ("sensor_end" in props)):
                 raise ValueError("focalsweep: a sweep needs both sensor_start and sensor_end")
             s, e = float(props.get("sensor_start")), float(props.get("sensor_end"))
             kind = props.get("profile", "linear")
             if kind == "linear":
-                if s == e:
-                    return ("fixed", np.array([s]))
-                return ("linear", np.array([s, e]))
+                return ("fixed", s, s) if s == e else ("linear", s, e)
             if kind == "trapezoidal":
                 mp = MotionProfile.trapezoidal(s, e, float(props.get("accel_fraction", 0.1)))
-            elif kind == "tabulated":
+                # i(t) = s + (e − s) g(t): g depends on accel_fraction alone, so the
+                # sweep's ends stay differentiable through the affine map.
+                self._shape = (motion_table(mp) - s) / (e - s)
+                return "trapezoidal", s, e
+            if kind == "tabulated":
                 if not (("times" in props) and ("positions" in props)):
                     raise ValueError("focalsweep: profile 'tabulated' needs times and positions")
                 t = _floats(props.get("times"), "times")
@@ -183,53 +197,108 @@ def _make_class():
                 if not (np.isclose(mp.start, s) and np.isclose(mp.end, e)):
                     raise ValueError(f"focalsweep: tabulated positions run {mp.start:g} -> "
                                      f"{mp.end:g} mm but sensor_start/end are {s:g}, {e:g}")
-            else:
-                raise ValueError(f"focalsweep: profile must be linear, trapezoidal or "
-                                 f"tabulated, got {kind!r}")
-            return ("table", motion_table(mp))
+                self._times = np.asarray(mp.times, dtype=float)
+                self._positions = np.asarray(mp.positions, dtype=float)
+                return "tabulated", mp.start, mp.end
+            raise ValueError(f"focalsweep: profile must be linear, trapezoidal or "
+                             f"tabulated, got {kind!r}")
 
         @property
         def motion_span(self) -> tuple[float, float]:
-            vals = self.motion[1]
-            return float(vals.min()), float(vals.max())
+            """Least and greatest sensor distance of the motion, mm."""
+            if self.motion_kind == "tabulated":
+                return float(self._positions.min()), float(self._positions.max())
+            return min(self._start, self._end), max(self._start, self._end)
+
+        def differentiable_parameters(self) -> tuple[str, ...]:
+            """Names (in :func:`mitsuba.traverse`) of the differentiable parameters."""
+            if self._scalar:
+                return ()
+            return _DIFFERENTIABLE[self.motion_kind]
 
         def _make_opaque(self):
-            kind, vals = self.motion
             self._scalar = mi.variant().startswith("scalar")
             if self._scalar:  # per-sample Python calls: plain floats and NumPy
-                self.m_table = vals.astype(float)
                 self.m_aperture, self.m_pitch = self.aperture_radius, self.pixel_pitch
                 self.m_f = self.focal_length
                 return
-            self.m_table = mi.Float(vals.astype(np.float32))
             self.m_aperture = mi.Float(self.aperture_radius)
             self.m_pitch = mi.Float(self.pixel_pitch)
             self.m_f = mi.Float(self.focal_length)
-            dr.make_opaque(self.m_table, self.m_aperture, self.m_pitch, self.m_f)
+            self.m_start = mi.Float(self._start)
+            # A fixed sensor has one distance: both ends are the same variable.
+            self.m_end = self.m_start if self.motion_kind == "fixed" else mi.Float(self._end)
+            opaque = [self.m_aperture, self.m_pitch, self.m_f, self.m_start, self.m_end]
+            if self._shape is not None:
+                self.m_shape = mi.Float(self._shape.astype(np.float32))
+                opaque.append(self.m_shape)
+            if self._times is not None:
+                self.m_times = mi.Float(self._times.astype(np.float32))
+                self.m_positions = mi.Float(self._positions.astype(np.float32))
+                opaque += [self.m_times, self.m_positions]
+            dr.make_opaque(*opaque)
+
+        def _fixed_parameters(self):
+            """(name, value) of the parameters exposed as non-differentiable."""
+            out = [("to_world", self.m_to_world), ("aperture_radius", self.m_aperture),
+                   ("pixel_pitch", self.m_pitch), ("focal_length", self.m_f)]
+            if self.motion_kind == "tabulated":
+                out.append(("times", self.m_times))
+            return out
+
+        def _refuse_gradients_of_fixed_parameters(self):
+            """Raise if a non-differentiable parameter was given a gradient: Mitsuba would
+            only log a warning and return a zero derivative."""
+            for name, value in self._fixed_parameters():
+                if dr.grad_enabled(value):
+                    allowed = ", ".join(self.differentiable_parameters())
+                    raise NotDifferentiableError(
+                        f"focalsweep: {name} is not differentiable (its gradient would "
+                        f"be silently zero); with profile {self.motion_kind!r} the "
+                        f"differentiable parameters are: {allowed}")
 
         # -- geometry -----------------------------------------------------------------
         def _sensor_distance(self, time):
-            kind, vals = self.motion
+            """Sensor distance i(t), mm, at Mitsuba time ``time`` (s).
+
+            In ``*_ad_*`` variants it is attached to the AD graph of ``sensor_start`` /
+            ``sensor_end`` (or ``positions``): the table index and weight are computed
+            from the (detached) time, the value from the differentiable entries.
+            """
+            kind = self.motion_kind
             if self._scalar:
                 if kind == "fixed":
-                    return float(vals[0])
+                    return self._start
                 t = min(max((float(time) - self.shutter_open()) / self.shutter_open_time(),
                             0.0), 1.0)
-                return float(np.interp(t, np.linspace(0.0, 1.0, len(vals)), vals))
+                if kind == "tabulated":
+                    return float(np.interp(t, self._times, self._positions))
+                if kind == "trapezoidal":
+                    t = float(np.interp(t, np.linspace(0.0, 1.0, len(self._shape)),
+                                        self._shape))
+                return self._start + (self._end - self._start) * t
             if kind == "fixed":
-                return dr.gather(mi.Float, self.m_table, mi.UInt32(0))
+                return self.m_start
             t = dr.clip((time - self.shutter_open()) / self.shutter_open_time(), 0.0, 1.0)
-            if kind == "linear":
-                a = dr.gather(mi.Float, self.m_table, mi.UInt32(0))
-                b = dr.gather(mi.Float, self.m_table, mi.UInt32(1))
-                return dr.fma(b - a, t, a)
-            n = len(vals) - 1
-            x = t * n
-            k = mi.UInt32(dr.clip(dr.floor(x), 0, n - 1))
-            w = x - mi.Float(k)
-            a = dr.gather(mi.Float, self.m_table, k)
-            b = dr.gather(mi.Float, self.m_table, k + 1)
-            return dr.fma(b - a, w, a)
+            if kind == "tabulated":
+                times, n = self.m_times, len(self._times)
+                k = dr.binary_search(
+                    0, n - 2, lambda j: dr.gather(mi.Float, times, j + 1) <= t)
+                t0 = dr.gather(mi.Float, times, k)
+                t1 = dr.gather(mi.Float, times, k + 1)
+                w = dr.clip((t - t0) / (t1 - t0), 0.0, 1.0)
+                a = dr.gather(mi.Float, self.m_positions, k)
+                b = dr.gather(mi.Float, self.m_positions, k + 1)
+                return dr.fma(b - a, w, a)
+            if kind == "trapezoidal":
+                n = len(self._shape) - 1
+                x = t * n
+                k = mi.UInt32(dr.clip(dr.floor(x), 0, n - 1))
+                w = x - mi.Float(k)
+                g0 = dr.gather(mi.Float, self.m_shape, k)
+                g1 = dr.gather(mi.Float, self.m_shape, k + 1)
+                t = dr.fma(g1 - g0, w, g0)
+            return dr.fma(self.m_end - self.m_start, t, self.m_start)
 
         def _sensor_point(self, sample2):
             """Upright sensor coordinates (u, v), mm, of a film sample (crop-relative)."""
@@ -240,6 +309,7 @@ def _make_class():
             return u, v
 
         def _rays(self, time, sample1, sample2, sample3, active, differentials):
+            self._refuse_gradients_of_fixed_parameters()
             wavelengths, wav_weight = self.sample_wavelengths(
                 dr.zeros(mi.SurfaceInteraction3f), sample1, active)
             i = self._sensor_distance(time)
@@ -278,6 +348,7 @@ def _make_class():
 
         def sample_direction(self, it, sample, active=True):
             """Connect a scene point to a sampled aperture point (for light tracing)."""
+            self._refuse_gradients_of_fixed_parameters()
             to_world = self.world_transform()
             ref = to_world.inverse() @ it.p
             i = self._sensor_distance(it.time)
@@ -319,36 +390,65 @@ def _make_class():
             return mi.ScalarBoundingBox3f(p, p)
 
         def traverse(self, callback):
-            callback.put("to_world", self.m_to_world, mi.ParamFlags.NonDifferentiable)
+            flag = mi.ParamFlags
+            callback.put("to_world", self.m_to_world, flag.NonDifferentiable)
             if self._scalar:
                 return
-            callback.put("aperture_radius", self.m_aperture, mi.ParamFlags.NonDifferentiable)
-            callback.put("pixel_pitch", self.m_pitch, mi.ParamFlags.NonDifferentiable)
-            callback.put("focal_length", self.m_f, mi.ParamFlags.NonDifferentiable)
-            callback.put("sensor_distances", self.m_table, mi.ParamFlags.NonDifferentiable)
+            callback.put("aperture_radius", self.m_aperture, flag.NonDifferentiable)
+            callback.put("pixel_pitch", self.m_pitch, flag.NonDifferentiable)
+            callback.put("focal_length", self.m_f, flag.NonDifferentiable)
+            kind = self.motion_kind
+            if kind == "fixed":
+                callback.put("sensor_distance", self.m_start, flag.Differentiable)
+                # Deprecated alias of sensor_distance (the key of mitsweep <= 0.x).
+                callback.put("sensor_distances", self.m_start, flag.Differentiable)
+            elif kind == "tabulated":
+                callback.put("positions", self.m_positions, flag.Differentiable)
+                callback.put("times", self.m_times, flag.NonDifferentiable)
+            else:
+                callback.put("sensor_start", self.m_start, flag.Differentiable)
+                callback.put("sensor_end", self.m_end, flag.Differentiable)
 
         def parameters_changed(self, keys):
             super().parameters_changed(keys)
             if self._scalar:
                 return
+            self._refuse_gradients_of_fixed_parameters()
+            sizes = [("sensor_start", self.m_start, 1), ("sensor_end", self.m_end, 1)]
+            if self.motion_kind == "tabulated":
+                sizes += [("positions", self.m_positions, len(self._positions)),
+                          ("times", self.m_times, len(self._times))]
+            for name, value, n in sizes:
+                if dr.width(value) != n:
+                    raise ValueError(f"focalsweep: {name} must keep its length {n}, "
+                                     f"got {dr.width(value)}")
             # Keep the Python-side copies (used for validation and repr) in step.
             self.aperture_radius = float(dr.slice(self.m_aperture, 0))
             self.pixel_pitch = float(dr.slice(self.m_pitch, 0))
             self.focal_length = float(dr.slice(self.m_f, 0))
-            vals = self.m_table.numpy().astype(float)
-            if vals.size != self.motion[1].size:
-                raise ValueError("focalsweep: sensor_distances cannot change length")
-            self.motion = (self.motion[0], vals)
+            self._start = float(dr.slice(self.m_start, 0))
+            self._end = float(dr.slice(self.m_end, 0))
+            if self.motion_kind == "tabulated":
+                self._positions = dr.detach(self.m_positions).numpy().astype(float)
+                self._start, self._end = float(self._positions[0]), float(self._positions[-1])
+                times = dr.detach(self.m_times).numpy().astype(float)
+                if not (np.all(np.diff(times) > 0) and times[0] == 0 and times[-1] == 1):
+                    raise ValueError("focalsweep: times must rise strictly from 0 to 1 "
+                                     "(the normalised exposure)")
+                self._times = times
             if not self.motion_span[0] > self.focal_length:
                 raise ValueError("focalsweep: a sensor distance is at or inside the focal "
                                  "length")
-            dr.make_opaque(self.m_table, self.m_aperture, self.m_pitch, self.m_f)
+            opaque = [self.m_aperture, self.m_pitch, self.m_f, self.m_start, self.m_end]
+            if self.motion_kind == "tabulated":
+                opaque += [self.m_times, self.m_positions]
+            dr.make_opaque(*opaque)
 
         def to_string(self):
             lo, hi = self.motion_span
             return (f"FocalSweepSensor[focal_length={self.focal_length}, "
                     f"aperture_radius={self.aperture_radius}, pixel_pitch={self.pixel_pitch}, "
-                    f"motion={self.motion[0]}, sensor_distance={lo}..{hi}, "
+                    f"motion={self.motion_kind}, sensor_distance={lo}..{hi}, "
                     f"film={self.film()}]")
 
     return FocalSweepSensor
