@@ -1,0 +1,349 @@
+"""Motion profiles on the rig: the plan's step-rate table, its refusals before any
+motion, the protocol exchanges, and captures against the simulators (real pty I/O)
+whose measured motion follows the planned profile.
+
+Timing resolution of the simulators: the Arduino model stamps events from the analytic
+motion at the board's 1 µs ``micros()``; a sample's planned position is the table's at
+the sample's time, so the measured position agrees within one step (the stepper stands
+at the floor of its travel) plus the peak rate over two 1 µs stamps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mitsweep.config import SetupError, load_setup
+from mitsweep.optics import optimal_sweep_range
+from mitsweep.optics.motion import MotionProfile
+from mitsweep.rig import (DeviceFault, PortLost, ProtocolError, ReplyTimeout, RigPorts,
+                          load_capture_record, measured_motion, plan_capture, run_capture)
+from mitsweep.rig.arduino import MAX_STEP_RATE, MAX_TABLE_SEGMENTS, ArduinoSweepController
+from mitsweep.rig.errors import PlanError
+from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
+from mitsweep.rig.testing import expected_protocol, fast_rig_setup
+from mitsweep.rig.zaber import SPEED_UNIT, ZaberStage
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+ZABER_STEPS_PER_MM = 1 / 0.047625e-3
+TIMER_RESOLUTION_S = 2e-6               # two 1 µs micros() stamps
+
+
+def bent_profile(sr, n: int = 64, bend: float = 0.3) -> MotionProfile:
+    """A monotonic, non-uniform profile over the sweep range: ``u = t + bend t (1 - t)``
+    (fast at the start, ``(1 + bend)`` times the mean velocity, slow at the end,
+    ``(1 - bend)``), as ``n`` tabulated knots."""
+    t = np.linspace(0.0, 1.0, n)
+    u = t + bend * t * (1.0 - t)
+    return MotionProfile.tabulated(t, sr.sensor_start + (sr.sensor_end - sr.sensor_start) * u)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return fast_rig_setup(load_setup(SCENES / "sphere.toml"))
+
+
+@pytest.fixture(scope="module")
+def sphere_zaber():
+    return fast_rig_setup(load_setup(SCENES / "sphere.toml"), steps_per_mm=ZABER_STEPS_PER_MM)
+
+
+@pytest.fixture(scope="module")
+def profile(sphere):
+    return bent_profile(optimal_sweep_range(sphere))
+
+
+def setup_for(stage, sphere, sphere_zaber):
+    return sphere if stage == "arduino" else sphere_zaber
+
+
+# -- the plan ------------------------------------------------------------------------------
+@pytest.mark.parametrize("stage", ["arduino", "zaber"])
+def test_table_follows_profile_within_its_stated_tolerance(sphere, sphere_zaber, profile,
+                                                           stage):
+    setup = setup_for(stage, sphere, sphere_zaber)
+    exposure = 0.7
+    plan = plan_capture(setup, stage=stage, motion=profile, exposure_s=exposure)
+    table, spm = plan.profile, plan.steps_per_mm
+    assert len(table.steps) == len(profile.times) - 1
+    # the profile's stage travel from the open step, at dense times: brute force against
+    # the table's reported deviation (exact for two piecewise-linear travels)
+    t = np.linspace(0.0, exposure, 20001)
+    x = ((profile.sensor_distance(t / exposure) - plan.sensor_distance_at_zero_mm)
+         / plan.sensor_direction)                       # stage position, mm
+    ideal = plan.direction * (x * spm - plan.open_steps)
+    dense = float(np.max(np.abs(table.travel_at(t) - ideal)))
+    assert dense <= table.max_deviation_steps + 1e-9
+    # cumulative rounding: within half a step at the knots, and the durations add up to
+    # the exposure (Arduino: whole µs, knot times within 0.5 µs; Zaber: the speed
+    # quantum 1/1.6384 microstep/s changes each segment's time by < 1e-4 relative)
+    if stage == "arduino":
+        assert table.max_deviation_steps <= 0.5 + table.max_velocity_mm_s * spm * 0.5e-6 * 2
+        assert table.duration_s == pytest.approx(exposure, abs=1e-6)
+        assert all(u == round(d * 1e6) for u, d in zip(table.driver, table.durations_s))
+        assert max(k / d for k, d in zip(table.steps, table.durations_s)) <= MAX_STEP_RATE
+    else:
+        assert table.max_deviation_steps <= 1.0
+        assert table.duration_s == pytest.approx(exposure, rel=1e-4)
+        speeds = np.array(table.steps) / np.array(table.durations_s)
+        assert np.allclose(speeds * SPEED_UNIT, table.driver, rtol=0, atol=1e-6)
+    assert plan.planned_exposure_s == pytest.approx(table.duration_s, abs=1e-6)
+    # the shutter window is the profile's span; ramps and settle outside it
+    assert plan.sensor_distance(plan.open_mm) == pytest.approx(profile.start, abs=0.5 / spm)
+    assert plan.sensor_distance(plan.close_mm) == pytest.approx(profile.end, abs=1.0 / spm)
+    assert plan.close_steps - plan.open_steps == plan.direction * table.total_steps
+    xs = [plan.approach_steps, plan.open_steps, plan.close_steps, plan.end_steps]
+    assert xs == sorted(xs, reverse=plan.direction < 0)
+    margin = setup.rig.settle_distance * spm
+    v_in, v_out = table.entry_rate, table.exit_rate
+    a = plan.acceleration_mm_s2 * spm
+    assert abs(plan.open_steps - plan.approach_steps) >= v_in ** 2 / (2 * a) + margin - 1e-9
+    assert abs(plan.end_steps - plan.close_steps) >= v_out ** 2 / (2 * a) + margin - 1e-9
+    # velocities: the profile's (1 + bend) and (1 - bend) times the mean at its ends
+    mean = plan.translation_mm / exposure
+    assert table.max_velocity_mm_s == pytest.approx(1.3 * mean, rel=0.02)
+    assert plan.velocity_mm_s == pytest.approx(mean, rel=1e-12)
+
+
+def test_linear_profile_plans_the_linear_sweeps_shutter_window(sphere):
+    sr = optimal_sweep_range(sphere)
+    linear = plan_capture(sphere)
+    plan = plan_capture(sphere, motion=MotionProfile.linear(sr.sensor_start, sr.sensor_end),
+                        exposure_s=sr.exposure_s)
+    assert len(plan.profile.steps) == 1
+    assert (plan.open_steps, plan.close_steps) == (linear.open_steps, linear.close_steps)
+    assert plan.planned_exposure_s == pytest.approx(sr.exposure_s, abs=0.5e-6)
+    # the default exposure is the linear sweep's: travel at sweep.velocity
+    default = plan_capture(sphere, motion=MotionProfile.linear(sr.sensor_start, sr.sensor_end))
+    assert default.exposure_s == pytest.approx(sr.exposure_s, rel=1e-12)
+
+
+def test_profile_with_more_knots_than_the_board_holds_is_reknotted(sphere):
+    sr = optimal_sweep_range(sphere)
+    plan = plan_capture(sphere, motion=bent_profile(sr, n=300), exposure_s=0.7)
+    table = plan.profile
+    assert len(table.steps) == MAX_TABLE_SEGMENTS
+    # chords over h = 1/64 of the exposure of the parabola u(t) deviate from it by at
+    # most bend |Δ| h² / 4; the new knots lie on the 300-knot polyline, itself within
+    # bend |Δ| (1/299)² / 4 of the parabola
+    bound = 0.3 * sr.translation / 4 * (1 / 64 ** 2 + 1 / 299 ** 2)
+    assert 0.9 * bound <= table.resample_deviation_mm <= bound
+    assert "re-knotted" in plan.summary()
+
+
+def with_rig(setup, **rig):
+    return dataclasses.replace(setup, rig=dataclasses.replace(setup.rig, **rig))
+
+
+@pytest.mark.parametrize("case, match", [
+    ("too fast", "more than rig.max_velocity"),
+    ("too abrupt", "more than rig.acceleration"),
+    ("crosses focal length", "focal length"),
+    ("turns back", "must be monotonic"),
+    ("starts at rest", "starts at rest"),
+    ("too long", "outside the camera's range"),
+])
+def test_profile_the_stage_cannot_follow_is_refused(sphere, case, match):
+    sr = optimal_sweep_range(sphere)
+    s0, s1 = sr.sensor_start, sr.sensor_end
+    exposure = 0.7
+    setup = sphere
+    if case == "too fast":           # 0.695 mm in 0.05 s: ~18 mm/s > 10 mm/s
+        motion, exposure = bent_profile(sr), 0.05
+    elif case == "too abrupt":       # velocity halves between two knots: ~0.7 mm/s in
+        t = [0.0, 0.5, 1.0]          # ~0.35 s, 2 mm/s^2 > 1 mm/s^2
+        motion = MotionProfile.tabulated(t, [s0, s0 + (s1 - s0) * 2 / 3, s1])
+        setup = with_rig(sphere, acceleration=1.0)
+    elif case == "crosses focal length":
+        f = sphere.lens.focal_length
+        motion = MotionProfile.linear(f + 0.3, f - 0.2)
+    elif case == "turns back":
+        motion = MotionProfile.tabulated([0, 0.4, 0.7, 1.0], [s0, s1, s0 + 0.5 * (s1 - s0), s1])
+    elif case == "starts at rest":
+        motion = MotionProfile.tabulated([0, 0.2, 1.0], [s0, s0, s1])
+    else:                            # 60 s > rig.max_exposure_s = 30 s
+        motion, exposure = bent_profile(sr), 60.0
+    with pytest.raises(PlanError, match=match):
+        plan_capture(setup, motion=motion, exposure_s=exposure)
+
+
+def test_empty_profile_is_refused_when_made():
+    with pytest.raises(SetupError, match="empty sweep"):
+        MotionProfile.tabulated([0.0, 1.0], [58.0, 58.0])
+    with pytest.raises(SetupError, match=">= 2"):
+        MotionProfile.tabulated([], [])
+
+
+def test_zaber_refuses_a_dwell_it_cannot_stream(sphere_zaber):
+    sr = optimal_sweep_range(sphere_zaber)
+    s0, s1 = sr.sensor_start, sr.sensor_end
+    mid = s0 + 0.5 * (s1 - s0)
+    dwell = MotionProfile.tabulated([0, 0.45, 0.55, 1.0], [s0, mid, mid, s1])
+    with pytest.raises(PlanError, match="no microstep"):
+        plan_capture(with_rig(sphere_zaber, acceleration=1000.0), stage="zaber",
+                     motion=dwell, exposure_s=0.7)
+    # the Arduino runs the same dwell: a segment of 0 steps that only takes its time
+    plan = plan_capture(fast_rig_setup(with_rig(sphere_zaber, acceleration=1000.0)),
+                        motion=dwell, exposure_s=0.7)
+    assert 0 in plan.profile.steps
+
+
+# -- the protocol ----------------------------------------------------------------------
+def test_arduino_table_upload_is_acknowledged_with_running_totals():
+    exchanges = [(b"TABLE 2\n", b"OK TABLE 2\n"),
+                 (b"SEG 0 40 100000\n", b"OK SEG 0 40 100000\n"),
+                 (b"SEG 1 20 100000\n", b"OK SEG 1 60 200000\n"),
+                 (b"TSWEEP 300 4000 100 160\n", b"OK TSWEEP\n")]
+    with expected_protocol(lambda t: ArduinoSweepController(t, steps_per_mm=400),
+                           exchanges) as board:
+        board.load_table([40, 20], [100000, 100000])
+        board.start_table_sweep(target=300, acceleration_mm_s2=10.0, open_at=100, close_at=160)
+
+
+def test_arduino_table_with_a_wrong_total_fails_before_motion():
+    # the board acknowledges segment 1 with totals that are not the host's: a line lost
+    # or altered on the way (checksums off)
+    exchanges = [(b"TABLE 2\n", b"OK TABLE 2\n"),
+                 (b"SEG 0 40 100000\n", b"OK SEG 0 40 100000\n"),
+                 (b"SEG 1 20 100000\n", b"OK SEG 1 61 200000\n")]
+    with pytest.raises(ProtocolError, match="totals"):
+        with expected_protocol(lambda t: ArduinoSweepController(t, steps_per_mm=400),
+                               exchanges) as board:
+            board.load_table([40, 20], [100000, 100000])
+
+
+def test_zaber_stream_is_stored_then_started_by_one_command():
+    ok = b"@01 0 OK IDLE -- 0\r\n"
+    sent = [b"stream 1 setup disable", b"stream 1 buffer 1 erase",
+            b"stream 1 setup store 1 1", b"stream 1 set tanaccel 164",
+            b"stream 1 set maxspeed 1638", b"stream 1 line abs 2000",
+            b"stream 1 set maxspeed 3277", b"stream 1 line abs 4000",
+            b"stream 1 setup disable", b"stream 1 setup live 1"]
+    exchanges = [(b"/1 0 " + s + b"\n", ok) for s in sent]
+    exchanges.append((b"/1 0 stream 1 call 1\n", b"@01 0 OK BUSY -- 0\r\n"))
+    with expected_protocol(lambda t: ZaberStage(t, steps_per_mm=1000), exchanges) as z:
+        z.load_stream([(2000, 1638), (4000, 3277)], accel=164)
+        z.start_stream()
+
+
+# -- captures against the simulators -------------------------------------------------
+def test_arduino_capture_runs_the_profile_it_planned(sphere, profile, tmp_path):
+    plan = plan_capture(sphere, motion=profile, exposure_s=0.7)
+    out = tmp_path / "capture.json"
+    with PtyDevice(ArduinoModel()) as dev:
+        run_capture(sphere, RigPorts(arduino=dev.port, checksums=True), out=out, plan=plan)
+        now = time.monotonic()
+        assert not dev.model.moving(now) and not dev.model.shutter_open
+        assert dev.model.position(now) == plan.end_steps
+        history = list(dev.model.shutter_history)
+    data = load_capture_record(out)
+    assert data["complete"]
+    exp = data["measured"]["exposure"]
+    # shutter window: open once, on the planned steps, for the table's duration
+    assert [h[0] for h in history] == ["open", "close"]
+    assert history[1][1] - history[0][1] == pytest.approx(plan.planned_exposure_s, abs=1e-9)
+    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
+                                                       abs=TIMER_RESOLUTION_S)
+    assert exp["open_position_mm"] == pytest.approx(plan.open_mm, abs=1e-12)
+    assert exp["close_position_mm"] == pytest.approx(plan.close_mm, abs=1e-12)
+    # measured motion (EV POS every 50 ms) against the plan, within the timing resolution
+    cmp = data["measured"]["profile"]
+    peak = max(k / d for k, d in zip(plan.profile.steps, plan.profile.durations_s))
+    assert cmp["tolerance_steps"] == pytest.approx(1 + peak * TIMER_RESOLUTION_S)
+    assert cmp["max_deviation_steps"] <= cmp["tolerance_steps"]
+    assert len(cmp["time_s"]) >= 10
+    # and against the optimised profile itself: the table's deviation on top
+    t, s = measured_motion(out)
+    ideal = profile.sensor_distance(t / plan.exposure_s)
+    bound = (cmp["tolerance_steps"] + plan.profile.max_deviation_steps) / plan.steps_per_mm
+    assert np.max(np.abs(s - ideal)) <= bound
+    # a non-uniform profile, not a linear sweep: the measured velocity over the first and
+    # the last 0.2 s (line fits) differs as the profile's does, ~1.55x
+    def speed_ratio(s_mm):
+        first, last = t <= 0.2, t >= t[-1] - 0.2
+        return np.polyfit(t[first], s_mm[first], 1)[0] / np.polyfit(t[last], s_mm[last], 1)[0]
+
+    assert speed_ratio(ideal) > 1.5
+    assert speed_ratio(s) == pytest.approx(speed_ratio(ideal), rel=0.03)
+    texts = [c["text"].split("*")[0] for c in data["commands"]]
+    assert texts.count("OK TSWEEP") == 1 and not any(x.startswith("SWEEP ") for x in texts)
+    assert sum(x.startswith("SEG ") for x in texts) == len(plan.profile.steps)
+
+
+def test_zaber_capture_runs_the_profile_as_a_stream(sphere_zaber, profile, tmp_path):
+    plan = plan_capture(sphere_zaber, stage="zaber", motion=profile, exposure_s=0.7)
+    out = tmp_path / "capture.json"
+    with PtyDevice(ArduinoModel()) as board, \
+            PtyDevice(ZaberModel(max_position=int(26 * ZABER_STEPS_PER_MM))) as stage:
+        run_capture(sphere_zaber, RigPorts(arduino=board.port, zaber=stage.port,
+                                           checksums=True), out=out, plan=plan)
+        assert stage.model.position(time.monotonic()) == plan.end_steps
+    data = load_capture_record(out)
+    assert data["complete"]
+    exp = data["measured"]["exposure"]
+    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
+                                                       abs=TIMER_RESOLUTION_S)
+    # positions from polls: each known to half its round trip, the clock mapping to half
+    # the SHUTTER round trip, the shutter placed to the host's latency (the record's
+    # tolerance); the stream's lines are the table's
+    cmp = data["measured"]["profile"]
+    assert cmp["max_deviation_steps"] <= cmp["tolerance_steps"]
+    texts = [c["text"].split(":")[0] for c in data["commands"]]
+    lines = [x for x in texts if " stream 1 line abs " in x]
+    assert len(lines) == len(plan.profile.steps) + 2
+    assert lines[-1].endswith(f" {plan.end_steps}")
+    assert sum(" stream 1 call 1" in x for x in texts) == 1
+
+
+# -- safety during a table sweep --------------------------------------------------------
+def assert_safe(model, lo, hi):
+    now = time.monotonic()
+    assert not model.moving(now), "stage still moving"
+    assert lo <= model.position(now) <= hi
+    assert not getattr(model, "shutter_open", False), "shutter left open"
+
+
+@pytest.mark.parametrize("fault, error, status", [
+    (Fault("no_reply", command="TSWEEP"), ReplyTimeout, "timeout"),
+    (Fault("garbage", command="SEG"), ProtocolError, "error"),
+    (Fault("fault_flag", at_fraction=0.5), DeviceFault, "fault"),
+    (Fault("late_event", delay_s=5.0), ReplyTimeout, "timeout"),
+    (Fault("unplug", at_fraction=0.5), PortLost, "port lost"),
+], ids=lambda x: f"{x.kind}-{x.command}" if isinstance(x, Fault) else None)
+def test_fault_during_table_sweep_leaves_the_rig_safe(sphere, profile, tmp_path, fault,
+                                                      error, status):
+    plan = plan_capture(sphere, motion=profile, exposure_s=0.7)
+    out = tmp_path / "capture.json"
+    lo, hi = 0, round(plan.soft_limit_max_mm * plan.steps_per_mm)
+    with PtyDevice(ArduinoModel([fault], homed=True, position=plan.approach_steps)) as dev:
+        t0 = time.monotonic()
+        with pytest.raises(error):
+            run_capture(sphere, RigPorts(arduino=dev.port), out=out, plan=plan)
+        assert time.monotonic() - t0 < plan.sweep_duration_s * 1.25 + 2.5
+        assert_safe(dev.model, lo, hi)
+        if fault.kind in ("fault_flag", "unplug"):    # stopped part-way through the table
+            assert dev.model.position(time.monotonic()) != plan.end_steps
+    data = load_capture_record(out)
+    assert data["complete"] is False and data["status"] == status
+    assert data["safety"] and data["safety"][0]["ok"] is (fault.kind != "unplug")
+
+
+def test_zaber_fault_during_stream_stops_and_releases_the_shutter(sphere_zaber, profile,
+                                                                  tmp_path):
+    plan = plan_capture(sphere_zaber, stage="zaber", motion=profile, exposure_s=0.7)
+    out = tmp_path / "capture.json"
+    with PtyDevice(ArduinoModel()) as board, \
+            PtyDevice(ZaberModel([Fault("fault_flag", at_fraction=0.5)],
+                                 max_position=int(26 * ZABER_STEPS_PER_MM))) as stage:
+        with pytest.raises(DeviceFault):
+            run_capture(sphere_zaber, RigPorts(arduino=board.port, zaber=stage.port),
+                        out=out, plan=plan)
+        now = time.monotonic()
+        assert not stage.model.moving(now) and not board.model.shutter_open
+        assert stage.model.position(now) != plan.end_steps
+    data = load_capture_record(out)
+    assert data["status"] == "fault" and all(a["ok"] for a in data["safety"])
