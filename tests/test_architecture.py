@@ -44,6 +44,7 @@ LAYERS = {
     "render": {"optics", "io", "backend"},
     "deconv": {"optics", "io"},
     "rig": {"optics", "io"},
+    "design": {"optics", "io", "backend", "tracer", "deconv"},
     "pipeline": {"optics", "io", "backend", "plots", "tracer", "render", "deconv"},
     "cli": ANY,
     "__main__": {"cli"},

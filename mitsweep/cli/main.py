@@ -21,6 +21,7 @@ COMMANDS = [
     "sweep_range",
     "render",
     "ipsf",
+    "design_sweep",
     "table1",
     "dataset",
     "deconvolve",

@@ -1,0 +1,159 @@
+"""The predicted restoration error of a sweep: the Wiener MSE of a natural image.
+
+For one field point and depth, with exposure fractions ``τ`` over the bins of a
+:class:`~mitsweep.design.planes.PlaneBank`, the IPSF's transfer function is linear in τ,
+
+.. math:: \\hat K(f; τ) = \\sum_k τ_k \\hat P_k(f),
+
+and the mean squared error per pixel of the Wiener (MMSE) estimate of an image with
+power spectrum ``S(f) = A / |f|²`` (the natural-image prior of the V metric, paper
+Eq. 2; ``A`` such that the image variance is ``σ_s²``, :func:`mitsweep.deconv.wiener.
+natural_prior_scale`) under white noise of variance ``σ²`` is
+
+.. math:: \\mathrm{MSE}(τ) = \\frac{1}{n^2} \\sum_{f \\ne 0}
+          \\frac{S(f)\\, σ^2}{|\\hat K(f; τ)|^2 S(f) + σ^2}
+          = \\frac{σ^2}{n^2} \\sum_{f \\ne 0} \\frac{1}{|\\hat K(f; τ)|^2 + R(f)},
+
+``R(f) = σ²/S(f) = nsr · 2π ln(n_px/2) · |f|²`` the regulariser of mitsweep's natural
+Wiener filter (:func:`mitsweep.deconv.wiener.regulariser`), ``nsr = σ²/σ_s²``, on an
+``n × n`` DFT grid (cycles per pixel; DC left out: the image mean is known). Noise and
+signal are in relative exposure (white = 1): ``σ² =`` :meth:`SensorNoise.variance` at
+the mean level 0.5 and ``σ_s = 0.5`` (:meth:`SensorNoise.nsr`), so ``10 log10(1/MSE)``
+is a predicted PSNR.
+
+Convexity, and the bound used to certify the optimiser
+------------------------------------------------------
+``1/(y² + R)`` is not convex in ``y = |K̂|`` (it is concave for ``y < √(R/3)``) and
+``|K̂|`` is not linear in τ, so the MSE is not convex in τ. Two steps give a convex
+lower bound: the triangle inequality ``|K̂(f; τ)| ≤ Σ_k τ_k |P̂_k(f)| =: y_f(τ)`` (linear
+in τ; the MSE term decreases in ``|K̂|``), and the convex envelope of ``h(y) = 1/(y² + R)``
+on ``y ≥ 0``: the tangent from ``(0, h(0))``, which touches ``h`` at ``y = √R``,
+
+.. math:: \\check h(y) = \\frac{1}{R}\\Big(1 - \\frac{y}{2\\sqrt R}\\Big)\\ (y < \\sqrt R),
+          \\qquad \\check h(y) = h(y)\\ (y \\ge \\sqrt R),
+
+so ``L(τ) = σ²/n² Σ_f ȟ_f(y_f(τ)) ≤ MSE(τ)`` for every τ, and ``L`` is convex in τ.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import fft as sfft
+
+from ..deconv.wiener import regulariser
+
+__all__ = ["WienerModel", "wiener_model", "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
+
+#: DFT grid of the MSE sum, cycles/pixel steps of 1/64 (kernels of 31 px fit twice).
+DEFAULT_FFT_SIZE = 64
+#: Mean level of the natural image (relative exposure), also its rms contrast
+#: (:meth:`mitsweep.deconv.noise.SensorNoise.nsr`).
+SIGNAL_MEAN = 0.5
+
+
+@dataclass(frozen=True)
+class WienerModel:
+    """The MSE of every field point and depth as a function of τ (module docstring).
+
+    Attributes
+    ----------
+    spectra_re, spectra_im : (J, N, F) ndarray
+        Real and imaginary parts of ``P̂_k(f)`` of the J = n_depths · n_points kernels
+        (depth-major) on the rfft grid, DC removed.
+    magnitude : (J, N, F) ndarray
+        ``|P̂_k(f)|`` (the convex bound's).
+    weight : (F,) ndarray
+        ``c_f / n²``: rfft multiplicity over the grid size.
+    reg : (F,) ndarray
+        ``R(f)``.
+    noise_var : float
+        ``σ²``, relative exposure².
+    """
+
+    spectra_re: np.ndarray
+    spectra_im: np.ndarray
+    magnitude: np.ndarray
+    weight: np.ndarray
+    reg: np.ndarray
+    noise_var: float
+
+    @property
+    def n_kernels(self) -> int:
+        return self.spectra_re.shape[0]
+
+    @staticmethod
+    def _combine(t: np.ndarray, spectra: np.ndarray) -> np.ndarray:
+        """``Σ_k τ_k S[j, k, f]``: (J, F) for τ (N,), (B, J, F) for (B, N)."""
+        if t.ndim == 1:
+            return np.matmul(t, spectra)
+        return np.matmul(t[None], spectra).transpose(1, 0, 2)
+
+    def _transfer(self, t):
+        return self._combine(t, self.spectra_re), self._combine(t, self.spectra_im)
+
+    def mse(self, tau) -> np.ndarray:
+        """(J,) predicted MSE at exposure fractions ``tau`` (N,), or (B, J) for (B, N)."""
+        kr, ki = self._transfer(np.asarray(tau, dtype=float))
+        return self.noise_var * (self.weight / (kr * kr + ki * ki + self.reg)).sum(axis=-1)
+
+    def mse_and_grad(self, tau) -> tuple[np.ndarray, np.ndarray]:
+        """(J,) MSE and its (J, N) gradient in τ."""
+        kr, ki = self._transfer(np.asarray(tau, dtype=float))
+        d = kr * kr + ki * ki + self.reg
+        value = self.noise_var * (self.weight / d).sum(axis=-1)
+        # d/dτ_k 1/d = −2 Re(conj(K) P̂_k) / d²
+        coef = -2.0 * self.noise_var * self.weight / (d * d)  # (J, F)
+        grad = np.matmul(self.spectra_re, (coef * kr)[:, :, None])[..., 0] \
+            + np.matmul(self.spectra_im, (coef * ki)[:, :, None])[..., 0]
+        return value, grad
+
+    def bound_and_grad(self, tau) -> tuple[np.ndarray, np.ndarray]:
+        """(J,) convex lower bound ``L(τ) <= MSE(τ)`` and its (J, N) gradient."""
+        y = self._combine(np.asarray(tau, dtype=float), self.magnitude)
+        sq = np.sqrt(self.reg)
+        lin = y < sq
+        h = np.where(lin, (1.0 - y / (2.0 * sq)) / self.reg, 1.0 / (y * y + self.reg))
+        dh = np.where(lin, -1.0 / (2.0 * self.reg * sq), -2.0 * y / (y * y + self.reg) ** 2)
+        value = self.noise_var * (self.weight * h).sum(axis=-1)
+        grad = self.noise_var * np.matmul(self.magnitude, (self.weight * dh)[:, :, None])[..., 0]
+        return value, grad
+
+
+def wiener_model(kernels, noise, *, n_fft: int = DEFAULT_FFT_SIZE,
+                 n_px: float) -> WienerModel:
+    """The :class:`WienerModel` of bin-averaged kernels.
+
+    Parameters
+    ----------
+    kernels : (n_depths, n_points, N, K, K) ndarray
+        ``P_k`` (:attr:`PlaneBank.kernels`), the chief-ray image at ``[K//2, K//2]``.
+    noise : mitsweep.deconv.SensorNoise
+        The sensor at the light level of the design.
+    n_fft : int
+        DFT grid n (>= K).
+    n_px : float
+        Image size that sets the prior's lowest frequency (the sensor's, as the Wiener
+        filter of a whole image uses).
+    """
+    k = np.asarray(kernels, dtype=float)
+    D, P, N, K, K2 = k.shape
+    if K != K2 or K > n_fft:
+        raise ValueError(f"kernels: need square kernels no larger than n_fft = {n_fft}, "
+                         f"got {K}x{K2}")
+    big = np.zeros((D * P * N, n_fft, n_fft))
+    big[:, :K, :K] = k.reshape(-1, K, K)
+    big = np.roll(big, (-(K // 2), -(K // 2)), axis=(1, 2))
+    spec = sfft.rfft2(big, workers=-1).reshape(D * P, N, -1)[:, :, 1:]  # DC is index 0
+    nsr = float(noise.nsr(SIGNAL_MEAN))
+    reg = regulariser((n_fft, n_fft), nsr, "natural", n_px=n_px).ravel()
+    mult = np.full(n_fft // 2 + 1, 2.0)
+    mult[0] = 1.0
+    if n_fft % 2 == 0:
+        mult[-1] = 1.0
+    weight = np.broadcast_to(mult, (n_fft, n_fft // 2 + 1)).ravel() / n_fft ** 2
+    return WienerModel(spectra_re=np.ascontiguousarray(spec.real),
+                       spectra_im=np.ascontiguousarray(spec.imag), magnitude=np.abs(spec),
+                       weight=weight[1:].copy(), reg=reg[1:].astype(float),
+                       noise_var=float(noise.variance(SIGNAL_MEAN)))

@@ -1,0 +1,288 @@
+"""``design_sweep``: the exposure-time profile of a focal sweep that minimises the
+predicted restoration error (the objective is stated in :mod:`mitsweep.design`)."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config import SetupError
+from ..optics import optimal_sweep_range
+from ..optics.motion import MotionProfile
+from ..optics.reference import reference_geometry
+from ..tracer.bank import field_radius, grid_points
+from ..tracer.metrics import v_avg
+from ..tracer.source import source_from_image
+from .objective import DEFAULT_FFT_SIZE, wiener_model
+from .optimize import (OBJECTIVES, StageLimits, brute_force, certified_lower_bound,
+                       local_optimum, stage_feasible)
+from .planes import DEFAULT_PLANE_RAYS, DEFAULT_SUB_PLANES, plane_bank
+
+__all__ = ["SweepDesign", "design_sweep", "design_depths", "design_points", "V_DEPTHS_MM",
+           "MIN_PLANES"]
+
+logger = logging.getLogger(__name__)
+
+#: The V_avg depths of the paper (Eq. 3), mm.
+V_DEPTHS_MM = (500.0, 1000.0, 5000.0, 10000.0)
+#: Fewest bins a design may have (the brute-force check coarsens to 6 of them).
+MIN_PLANES = 8
+_BRUTE_BINS = 6
+
+
+@dataclass(frozen=True)
+class SweepDesign:
+    """A designed sweep and its predictions against the uniform (linear) sweep.
+
+    Attributes
+    ----------
+    profile : MotionProfile
+        Tabulated: knots at the bin edges, times ``Σ τ`` (normalised).
+    tau, tau_linear : (N,) ndarray
+        Exposure fractions per bin of the design and of the uniform sweep.
+    edges_mm : (N + 1,) ndarray
+        Bin edges, sensor distances, start → end.
+    exposure_s : float
+    mse, mse_linear : (n_depths, n_points) ndarray
+        Predicted Wiener MSE per depth and field point (relative exposure²).
+    points_uv : (n_points, 2) ndarray
+    depths_mm : (n_depths,) ndarray
+    report : dict
+        Everything ``mitsweep design-sweep --json`` prints.
+    """
+
+    profile: MotionProfile
+    tau: np.ndarray
+    tau_linear: np.ndarray
+    edges_mm: np.ndarray
+    exposure_s: float
+    mse: np.ndarray
+    mse_linear: np.ndarray
+    points_uv: np.ndarray
+    depths_mm: np.ndarray
+    report: dict = field(default_factory=dict)
+
+
+def design_depths(setup) -> list[float]:
+    """The setup's depth range's ends and the paper's V_avg depths within it, mm."""
+    s = setup.sweep
+    inner = [d for d in V_DEPTHS_MM if s.depth_min <= d <= s.depth_max]
+    return sorted({float(s.depth_min), *inner, float(s.depth_max)})
+
+
+def design_points(setup, i_ref: float, geometry, *, n_radii: int, grid: tuple[int, int]):
+    """Field points: ``n_radii`` radii from the centre to the FOV's edge (untilted), or
+    the centres of a grid over the sensor that see the mirror (tilted; the 2-D field)."""
+    if setup.mirror.is_symmetric:
+        r = np.linspace(0.0, field_radius(setup, geometry), int(n_radii))
+        return np.stack([r, np.zeros_like(r)], axis=1)
+    pts = []
+    for u, v in grid_points(setup, grid):
+        try:
+            source_from_image(setup, float(u), float(v), 1000.0, reference_sensor_distance=i_ref)
+        except ValueError:
+            continue
+        pts.append((u, v))
+    if not pts:
+        raise SetupError("design: no grid point sees the mirror")
+    return np.asarray(pts, dtype=float)
+
+
+def _where(mse, points, depths) -> dict:
+    d, p = np.unravel_index(int(np.argmax(mse)), mse.shape)
+    u, v = (float(x) for x in points[p])
+    return {"radius_mm": math.hypot(u, v), "u_mm": u, "v_mm": v, "depth_mm": float(depths[d]),
+            "mse": float(mse[d, p])}
+
+
+def _psnr(mse: float) -> float:
+    return 10.0 * math.log10(1.0 / mse)
+
+
+def _v_avg(kernels, depths) -> tuple[float, list]:
+    """V_avg (Eq. 3) over the paper's depths when all are designed, else all depths."""
+    sel = [j for j, d in enumerate(depths) if d in V_DEPTHS_MM]
+    if len(sel) != len(V_DEPTHS_MM):
+        sel = list(range(len(depths)))
+    k = kernels[sel]
+    k = k / k.sum(axis=(-2, -1), keepdims=True)
+    return float(v_avg(k)), [float(depths[j]) for j in sel]
+
+
+def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
+                 span_mm: tuple[float, float] | None = None, n_radii: int = 9,
+                 grid: tuple[int, int] = (5, 5), depths=None, rays: int = DEFAULT_PLANE_RAYS,
+                 kernel_size: int = 31, seed: int = 0, n_fft: int = DEFAULT_FFT_SIZE,
+                 sub_planes: int = DEFAULT_SUB_PLANES, brute_force_steps: int = 16,
+                 progress=None) -> SweepDesign:
+    """Design the time profile of a focal sweep (objective in :mod:`mitsweep.design`).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+    noise : mitsweep.deconv.SensorNoise
+        The sensor at the design's light level.
+    objective : {"worst", "mean"}
+        Minimise the largest or the mean predicted MSE over field points × depths.
+    n_planes : int
+        Bins N of the span (>= 8).
+    span_mm : (start, end), optional
+        Sensor distances the sweep runs between, mm (default: the optimal range,
+        ``sensor_start`` → ``sensor_end``). The exposure is the setup's sweep exposure
+        over the optimal range either way.
+    n_radii, grid : field points (:func:`design_points`).
+    depths : sequence of float, optional
+        Default :func:`design_depths`.
+    rays, kernel_size, seed, sub_planes : the plane banks (:func:`plane_bank`).
+    n_fft : int
+        DFT grid of the MSE sum.
+    brute_force_steps : int
+        Lattice resolution of the brute-force check (0 skips it).
+    progress : callable, optional
+        Called after each traced point.
+
+    Returns
+    -------
+    SweepDesign
+
+    Raises
+    ------
+    SetupError
+        A span that reaches the focal length, that the stage cannot run in the exposure,
+        or an unknown objective.
+    """
+    t_start = time.perf_counter()
+    if objective not in OBJECTIVES:
+        raise SetupError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    if int(n_planes) < MIN_PLANES:
+        raise SetupError(f"planes: need at least {MIN_PLANES}, got {n_planes}")
+    sweep = optimal_sweep_range(setup)
+    T = float(sweep.exposure_s)
+    f = setup.lens.focal_length
+    start, end = (sweep.sensor_start, sweep.sensor_end) if span_mm is None else \
+        (float(span_mm[0]), float(span_mm[1]))
+    if not (math.isfinite(start) and math.isfinite(end)) or start == end:
+        raise SetupError(f"span: need two different finite sensor distances, got "
+                         f"{start:g} {end:g} mm")
+    if min(start, end) <= f:
+        raise SetupError(f"span {start:g} .. {end:g} mm reaches the lens focal length "
+                         f"({f:g} mm): both ends must be > {f:g} mm")
+    rig = setup.rig
+    limits = StageLimits(exposure_s=T, max_velocity=rig.max_velocity,
+                         acceleration=rig.acceleration)
+    if abs(end - start) > rig.travel:
+        raise SetupError(f"span {start:g} .. {end:g} mm: travel {abs(end - start):g} mm exceeds "
+                         f"rig.travel ({rig.travel:g} mm)")
+    if abs(end - start) / T > rig.max_velocity:
+        raise SetupError(f"span {start:g} .. {end:g} mm cannot be swept in the exposure "
+                         f"{T:g} s: it needs at least {abs(end - start) / T:g} mm/s, more than "
+                         f"rig.max_velocity ({rig.max_velocity:g} mm/s)")
+    if not rig.min_exposure_s <= T <= rig.max_exposure_s:
+        raise SetupError(f"exposure {T:g} s is outside rig.min_exposure_s .. rig.max_exposure_s")
+    depths = design_depths(setup) if depths is None else [float(d) for d in depths]
+    N = int(n_planes)
+    edges = np.linspace(start, end, N + 1)
+    motion_lin = MotionProfile.linear(start, end)
+    geom = reference_geometry(setup, sweep=sweep, motion=motion_lin)
+    i_ref = geom.sensor_distance
+    points = design_points(setup, i_ref, geom, n_radii=n_radii, grid=grid)
+    common = dict(rays=rays, kernel_size=kernel_size, seed=seed, sub_planes=sub_planes,
+                  progress=progress)
+    bank = plane_bank(setup, points, depths, edges, reference_sensor_distance=i_ref, **common)
+    widths = bank.widths_mm
+    n_px = math.sqrt(setup.sensor.resolution[0] * setup.sensor.resolution[1])
+    t0 = time.perf_counter()
+    model = wiener_model(bank.kernels, noise, n_fft=n_fft, n_px=n_px)
+    shape = (len(depths), len(points))
+    # the uniform sweep over the optimal range, same exposure: the baseline
+    optimal = span_mm is None or (np.isclose(start, sweep.sensor_start, rtol=0, atol=1e-12)
+                                  and np.isclose(end, sweep.sensor_end, rtol=0, atol=1e-12))
+    tau_lin = widths / widths.sum()
+    if optimal:
+        mse_lin = model.mse(tau_lin).reshape(shape)
+        kernels_lin = bank.ipsf(tau_lin)
+        lin_feasible = stage_feasible(tau_lin, widths, limits)
+    else:
+        lin_edges = np.linspace(sweep.sensor_start, sweep.sensor_end, N + 1)
+        lin_geom = reference_geometry(setup, sweep=sweep)
+        lin_points = design_points(setup, lin_geom.sensor_distance, lin_geom,
+                                   n_radii=n_radii, grid=grid)
+        lin_bank = plane_bank(setup, lin_points, depths, lin_edges,
+                              reference_sensor_distance=lin_geom.sensor_distance, **common)
+        lw = lin_bank.widths_mm
+        lin_model = wiener_model(lin_bank.kernels, noise, n_fft=n_fft, n_px=n_px)
+        mse_lin = lin_model.mse(lw / lw.sum()).reshape(shape)
+        kernels_lin = lin_bank.ipsf(lw / lw.sum())
+        lin_feasible = True
+    sol = local_optimum(model, widths, limits, objective=objective)
+    bound, bound_info = certified_lower_bound(model, widths, limits, objective=objective)
+    t_opt = time.perf_counter() - t0
+    brute = None
+    if brute_force_steps:
+        small = bank.coarsened(_BRUTE_BINS)
+        brute = brute_force(wiener_model(small.kernels, noise, n_fft=n_fft, n_px=n_px),
+                            small.widths_mm, limits, objective=objective,
+                            steps=brute_force_steps)
+    # uniform τ is in the design's feasible set only when the span is the optimal range
+    uniform_value = None
+    if optimal and lin_feasible:
+        uniform_value = float(mse_lin.max() if objective == "worst" else mse_lin.mean())
+    tau = sol.tau
+    times = np.concatenate([[0.0], np.cumsum(tau)])
+    times[-1] = 1.0
+    profile = MotionProfile.tabulated(times, edges)
+    mse = sol.mse.reshape(shape)
+    kernels = bank.ipsf(tau)
+    v_opt, v_depths = _v_avg(kernels, depths)
+    v_lin, _ = _v_avg(kernels_lin, depths)
+    velocity = widths / (tau * T)
+    accel = np.diff(velocity) / (0.5 * (tau[:-1] + tau[1:]) * T)
+    value = sol.value
+    gap = value - bound
+    report = {
+        "setup": setup.name, "objective": objective, "planes": N,
+        "span_mm": [start, end], "optimal_range_mm": [sweep.sensor_start, sweep.sensor_end],
+        "exposure_s": T, "noise": noise.as_dict(), "depths_mm": list(depths),
+        "points_uv_mm": points.tolist(),
+        "linear_worst_mse": float(mse_lin.max()), "optimized_worst_mse": float(mse.max()),
+        "linear_mean_mse": float(mse_lin.mean()), "optimized_mean_mse": float(mse.mean()),
+        "linear_worst_psnr_db": _psnr(float(mse_lin.max())),
+        "optimized_worst_psnr_db": _psnr(float(mse.max())),
+        "linear_mean_psnr_db": _psnr(float(mse_lin.mean())),
+        "optimized_mean_psnr_db": _psnr(float(mse.mean())),
+        "linear_v_avg": v_lin, "optimized_v_avg": v_opt, "v_avg_depths_mm": v_depths,
+        "linear_worst_at": _where(mse_lin, points, depths),
+        "optimized_worst_at": _where(mse, points, depths),
+        "per_point": {"linear_mse": mse_lin.tolist(), "optimized_mse": mse.tolist()},
+        "tau": tau.tolist(), "edges_mm": edges.tolist(),
+        "velocity_mm_s": [float(velocity.min()), float(velocity.max())],
+        "max_acceleration_mm_s2": float(np.abs(accel).max()) if accel.size else 0.0,
+        "stage_limits": {"max_velocity_mm_s": rig.max_velocity,
+                         "acceleration_mm_s2": rig.acceleration},
+        "certificate": {
+            "objective_value": value,
+            "lower_bound": bound,
+            "gap": gap, "relative_gap": gap / value,
+            "uniform_value": uniform_value,
+            "relaxed_value": bound_info["relaxed_value"],
+            "starts": sol.info["starts"], "best_start": sol.info["best_start"],
+            "iterations": sol.info["iterations"],
+            "says": (f"the optimum of this objective (worst/mean predicted MSE over the bank, "
+                     f"these stage limits) lies in [{bound:.6g}, {value:.6g}]: the profile "
+                     f"found is within {100 * gap / value:.3g} % of it"),
+            "brute_force": brute,
+        },
+        "seconds": {"plane_bank": bank.metadata["seconds"], "optimise_and_bound": t_opt,
+                    "brute_force": None if brute is None else brute["seconds"],
+                    "total": time.perf_counter() - t_start},
+        "plane_bank": {k: bank.metadata[k] for k in ("rays", "sub_planes", "seed",
+                                                     "kernel_size")},
+        "n_fft": int(n_fft),
+    }
+    return SweepDesign(profile=profile, tau=tau, tau_linear=tau_lin, edges_mm=edges,
+                       exposure_s=T, mse=mse, mse_linear=mse_lin, points_uv=points,
+                       depths_mm=np.asarray(depths), report=report)
