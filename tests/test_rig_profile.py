@@ -347,3 +347,90 @@ def test_zaber_fault_during_stream_stops_and_releases_the_shutter(sphere_zaber, 
         assert stage.model.position(now) != plan.end_steps
     data = load_capture_record(out)
     assert data["status"] == "fault" and all(a["ok"] for a in data["safety"])
+
+
+# -- the command line ----------------------------------------------------------------
+def motion_json(path: Path, times, distances, exposure_s=0.7) -> Path:
+    """A motion-profile file written by hand (the format of mitsweep.optics.motion_file),
+    so that bad tables can be written too."""
+    import json
+
+    path.write_text(json.dumps({"format": "mitsweep-motion-profile", "version": 1,
+                                "times": list(times), "sensor_distances_mm": list(distances),
+                                "exposure_s": exposure_s,
+                                "provenance": {"generator": "test_rig_profile"}}))
+    return path
+
+
+@pytest.fixture
+def rig_setup_file(tmp_path):
+    from test_rig_cli import setup_file
+
+    return setup_file(tmp_path)
+
+
+def test_cli_capture_with_motion_file_against_simulator(rig_setup_file, sphere, profile,
+                                                        tmp_path):
+    import json
+
+    from conftest import run_cli
+
+    from mitsweep.optics.motion_file import save_motion_file
+
+    motion = save_motion_file(tmp_path / "profile.json", profile, exposure_s=0.7,
+                              provenance={"generator": "test_rig_profile"})
+    rc, stdout, err = run_cli("capture", rig_setup_file, "--motion", motion, "--dry-run",
+                              timeout=120)
+    assert rc == 0, err
+    assert "motion profile     63 segments" in stdout
+    out = tmp_path / "rec.json"
+    with PtyDevice(ArduinoModel()) as dev:
+        rc, stdout, err = run_cli("capture", rig_setup_file, "--port", dev.port, "--motion",
+                                  motion, "--out", out, "--json", timeout=120)
+    assert rc == 0, err
+    summary = json.loads(stdout)
+    assert summary["complete"]
+    assert summary["measured_exposure_s"] == pytest.approx(0.7, abs=TIMER_RESOLUTION_S)
+    assert summary["profile_max_deviation_steps"] <= summary["profile_tolerance_steps"]
+    data = load_capture_record(out)
+    assert data["motion"]["file"] == str(motion)
+    assert data["motion"]["provenance"] == {"generator": "test_rig_profile"}
+    assert data["plan"]["profile"]["segments"] == 63
+
+
+@pytest.mark.parametrize("case, message", [
+    ("too fast", "cannot follow"),
+    ("too abrupt", "cannot follow"),
+    ("crosses focal length", "focal length"),
+    ("empty", "empty table"),
+    ("non-monotonic", "monotonic"),
+])
+def test_cli_bad_motion_exits_2_with_one_line_before_any_motion(rig_setup_file, sphere,
+                                                                tmp_path, case, message):
+    from conftest import run_cli
+
+    sr = optimal_sweep_range(sphere)
+    s0, s1 = sr.sensor_start, sr.sensor_end
+    f = sphere.lens.focal_length
+    t, d, exposure = [0.0, 0.5, 1.0], [s0, 0.5 * (s0 + s1), s1], 0.7
+    if case == "too fast":                       # ~14 mm/s > rig.max_velocity = 10
+        exposure = 0.05
+    elif case == "too abrupt":                   # ~300 mm/s^2 > rig.acceleration = 100
+        d = [s0, s0 + 0.9 * (s1 - s0), s1]
+        exposure = 0.1
+    elif case == "crosses focal length":
+        d = [f + 0.3, f + 0.05, f - 0.2]
+    elif case == "empty":
+        t, d = [], []
+    else:
+        d = [s0, s1, 0.5 * (s0 + s1)]
+    motion = motion_json(tmp_path / "profile.json", t, d, exposure)
+    out = tmp_path / "rec.json"
+    with PtyDevice(ArduinoModel()) as dev:
+        rc, _, err = run_cli("capture", rig_setup_file, "--port", dev.port, "--motion",
+                             motion, "--out", out, timeout=120)
+        assert not [line for _, di, line in dev.model.log if di == "rx"], "port was used"
+    assert rc == 2, err
+    assert err.startswith("mitsweep: error:") and len(err.strip().splitlines()) == 1, err
+    assert message in err
+    assert not out.exists()

@@ -4,6 +4,14 @@ The sensor travel and exposure come from the setup's sweep range and velocity; t
 section of the setup gives the stage limits, acceleration, settle distance, sensor
 mapping and the board's watchdog. ``--dry-run`` prints the plan without opening a port.
 
+``--motion PROFILE.json`` runs a motion-profile file (e.g. from ``mitsweep design-sweep``)
+instead of the linear sweep, for the file's ``exposure_s`` (or, when it has none, the
+linear sweep's exposure over the same span): the plan turns it into a step-rate table
+(Arduino: ``TABLE``/``SEG``/``TSWEEP``; Zaber: a stored stream of ``line abs`` moves)
+and refuses, before any port is opened, a profile the stage cannot follow, a span that
+reaches the focal length, or a table that is empty or not monotonic. The record then
+holds the planned and the measured motion (``measured.profile``).
+
 ``--out`` (default ``capture_<setup>_<UTC time>.json``) is never the setup file, and an
 existing file is replaced only with ``--force``.
 
@@ -70,6 +78,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dry-run", action="store_true",
                    help="print the plan and exit; opens no port")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    from .motion import add_motion_argument
+
+    add_motion_argument(p)
 
 
 def _parse_stage(text: str) -> str | None:
@@ -117,9 +128,17 @@ def _report_incomplete(exc: BaseException, record, out: str) -> int:
 def run(args) -> int:
     from ..rig import RigError, RigPorts, plan_capture, run_capture
 
+    from .motion import motion_file_from_args
+
     zaber_port = _parse_stage(args.stage)
     setup = load_setup_arg(args.setup)
-    plan = plan_capture(setup, stage="zaber" if zaber_port else "arduino")
+    motion_file = motion_file_from_args(args, setup)
+    stage = "zaber" if zaber_port else "arduino"
+    if motion_file is None:
+        plan = plan_capture(setup, stage=stage)
+    else:
+        plan = plan_capture(setup, stage=stage, motion=motion_file.profile,
+                            exposure_s=motion_file.exposure_s)
     if args.dry_run:
         if args.json:
             print_json({"setup": setup.name, "dry_run": True, "plan": plan.as_dict()})
@@ -133,16 +152,20 @@ def run(args) -> int:
     _check_out(out, args.setup, args.force)
     ports = RigPorts(arduino=args.port, zaber=zaber_port, checksums=args.checksums)
     try:
-        record = run_capture(setup, ports, out=out, plan=plan)
+        record = run_capture(setup, ports, out=out, plan=plan, motion_file=motion_file)
     except (RigError, KeyboardInterrupt) as exc:
         record = getattr(exc, "capture_record", None)
         if record is None:      # not from the device phase: nothing was moved
             raise
         return _report_incomplete(exc, record, out)
     m = record.measurement()
+    cmp = m.get("profile")
     if args.json:
+        extra = {} if cmp is None else {
+            "profile_max_deviation_steps": cmp["max_deviation_steps"],
+            "profile_tolerance_steps": cmp["tolerance_steps"]}
         print_json({"setup": setup.name, "record": str(out), "complete": record.complete,
-                    **m["exposure"]})
+                    **m["exposure"], **extra})
     else:
         e = m["exposure"]
         sys.stdout.write("\n".join([
@@ -151,5 +174,8 @@ def run(args) -> int:
             f"{e['planned_exposure_s']:.6f} s planned",
             f"sensor distance    {e['open_sensor_distance_mm']:.4f} -> "
             f"{e['close_sensor_distance_mm']:.4f} mm",
-        ]) + "\n")
+        ] + ([] if cmp is None else [
+            f"motion profile     measured within {cmp['max_deviation_steps']:.2f} steps of "
+            f"the plan at {len(cmp['time_s'])} samples (allowed "
+            f"{cmp['tolerance_steps']:.2f})"])) + "\n")
     return EXIT_COMPLETE

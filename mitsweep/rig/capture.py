@@ -420,7 +420,7 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
 
 
 def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
-                plan: CapturePlan | None = None) -> CaptureRecord:
+                plan: CapturePlan | None = None, motion_file=None) -> CaptureRecord:
     """Run one focal-sweep capture on the rig and return its record.
 
     Parameters
@@ -432,7 +432,11 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
         Capture record (JSON), written atomically: once marked ``"running"`` before any
         motion, and again at the end (complete, or incomplete with the reason).
     plan : CapturePlan, optional
-        Default: :func:`plan_capture` of the setup for the chosen stage.
+        Default: :func:`plan_capture` of the setup for the chosen stage (a motion
+        profile's plan: ``plan_capture(setup, motion=..., exposure_s=...)``).
+    motion_file : mitsweep.optics.motion_file.MotionFile, optional
+        The file the plan's profile came from: the record keeps its source, exposure
+        and provenance.
 
     Raises
     ------
@@ -460,6 +464,9 @@ def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
             raise PlanError(f"capture record: {exc}") from None
     log = CommandLog()
     record = CaptureRecord(setup=setup, plan=plan, log=log, ports=ports, path=out)
+    if motion_file is not None:
+        record.motion = {"file": motion_file.source, "exposure_s": motion_file.exposure_s,
+                         "provenance": motion_file.provenance}
     guard = _SignalGuard()
     dev = _open_devices(ports, plan, setup, log)   # PortUnavailable: nothing moved
     try:

@@ -51,6 +51,9 @@ __all__ = ["ProfileTable", "profile_knots", "quantise_table", "check_followable"
 
 #: Chords per ramp when a trapezoidal profile is turned into knots.
 KNOTS_PER_RAMP = 16
+#: Relative slack on the stage limits, as :mod:`mitsweep.optics.motion_file` allows: a
+#: profile designed exactly at a limit (an optimiser's active constraint) passes.
+LIMIT_RTOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -165,7 +168,7 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
         raise PlanError("motion profile: knot times must be strictly increasing")
     v = np.diff(travel_mm) / dt
     k = int(np.argmax(v))
-    if v[k] > max_velocity * (1 + 1e-12):
+    if v[k] > max_velocity * (1 + LIMIT_RTOL):
         raise PlanError(f"motion profile: the stage cannot follow it: {v[k]:.4g} mm/s at "
                         f"{sensor_mm[k]:.4f} .. {sensor_mm[k + 1]:.4f} mm (t = "
                         f"{times_s[k]:.4f} s), more than rig.max_velocity = "
@@ -179,7 +182,7 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
     dv = np.abs(np.diff(v))
     acc = dv / (0.5 * (dt[:-1] + dt[1:]))
     j = int(np.argmax(acc))
-    if acc[j] > acceleration * (1 + 1e-9):
+    if acc[j] > acceleration * (1 + LIMIT_RTOL):
         raise PlanError(f"motion profile: the stage cannot follow it: the velocity changes "
                         f"from {v[j]:.4g} to {v[j + 1]:.4g} mm/s at {sensor_mm[j + 1]:.4f} mm "
                         f"(t = {times_s[j + 1]:.4f} s), {acc[j]:.4g} mm/s^2, more than "

@@ -10,7 +10,9 @@ Layout (``format = "mitsweep-capture-record"``, ``version = 1``)::
                     "SIGHUP"), else null; signals_during_safety: those that arrived
                     while the safety path ran (and did not stop it)
     setup           the setup (normalised, as setup_to_dict)
-    plan            the CapturePlan (positions, rates, planned exposure, sensor mapping)
+    plan            the CapturePlan (positions, rates, planned exposure, sensor mapping;
+                    a motion profile's step-rate table under plan.profile)
+    motion          the motion-profile file run (file, exposure_s, provenance), or null
     ports, devices  what was opened and how the devices identified themselves
     marks           host-time milestones (homed, at approach position, sweep started ...)
     commands        every line sent and received: t_s (host monotonic, s since the
@@ -79,6 +81,7 @@ class CaptureRecord:
         self.board_events: list = []
         self.stage_samples: list[tuple[float, int, float]] = []
         self.clock_map: dict | None = None
+        self.motion: dict | None = None        # the motion-profile file run, if any
         self.created_utc = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
 
     # -- accumulate ---------------------------------------------------------------------
@@ -197,6 +200,7 @@ class CaptureRecord:
             "created_utc": self.created_utc, "mitsweep_version": __version__,
             "host": platform.node(),
             "setup": setup_to_dict(self.setup), "plan": self.plan.as_dict(),
+            "motion": self.motion,
             "ports": ports, "devices": dict(self.devices), "homed": self.homed,
             "marks": list(self.marks),
             "commands": self.log.as_list(),
