@@ -60,6 +60,13 @@ def test_round_trip_through_dict():
     ("mirror", "radius", "big", r"mirror.radius: expected a number"),
     ("rig", "watchdog_s", 0.0, r"rig.watchdog_s: must be > 0"),
     ("rig", "watchdog_s", 61.0, r"rig.watchdog_s: must be in \(0, 60\] s"),
+    ("scene", "unit", "km", r"scene.unit: must be one of mm, cm, m"),
+    ("scene", "file", "", r"scene.file: must be a path to a Mitsuba XML file"),
+    ("scene", "placement", {"shift": [0, 0, 1]},
+     r"scene.placement.shift: unknown key; allowed keys: rotate_deg, translate"),
+    ("scene", "placement", {"translate": [0, 1]}, r"scene.placement.translate: must be \[x, y, z\]"),
+    ("scene", "placement", {"rotate_deg": [0, "a", 0]}, r"scene.placement.rotate_deg: expected a number"),
+    ("scene", "placement", [0, 0, 1], r"scene.placement: must be a table"),
 ])
 def test_bad_values_name_key_and_range(section, key, value, message):
     with pytest.raises(SetupError, match=message):
@@ -112,3 +119,23 @@ def test_setup_is_frozen():
     s = setup_from_dict(BASE)
     with pytest.raises(Exception):
         s.lens.f_number = 4.0  # type: ignore[misc]
+
+
+def test_user_scene_keys_round_trip_and_resolve_beside_the_setup(tmp_path, monkeypatch):
+    """[scene] file is relative to the setup file (not the working directory); unit and
+    placement survive TOML and dict round trips; a setup without them is unchanged."""
+    from mitsweep.config import Placement, setup_to_toml
+
+    data = _with("scene", file="worlds/garden.xml", unit="m",
+                 placement={"translate": [0.0, -20.0, 5.0], "rotate_deg": [90.0, 0.0, 0.0]})
+    s = setup_from_dict(data)
+    assert s.scene.placement == Placement(translate=(0.0, -20.0, 5.0), rotate_deg=(90.0, 0.0, 0.0))
+    (tmp_path / "rig").mkdir()
+    path = tmp_path / "rig" / "s.toml"
+    path.write_text(setup_to_toml(s))
+    monkeypatch.chdir(tmp_path)
+    loaded = load_setup(path)
+    assert loaded.scene.file == str(tmp_path / "rig" / "worlds" / "garden.xml")
+    assert loaded.scene.unit == "m" and loaded.scene.placement == s.scene.placement
+    assert setup_from_dict(setup_to_dict(loaded)) == loaded
+    assert {"file", "unit", "placement"}.isdisjoint(setup_to_dict(setup_from_dict(BASE))["scene"])

@@ -307,13 +307,16 @@ def _render_loaded(scene, counts, seed, *, progress=True, desc="render"):
     return (acc / spp).astype(np.float32), _time.perf_counter() - t0
 
 
-def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render"):
+def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render", check=None):
     """Render ``spp`` samples in passes (memory bound, progress).
 
-    Returns the mean image (h, w, C), the loaded scene and the seconds spent rendering
-    (the passes only, not the scene load).
+    ``check(scene)``, if given, runs on the loaded scene before any pass (it raises to
+    stop). Returns the mean image (h, w, C), the loaded scene and the seconds spent
+    rendering (the passes only, not the scene load).
     """
     scene, counts = _load_passes(scene_dict, spp)
+    if check is not None:
+        check(scene)
     img, t = _render_loaded(scene, counts, seed, progress=progress, desc=desc)
     return img, scene, t
 
@@ -437,12 +440,14 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
         scene_dict, info = build_scene(setup, cam, surroundings=False, extra=user.objects,
                                        max_depth=depth)
         info["lighting"] = "user scene"
-    t0 = _time.perf_counter()
-    scene, counts = _load_passes(scene_dict, spp)
+    check = None
     if user is not None:
-        user.provenance["view"] = check_view(scene, setup, i_ref, label=user.label,
-                                             aperture_radius=kwargs["aperture_radius"])
-    img, t_render = _render_loaded(scene, counts, seed, progress=progress, desc=f"{mode}")
+        def check(loaded):
+            user.provenance["view"] = check_view(loaded, setup, i_ref, label=user.label,
+                                                 aperture_radius=kwargs["aperture_radius"])
+    t0 = _time.perf_counter()
+    img, scene, t_render = _render_passes(scene_dict, spp, seed, progress=progress,
+                                          desc=f"{mode}", check=check)
     t_total = _time.perf_counter() - t0
     full = np.zeros((H, W, 3), dtype=np.float32)
     x, y, w, h = crop

@@ -285,7 +285,7 @@ def _prepare(state, label: str, m: np.ndarray, s: float) -> tuple[list[str], int
             replaced.append(_describe(node))
             logger.info("%s: replaced by mitsweep's %s", what,
                         "camera" if node.type != T.Integrator else "integrator")
-            root.remove_property(key)
+            del root[key]
         elif node.type == T.Shape and node.props.plugin_name() != "shapegroup":
             _move_shape(node.props, m)
         elif node.type == T.Emitter:
