@@ -74,6 +74,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--motion-table", metavar="CSV",
                    help="measured stage motion (two columns: time, sensor distance mm) for "
                         "sweep.profile = 'tabulated'")
+    add_motion_argument(p)
     p.add_argument("--rays", type=positive_int, default=1_000_000,
                    help="rays per IPSF (1000000)")
     p.add_argument("--kernel-size", type=positive_int, default=31,

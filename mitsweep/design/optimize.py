@@ -49,7 +49,7 @@ __all__ = ["StageLimits", "Solution", "local_optimum", "certified_lower_bound", 
 logger = logging.getLogger(__name__)
 
 OBJECTIVES = ("worst", "mean")
-#: The optimiser keeps this relative margin below the stage's limits, so that its
+#: The optimiser keeps this relative margin below the acceleration limit, so that its
 #: active constraints pass :func:`mitsweep.optics.motion_file.check_motion_file`.
 _MARGIN = 1e-7
 
@@ -63,8 +63,9 @@ class StageLimits:
     acceleration: float
 
     def tau_min(self, widths: np.ndarray) -> np.ndarray:
-        """Smallest exposure fraction per bin: the bin crossed at ``max_velocity``."""
-        return widths / (self.max_velocity * (1 - _MARGIN) * self.exposure_s)
+        """Smallest exposure fraction per bin: the bin crossed at ``max_velocity`` (a bound
+        that SLSQP holds exactly, so it needs no margin)."""
+        return widths / (self.max_velocity * self.exposure_s)
 
 
 @dataclass(frozen=True)
