@@ -36,10 +36,12 @@ from ..optics.motion import MotionProfile
 from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..optics.reference import reference_geometry
 from ..resources import check_allocation
-from .kernel import TraceParams, deposit, deposit_segments, trace_arrays
+from .kernel import (SourceBatch, TraceParams, deposit, deposit_batch, deposit_segments,
+                     trace_arrays, trace_arrays_batch)
 from .source import PointSource, source_from_image
 
-__all__ = ["integrated_psf", "psf", "render_source", "fit_sampling_box", "METHODS",
+__all__ = ["integrated_psf", "integrated_psfs", "psf", "render_source", "render_sources",
+           "fit_sampling_box", "fit_sampling_boxes", "METHODS",
            "DEFAULT_RAYS", "DEFAULT_KERNEL_SIZE",
            "DEFAULT_TIME_SAMPLES"]
 
@@ -52,7 +54,12 @@ DEFAULT_KERNEL_SIZE = 31
 #: the same L1 error per second; 4 halves the error at a given ray count.
 DEFAULT_TIME_SAMPLES = 4
 _CHUNK = 1 << 22
-_PILOT = 1 << 14
+#: Rays per source from which a batch deposits source by source (one-source launches,
+#: literals) instead of in batched launches (per-lane table reads): measured on the
+#: 2-core LLVM machine, the table reads cost ~30 % of the trace, a launch ~2-4 ms.
+_BATCH_DEPOSIT_RAYS = 1 << 18
+_PILOT_LOG2 = 14
+_PILOT = 1 << _PILOT_LOG2
 _PILOT_KEYS = ("landed_free", "a", "b")
 _SENSOR_TABLE = 4097
 #: Chords per ramp of a trapezoidal motion in the exact method's time CDF: its sensor
@@ -89,13 +96,65 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
     ValueError
         If no ray from the source reaches the lens aperture.
     """
+    steps = _sampling_box_steps(geom, seed=seed, max_rounds=max_rounds)
+    request = next(steps)
+    while True:
+        try:
+            request = steps.send(trace_arrays(geom, request, _PILOT, double=double,
+                                              keys=_PILOT_KEYS))
+        except StopIteration as done:
+            return done.value
+
+
+def fit_sampling_boxes(geoms, *, seeds, double: bool = False, max_rounds: int = 40) -> list:
+    """:func:`fit_sampling_box` for many sources at once: each pilot round is one launch.
+
+    The sources run the same algorithm in lockstep; each round traces the pending pilot
+    pass of every source still fitting in one :func:`~mitsweep.tracer.kernel.
+    trace_arrays_batch` launch, so a bank pays the launch and read-back cost once per
+    round instead of once per source and round. Every source gets the box (and ellipse)
+    :func:`fit_sampling_box` gives it: the pilot rays are the same, bit for bit.
+
+    Returns
+    -------
+    list
+        Per source ``(params, info)``, or the ``ValueError`` its fit raised.
+    """
+    geoms = list(geoms)
+    results: list = [None] * len(geoms)
+    pending = {}
+    for j, (geom, seed) in enumerate(zip(geoms, seeds)):
+        steps = _sampling_box_steps(geom, seed=int(seed), max_rounds=max_rounds)
+        pending[j] = (steps, next(steps))
+    while pending:
+        order = sorted(pending)
+        batch = SourceBatch([geoms[j] for j in order], [pending[j][1] for j in order],
+                            double=double)
+        traced = trace_arrays_batch(batch, _PILOT_LOG2, keys=_PILOT_KEYS)
+        for j, r in zip(order, traced):
+            steps = pending[j][0]
+            try:
+                pending[j] = (steps, steps.send(r))
+            except StopIteration as done:
+                results[j] = done.value
+                del pending[j]
+            except ValueError as exc:
+                results[j] = exc
+                del pending[j]
+    return results
+
+
+def _sampling_box_steps(geom, *, seed: int, max_rounds: int):
+    """The fit of :func:`fit_sampling_box` as a generator: it yields the TraceParams of
+    each pilot pass (``_PILOT`` rays, keys ``_PILOT_KEYS``), is sent the traced arrays,
+    and returns ``(params, info)``."""
     cos_i = abs(float(geom.w @ np.array([0.0, 0.0, 1.0])))
     h0 = max(geom.aperture_radius * (0.5 * geom.radius + 1.0) / geom.vertex_distance, 1e-3)
     a0, a1, b0, b1 = -h0, h0, -h0 / max(cos_i, 0.05), h0 / max(cos_i, 0.05)
     traced = 0
     for _ in range(max_rounds):
         params = TraceParams(a0, a1, b0, b1, seed=seed + 7919)
-        r = trace_arrays(geom, params, _PILOT, double=double, keys=_PILOT_KEYS)
+        r = yield params
         traced += _PILOT
         ok = r["landed_free"]
         wa, wb = a1 - a0, b1 - b0
@@ -142,7 +201,7 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
     for _ in range(4):
         wa, wb = a1 - a0, b1 - b0
         probe = TraceParams(a0 - wa, a1 + wa, b0 - wb, b1 + wb, seed=seed + 104729)
-        r = trace_arrays(geom, probe, _PILOT, double=double, keys=_PILOT_KEYS)
+        r = yield probe
         traced += _PILOT
         ok = r["landed_free"]
         sa, sb = r["a"][ok], r["b"][ok]
@@ -153,7 +212,7 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
         a0, a1 = min(a0, sa.min() - 3 * ga), max(a1, sa.max() + 3 * ga)
         b0, b1 = min(b0, sb.min() - 3 * gb), max(b1, sb.max() + 3 * gb)
     params = TraceParams(a0, a1, b0, b1, seed=seed)
-    ellipse, n_pilot = _fit_ellipse(geom, params, seed=seed, double=double)
+    ellipse, n_pilot = yield from _fit_ellipse(geom, params, seed=seed)
     traced += n_pilot
     if ellipse is not None:
         params = TraceParams(a0, a1, b0, b1, seed=seed, ellipse=ellipse)
@@ -161,16 +220,17 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
                     "ellipse_mm": None if ellipse is None else list(ellipse)}
 
 
-def _fit_ellipse(geom, box: TraceParams, *, seed: int, double: bool):
+def _fit_ellipse(geom, box: TraceParams, *, seed: int):
     """An ellipse around the footprint the box holds, if it is validated and smaller.
 
     The landed rays of a pilot pass in the box are whitened by their covariance; the
     ellipse is their largest whitened radius ρ plus three lattice spacings
     ``ρ √(π / n_landed)``. A pilot pass in the ellipse then must find no landed ray within
     1.5 of its lattice spacings of its edge (else it grows by 25 %, at most 3 times); an ellipse not
-    smaller than 0.9 of the box is not used. Returns ``(ellipse or None, pilot rays)``.
+    smaller than 0.9 of the box is not used. Returns ``(ellipse or None, pilot rays)``; a
+    generator like :func:`_sampling_box_steps`.
     """
-    r = trace_arrays(geom, box, _PILOT, double=double, keys=_PILOT_KEYS)
+    r = yield box
     traced = _PILOT
     ok = r["landed_free"]
     if ok.sum() < 256:
@@ -192,7 +252,7 @@ def _fit_ellipse(geom, box: TraceParams, *, seed: int, double: bool):
                             ellipse=ellipse)
         if trial.area > 0.9 * box.area:
             return None, traced
-        r = trace_arrays(geom, trial, _PILOT, double=double, keys=_PILOT_KEYS)
+        r = yield trial
         traced += _PILOT
         ok = r["landed_free"]
         pts = np.stack([r["a"][ok], r["b"][ok]], axis=1)
@@ -234,31 +294,8 @@ def sweep_cdf(motion: MotionProfile, n: int = _SENSOR_TABLE) -> np.ndarray | Non
     return cdf
 
 
-def render_source(setup, source: PointSource, *, times=None, motion: MotionProfile | None = None,
-                  time_samples: int = DEFAULT_TIME_SAMPLES, exact: bool = False,
-                  rays: int = DEFAULT_RAYS,
-                  kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
-                  double: bool = False, aperture_radius: float | None = None):
-    """Trace ``rays`` rays from ``source`` and bin them on the reference pixel grid.
-
-    Give either fixed sensor distances ``times`` (mm; equal weights) or a ``motion``,
-    with ``time_samples`` stratified times per ray, or, with ``exact``, each ray's whole
-    sweep deposited as its segment (:func:`mitsweep.tracer.kernel.deposit_segments`).
-    Returns ``(kernel, info)`` as :func:`integrated_psf`.
-    """
-    import drjit as dr
-
-    K = int(kernel_size)
-    if K < 3 or K % 2 == 0:
-        raise ValueError(f"kernel_size: must be an odd integer >= 3, got {kernel_size!r}")
-    check_allocation(f"{K}x{K} px kernel", K * K * KERNEL_PIXEL_BYTES)
-    rays = int(rays)
-    if rays < 1:
-        raise ValueError(f"rays: must be >= 1, got {rays!r}")
-    t_start = time.perf_counter()
-    geom = source.geometry(setup, aperture_radius=aperture_radius)
-    params, box_info = fit_sampling_box(geom, seed=seed, double=double)
-    pitch = setup.sensor.pixel_pitch
+def _sweep_arguments(setup, *, times, motion, exact, time_samples):
+    """Validated deposit arguments: ``(times, linear, sensor_table, cdf_table)``."""
     linear = table = cdf = None
     if times is None:
         if motion is None:
@@ -278,30 +315,190 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         if not all(x > setup.lens.focal_length for x in times):
             raise ValueError(f"sensor distances must be > lens.focal_length "
                              f"({setup.lens.focal_length:g} mm), got min {min(times):g}")
+    return times, linear, table, cdf
+
+
+def _check_sizes(kernel_size, rays, sources: int = 1) -> tuple[int, int]:
+    K = int(kernel_size)
+    if K < 3 or K % 2 == 0:
+        raise ValueError(f"kernel_size: must be an odd integer >= 3, got {kernel_size!r}")
+    check_allocation(f"{sources} x {K}x{K} px kernel{'s' if sources > 1 else ''}",
+                     sources * K * K * KERNEL_PIXEL_BYTES)
+    rays = int(rays)
+    if rays < 1:
+        raise ValueError(f"rays: must be >= 1, got {rays!r}")
+    return K, rays
+
+
+def render_source(setup, source: PointSource, *, times=None, motion: MotionProfile | None = None,
+                  time_samples: int = DEFAULT_TIME_SAMPLES, exact: bool = False,
+                  rays: int = DEFAULT_RAYS,
+                  kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
+                  double: bool = False, aperture_radius: float | None = None):
+    """Trace ``rays`` rays from ``source`` and bin them on the reference pixel grid.
+
+    Give either fixed sensor distances ``times`` (mm; equal weights) or a ``motion``,
+    with ``time_samples`` stratified times per ray, or, with ``exact``, each ray's whole
+    sweep deposited as its segment (:func:`mitsweep.tracer.kernel.deposit_segments`).
+    Returns ``(kernel, info)`` as :func:`integrated_psf`.
+    """
+    import drjit as dr
+
+    K, rays = _check_sizes(kernel_size, rays)
+    t_start = time.perf_counter()
+    geom = source.geometry(setup, aperture_radius=aperture_radius)
+    params, box_info = fit_sampling_box(geom, seed=seed, double=double)
+    pitch = setup.sensor.pixel_pitch
+    times, linear, table, cdf = _sweep_arguments(setup, times=times, motion=motion,
+                                                 exact=exact, time_samples=time_samples)
+    buf = _deposit_source(geom, params, source.image_uv, rays, K, pitch, exact=exact,
+                          times=times, linear=linear, table=table, cdf=cdf, motion=motion,
+                          time_samples=time_samples, double=double)
+    return _kernel_and_info(buf, K, rays, source, box_info, seed=seed, double=double,
+                            seconds=time.perf_counter() - t_start, pitch=pitch)
+
+
+def _deposit_source(geom, params, center_uv, rays, K, pitch, *, exact, times, linear, table,
+                    cdf, motion, time_samples, double) -> np.ndarray:
+    """Trace and deposit ``rays`` rays of one source; its (K·K + 2) buffer as NumPy."""
+    import drjit as dr
+
     buffer = None
     done = 0
     while done < rays:  # chunks bound the memory: the kernel holds no per-ray arrays
         n = min(_CHUNK, rays - done)
         if exact and times is None:
             buffer = deposit_segments(geom, params, n, offset=done, kernel_size=K,
-                                      pitch=pitch, center_uv=source.image_uv,
+                                      pitch=pitch, center_uv=center_uv,
                                       span=motion.span, cdf_table=cdf, buffer=buffer,
                                       double=double)
         else:
             buffer = deposit(geom, params, n, offset=done, kernel_size=K, pitch=pitch,
-                             center_uv=source.image_uv, times=times, sensor_table=table,
+                             center_uv=center_uv, times=times, sensor_table=table,
                              linear=linear, time_samples=int(time_samples), buffer=buffer,
                              double=double)
         dr.eval(buffer)
         done += n
     dr.sync_thread()
-    buf = np.asarray(buffer.numpy(), dtype=np.float64)
+    return np.asarray(buffer.numpy(), dtype=np.float64)
+
+
+def render_sources(setup, sources, *, seeds, times=None, motion: MotionProfile | None = None,
+                   time_samples: int = DEFAULT_TIME_SAMPLES, exact: bool = False,
+                   rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
+                   double: bool = False, aperture_radius: float | None = None,
+                   progress=None) -> list:
+    """:func:`render_source` for many sources of one setup, traced together.
+
+    Each pilot round of the sampling-box fits is one launch (:func:`fit_sampling_boxes`),
+    and the deposit launches trace ``2^p`` samples of every source at once
+    (:func:`mitsweep.tracer.kernel.deposit_batch`, ``2^p`` the largest power of two that
+    fits the samples left and the chunk), so the fixed cost of a launch (compile-cache
+    lookup, literals, synchronisation, read-back: ~10–25 ms per IPSF one by one) is paid
+    once per launch, not per source. Source ``j``'s rays are those :func:`render_source`
+    traces with ``seed=seeds[j]``: the kernels agree up to the float64 summation order.
+
+    Parameters
+    ----------
+    sources : sequence of PointSource
+    seeds : sequence of int
+        One per source.
+    progress : callable, optional
+        Called with no argument once per source's worth of rays traced.
+    Others
+        As :func:`render_source`.
+
+    Returns
+    -------
+    list
+        Per source ``(kernel, info)`` as :func:`render_source` returns, or the
+        ``ValueError`` that source raised (fully vignetted, PSF outside the window);
+        ``info["seconds"]`` is the batch's wall time shared equally, ``info["batch_size"]``
+        the number of sources traced together.
+    """
+    sources, seeds = list(sources), [int(x) for x in seeds]
+    if len(seeds) != len(sources):
+        raise ValueError(f"seeds: give one per source ({len(sources)}), got {len(seeds)}")
+    if not sources:
+        return []
+    K, rays = _check_sizes(kernel_size, rays, len(sources))
+    # the stacked float64 buffer and its NumPy copy
+    check_allocation(f"deposit buffer of {len(sources)} IPSFs", len(sources) * (K * K + 2) * 16)
+    t_start = time.perf_counter()
+    times, linear, table, cdf = _sweep_arguments(setup, times=times, motion=motion,
+                                                 exact=exact, time_samples=time_samples)
+    geoms = [s.geometry(setup, aperture_radius=aperture_radius) for s in sources]
+    fits = fit_sampling_boxes(geoms, seeds=seeds, double=double)
+    ok = [j for j, f in enumerate(fits) if not isinstance(f, Exception)]
+    results: list = list(fits)
+    if progress is not None:
+        for _ in range(len(sources) - len(ok)):
+            progress()
+    if not ok:
+        return results
+    pitch = setup.sensor.pixel_pitch
+    sweep_kw = dict(exact=exact, times=times, linear=linear, table=table, cdf=cdf,
+                    motion=motion, time_samples=time_samples, double=double)
+    if rays >= _BATCH_DEPOSIT_RAYS:
+        # Many rays per source: the launch cost is amortised, and the literals of a
+        # one-source launch are cheaper than the batch's per-lane table reads.
+        buf = np.empty((len(ok), K * K + 2))
+        for row, j in enumerate(ok):
+            buf[row] = _deposit_source(geoms[j], fits[j][0], sources[j].image_uv, rays, K,
+                                       pitch, **sweep_kw)
+            if progress is not None:
+                progress()
+    else:
+        buf = _deposit_batch(SourceBatch([geoms[j] for j in ok], [fits[j][0] for j in ok],
+                                         center_uv=[sources[j].image_uv for j in ok],
+                                         double=double),
+                             rays, K, pitch, progress=progress, **sweep_kw)
+    seconds = (time.perf_counter() - t_start) / len(sources)
+    for row, j in enumerate(ok):
+        try:
+            kernel, info = _kernel_and_info(buf[row], K, rays, sources[j], fits[j][1],
+                                            seed=seeds[j], double=double, seconds=seconds,
+                                            pitch=pitch)
+            info["batch_size"] = len(sources)
+            results[j] = (kernel, info)
+        except ValueError as exc:
+            results[j] = exc
+    return results
+
+
+def _deposit_batch(batch, rays, K, pitch, *, exact, times, linear, table, cdf, motion,
+                   time_samples, double, progress) -> np.ndarray:
+    """Trace and deposit ``rays`` rays of every source of ``batch``; (S, K·K + 2) NumPy."""
+    import drjit as dr
+
+    per_launch = max(_CHUNK // batch.size, 1)
+    buffer = None
+    done = reported = 0
+    while done < rays:
+        log2_count = min(rays - done, per_launch).bit_length() - 1
+        buffer = deposit_batch(batch, log2_count, offset=done, kernel_size=K, pitch=pitch,
+                               exact=exact and times is None, times=times,
+                               sensor_table=table, linear=linear,
+                               time_samples=int(time_samples),
+                               span=None if motion is None else motion.span, cdf_table=cdf,
+                               buffer=buffer)
+        dr.eval(buffer)
+        done += 1 << log2_count
+        if progress is not None:
+            for _ in range(batch.size * done // rays - reported):
+                progress()
+            reported = batch.size * done // rays
+    dr.sync_thread()
+    return np.asarray(buffer.numpy(), dtype=np.float64).reshape(batch.size, K * K + 2)
+
+
+def _kernel_and_info(buf, K, rays, source, box_info, *, seed, double, seconds, pitch):
+    """Normalise a (K·K + 2) deposit buffer into the kernel and its ``info``."""
     KK = K * K
     img = buf[:KK].reshape(K, K)
     in_w = img.sum()
     landed_w = in_w + buf[KK]
     free_w = landed_w + buf[KK + 1]
-    elapsed = time.perf_counter() - t_start
     if not landed_w > 0:
         raise ValueError("no traced ray landed on the sensor: the point is fully vignetted")
     total = img.sum()
@@ -329,7 +526,7 @@ def render_source(setup, source: PointSource, *, times=None, motion: MotionProfi
         "box_mm": box_info["box_mm"],
         "ellipse_mm": box_info["ellipse_mm"],
         "seed": int(seed),
-        "seconds": elapsed,
+        "seconds": seconds,
         "precision": "float64" if double else "float32",
     }
     return kernel, info
@@ -396,34 +593,103 @@ def integrated_psf(setup, u: float, v: float, depth, *, rays: int = DEFAULT_RAYS
     mitsweep.config.SetupError
         Empty sweep or an unknown motion profile.
     """
+    geometry, ref, sweep_kw, extra = _sweep_setup(setup, motion=motion, sweep=sweep,
+                                                  method=method, time_samples=time_samples,
+                                                  n_planes=n_planes,
+                                                  reference_sensor_distance=reference_sensor_distance)
+    source = source_from_image(setup, u, v, depth, reference_sensor_distance=ref)
+    kernel, info = render_source(setup, source, rays=rays, kernel_size=kernel_size, seed=seed,
+                                 double=double, aperture_radius=aperture_radius, **sweep_kw)
+    info.update(extra)
+    info["image_uv_mm"] = (float(u), float(v))
+    return kernel, info
+
+
+def integrated_psfs(setup, points, *, rays: int = DEFAULT_RAYS,
+                    kernel_size: int = DEFAULT_KERNEL_SIZE, seeds=None,
+                    motion: MotionProfile | None = None, sweep=None, method: str = "exact",
+                    time_samples: int = DEFAULT_TIME_SAMPLES, n_planes: int = 16,
+                    reference_sensor_distance: float | None = None, double: bool = False,
+                    aperture_radius: float | None = None, progress=None) -> list:
+    """:func:`integrated_psf` of many points of one setup, traced together.
+
+    Parameters
+    ----------
+    points : sequence of (u, v, depth)
+        Image points (mm, at the reference distance) and depths (mm, inf allowed).
+    seeds : sequence of int, optional
+        One per point (default: all 0).
+    progress : callable, optional
+        Called with no argument once per IPSF's worth of rays traced.
+    Others
+        As :func:`integrated_psf`; the sweep, motion and reference distance are resolved
+        once for all points.
+
+    Returns
+    -------
+    list
+        Per point ``(kernel, info)`` equal to :func:`integrated_psf` with that point's
+        seed (up to the float64 summation order of the deposit; see
+        :func:`render_sources`), or the ``ValueError`` that point raised (outside the
+        mirror's image, fully vignetted, PSF outside the window).
+
+    Raises
+    ------
+    ValueError
+        Unknown method or bad sizes (errors of the whole batch).
+    """
+    points = [(float(u), float(v), d) for u, v, d in points]
+    seeds = [0] * len(points) if seeds is None else [int(x) for x in seeds]
+    if len(seeds) != len(points):
+        raise ValueError(f"seeds: give one per point ({len(points)}), got {len(seeds)}")
+    geometry, ref, sweep_kw, extra = _sweep_setup(setup, motion=motion, sweep=sweep,
+                                                  method=method, time_samples=time_samples,
+                                                  n_planes=n_planes,
+                                                  reference_sensor_distance=reference_sensor_distance)
+    results: list = [None] * len(points)
+    sources, index = [], []
+    for j, (u, v, depth) in enumerate(points):
+        try:
+            sources.append(source_from_image(setup, u, v, depth, reference_sensor_distance=ref))
+            index.append(j)
+        except ValueError as exc:
+            results[j] = exc
+            if progress is not None:
+                progress()
+    traced = render_sources(setup, sources, seeds=[seeds[j] for j in index], rays=rays,
+                            kernel_size=kernel_size, double=double,
+                            aperture_radius=aperture_radius, progress=progress, **sweep_kw)
+    for j, res in zip(index, traced):
+        if not isinstance(res, Exception):
+            res[1].update(extra)
+            res[1]["image_uv_mm"] = points[j][:2]
+        results[j] = res
+    return results
+
+
+def _sweep_setup(setup, *, motion, sweep, method, time_samples, n_planes,
+                 reference_sensor_distance):
+    """Resolve the sweep of an IPSF: ``(geometry, reference distance, render_source
+    keywords, info entries)``."""
     if method not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
     geometry = reference_geometry(setup, motion=motion, sweep=sweep)
     motion = geometry.motion
     ref = geometry.sensor_distance if reference_sensor_distance is None \
         else float(reference_sensor_distance)
-    source = source_from_image(setup, u, v, depth, reference_sensor_distance=ref)
+    extra = {"method": method, "motion": motion.as_dict()}
     if method == "planes":
         if not 1 <= int(n_planes) <= 64:
             raise ValueError(f"n_planes: must be in [1, 64], got {n_planes!r}")
         t = (np.arange(int(n_planes)) + 0.5) / int(n_planes)
-        kernel, info = render_source(setup, source, times=motion.sensor_distance(t),
-                                     rays=rays, kernel_size=kernel_size, seed=seed,
-                                     double=double, aperture_radius=aperture_radius)
-        info["n_planes"] = int(n_planes)
+        kw = {"times": motion.sensor_distance(t)}
+        extra["n_planes"] = int(n_planes)
     elif method == "exact":
-        kernel, info = render_source(setup, source, motion=motion, exact=True, rays=rays,
-                                     kernel_size=kernel_size, seed=seed, double=double,
-                                     aperture_radius=aperture_radius)
+        kw = {"motion": motion, "exact": True}
     else:
-        kernel, info = render_source(setup, source, motion=motion, time_samples=time_samples,
-                                     rays=rays, kernel_size=kernel_size, seed=seed,
-                                     double=double, aperture_radius=aperture_radius)
-        info["time_samples"] = int(time_samples)
-    info["method"] = method
-    info["motion"] = motion.as_dict()
-    info["image_uv_mm"] = (float(u), float(v))
-    return kernel, info
+        kw = {"motion": motion, "time_samples": time_samples}
+        extra["time_samples"] = int(time_samples)
+    return geometry, ref, kw, extra
 
 
 def psf(setup, u: float, v: float, depth, sensor_distance: float, *,

@@ -51,8 +51,8 @@ import numpy as np
 
 from ..backend import drjit_module
 
-__all__ = ["Geometry", "TraceParams", "trace_arrays", "deposit", "deposit_segments",
-           "TRACE_REVISION"]
+__all__ = ["Geometry", "TraceParams", "SourceBatch", "trace_arrays", "trace_arrays_batch",
+           "deposit", "deposit_segments", "deposit_batch", "TRACE_REVISION"]
 
 #: Bumped whenever the rays a seed produces or the way they are deposited change, so that
 #: kernels cached under an unchanged package version are not served stale (2: R2 lattice
@@ -146,6 +146,172 @@ class TraceParams:
         return (self.a1 - self.a0) * (self.b1 - self.b0)
 
 
+#: Per-source values of a trace, in the order of a :class:`SourceBatch`'s packed table:
+#: chief direction w, aim-plane axes e1 and e2, mirror point p_r (local frame), 1/l, l,
+#: margin, the sampling box, the sampling ellipse (zeros where the box is used) and the
+#: chief-ray image (u, v) the deposit centres its window on.
+_COLUMNS = ("w0", "w1", "w2", "e10", "e11", "e12", "e20", "e21", "e22", "p0", "p1", "p2",
+            "inv_l", "depth", "margin", "a0", "a1", "b0", "b1",
+            "ca", "cb", "m00", "m01", "m10", "m11", "cu", "cv")
+_COLUMN = {name: j for j, name in enumerate(_COLUMNS)}
+#: Table rows are read as packets of 8 contiguous values (one vector load per packet and
+#: a transpose: measured ~5x cheaper than one gather per value on AVX2).
+_PACKET = 8
+_ROW = -(-len(_COLUMNS) // _PACKET) * _PACKET
+#: Geometry fields every source of a batch shares (the setup's mirror, lens and rim).
+_SHARED = ("radius", "conic", "aspheric", "rim_radius", "rotation", "vertex_distance",
+           "focal_length", "aperture_radius")
+
+
+def _source_columns(geom: Geometry, params: TraceParams, center_uv=None) -> dict:
+    inv_l = 0.0 if math.isinf(geom.depth) else 1.0 / geom.depth
+    ellipse = params.ellipse if params.ellipse is not None else (0.0,) * 6
+    values = (*geom.w, *geom.e1, *geom.e2, *geom.origin_pr, inv_l, geom.depth, geom.margin,
+              params.a0, params.a1, params.b0, params.b1, *ellipse,
+              *(center_uv if center_uv is not None else (0.0, 0.0)))
+    return dict(zip(_COLUMNS, (float(x) for x in values)))
+
+
+def _lattice_shifts(seed: int, offset: int) -> np.ndarray:
+    """Cranley-Patterson shifts of the lattice from the seed (and the 2^32 block)."""
+    return np.random.default_rng([seed, offset >> 32]).integers(0, 2 ** 32, size=3,
+                                                                dtype=np.uint64)
+
+
+class SourceBatch:
+    """Point sources traced together: one kernel launch serves all of them.
+
+    The sources share the setup's mirror, lens and rim (a bank's sources do); each has
+    its own geometry (chief ray, depth), sampling domain, seed and window centre, held in
+    one packed Dr.Jit table that the kernel gathers from by source index. A launch
+    traces ``2^p`` consecutive samples of every source (:func:`trace_arrays_batch`,
+    :func:`deposit_batch`): sample ``k`` of a source is the ray the one-source functions
+    trace for sample ``k`` with the same parameters, bit for bit.
+
+    Parameters
+    ----------
+    geoms : sequence of Geometry
+    params : sequence of TraceParams
+        One per source (``seed`` included).
+    center_uv : sequence of (u, v), optional
+        Window centres of a deposit, mm (upright image coordinates).
+    double : bool
+        float64 tables and kernels.
+
+    Raises
+    ------
+    ValueError
+        No source, mismatched lengths, or sources that do not share the mirror and lens.
+    """
+
+    def __init__(self, geoms, params, *, center_uv=None, double: bool = False):
+        geoms, params = list(geoms), list(params)
+        if not geoms or len(geoms) != len(params):
+            raise ValueError(f"SourceBatch: give one TraceParams per geometry "
+                             f"({len(geoms)} geometries, {len(params)} params)")
+        if center_uv is not None and len(center_uv) != len(geoms):
+            raise ValueError("SourceBatch: give one window centre per source")
+        first = geoms[0]
+        for g in geoms[1:]:
+            for name in _SHARED:
+                if not np.array_equal(np.asarray(getattr(g, name)),
+                                      np.asarray(getattr(first, name))):
+                    raise ValueError(f"SourceBatch: the sources must share the mirror, lens "
+                                     f"and rim ({name} differs)")
+        m, Float, _ = _types(double)
+        rows = [_source_columns(g, p, None if center_uv is None else center_uv[j])
+                for j, (g, p) in enumerate(zip(geoms, params))]
+        table = np.zeros((len(rows), _ROW))
+        table[:, :len(_COLUMNS)] = [[r[name] for name in _COLUMNS] for r in rows]
+        kinds = [p.ellipse is not None for p in params]
+        codes = np.array([[*_lattice_shifts(p.seed, 0), int(k)] for p, k in zip(params, kinds)],
+                         dtype=np.uint64)
+        self.geometry = first
+        self.size = len(geoms)
+        self.double = bool(double)
+        #: True / False when every source samples an ellipse / a box, None when mixed.
+        self.ellipse = kinds[0] if len(set(kinds)) == 1 else None
+        self.table = Float(table.ravel().astype(np.float64 if double else np.float32))
+        self.codes = m.UInt32(codes.ravel().astype(np.uint32))
+
+
+class _Lanes:
+    """The lanes of one launch: each lane's sample index and its source's values.
+
+    One source: lane ``k`` traces sample ``offset + k`` and the source's values are
+    opaque literals (the kernel compiles once and is reused with new values). A
+    :class:`SourceBatch` with ``2^p`` samples per source: lane ``k`` traces sample
+    ``offset + (k mod 2^p)`` of source ``k >> p``, whose values are gathered from the
+    batch's table.
+    """
+
+    def __init__(self, double: bool, n: int, offset: int, *, columns: dict | None = None,
+                 seed: int = 0, ellipse: bool = False, batch: SourceBatch | None = None,
+                 log2_count: int = 0):
+        import drjit as dr
+
+        m, Float, _ = _types(double)
+        UInt32 = m.UInt32
+        self._float = Float
+        self._cache = {}
+        self.batch = batch
+        if batch is None:
+            self.n = int(n)
+            self.index = dr.arange(UInt32, self.n) + dr.opaque(UInt32, offset & 0xFFFFFFFF)
+            self.source = None
+            self._columns = columns
+            self.shifts = [dr.opaque(UInt32, int(x)) for x in _lattice_shifts(seed, offset)]
+            self.ellipse = bool(ellipse)
+            self.infinite_depth = math.isinf(columns["depth"])
+        else:
+            if offset + (1 << log2_count) > 2 ** 32:
+                raise ValueError("SourceBatch: at most 2^32 samples per source")
+            self.n = batch.size << log2_count
+            lane = dr.arange(UInt32, self.n)
+            self.source = lane >> dr.opaque(UInt32, log2_count)
+            self.index = (lane & dr.opaque(UInt32, (1 << log2_count) - 1)) \
+                + dr.opaque(UInt32, offset)
+            self._row = self.source * (_ROW // _PACKET)
+            self._packet_type = m.ArrayXf64 if double else m.ArrayXf
+            codes = dr.gather(m.ArrayXu, batch.codes, self.source, shape=(4, self.n))
+            self.shifts = [codes[j] for j in range(3)]
+            self.ellipse = batch.ellipse
+            if self.ellipse is None:
+                self.is_ellipse = codes[3] != 0
+            # l = inf needs no branch here: 1/l = 0 and min(margin, l·1) = margin.
+            self.infinite_depth = False
+
+    def value(self, name: str):
+        """The lanes' source value ``name`` (one of :data:`_COLUMNS`)."""
+        import drjit as dr
+
+        v = self._cache.get(name)
+        if v is None:
+            if self.batch is None:
+                v = dr.opaque(self._float, self._columns[name])
+            else:
+                packet, k = divmod(_COLUMN[name], _PACKET)
+                values = self._cache.get(packet)
+                if values is None:
+                    values = dr.gather(self._packet_type, self.batch.table, self._row + packet,
+                                       shape=(_PACKET, self.n))
+                    self._cache[packet] = values
+                v = values[k]
+            self._cache[name] = v
+        return v
+
+    def cell_base(self, cells: int):
+        """Index of each lane's first buffer cell: ``source · cells`` (0 for one source)."""
+        if self.source is None:
+            return None
+        return self.source * cells
+
+
+def _single_lanes(geom, params, n, offset, double, center_uv=None) -> _Lanes:
+    return _Lanes(double, n, offset, columns=_source_columns(geom, params, center_uv),
+                  seed=params.seed, ellipse=params.ellipse is not None)
+
+
 def _types(double: bool):
     m = drjit_module()
     if double:
@@ -165,26 +331,22 @@ def _deposit_types(double: bool):
     return m, Float, m.UInt32, m.Int32
 
 
-def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: bool,
-           time_dim: bool = False):
-    """Trace ``n`` rays (sample indices ``offset … offset+n−1``); Dr.Jit values out.
+def _trace(geom: Geometry, lanes: _Lanes, double: bool, time_dim: bool = False):
+    """Trace the rays of ``lanes`` (:class:`_Lanes`: sample indices, per-source values).
 
-    Returns a dict of Dr.Jit arrays: ``landed`` (reaches the sensor through the rim and
-    the aperture), ``landed_free`` (would, without the rim), ``weight``, ``Au, Av, Bu,
-    Bv`` (sensor hit ``A + B i``, upright image mm), ``a, b`` (aim-plane sample) and, with
-    ``time_dim``, ``xi_t`` (a third low-discrepancy coordinate in [0, 1) for time: the
-    samples are then R3's, else R2's).
+    ``geom`` gives what every source shares (mirror, lens, rim); the chief ray, depth,
+    margin and sampling domain are the lanes' own. Returns a dict of Dr.Jit arrays:
+    ``landed`` (reaches the sensor through the rim and the aperture), ``landed_free``
+    (would, without the rim), ``weight``, ``Au, Av, Bu, Bv`` (sensor hit ``A + B i``,
+    upright image mm), ``a, b`` (aim-plane sample) and, with ``time_dim``, ``xi_t`` (a
+    third low-discrepancy coordinate in [0, 1) for time: the samples are then R3's, else
+    R2's).
     """
     import drjit as dr
 
     m, Float, Array3 = _types(double)
     UInt32 = m.UInt32
-    idx = dr.arange(UInt32, n) + dr.opaque(UInt32, offset & 0xFFFFFFFF)
-    # Cranley-Patterson shifts of the lattice from the seed (and the 2^32 block).
-    shift_vals = np.random.default_rng([params.seed, offset >> 32]).integers(
-        0, 2 ** 32, size=3, dtype=np.uint64)
-    shifts = [dr.opaque(UInt32, int(x)) for x in shift_vals]
-
+    idx, shifts = lanes.index, lanes.shifts
     gen = _R3 if time_dim else _R2
 
     def lattice(j):
@@ -194,34 +356,41 @@ def _trace(geom: Geometry, params: TraceParams, n: int, offset: int, double: boo
     ua, ub = lattice(0), lattice(1)
     ut = lattice(2) if time_dim else None
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731 - compile once, update values
-    if params.ellipse is None:
-        a = op(params.a0) + (op(params.a1) - op(params.a0)) * ua
-        b = op(params.b0) + (op(params.b1) - op(params.b0)) * ub
-    else:
+    val = lanes.value
+
+    def in_box():
+        return (val("a0") + (val("a1") - val("a0")) * ua,
+                val("b0") + (val("b1") - val("b0")) * ub)
+
+    def in_ellipse():
         rad = dr.sqrt(ua)  # uniform on the unit disc
         sin_p, cos_p = dr.sincos((2.0 * math.pi) * ub)
         xd, yd = rad * cos_p, rad * sin_p
-        ca, cb, m00, m01, m10, m11 = (op(x) for x in params.ellipse)
-        a = ca + m00 * xd + m01 * yd
-        b = cb + m10 * xd + m11 * yd
+        return (val("ca") + val("m00") * xd + val("m01") * yd,
+                val("cb") + val("m10") * xd + val("m11") * yd)
 
-    inv_l = 0.0 if math.isinf(geom.depth) else 1.0 / geom.depth
-    inv_l = op(inv_l)
-    w = Array3(*[op(x) for x in geom.w])
-    e1 = Array3(*[op(x) for x in geom.e1])
-    e2 = Array3(*[op(x) for x in geom.e2])
-    pr = Array3(*[op(x) for x in geom.origin_pr])
+    if lanes.ellipse is None:  # a batch of both kinds
+        (a_box, b_box), (a_ell, b_ell) = in_box(), in_ellipse()
+        a = dr.select(lanes.is_ellipse, a_ell, a_box)
+        b = dr.select(lanes.is_ellipse, b_ell, b_box)
+    else:
+        a, b = in_ellipse() if lanes.ellipse else in_box()
+
+    inv_l = val("inv_l")
+    w = Array3(val("w0"), val("w1"), val("w2"))
+    e1 = Array3(val("e10"), val("e11"), val("e12"))
+    e2 = Array3(val("e20"), val("e21"), val("e22"))
+    pr = Array3(val("p0"), val("p1"), val("p2"))
     al, bl = a * inv_l, b * inv_l
     d = dr.normalize(-w + e1 * al + e2 * bl)
     weight = dr.rsqrt(1.0 + al * al + bl * bl)
     weight = weight * weight * weight
     q_pt = pr + e1 * a + e2 * b
     # Distance from S to Q is sqrt(l² + a² + b²); start no farther back than the margin.
-    if math.isinf(geom.depth):
-        back = op(geom.margin)
+    if lanes.infinite_depth:
+        back = val("margin")
     else:
-        back = dr.minimum(op(geom.margin),
-                          op(geom.depth) * dr.sqrt(1.0 + al * al + bl * bl))
+        back = dr.minimum(val("margin"), val("depth") * dr.sqrt(1.0 + al * al + bl * bl))
     o = q_pt - d * back
 
     R, ok = op(geom.radius), op(1.0 + geom.conic)
@@ -318,12 +487,27 @@ def trace_arrays(geom: Geometry, params: TraceParams, n: int, *, offset: int = 0
     ``Av``, ``Bu``, ``Bv``, ``a``, ``b`` (float64 copies of the traced values); ``keys``
     selects some (the pilot passes need three: each array read back costs ~0.3 ms).
     """
+    return _read_arrays(geom, _single_lanes(geom, params, n, offset, double), double, keys)
+
+
+def trace_arrays_batch(batch: SourceBatch, log2_count: int, *, offset: int = 0,
+                       keys=_ARRAY_KEYS) -> list[dict[str, np.ndarray]]:
+    """Trace samples ``offset … offset + 2^log2_count − 1`` of every source of ``batch``
+    in one launch; one dict per source, as :func:`trace_arrays` returns."""
+    lanes = _Lanes(batch.double, 0, offset, batch=batch, log2_count=int(log2_count))
+    res = _read_arrays(batch.geometry, lanes, batch.double, keys)
+    count = 1 << int(log2_count)
+    return [{k: v[j * count:(j + 1) * count] for k, v in res.items()}
+            for j in range(batch.size)]
+
+
+def _read_arrays(geom, lanes, double, keys):
     import drjit as dr
 
-    out = _trace(geom, params, n, offset, double)
     unknown = set(keys) - set(_ARRAY_KEYS)
     if unknown:
         raise ValueError(f"keys: unknown {sorted(unknown)}; allowed: {', '.join(_ARRAY_KEYS)}")
+    out = _trace(geom, lanes, double)
     vals = [out[k] for k in keys]
     dr.eval(*vals)
     res = {}
@@ -349,20 +533,30 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
     ``K·K+1`` the weight of rays that reach the aperture only without the rim; so the
     landed weight is the pixel sum plus cell K·K, the rim-free one that plus K·K+1.
     """
+    lanes = _single_lanes(geom, params, n, offset, double, center_uv)
+    return _deposit_samples(geom, lanes, kernel_size=kernel_size, pitch=pitch, times=times,
+                            sensor_table=sensor_table, linear=linear,
+                            time_samples=time_samples, buffer=buffer, double=double)
+
+
+def _deposit_samples(geom, lanes, *, kernel_size, pitch, times, sensor_table, linear,
+                     time_samples, buffer, double):
     import drjit as dr
 
     m, Float, UInt32, Int32 = _deposit_types(double)
     K = int(kernel_size)
     KK = K * K
     Acc = m.Float64  # float32 sums of millions of rays drift by ~1 %: accumulate in float64
+    sources = 1 if lanes.batch is None else lanes.batch.size
     if buffer is None:
-        buffer = dr.zeros(Acc, KK + 2)
-    out = _trace(geom, params, n, offset, double, time_dim=times is None)
+        buffer = dr.zeros(Acc, sources * (KK + 2))
+    base = lanes.cell_base(KK + 2)
+    out = _trace(geom, lanes, double, time_dim=times is None)
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731
     landed, weight = out["landed"], out["weight"]
     inv_p = op(1.0 / pitch)
-    au = (out["Au"] - op(center_uv[0])) * inv_p + (K // 2 + 0.5)
-    av = -(out["Av"] - op(center_uv[1])) * inv_p + (K // 2 + 0.5)
+    au = (out["Au"] - lanes.value("cu")) * inv_p + (K // 2 + 0.5)
+    av = -(out["Av"] - lanes.value("cv")) * inv_p + (K // 2 + 0.5)
     bu, bv = out["Bu"] * inv_p, -out["Bv"] * inv_p
     if times is not None:
         M = len(times)
@@ -398,6 +592,9 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
         index = UInt32(dr.select(ok, row * K + col, KK))
         if j == 0:
             index = dr.select(free_only, UInt32(KK + 1), index)
+        if base is not None:
+            index = base + index
+        if j == 0:
             value = dr.select(free_only, Acc(weight), wj)
             dr.scatter_reduce(dr.ReduceOp.Add, buffer, value, index,
                               active=out["landed_free"], mode=_MODE)
@@ -428,23 +625,31 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
     .. [1] J. Amanatides, A. Woo, "A fast voxel traversal algorithm for ray tracing",
        Eurographics 1987.
     """
+    lanes = _single_lanes(geom, params, n, offset, double, center_uv)
+    return _deposit_sweeps(geom, lanes, kernel_size=kernel_size, pitch=pitch, span=span,
+                           cdf_table=cdf_table, buffer=buffer, double=double)
+
+
+def _deposit_sweeps(geom, lanes, *, kernel_size, pitch, span, cdf_table, buffer, double):
     import drjit as dr
 
     m, Float, UInt32, Int32 = _deposit_types(double)
     K = int(kernel_size)
     KK = K * K
     Acc = m.Float64
+    sources = 1 if lanes.batch is None else lanes.batch.size
     if buffer is None:
-        buffer = dr.zeros(Acc, KK + 2)
-    out = _trace(geom, params, n, offset, double)
+        buffer = dr.zeros(Acc, sources * (KK + 2))
+    base = lanes.cell_base(KK + 2)
+    out = _trace(geom, lanes, double)
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731
     landed, weight = out["landed"], out["weight"]
     inv_p = op(1.0 / pitch)
     i_lo, i_hi = op(span[0]), op(span[1])
     # Pixel coordinates (col x, row y; integers at pixel edges) along s ∈ [0, 1].
     bu, bv = out["Bu"] * inv_p, -out["Bv"] * inv_p
-    x0 = (out["Au"] - op(center_uv[0])) * inv_p + (K // 2 + 0.5) + bu * i_lo
-    y0 = -(out["Av"] - op(center_uv[1])) * inv_p + (K // 2 + 0.5) + bv * i_lo
+    x0 = (out["Au"] - lanes.value("cu")) * inv_p + (K // 2 + 0.5) + bu * i_lo
+    y0 = -(out["Av"] - lanes.value("cv")) * inv_p + (K // 2 + 0.5) + bv * i_lo
     dx, dy = bu * (i_hi - i_lo), bv * (i_hi - i_lo)
     if cdf_table is None:
         cdf = lambda s: s  # noqa: E731 - linear motion: F is linear in i
@@ -480,8 +685,9 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
     # weight of rays only the rim stopped to cell K·K+1.
     free_only = out["landed_free"] & ~landed
     rest = w * Acc(1.0 - (f_out - f_in))
+    outside = dr.select(free_only, UInt32(KK + 1), UInt32(KK))
     dr.scatter_reduce(dr.ReduceOp.Add, buffer, dr.select(free_only, w, rest),
-                      dr.select(free_only, UInt32(KK + 1), UInt32(KK)),
+                      outside if base is None else base + outside,
                       active=free_only | (landed & (rest > 0.0)), mode=_MODE)
 
     xs, ys = x0 + dx * s_in, y0 + dy * s_in
@@ -507,7 +713,8 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
         s_next = dr.maximum(dr.minimum(dr.select(along_x, sx, sy), s_out), s)
         last = s_next >= s_out
         f_next = dr.select(last, f_out, cdf(s_next))
-        dr.scatter_reduce(dr.ReduceOp.Add, buffer, w * Acc(f_next - f_s), UInt32(index),
+        cell = UInt32(index) if base is None else base + UInt32(index)
+        dr.scatter_reduce(dr.ReduceOp.Add, buffer, w * Acc(f_next - f_s), cell,
                           active=active, mode=_MODE)
         index = index + dr.select(along_x, step_c, step_r * K)
         sx = dr.select(along_x, sx + dsx, sx)
@@ -518,3 +725,27 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
     dr.while_loop(state=(s_in, f_in, row * K + col, sx, sy, crosses), cond=cond, body=body,
                   labels=("s", "f_s", "index", "sx", "sy", "active"), label="segment DDA")
     return buffer
+
+
+def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_size: int,
+                  pitch: float, exact: bool, times: list | None = None,
+                  sensor_table: np.ndarray | None = None,
+                  linear: tuple[float, float] | None = None, time_samples: int = 1,
+                  span: tuple[float, float] | None = None,
+                  cdf_table: np.ndarray | None = None, buffer=None):
+    """Trace samples ``offset … offset + 2^log2_count − 1`` of every source of ``batch``
+    and deposit them, in one launch, into a stacked (S·(K·K + 2)) Dr.Jit buffer.
+
+    Source ``j`` owns cells ``j·(K·K+2) …``, laid out as the one-source buffer of
+    :func:`deposit_segments` (``exact``: ``span``, ``cdf_table``) or :func:`deposit`
+    (``times``, ``sensor_table``, ``linear``, ``time_samples``); the window of source
+    ``j`` is centred on the batch's ``center_uv[j]``.
+    """
+    lanes = _Lanes(batch.double, 0, offset, batch=batch, log2_count=int(log2_count))
+    if exact:
+        return _deposit_sweeps(batch.geometry, lanes, kernel_size=kernel_size, pitch=pitch,
+                               span=span, cdf_table=cdf_table, buffer=buffer,
+                               double=batch.double)
+    return _deposit_samples(batch.geometry, lanes, kernel_size=kernel_size, pitch=pitch,
+                            times=times, sensor_table=sensor_table, linear=linear,
+                            time_samples=time_samples, buffer=buffer, double=batch.double)
