@@ -145,3 +145,34 @@ def test_irregular_grid_is_refused():
                    grid_shape=(3, 3))
     with pytest.raises(BankError, match="regular"):
         spatially_varying_deconvolve(np.zeros((64, 64)), bad)
+
+
+@pytest.mark.parametrize("resolution,pitch", [((200, 200), 0.06), ((262, 230), 0.06),
+                                              ((512, 512), 0.02)])
+def test_mirror_grid_puts_the_asked_nodes_across_the_tilted_mirrors_image(resolution, pitch):
+    """The grid's node lines (cell centres over the sensor, as the tracer places them)
+    that fall within the predicted outline's extent: at least ``nodes_across`` on each
+    axis, where a 9x9 grid over the frame has 5 or 6 across this mirror."""
+    from dataclasses import replace
+
+    from mitsweep.config import Sensor, load_setup
+    from mitsweep.deconv.spatial import MIRROR_GRID_NODES, mirror_grid_shape
+    from mitsweep.optics.calibration import predicted_outline
+    from mitsweep.tracer.bank import grid_points
+
+    from conftest import SCENES
+
+    setup = replace(load_setup(SCENES / "paraboloid_tilted.toml"),
+                    sensor=Sensor(resolution=resolution, pixel_pitch=pitch))
+    uv = predicted_outline(setup).uv
+    (u0, v0), (u1, v1) = uv.min(axis=0), uv.max(axis=0)
+
+    def across(grid):
+        pts = grid_points(setup, grid)
+        us, vs = np.unique(pts[:, 0]), np.unique(pts[:, 1])
+        return (int(np.sum((us >= u0) & (us <= u1))), int(np.sum((vs >= v0) & (vs <= v1))))
+
+    rows, cols = mirror_grid_shape(setup)
+    assert rows == cols and min(across((rows, cols))) >= MIRROR_GRID_NODES
+    assert min(across((9, 9))) < MIRROR_GRID_NODES
+    assert rows <= min(resolution) // 4

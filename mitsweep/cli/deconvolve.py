@@ -197,6 +197,7 @@ def _traced_bank(args, setup, shape, pitch, motion, depth):
     """The bank of the photo's geometry, from the cache (traced on a miss)."""
     from tqdm import tqdm
 
+    from ..deconv.spatial import mirror_grid_shape
     from ..io.bank import bank_kernel_size
     from ..tracer.bank import BANK_RAYS
     from ..tracer.cache import cached_bank
@@ -205,13 +206,15 @@ def _traced_bank(args, setup, shape, pitch, motion, depth):
     photo = replace(setup, sensor=replace(setup.sensor, resolution=(W, H), pixel_pitch=pitch,
                                           center_offset_px=None))
     kind = "radial" if photo.mirror.is_symmetric else "grid"
-    n = 19 if kind == "radial" else 81
+    # a tilted mirror's image covers part of the frame: a grid fine enough for it
+    grid = mirror_grid_shape(photo) if kind == "grid" else (9, 9)
+    n = 19 if kind == "radial" else grid[0] * grid[1]
     with tqdm(total=n, desc="IPSF bank", unit="ipsf", file=sys.stderr,
               disable=not sys.stderr.isatty()) as bar:
         got = cached_bank(photo, motion=motion, kind=kind,
                           depths=(depth if isinstance(depth, float) else 500.0,),
                           rays=args.rays or BANK_RAYS, kernel_size=bank_kernel_size(pitch),
-                          progress=bar.update)
+                          grid=grid, progress=bar.update)
     return got, photo
 
 
