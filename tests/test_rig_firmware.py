@@ -202,6 +202,50 @@ def test_sketch_runs_a_capture_with_the_python_driver(host_firmware, tmp_path):
     assert [e["name"] for e in data["events"]].count("POS") >= 10
 
 
+def test_sketch_runs_a_motion_profile_with_the_python_driver(host_firmware, tmp_path):
+    """The firmware's own table execution (TABLE/SEG/TSWEEP), driven by run_capture over
+    a real pty with an optimised-like profile: the shutter pin was high once, exactly
+    between the planned steps, for the table's time, and the board's positions follow
+    the plan (one step, plus the peak rate over the host build's scheduling delay)."""
+    import numpy as np
+
+    from mitsweep.config import load_setup
+    from mitsweep.optics import optimal_sweep_range
+    from mitsweep.optics.motion import MotionProfile
+    from mitsweep.rig import RigPorts, load_capture_record, plan_capture, run_capture
+    from mitsweep.rig.testing import fast_rig_setup
+
+    setup = fast_rig_setup(load_setup(SKETCH_DIR.parents[2] / "scenes" / "sphere.toml"))
+    sr = optimal_sweep_range(setup)
+    t = np.linspace(0.0, 1.0, 64)
+    u = t + 0.3 * t * (1.0 - t)          # 1.3x the mean velocity at the start, 0.7x at the end
+    motion = MotionProfile.tabulated(t, sr.sensor_start + (sr.sensor_end - sr.sensor_start) * u)
+    plan = plan_capture(setup, motion=motion, exposure_s=0.7)
+    board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
+    out = tmp_path / "capture.json"
+    try:
+        run_capture(setup, RigPorts(arduino=board.port, checksums=True), out=out, plan=plan)
+    finally:
+        board.close()
+    data = load_capture_record(out)
+    assert data["complete"]
+    exp = data["measured"]["exposure"]
+    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
+                                                       abs=HOST_TIMING_TOLERANCE_S)
+    shutter = board.pin_changes(6)   # PIN_SHUTTER
+    assert [v for _, v, _ in shutter] == [1, 0]
+    (t_open, _, x_open), (t_close, _, x_close) = shutter
+    assert (x_open, x_close) == (plan.open_steps, plan.close_steps)
+    # the table is timed from the open step on the board's clock: its last step, which
+    # closes the shutter, is due the table's duration later (late by scheduling only)
+    assert (t_close - t_open) * 1e-6 == pytest.approx(plan.profile.duration_s,
+                                                      abs=HOST_TIMING_TOLERANCE_S)
+    cmp = data["measured"]["profile"]
+    peak = max(k / d for k, d in zip(plan.profile.steps, plan.profile.durations_s))
+    assert cmp["max_deviation_steps"] <= 1 + peak * HOST_TIMING_TOLERANCE_S
+    assert len(cmp["time_s"]) >= 10
+
+
 # -- the simulator and the firmware answer alike ------------------------------------------
 # (command, expected reply, events that must follow before the next command). Replies are
 # matched as regular expressions from their start (OK <CMD> / ERR <CODE>); events by

@@ -10,16 +10,28 @@ at the floor of its travel) plus the peak rate over two 1 µs stamps.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT, run_cli
+from test_rig_cli import setup_file
+from test_rig_firmware import HostBoard, host_firmware  # noqa: F401 - fixture
+from test_rig_signals import ZABER_RIG, finish, received, signal_exit_status, wait_for
+from test_rig_watchdog import MARGIN_S, WATCHDOG_RIG, WATCHDOG_S, read_lines
 
 from mitsweep.config import SetupError, load_setup
 from mitsweep.optics import optimal_sweep_range
 from mitsweep.optics.motion import MotionProfile
+from mitsweep.optics.motion_file import save_motion_file
 from mitsweep.rig import (DeviceFault, PortLost, ProtocolError, ReplyTimeout, RigPorts,
                           load_capture_record, measured_motion, plan_capture, run_capture)
 from mitsweep.rig.arduino import MAX_STEP_RATE, MAX_TABLE_SEGMENTS, ArduinoSweepController
@@ -353,8 +365,6 @@ def test_zaber_fault_during_stream_stops_and_releases_the_shutter(sphere_zaber, 
 def motion_json(path: Path, times, distances, exposure_s=0.7) -> Path:
     """A motion-profile file written by hand (the format of mitsweep.optics.motion_file),
     so that bad tables can be written too."""
-    import json
-
     path.write_text(json.dumps({"format": "mitsweep-motion-profile", "version": 1,
                                 "times": list(times), "sensor_distances_mm": list(distances),
                                 "exposure_s": exposure_s,
@@ -364,19 +374,11 @@ def motion_json(path: Path, times, distances, exposure_s=0.7) -> Path:
 
 @pytest.fixture
 def rig_setup_file(tmp_path):
-    from test_rig_cli import setup_file
-
     return setup_file(tmp_path)
 
 
 def test_cli_capture_with_motion_file_against_simulator(rig_setup_file, sphere, profile,
                                                         tmp_path):
-    import json
-
-    from conftest import run_cli
-
-    from mitsweep.optics.motion_file import save_motion_file
-
     motion = save_motion_file(tmp_path / "profile.json", profile, exposure_s=0.7,
                               provenance={"generator": "test_rig_profile"})
     rc, stdout, err = run_cli("capture", rig_setup_file, "--motion", motion, "--dry-run",
@@ -407,8 +409,6 @@ def test_cli_capture_with_motion_file_against_simulator(rig_setup_file, sphere, 
 ])
 def test_cli_bad_motion_exits_2_with_one_line_before_any_motion(rig_setup_file, sphere,
                                                                 tmp_path, case, message):
-    from conftest import run_cli
-
     sr = optimal_sweep_range(sphere)
     s0, s1 = sr.sensor_start, sr.sensor_end
     f = sphere.lens.focal_length
@@ -434,3 +434,115 @@ def test_cli_bad_motion_exits_2_with_one_line_before_any_motion(rig_setup_file, 
     assert err.startswith("mitsweep: error:") and len(err.strip().splitlines()) == 1, err
     assert message in err
     assert not out.exists()
+
+
+# -- signals and the watchdog during a table sweep (real subprocesses) ------------------
+# a slow profile: the shutter stays open 3.5 s (0.695 mm, 0.2 mm/s on average): time to
+# signal or kill the capture in the middle of the table
+SLOW_EXPOSURE_S = 3.5
+
+
+def start_profile_capture(setup_path, motion_path, out, board, stage=None):
+    argv = [sys.executable, "-m", "mitsweep", "capture", str(setup_path), "--port",
+            board.port, "--motion", str(motion_path), "--out", str(out)]
+    if stage is not None:
+        argv += ["--stage", f"zaber:{stage.port}"]
+    return subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+def slow_profile_rig(tmp_path, rig_kind, extra_rig=""):
+    """(setup path, motion path, plan) of the slow profile on a fast-positioning rig."""
+    setup_path = setup_file(tmp_path, (ZABER_RIG if rig_kind == "zaber" else "") + extra_rig)
+    setup = load_setup(setup_path)
+    motion = bent_profile(optimal_sweep_range(setup))
+    path = save_motion_file(tmp_path / "profile.json", motion, exposure_s=SLOW_EXPOSURE_S,
+                            provenance={"generator": "test_rig_profile"})
+    return setup_path, path, plan_capture(setup, stage=rig_kind, motion=motion,
+                                          exposure_s=SLOW_EXPOSURE_S)
+
+
+@pytest.mark.parametrize("rig_kind", ["arduino", "zaber"])
+def test_sigterm_mid_table_sweep_stops_the_rig_and_records_interrupted(tmp_path, rig_kind):
+    setup_path, motion_path, plan = slow_profile_rig(tmp_path, rig_kind)
+    out = tmp_path / "rec.json"
+    board = PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps
+                                   if rig_kind == "arduino" else 0))
+    stage = None
+    if rig_kind == "zaber":
+        stage = PtyDevice(ZaberModel(homed=True, position=plan.approach_steps,
+                                     max_position=int(26 * ZABER_STEPS_PER_MM)))
+    motor = stage or board
+    with contextlib.ExitStack() as devices:
+        for dev in filter(None, (board, stage)):
+            devices.enter_context(dev)
+        proc = start_profile_capture(setup_path, motion_path, out, board, stage)
+        try:
+            wait_for(lambda: board.model.shutter_open and motor.model.moving(time.monotonic()),
+                     "the shutter open mid-table", proc)
+            assert received(motor.model, "TSWEEP" if stage is None else "/1 0 stream 1 call 1")
+            proc.send_signal(signal.SIGTERM)
+            rc, err = finish(proc)
+        finally:
+            proc.kill()
+            proc.wait()
+        now = time.monotonic()
+        assert not board.model.shutter_open, "shutter left open"
+        assert not motor.model.moving(now) and motor.model.stopped, "stage not stopped"
+        assert motor.model.position(now) != plan.end_steps       # stopped mid-table
+    assert rc == signal_exit_status("SIGTERM"), err
+    data = load_capture_record(out)
+    assert data["status"] == "interrupted" and data["signal"] == "SIGTERM"
+    assert all(a["ok"] for a in data["safety"])
+
+
+def test_sigkilled_host_mid_table_the_simulated_board_stops_within_watchdog(tmp_path):
+    setup_path, motion_path, plan = slow_profile_rig(tmp_path, "arduino", WATCHDOG_RIG)
+    with PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps)) as board:
+        proc = start_profile_capture(setup_path, motion_path, tmp_path / "rec.json", board)
+        try:
+            wait_for(lambda: board.model.shutter_open, "the shutter open mid-table", proc)
+            t_kill = time.monotonic()
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            proc.kill()
+            proc.wait()
+        wait_for(lambda: not board.model.shutter_open
+                 and not board.model.moving(time.monotonic()), "the board at rest",
+                 timeout_s=10.0)
+        assert board.model.faults_seen == ["WATCHDOG"]
+        kind, t_release = board.model.shutter_history[-1]
+        assert kind == "close" and t_release - t_kill <= WATCHDOG_S + MARGIN_S
+
+
+def test_sigkilled_host_mid_table_the_firmware_stops_within_watchdog(
+        host_firmware, tmp_path):  # noqa: F811
+    setup_path, motion_path, plan = slow_profile_rig(tmp_path, "arduino", WATCHDOG_RIG)
+    board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
+    shutter = lambda: [v for _, v, _ in board.pin_changes(6)]  # noqa: E731 - PIN_SHUTTER
+    try:
+        proc = start_profile_capture(setup_path, motion_path, tmp_path / "rec.json", board)
+        try:
+            wait_for(lambda: shutter() == [1], "the shutter open mid-table", proc)
+            t_kill = time.monotonic()
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            proc.kill()
+            proc.wait()
+        wait_for(lambda: shutter() == [1, 0], "the shutter's release", timeout_s=10.0)
+        elapsed = board.pin_times(6)[-1][0] - t_kill
+        faults = [ln for ln in read_lines(board.slave, 0.5) if ln.startswith("EV FAULT")]
+        assert len(faults) == 1 and faults[0].endswith(" WATCHDOG"), faults
+        os.write(board.slave, b"STATE\n")
+        state = [ln for ln in read_lines(board.slave, 1.0) if ln.startswith("OK STATE")]
+        _, _, _, pos, _, moving, shutter_open = state[0].split()
+        assert (moving, shutter_open) == ("0", "0")
+        # stopped inside the table, where it faulted
+        assert int(pos) == int(faults[0].split()[3])
+        assert min(plan.open_steps, plan.close_steps) < int(pos) < max(plan.open_steps,
+                                                                        plan.close_steps)
+    finally:
+        board.close()
+    assert elapsed <= WATCHDOG_S + MARGIN_S

@@ -15,8 +15,8 @@ Quantisation (what the table differs from the profile by)
   rounded cumulatively: ≤ 0.5 µs); a Zaber segment lasts its step count over the speed
   its ``maxspeed`` data value gives (1/1.6384 microstep/s resolution), which the table
   keeps exactly: the exposure is the sum;
-- profiles with more segments than the board holds (:data:`~mitsweep.rig.arduino.MAX_TABLE_SEGMENTS`)
-  are re-knotted at evenly spaced times: the chord error is reported.
+- profiles with more segments than the board holds
+  (:data:`~mitsweep.rig.arduino.MAX_TABLE_SEGMENTS`) are re-knotted at evenly spaced times: the chord error is reported.
 
 :attr:`ProfileTable.max_deviation_steps` is the largest difference between the table's
 travel and the profile's over the exposure (exact: both are piecewise linear, compared
