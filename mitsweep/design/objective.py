@@ -46,8 +46,10 @@ from ..deconv.wiener import regulariser
 
 __all__ = ["WienerModel", "wiener_model", "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
 
-#: DFT grid of the MSE sum, cycles/pixel steps of 1/64 (kernels of 31 px fit twice).
-DEFAULT_FFT_SIZE = 64
+#: DFT grid of the MSE sum (steps of 1/32 cycle/pixel; a 31 px kernel fits). Measured on
+#: the paraboloid at 50 and 0.5 lux: uniform and optimised worst-case MSE within 0.1 % of
+#: a 128-point grid's, the optimised τ the same to 3 digits.
+DEFAULT_FFT_SIZE = 32
 #: Mean level of the natural image (relative exposure), also its rms contrast
 #: (:meth:`mitsweep.deconv.noise.SensorNoise.nsr`).
 SIGNAL_MEAN = 0.5

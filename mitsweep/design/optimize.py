@@ -89,14 +89,17 @@ def _velocity_accel(tau, widths, limits: StageLimits):
     return v, a
 
 
-def stage_feasible(tau, widths, limits: StageLimits, *, rtol: float = 1e-6) -> bool:
-    """Whether τ sums to 1 and the stage can follow it (velocity, acceleration)."""
+def stage_feasible(tau, widths, limits: StageLimits, *, rtol: float = 1e-6,
+                   acceleration: bool = True) -> bool:
+    """Whether τ sums to 1 and the stage can follow it (velocity, and acceleration
+    unless ``acceleration`` is False)."""
     tau = np.asarray(tau, dtype=float)
     if np.any(tau <= 0) or abs(tau.sum() - 1.0) > 1e-9:
         return False
     v, a = _velocity_accel(tau, widths, limits)
     return bool(v.max() <= limits.max_velocity * (1 + rtol)
-                and (a.size == 0 or np.abs(a).max() <= limits.acceleration * (1 + rtol)))
+                and (not acceleration or a.size == 0
+                     or np.abs(a).max() <= limits.acceleration * (1 + rtol)))
 
 
 def _accel_constraints(tau_lin, widths, limits: StageLimits):
@@ -203,8 +206,12 @@ def _starts(n: int, x_lo: float) -> dict[str, np.ndarray]:
 
 
 def local_optimum(model: WienerModel, widths, limits: StageLimits, *,
-                  objective: str = "worst", extra_starts: dict | None = None) -> Solution:
+                  objective: str = "worst", extra_starts: dict | None = None,
+                  acceleration: bool = True) -> Solution:
     """The best τ SLSQP finds from the fixed starts (module docstring), stage-feasible.
+
+    ``acceleration=False`` drops the acceleration limit (a diagnostic: how much of the
+    certificate's gap that constraint accounts for).
 
     Returns
     -------
@@ -225,10 +232,11 @@ def local_optimum(model: WienerModel, widths, limits: StageLimits, *,
     reached: dict = {}
     iterations = 0
     for name, x0 in starts.items():
-        x, res = _solve(model.mse_and_grad, tau_lin, widths, limits, objective, x0, accel=True)
+        x, res = _solve(model.mse_and_grad, tau_lin, widths, limits, objective, x0,
+                        accel=acceleration)
         iterations += int(res.nit)
         tau = tau_lin * x
-        ok = stage_feasible(tau, widths, limits)
+        ok = stage_feasible(tau, widths, limits, acceleration=acceleration)
         value = _reduce(model.mse(tau), objective)
         reached[name] = value if ok else None
         logger.debug("start %s: %s, value %.6g, feasible %s", name, res.message, value, ok)

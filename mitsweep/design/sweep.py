@@ -20,7 +20,7 @@ from ..tracer.source import source_from_image
 from .objective import DEFAULT_FFT_SIZE, wiener_model
 from .optimize import (OBJECTIVES, StageLimits, brute_force, certified_lower_bound,
                        local_optimum, stage_feasible)
-from .planes import DEFAULT_PLANE_RAYS, DEFAULT_SUB_PLANES, plane_bank
+from .planes import DEFAULT_PLANE_RAYS, DEFAULT_SUB_PLANES, PlaneBank, plane_bank
 
 __all__ = ["SweepDesign", "design_sweep", "design_depths", "design_points", "V_DEPTHS_MM",
            "MIN_PLANES"]
@@ -53,6 +53,8 @@ class SweepDesign:
     depths_mm : (n_depths,) ndarray
     report : dict
         Everything ``mitsweep design-sweep --json`` prints.
+    bank : PlaneBank or None
+        The plane bank the design was optimised on.
     """
 
     profile: MotionProfile
@@ -65,6 +67,7 @@ class SweepDesign:
     points_uv: np.ndarray
     depths_mm: np.ndarray
     report: dict = field(default_factory=dict)
+    bank: PlaneBank | None = field(default=None, repr=False)
 
 
 def design_depths(setup) -> list[float]:
@@ -118,7 +121,7 @@ def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
                  grid: tuple[int, int] = (5, 5), depths=None, rays: int = DEFAULT_PLANE_RAYS,
                  kernel_size: int = 31, seed: int = 0, n_fft: int = DEFAULT_FFT_SIZE,
                  sub_planes: int = DEFAULT_SUB_PLANES, brute_force_steps: int = 16,
-                 progress=None) -> SweepDesign:
+                 bank: PlaneBank | None = None, progress=None) -> SweepDesign:
     """Design the time profile of a focal sweep (objective in :mod:`mitsweep.design`).
 
     Parameters
@@ -142,6 +145,10 @@ def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
         DFT grid of the MSE sum.
     brute_force_steps : int
         Lattice resolution of the brute-force check (0 skips it).
+    bank : PlaneBank, optional
+        A plane bank of an earlier design of this setup with the same span, planes,
+        points and depths (``SweepDesign.bank``): reused instead of traced again (the
+        bank does not depend on the light level).
     progress : callable, optional
         Called after each traced point.
 
@@ -192,7 +199,12 @@ def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
     points = design_points(setup, i_ref, geom, n_radii=n_radii, grid=grid)
     common = dict(rays=rays, kernel_size=kernel_size, seed=seed, sub_planes=sub_planes,
                   progress=progress)
-    bank = plane_bank(setup, points, depths, edges, reference_sensor_distance=i_ref, **common)
+    if bank is None:
+        bank = plane_bank(setup, points, depths, edges, reference_sensor_distance=i_ref,
+                          **common)
+    elif not (np.array_equal(bank.edges_mm, edges) and np.array_equal(bank.points_uv, points)
+              and np.array_equal(bank.depths_mm, np.asarray(depths, dtype=float))):
+        raise ValueError("bank: traced for other planes, points or depths than this design")
     widths = bank.widths_mm
     n_px = math.sqrt(setup.sensor.resolution[0] * setup.sensor.resolution[1])
     t0 = time.perf_counter()
@@ -220,6 +232,7 @@ def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
         lin_feasible = True
     sol = local_optimum(model, widths, limits, objective=objective)
     bound, bound_info = certified_lower_bound(model, widths, limits, objective=objective)
+    free = local_optimum(model, widths, limits, objective=objective, acceleration=False)
     t_opt = time.perf_counter() - t0
     brute = None
     if brute_force_steps:
@@ -269,6 +282,7 @@ def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
             "gap": gap, "relative_gap": gap / value,
             "uniform_value": uniform_value,
             "relaxed_value": bound_info["relaxed_value"],
+            "without_acceleration_value": free.value,
             "starts": sol.info["starts"], "best_start": sol.info["best_start"],
             "iterations": sol.info["iterations"],
             "says": (f"the optimum of this objective (worst/mean predicted MSE over the bank, "
@@ -285,4 +299,4 @@ def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
     }
     return SweepDesign(profile=profile, tau=tau, tau_linear=tau_lin, edges_mm=edges,
                        exposure_s=T, mse=mse, mse_linear=mse_lin, points_uv=points,
-                       depths_mm=np.asarray(depths), report=report)
+                       depths_mm=np.asarray(depths), report=report, bank=bank)
