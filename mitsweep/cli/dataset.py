@@ -17,7 +17,23 @@ HELP = ("render a synthetic dataset: ground truth, focused, sweep and stopped im
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("setup", help="setup TOML file")
     p.add_argument("--out", required=True, help="dataset directory")
-    p.add_argument("--scenes", type=positive_int, default=1, help="scene variations (default 1)")
+    p.add_argument("--scenes", type=positive_int, default=None,
+                   help="scene variations (default 1; with --scenes-from, the directory's "
+                        "files)")
+    p.add_argument("--family", choices=("room", "procedural"), default=None,
+                   help="the scenes: the built-in textured room (default; texture layout "
+                        "scene.texture_seed + i) or the procedural family (random shapes, "
+                        "materials and lights over the depth range; scene seed --seed + i)")
+    p.add_argument("--family-param", action="append", type=_family_param, default=[],
+                   metavar="KEY=VALUE",
+                   help="a parameter of the procedural family (repeatable), e.g. "
+                        "objects=64, shapes=sphere,cube, envmap=none")
+    p.add_argument("--scenes-from", metavar="DIR",
+                   help="the scenes: every *.xml Mitsuba scene in DIR, sorted by name, one "
+                        "scene each (checked before any work starts)")
+    p.add_argument("--scene-unit", choices=("mm", "cm", "m"), default=None,
+                   help="length unit of the --scenes-from scenes (default: the setup's "
+                        "[scene] unit, else mm)")
     p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--spp", type=positive_int, nargs=4, metavar=("PINHOLE", "FOCUSED", "SWEEP", "STOPPED"),
                    default=[16, 64, 128, 64], help="samples per pixel per mode (default 16 64 128 64)")
@@ -59,6 +75,22 @@ def _seconds(text: str) -> float:
     return x
 
 
+def _family_param(text: str) -> tuple[str, object]:
+    """``KEY=VALUE``: the value as JSON where it is JSON (numbers), else a string."""
+    import json
+
+    key, sep, value = text.partition("=")
+    if not (sep and key.strip()):
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    try:
+        parsed = json.loads(value)
+    except ValueError:
+        parsed = value.strip()
+    if not isinstance(parsed, (int, float, str)):
+        parsed = value.strip()
+    return key.strip(), parsed
+
+
 def _methods(text: str) -> tuple[str, ...]:
     names = tuple(m.strip() for m in text.split(","))
     if not all(names):
@@ -98,7 +130,32 @@ def _non_negative_int(text: str) -> int:
 
 #: DatasetOptions fields → the options that set them, for messages.
 _OPTION_OF = {"scenes": "--scenes", "seed": "--seed", "spp": "--spp",
-              "light_levels_lux": "--lux", "methods": "--methods", "bank_rays": "--bank-rays"}
+              "light_levels_lux": "--lux", "methods": "--methods", "bank_rays": "--bank-rays",
+              "family": "--family", "family_params": "--family-param",
+              "scene_files": "--scenes-from", "scene_unit": "--scene-unit"}
+
+
+def _scene_options(args, setup) -> dict:
+    """The DatasetOptions fields of the scene options (family, parameters, files)."""
+    from ..pipeline.dataset import scene_files_from
+
+    if args.scenes_from is None:
+        if args.scene_unit is not None:
+            raise UsageError("--scene-unit: applies to --scenes-from scenes only")
+        family = args.family or "room"
+        if args.family_param and family != "procedural":
+            raise UsageError(f"--family-param: applies to --family procedural only, got "
+                             f"--family {family}")
+        return {"scenes": args.scenes or 1, "family": family,
+                "family_params": dict(args.family_param)}
+    for given, option in ((args.family, "--family"), (args.scenes, "--scenes"),
+                          (args.family_param, "--family-param")):
+        if given:
+            raise UsageError(f"{option}: not with --scenes-from (each *.xml file of "
+                             f"{args.scenes_from} is one scene)")
+    files = scene_files_from(args.scenes_from, setup, unit=args.scene_unit)
+    return {"scenes": len(files), "family": "xml", "scene_files": files,
+            "scene_unit": args.scene_unit}
 
 
 def check_dataset_outputs(inputs: list, out: Path, opts, shard=None) -> None:
@@ -127,19 +184,24 @@ def run(args) -> int:
     if args.out.strip() == "":
         raise UsageError("--out: must name a directory")
     setup = load_setup_arg(args.setup)
+    scenes = _scene_options(args, setup)
     try:
-        opts = DatasetOptions(scenes=args.scenes, seed=args.seed,
+        opts = DatasetOptions(seed=args.seed,
                               spp=dict(zip(("pinhole", "focused", "sweep", "stopped"), args.spp)),
                               light_levels_lux=tuple(args.lux), methods=args.methods,
-                              bank_rays=args.bank_rays)
+                              bank_rays=args.bank_rays, **scenes)
     except DatasetError as exc:  # name the option, not the field
         field, _, rest = str(exc).partition(":")
-        raise UsageError(f"{_OPTION_OF.get(field.split('[')[0], field)}:{rest}") from None
+        head = field.split("[")[0].split(".")[0]
+        detail = field.partition(".")[2]
+        rest = f" {detail}:{rest}" if detail else rest
+        raise UsageError(f"{_OPTION_OF.get(head, field)}:{rest}") from None
     out = Path(args.out)
     if args.scheduler and args.executor not in (None, "dask"):
         raise UsageError(f"--scheduler: needs --executor dask (or no --executor), got "
                          f"--executor {args.executor}")
-    check_dataset_outputs([args.setup], out, opts, args.shard)
+    check_dataset_outputs([args.setup, *(f["path"] for f in opts.scene_files)], out, opts,
+                          args.shard)
     manifest = build_dataset(setup, out, opts, executor=args.executor or "serial",
                              jobs=args.jobs, scheduler=args.scheduler, shard=args.shard,
                              retries=args.retries, wait=args.wait)

@@ -9,13 +9,13 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 from ..config import Setup, setup_to_dict
-from .options import DatasetOptions, _is_int, _is_real, _require, options_from_dict
+from .options import MAX_SCENES, DatasetOptions, _is_int, _is_real, _require, options_from_dict
 from .runner import (DEFAULT_RETRIES, LOG_DIR, MANIFEST, SHARD_DIR, DatasetError, Shard,
                      run_tasks)
 from .tasks import item_names, plan
 
 __all__ = ["build_dataset", "load_manifest", "read_manifest", "validate_manifest",
-           "dataset_inputs", "FORMAT"]
+           "dataset_inputs", "scene_files_from", "FORMAT"]
 
 FORMAT = "mitsweep-dataset/1"
 
@@ -118,6 +118,37 @@ def dataset_inputs(directory: str | Path) -> list[Path]:
     root = Path(directory)
     manifest = load_manifest(root)
     return [root / MANIFEST] + [root / name for name in manifest["items"]]
+
+
+def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
+                     unit: str | None = None) -> tuple[dict, ...]:
+    """The scenes of ``mitsweep dataset --scenes-from``: every ``*.xml`` file of
+    ``directory`` (not its subfolders), sorted by name, as ``{"path", "sha256"}``
+    (:attr:`DatasetOptions.scene_files`).
+
+    With ``setup``, each file is loaded first as the render will load it
+    (:func:`mitsweep.render.user_scene.load_user_scene`, in ``unit``): a file that is
+    not Mitsuba XML, references a missing file or uses an unknown plugin is refused
+    before any work starts, naming the file. Raises :class:`DatasetError` (or the
+    loader's ``UserSceneError``), both ValueErrors: one line at the command line.
+    """
+    from .runner import sha256
+
+    root = Path(directory)
+    if not root.is_dir():
+        raise DatasetError(f"{directory}: not a directory (--scenes-from takes a folder of "
+                           f"Mitsuba XML scenes)")
+    paths = sorted(p for p in root.glob("*.xml") if p.is_file())
+    if not paths:
+        raise DatasetError(f"{directory}: no *.xml scene files")
+    _require(len(paths) <= MAX_SCENES, "scenes-from",
+             f"{directory} holds {len(paths)} scenes; at most {MAX_SCENES}")
+    if setup is not None:
+        from ..render.user_scene import load_user_scene
+
+        for p in paths:
+            load_user_scene(setup, p, unit=unit)
+    return tuple({"path": str(p.resolve()), "sha256": sha256(p)} for p in paths)
 
 
 def written_paths(opts: DatasetOptions, shard: Shard | None = None) -> set[str]:

@@ -12,7 +12,7 @@ from ..render.api import MODES  # the camera modes; render imports Mitsuba only 
 from .runner import DatasetError
 
 __all__ = ["DatasetOptions", "options_from_dict", "MAX_SCENES", "MAX_LIGHT_LEVELS",
-           "MAX_BANK_DEPTHS", "MAX_SEED"]
+           "MAX_BANK_DEPTHS", "MAX_SEED", "FAMILIES", "SCENE_UNITS"]
 
 #: Most scene variations a dataset may hold (``DatasetOptions.scenes``); a manifest that
 #: claims more is refused before any work starts.
@@ -22,6 +22,13 @@ MAX_LIGHT_LEVELS = 32
 MAX_BANK_DEPTHS = 64
 #: Mitsuba's sampler seeds are 32-bit: scene i renders with seed + i.
 MAX_SEED = 2**32 - 1
+#: Where a dataset's scenes come from: ``room`` the built-in textured room (texture
+#: layout ``scene.texture_seed + i``), ``procedural`` the procedural family
+#: (:mod:`mitsweep.render.procedural`, scene seed ``seed + i``), ``xml`` the user's
+#: Mitsuba XML files (``scene_files``, one scene each).
+FAMILIES = ("room", "procedural", "xml")
+SCENE_UNITS = ("mm", "cm", "m")
+_HEX = frozenset("0123456789abcdef")
 
 
 def _is_int(v: Any) -> bool:
@@ -72,6 +79,13 @@ class DatasetOptions:
     (1 to ``MAX_BANK_DEPTHS``) finite and > 0, ``methods`` names of
     :data:`mitsweep.deconv.METHODS` (each makes its own EDOF images: ``wiener`` the
     ``edof*`` items, another method ``m`` the ``edof_m*`` items).
+
+    Scenes: ``family`` one of :data:`FAMILIES`. ``procedural`` takes ``family_params``
+    (the family's parameters, plain JSON, stored resolved:
+    :func:`mitsweep.render.procedural.resolve_params`). ``xml`` takes ``scene_files``,
+    one ``{"path": absolute path, "sha256": of its bytes}`` per scene (``scenes`` is
+    their number), and ``scene_unit`` (one of :data:`SCENE_UNITS`, or None for the
+    setup's). A room dataset's options read and write as before these fields existed.
     """
 
     scenes: int = 1
@@ -85,6 +99,10 @@ class DatasetOptions:
     stopped_f_number: float = 11.0
     diffraction: bool = True
     methods: tuple[str, ...] = ("wiener",)
+    family: str = "room"
+    family_params: dict = field(default_factory=dict)
+    scene_files: tuple[dict, ...] = ()
+    scene_unit: str | None = None
 
     def __post_init__(self) -> None:
         _require(_is_int(self.scenes) and 1 <= self.scenes <= MAX_SCENES, "scenes",
@@ -115,28 +133,83 @@ class DatasetOptions:
         _require(isinstance(self.diffraction, bool), "diffraction",
                  f"must be true or false, got {self.diffraction!r}")
         methods = _methods(self.methods)
+        self._check_scenes()
         object.__setattr__(self, "spp", {m: int(self.spp[m]) for m in MODES})
         object.__setattr__(self, "light_levels_lux", lux)
         object.__setattr__(self, "bank_depths_mm", depths)
         object.__setattr__(self, "grid", tuple(int(g) for g in self.grid))
         object.__setattr__(self, "methods", methods)
 
+    def _check_scenes(self) -> None:
+        _require(isinstance(self.family, str) and self.family in FAMILIES, "family",
+                 f"must be one of {', '.join(FAMILIES)}, got {self.family!r}")
+        _require(isinstance(self.family_params, dict), "family_params",
+                 f"must be an object, got {type(self.family_params).__name__}")
+        _require(isinstance(self.scene_files, (list, tuple)), "scene_files",
+                 f"must be a list, got {type(self.scene_files).__name__}")
+        _require(self.scene_unit is None or self.scene_unit in SCENE_UNITS, "scene_unit",
+                 f"must be one of {', '.join(SCENE_UNITS)} or null, got {self.scene_unit!r}")
+        if self.family != "procedural":
+            _require(not self.family_params, "family_params",
+                     f"apply to the procedural family only (family {self.family!r})")
+        else:
+            from ..render.procedural import resolve_params  # pure NumPy, no Mitsuba
+
+            try:
+                params = resolve_params(**self.family_params)
+            except ValueError as exc:
+                raise DatasetError(f"family_params.{exc}") from None
+            object.__setattr__(self, "family_params", params)
+        if self.family != "xml":
+            _require(not self.scene_files, "scene_files",
+                     f"apply to family 'xml' only (family {self.family!r})")
+            _require(self.scene_unit is None, "scene_unit",
+                     f"applies to family 'xml' only (family {self.family!r})")
+            object.__setattr__(self, "scene_files", ())
+            return
+        _require(len(self.scene_files) == self.scenes, "scene_files",
+                 f"one file per scene: {self.scenes} scenes, {len(self.scene_files)} files")
+        files = []
+        for k, f in enumerate(self.scene_files):
+            key = f"scene_files[{k}]"
+            _require(isinstance(f, dict) and set(f) == {"path", "sha256"}, key,
+                     f"must be an object with path and sha256, got {f!r}")
+            _require(isinstance(f["path"], str) and f["path"].endswith(".xml"), f"{key}.path",
+                     f"must be the path of an .xml file, got {f['path']!r}")
+            sha = f["sha256"]
+            _require(isinstance(sha, str) and len(sha) == 64 and set(sha) <= _HEX,
+                     f"{key}.sha256", f"must be 64 lowercase hex digits, got {sha!r}")
+            files.append({"path": f["path"], "sha256": sha})
+        object.__setattr__(self, "scene_files", tuple(files))
+
     def as_dict(self) -> dict:
-        return {"scenes": self.scenes, "seed": self.seed, "spp": dict(self.spp),
-                "light_levels_lux": list(self.light_levels_lux),
-                "bank_depths_mm": list(self.bank_depths_mm), "bank_rays": self.bank_rays,
-                "grid": list(self.grid), "stopped_f_number": self.stopped_f_number,
-                "diffraction": self.diffraction, "methods": list(self.methods)}
+        d = {"scenes": self.scenes, "seed": self.seed, "spp": dict(self.spp),
+             "light_levels_lux": list(self.light_levels_lux),
+             "bank_depths_mm": list(self.bank_depths_mm), "bank_rays": self.bank_rays,
+             "grid": list(self.grid), "stopped_f_number": self.stopped_f_number,
+             "diffraction": self.diffraction, "methods": list(self.methods)}
+        # The scene fields only where they say something: a room dataset's manifest is
+        # byte for byte what it was before they existed.
+        if self.family != "room":
+            d["family"] = self.family
+        if self.family == "procedural":
+            d["family_params"] = dict(self.family_params)
+        if self.family == "xml":
+            d["scene_files"] = [dict(f) for f in self.scene_files]
+            d["scene_unit"] = self.scene_unit
+        return d
 
 
 #: Keys a manifest's options may omit (datasets written before they existed), with the
 #: value those datasets were made with.
-_ADDED_LATER = {"methods": ["wiener"]}
+_ADDED_LATER = {"methods": ["wiener"], "family": "room", "family_params": {},
+                "scene_files": [], "scene_unit": None}
 
 
 def options_from_dict(d: Any) -> DatasetOptions:
     """:class:`DatasetOptions` from a manifest's ``options`` (the keys of
-    :meth:`DatasetOptions.as_dict`, all required but ``methods``, no others); raises
+    :meth:`DatasetOptions.as_dict`, all required but those of ``_ADDED_LATER``, no
+    others); raises
     :class:`DatasetError` naming the field."""
     names = [f.name for f in fields(DatasetOptions)]
     _require(isinstance(d, dict), "options", f"must be an object, got {type(d).__name__}")

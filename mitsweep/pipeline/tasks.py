@@ -12,6 +12,15 @@ Diffraction: the renders are geometric; the thin-lens images (focused, sweep, st
 are convolved with the lens's pixel-integrated Airy PSF at 550 nm (``diffraction=True``),
 which is what the paper holds against stopping down. The ground truth stays ideal.
 
+Scenes (``DatasetOptions.family``): scene ``i`` is the built-in room with texture layout
+``scene.texture_seed + i`` (``room``, today's datasets: their task parameters are what
+they always were), procedural scene ``seed + i`` of :mod:`mitsweep.render.procedural`,
+or the ``i``-th XML file of the user's directory. For the last two, each render task's
+parameters hold ``scene_source`` (:func:`scene_source`): the family, seed and resolved
+parameters, or the file's path, SHA-256 and unit. They are in the manifest, so any item
+can be made again alone (``render(setup, out, **params)``), and a changed XML file
+changes its scene's parameters, so a rerun redoes that scene.
+
 Radiometry: renders are linear radiance. Relative exposure 1.0 (the noise model's
 reference level, reflectance ``SensorNoise.reflectance`` under the scene illuminance) is
 the 99th percentile of the ground truth inside the mirror's image; all images of a scene
@@ -33,9 +42,9 @@ from ..io import read_exr, write_exr
 from ..io.exr import stack_channels
 from ..render.api import MODE_SAMPLERS, MODES  # render imports Mitsuba only when rendering
 from .options import DatasetOptions
-from .runner import DatasetError, Task
+from .runner import DatasetError, Task, sha256
 
-__all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "trace_bank",
+__all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source", "trace_bank",
            "add_noise", "restore", "edof_name", "NOISE_PIXEL_MM", "DECONV_PRIOR",
            "WHITE_PERCENTILE", "BANK"]
 
@@ -81,20 +90,61 @@ def white_level(pinhole: np.ndarray, mask: np.ndarray) -> float:
 
 # -- the tasks --------------------------------------------------------------------------
 
+def scene_source(opts: DatasetOptions, index: int) -> dict | None:
+    """What scene ``index`` of a dataset is made of, for its render tasks' parameters:
+    None for the room (its parameters predate the families); for the procedural family
+    ``{"family", "seed": opts.seed + index, "params"}``; for XML files
+    ``{"family": "xml", "file", "sha256", "unit"}`` (unit None: the setup's)."""
+    if opts.family == "procedural":
+        return {"family": "procedural", "seed": opts.seed + index,
+                "params": dict(opts.family_params)}
+    if opts.family == "xml":
+        f = opts.scene_files[index]
+        return {"family": "xml", "file": f["path"], "sha256": f["sha256"],
+                "unit": opts.scene_unit}
+    return None
+
+
+def _user_scene(setup: Setup, source: dict):
+    """``(scene, scene_unit, max_depth)`` of :func:`render_image` for a scene source."""
+    if source["family"] == "procedural":
+        from ..render.procedural import procedural_scene
+
+        objects, params = procedural_scene(setup, source["seed"], **source["params"])
+        return {"type": "scene", **objects}, None, params["max_depth"]
+    path = Path(source["file"])
+    try:
+        digest = sha256(path)
+    except FileNotFoundError:
+        raise DatasetError(f"{path}: scene file missing (the dataset was planned from it)") \
+            from None
+    if digest != source["sha256"]:
+        raise DatasetError(f"{path}: changed since the dataset was planned (its SHA-256 "
+                           f"differs); rerun `mitsweep dataset --scenes-from` to plan it "
+                           f"again")
+    return str(path), source["unit"], None
+
+
 def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: int,
-           f_number: float | None, diffraction: bool, sampler: str) -> dict:
+           f_number: float | None, diffraction: bool, sampler: str,
+           scene_source: dict | None = None) -> dict:
     """Render scene variation ``scene`` in ``mode`` (the pinhole one with the depth and
     mask AOVs) with ``sampler``; ``f_number``: the stopped mode's; ``diffraction``: add
-    the lens's."""
+    the lens's; ``scene_source``: the scene, if not the room (:func:`scene_source`)."""
     from ..optics.diffraction import add_diffraction
     from ..render import render_image, render_to_exr
 
     s = scene_setup(setup, scene)
     aovs = ("depth", "mask") if mode == "pinhole" else ()
+    kw: dict[str, Any] = {}
+    if scene_source is not None:
+        kw["scene"], kw["scene_unit"], kw["max_depth"] = _user_scene(setup, scene_source)
     result = render_image(s, mode, spp=spp, seed=seed, aovs=aovs, f_number=f_number,
-                          sampler=sampler)
+                          sampler=sampler, **kw)
     timings = {k: result.metadata.pop(k) for k in _RENDER_TIMINGS if k in result.metadata}
     result.metadata["scene_index"] = scene
+    if scene_source is not None:
+        result.metadata["scene_source"] = scene_source
     if diffraction:
         n = f_number if mode == "stopped" else s.lens.f_number
         result.image = add_diffraction(result.image, n, s.sensor.pixel_pitch)
@@ -200,12 +250,15 @@ def plan(opts: DatasetOptions) -> list[Task]:
         def add(name: str, fn, params: dict, inputs: dict | None = None) -> None:
             tasks.append(Task(f"{d}/{name}", fn, params, inputs or {}, group=i))
 
+        source = scene_source(opts, i)
         for mode in MODES:
-            add(f"{mode}.exr", render,
-                {"scene": i, "mode": mode, "spp": opts.spp[mode], "seed": opts.seed + i,
-                 "f_number": opts.stopped_f_number if mode == "stopped" else None,
-                 "diffraction": opts.diffraction and mode != "pinhole",
-                 "sampler": MODE_SAMPLERS[mode]})
+            params = {"scene": i, "mode": mode, "spp": opts.spp[mode], "seed": opts.seed + i,
+                      "f_number": opts.stopped_f_number if mode == "stopped" else None,
+                      "diffraction": opts.diffraction and mode != "pinhole",
+                      "sampler": MODE_SAMPLERS[mode]}
+            if source is not None:
+                params["scene_source"] = source
+            add(f"{mode}.exr", render, params)
         for m in opts.methods:
             add(f"{edof_name(m)}.exr", restore, {"method": m, "nsr": None},
                 {"image": f"{d}/sweep.exr", "bank": BANK})
