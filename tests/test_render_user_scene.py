@@ -98,6 +98,29 @@ def test_metre_scene_renders_the_mm_scene_in_every_mode_with_aovs(tmp_path, mode
     assert m.metadata["scene"]["max_depth"] == 4  # the user's 3 plus the mirror's bounce
 
 
+def test_participating_media_convert_their_density_and_use_volpath(tmp_path):
+    """A fog ball (sigma_t per scene unit) in metres renders as its mm copy: the density
+    is divided by 1000 with the lengths multiplied by 1000 (else the fog would be 10^6
+    times denser: opaque)."""
+    def foggy(mm_per_unit):
+        d = world(mm_per_unit)
+        d["fog"] = {"type": "sphere", "center": [0.0, -400.0 / mm_per_unit, 0.0],
+                    "radius": 350.0 / mm_per_unit, "bsdf": {"type": "null"},
+                    "interior": {"type": "homogeneous", "sigma_t": 0.004 * mm_per_unit,
+                                 "albedo": 0.5}}
+        return d
+
+    s = small(32)
+    mm = render_image(s, "pinhole", spp=8, seed=3, scene=foggy(1.0))
+    m = render_image(s, "pinhole", spp=8, seed=3, scene=as_xml(foggy(1000.0), tmp_path / "f.xml"),
+                     scene_unit="m")
+    clear = render_image(s, "pinhole", spp=8, seed=3, scene=world(1.0))
+    assert mm.metadata["scene"]["integrator"] == "volpath"
+    assert np.abs(mm.image - clear.image).max() > 0.1  # the fog is seen
+    # Measured: 6e-8 at most (float32 rounding of the converted distances).
+    np.testing.assert_allclose(m.image, mm.image, rtol=1e-5, atol=1e-6)
+
+
 def test_centimetre_placed_scene_matches_the_mm_scene_moved_by_hand():
     """unit cm and a placement (rotation, then translation in mm) equal the mm scene with
     the same transform written into it."""
@@ -290,6 +313,9 @@ def _blocked():
     (lambda: {"type": "scene", "ball": {"type": "sphere"}}, "mm", "no emitter"),
     (lambda: {"type": "scene", "b": {"type": "blobby"}}, "mm", 'Plugin "blobby" not found'),
     (lambda: {"type": "shape"}, "mm", "needs \"type\": \"scene\""),
+    (lambda: {"type": "scene", "g": {"type": "shapegroup", "s": {"type": "sphere"}},
+              "i": {"type": "instance", "shapegroup": {"type": "ref", "id": "g"}}}, "m",
+     "instancing"),
 ])
 def test_unusable_dict_scenes_raise_one_line_user_errors(scene, unit, message):
     with pytest.raises(UserSceneError, match=message.replace("(", r"\(")) as err:

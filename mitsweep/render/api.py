@@ -404,7 +404,8 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
         SHA-256, or ``"dict"`` and the SHA-256 of its canonical JSON), unit, placement,
         what was replaced and the kept objects; the integrator depth is
         ``scene.max_depth`` if set, else the user's integrator's ``max_depth`` + 1 (the
-        mirror's bounce), else unlimited (-1).
+        mirror's bounce), else unlimited (-1); the integrator is ``path``, or
+        ``volpath`` where the scene has participating media.
     """
     from .. import __version__
     from ..config import setup_to_dict
@@ -440,9 +441,10 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
         scene_dict, info = build_scene(setup, cam, surroundings=False, extra=user.objects,
                                        max_depth=depth)
         info["lighting"] = "user scene"
-    check = None
-    if user is not None:
-        def check(loaded):
+        if user.has_media:  # path ignores participating media
+            scene_dict["integrator"]["type"] = info["integrator"] = "volpath"
+    def check(loaded):
+        if user is not None:  # refuse a hidden mirror or an empty view before rendering
             user.provenance["view"] = check_view(loaded, setup, i_ref, label=user.label,
                                                  aperture_radius=kwargs["aperture_radius"])
     t0 = _time.perf_counter()

@@ -14,7 +14,7 @@ replacement is logged), and moves every kept object into the mirror's frame in m
 with ``s`` the millimetres per scene unit (:data:`MM_PER_UNIT`) and the optional
 placement (:class:`mitsweep.config.Placement`). ``M`` is prepended to the ``to_world``
 of every top-level shape (a sphere's ``center``/``radius`` and a cylinder's ends
-compose with it) and instance; point-like emitters (``point``, ``spot``,
+compose with it; instancing, ``shapegroup``/``instance``, is refused); point-like emitters (``point``, ``spot``,
 ``projector``) move with ``M`` and their intensity is multiplied by ``s²``;
 direction-only emitters (``directional``, ``envmap``, ``constant``) turn with the
 rotation only. Media densities are divided by ``s`` (they are per unit length) and grid
@@ -81,11 +81,14 @@ class UserScene:
         ``shapes`` and ``emitters`` (the kept names).
     max_depth : int or None
         The user's integrator's ``max_depth``, if it had one.
+    has_media : bool
+        Whether the scene holds participating media (it then needs ``volpath``).
     """
 
     objects: dict
     provenance: dict = field(default_factory=dict)
     max_depth: int | None = None
+    has_media: bool = False
 
     @property
     def label(self) -> str:
@@ -286,7 +289,11 @@ def _prepare(state, label: str, m: np.ndarray, s: float) -> tuple[list[str], int
             logger.info("%s: replaced by mitsweep's %s", what,
                         "camera" if node.type != T.Integrator else "integrator")
             del root[key]
-        elif node.type == T.Shape and node.props.plugin_name() != "shapegroup":
+        elif node.type == T.Shape and node.props.plugin_name() in ("shapegroup", "instance"):
+            # An instance's shape group cannot be handed to a second scene as an object.
+            raise UserSceneError(f"{what}: instancing (shapegroup/instance) is not supported "
+                                 f"in a user scene; write the instanced shapes out")
+        elif node.type == T.Shape:
             _move_shape(node.props, m)
         elif node.type == T.Emitter:
             _move_emitter(node.props, m, s, what)
@@ -382,7 +389,8 @@ def load_user_scene(setup, scene, *, unit: str | None = None, placement=None) ->
             "replaced": replaced, "shapes": shapes, "emitters": emitters}
     logger.info("%s: %d shapes and %d emitters kept (unit %s)", name, len(shapes),
                 len(emitters), unit)
-    return UserScene(objects, prov, depth)
+    media = any(n.type == mi.ObjectType.Medium for n in state.nodes)
+    return UserScene(objects, prov, depth, media)
 
 
 def user_scene(setup, scene, *, unit: str | None = None, placement=None) -> dict:
