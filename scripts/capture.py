@@ -4,6 +4,7 @@
     scripts/capture.py scenes/sphere.toml --port /dev/ttyACM0 --out capture.json
     scripts/capture.py scenes/sphere.toml --port /dev/ttyACM0 --stage zaber:/dev/ttyUSB0
     scripts/capture.py scenes/sphere.toml --dry-run
+    scripts/capture.py scenes/sphere.toml --port /dev/ttyACM0 --motion profile.json
 """
 
 import sys

@@ -22,6 +22,15 @@ centres the sweep within the soft limits; the record says so.
 
 Every check that can fail fails here, before a port is opened: a sweep longer than the
 travel, a velocity the stage cannot hold, an exposure outside the camera's range.
+
+A motion profile (``plan_capture(setup, motion=profile, exposure_s=T)``, e.g. an
+optimised sweep from ``mitsweep design-sweep``) is planned as a step-rate table
+(:mod:`mitsweep.rig.profile`): the stage ramps from rest to the table's entry rate, runs
+the settle distance at it, runs the table with the shutter open (open on its first
+step, closed on its last), runs the settle distance at the exit rate and ramps to rest.
+Refused before any motion: a table that is empty or not monotonic, a span reaching the
+lens's focal length, velocities or accelerations beyond ``rig.max_velocity`` and
+``rig.acceleration``, and everything the linear sweep is refused for.
 """
 
 from __future__ import annotations
@@ -285,12 +294,7 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None, motion=None
                         f"({lo:g} .. {hi:g} mm = {hi - lo:g} mm)")
 
     delta = rig.sensor_direction
-    if rig.sensor_distance_at_zero is not None:
-        s0 = rig.sensor_distance_at_zero
-        mapping = "calibrated"
-    else:
-        s0 = 0.5 * (s_start + s_end) - delta * 0.5 * (lo + hi)
-        mapping = "centred (uncalibrated rig)"
+    s0, mapping = _sensor_mapping(rig, min(s_start, s_end), max(s_start, s_end))
     x_open = (s_start - s0) / delta
     x_close = (s_end - s0) / delta
     direction = 1 if x_close > x_open else -1
