@@ -202,3 +202,7 @@ def test_render_cli_offers_exactly_the_render_modes_and_aovs():
     choices = {a.dest: tuple(a.choices) for a in p._actions if a.choices}
     assert choices["mode"] == MODES
     assert choices["aov"] == AOV_NAMES
+    from mitsweep.config import SCENE_UNITS
+    from mitsweep.render.user_scene import MM_PER_UNIT
+
+    assert choices["scene_unit"] == tuple(MM_PER_UNIT) == SCENE_UNITS

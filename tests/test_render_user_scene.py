@@ -249,6 +249,18 @@ def test_xml_defaults_relative_files_and_replacements_are_resolved(tmp_path, cap
     assert user_scene(small(), str(xml), unit="m").keys() == u.objects.keys()
 
 
+def test_shipped_example_scene_spans_the_depth_range_in_metres():
+    """scenes/garden_m.xml (metres): everything the mirror sees is a shape, from the near
+    ball (0.25 m) to the sky dome (8 m)."""
+    res = render_image(small(32), "pinhole", spp=4, scene=SCENES / "garden_m.xml",
+                       scene_unit="m", aovs=("depth",))
+    assert res.metadata["user_scene"]["view"]["in_view_fraction"] == 1.0
+    depth = res.aovs["depth"][res.aovs["depth"] > 0]
+    # Mirror points lie within 36 mm of the origin, the dome's centre.
+    assert 150.0 < depth.min() < 400.0 and 7000.0 < depth.max() < 8036.0
+    assert np.isfinite(res.image).all() and res.image.max() > 0.3
+
+
 def test_exr_records_the_scene_file_and_its_hash(tmp_path):
     from mitsweep.io import read_exr
 

@@ -192,7 +192,8 @@ def build_scene(setup, sensor: dict, *, surroundings: bool = True, extra: dict |
     surroundings : bool
         Include the room and the boards (False: mirror only, e.g. for point sources).
     extra : dict, optional
-        More scene objects (name -> dict).
+        More scene objects (name -> dict or instantiated Mitsuba object, e.g. a user
+        scene's, :func:`mitsweep.render.user_scene.user_scene`).
     mirror_mesh : bool
         Mesh the mirror even where the analytic sphere applies (accuracy studies).
     sag_tol, normal_tol : float, optional
