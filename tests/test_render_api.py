@@ -137,6 +137,7 @@ def test_failed_write_leaves_no_partial_exr(tmp_path):
     (dict(mode="pinhole", spp=0), "spp"),
     (dict(mode="pinhole", spp=4, aovs=("normals",)), "aovs"),
     (dict(mode="stopped", spp=4, f_number=-2.0), "f_number"),
+    (dict(mode="pinhole", spp=4, scene_unit="m"), "scene_unit: applies to a user scene"),
 ])
 def test_render_image_rejects_bad_input(kwargs, message):
     with pytest.raises(ValueError, match=message):

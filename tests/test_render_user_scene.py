@@ -276,6 +276,27 @@ def test_exr_records_the_scene_file_and_its_hash(tmp_path):
     assert len(dict_res.metadata["user_scene"]["sha256"]) == 64
 
 
+def test_dict_hash_is_stable_and_follows_the_content():
+    """The SHA-256 of a dict scene depends on its values (transforms, bitmaps), not on
+    object identities: equal dicts hash equal, a changed value changes it."""
+    register()
+
+    def with_sky(value):
+        d = world(1.0)
+        d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(np.full((2, 4, 3), value,
+                                                                  dtype=np.float32))}
+        return d
+
+    def sha(d):
+        return load_user_scene(small(8), d).provenance["sha256"]
+
+    assert sha(with_sky(0.5)) == sha(with_sky(0.5))
+    assert sha(with_sky(0.5)) != sha(with_sky(0.6))
+    moved = with_sky(0.5)
+    moved["board"]["to_world"] = T().translate([0.0, 0.0, 1.0]) @ moved["board"]["to_world"]
+    assert sha(moved) != sha(with_sky(0.5))
+
+
 def test_setup_scene_file_is_found_beside_the_setup(tmp_path, monkeypatch):
     """[scene] file (relative to the setup file) and unit drive render_image alone."""
     as_xml(world(1000.0), tmp_path / "w.xml")
