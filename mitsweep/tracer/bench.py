@@ -12,9 +12,11 @@ the lens aperture (computed afterwards, not timed), so the comparison favours th
 Both run in this process, one after the other, so the ratio survives a noisy machine.
 
 Useful rays are reported for the cheapest deposit (one stratified sweep time per ray),
-the default 4 times and the exact segment deposit; what a user waits for is the error
-per second of :func:`bank_error_per_second`, where the exact deposit's lower error per
-ray outweighs its cost per ray.
+the default 4 times and the exact segment deposit; ``ratio_cpu`` compares the CPU
+seconds per ray of the same two runs (all threads), which a loaded machine disturbs
+less than wall time. What a user waits for is the error per second of
+:func:`bank_error_per_second`, where the exact deposit's lower error per ray outweighs
+its cost per ray, and where a bank's IPSFs are traced together (batched launches).
 """
 
 from __future__ import annotations
@@ -68,13 +70,14 @@ def _batoid_trace(batoid, bg, setup, geom, o, d, threads: int):
     old = bg._batoid_max_threads
     bg._batoid_max_threads = threads
     try:
-        best = math.inf
+        best = best_cpu = math.inf
         for _ in range(3):
             rv = batoid.RayVector(o[:, 0].copy(), o[:, 1].copy(), o[:, 2].copy(),
                                   d[:, 0].copy(), d[:, 1].copy(), d[:, 2].copy())
-            t0 = time.perf_counter()
+            c0, t0 = time.process_time(), time.perf_counter()
             surface.reflect(rv)
             best = min(best, time.perf_counter() - t0)
+            best_cpu = min(best_cpu, time.process_time() - c0)
     finally:
         bg._batoid_max_threads = old
     ok = ~(rv.vignetted | rv.failed)
@@ -85,7 +88,7 @@ def _batoid_trace(batoid, bg, setup, geom, o, d, threads: int):
         lx, ly = p[:, 0] + tl * v[:, 0], p[:, 1] + tl * v[:, 1]
         landed = ok & (v[:, 2] > 0) & (lx * lx + ly * ly <= geom.aperture_radius ** 2)
         slope_u = lx / geom.focal_length - v[:, 0] / v[:, 2]
-    return best, landed, slope_u
+    return best, best_cpu, landed, slope_u
 
 
 def _batoid_rate(setup, source, center, n: int, threads: int) -> dict:
@@ -96,7 +99,7 @@ def _batoid_rate(setup, source, center, n: int, threads: int) -> dict:
         return {"peer_rays_per_s": None,
                 "peer_note": "batoid is not installed (pip install batoid)"}
     geom, r, o, d = _rays_for(setup, source, n)
-    best, landed, _ = _batoid_trace(batoid, bg, setup, geom, o, d, threads)
+    best, best_cpu, landed, _ = _batoid_trace(batoid, bg, setup, geom, o, d, threads)
     ours = r["landed"]
     # At the periphery the rays run nearly along the surface (grazing): batoid's
     # intersection returns the far root of the sphere for most of them, so almost none
@@ -107,13 +110,14 @@ def _batoid_rate(setup, source, center, n: int, threads: int) -> dict:
         "peer": f"batoid {batoid.__version__}",
         "peer_rays_per_s": float(ours.mean() * n / best),
         "peer_raw_rays_per_s": float(n / best),
+        "peer_cpu_seconds_per_ray": float(best_cpu / n),
         "peer_rays": int(n), "peer_threads": int(threads),
         "peer_wrong_root_fraction": wrong,
     }
     # At the image centre (rays along the axis) batoid is right: check the two traces
     # agree there (landed masks, and the sensor-hit slope B_u in float64).
     geom, r, o, d = _rays_for(setup, center, 1 << 16)
-    _, landed, slope_u = _batoid_trace(batoid, bg, setup, geom, o, d, threads)
+    _, _, landed, slope_u = _batoid_trace(batoid, bg, setup, geom, o, d, threads)
     both = landed & r["landed"]
     out["peer_center_landed_mismatch"] = int((landed != r["landed"]).sum())
     out["peer_center_max_slope_diff"] = float(np.max(np.abs(slope_u[both] - r["Bu"][both])))
@@ -148,12 +152,18 @@ def bank_error_per_second(setup, *, n_radii: int = 19, depths=(500.0, 1000.0, 50
     against a reference of itself (``own_limit``, at half the reference rays), which
     isolates its Monte Carlo error.
 
+    Banks are traced batched (:func:`mitsweep.tracer.ipsf_bank`'s default); the exact
+    row also gives ``seconds_one_ipsf_at_a_time``, the same bank traced with
+    ``batched=False``.
+
     Returns
     -------
     dict
         ``rows``: per method {label, rays_per_kernel (None if not reached), seconds,
         worst_l1, floor_l1 (worst L1 at ``max_rays``, when not reached)}; the bank's
-        shape, ``reference_rays``, ``reference_self_l1``.
+        shape, ``reference_rays``, ``reference_self_l1``; ``exact_speedup_vs_planes``
+        (the plane sum's seconds over the exact method's; None where the sum never
+        reaches the target) and ``exact_speedup_vs_planes_own_limit``.
     """
     geometry = reference_geometry(setup)
     kw = dict(kind="radial", n_radii=n_radii, depths=depths, sweep=geometry.sweep,
@@ -187,10 +197,25 @@ def bank_error_per_second(setup, *, n_radii: int = 19, depths=(500.0, 1000.0, 50
             # half the rays: its deposit costs n_planes scatters per ray
             own = ipsf_bank(setup, rays=reference_rays // 2, seed=1000, **extra, **kw).kernels
             row["own_limit"] = ladder(extra, own)
+        if row["rays_per_kernel"] is not None and extra.get("method") == "exact":
+            # the same bank traced one IPSF at a time (as before batching), same rays
+            t0 = time.perf_counter()
+            ipsf_bank(setup, rays=row["rays_per_kernel"], seed=0, batched=False, **extra, **kw)
+            row["seconds_one_ipsf_at_a_time"] = time.perf_counter() - t0
         out_rows.append(row)
-    return {"setup": setup.name, "n_radii": int(n_radii), "depths_mm": list(depths),
-            "target_l1": target, "reference_rays": int(reference_rays),
-            "reference_self_l1": self_l1, "max_rays": int(max_rays), "rows": out_rows}
+    out = {"setup": setup.name, "n_radii": int(n_radii), "depths_mm": list(depths),
+           "target_l1": target, "reference_rays": int(reference_rays),
+           "reference_self_l1": self_l1, "max_rays": int(max_rays), "rows": out_rows}
+    # Side by side: how many times faster the exact deposit reaches the target than the
+    # paper's plane sum (against the true IPSF, and against the sum's own limit).
+    exact = next((r for r in out_rows if r["label"].startswith("exact")), None)
+    planes = next((r for r in out_rows if r["label"].startswith("paper")), None)
+    if exact is not None and planes is not None and exact["seconds"]:
+        out["exact_speedup_vs_planes"] = (planes["seconds"] / exact["seconds"]
+                                          if planes["seconds"] else None)
+        own = planes.get("own_limit", {}).get("seconds")
+        out["exact_speedup_vs_planes_own_limit"] = own / exact["seconds"] if own else None
+    return out
 
 
 def run_bench(args) -> dict:
@@ -211,8 +236,10 @@ def run_bench(args) -> dict:
     def measure(samples, method="continuous"):
         best = None
         for rep in range(2 if quick else 3):
+            c0 = time.process_time()
             _, info = integrated_psf(setup, u, 0.0, depth, rays=rays, sweep=sweep, seed=rep,
                                      time_samples=samples, method=method)
+            info["cpu_seconds"] = time.process_time() - c0
             rate = info["rays_landed"] / info["seconds"]
             if best is None or rate > best[0]:
                 best = (rate, info)
@@ -235,6 +262,9 @@ def run_bench(args) -> dict:
         "rays_per_s_default_time_samples": rate_default,
         "default_time_samples": DEFAULT_TIME_SAMPLES,
         "rays_per_s_exact": rate_exact,
+        # CPU seconds (all threads; pilot passes included) per ray: less sensitive than
+        # wall time to other processes sharing the cores
+        "cpu_seconds_per_ray": info["cpu_seconds"] / rays,
     }
     center = source_from_image(setup, 0.0, 0.0, depth,
                                reference_sensor_distance=geometry.sensor_distance)
@@ -243,6 +273,10 @@ def run_bench(args) -> dict:
     out["ratio"] = (rate / peer) if peer else None
     out["ratio_default_time_samples"] = (rate_default / peer) if peer else None
     out["ratio_exact"] = (rate_exact / peer) if peer else None
+    # The same comparison in CPU time: the peer's CPU per ray over ours (both count every
+    # traced ray; the landed fractions cancel as in "ratio").
+    peer_cpu = out.get("peer_cpu_seconds_per_ray")
+    out["ratio_cpu"] = (peer_cpu / out["cpu_seconds_per_ray"]) if peer_cpu else None
     # Error per second: a whole bank at L1 <= 1e-3 per kernel, each method side by side
     # (quick: a 3 x 2 bank).
     if quick:
