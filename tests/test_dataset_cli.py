@@ -67,3 +67,73 @@ def test_unreachable_scheduler_is_one_line(tmp_path, capsys):
                           "tcp://127.0.0.1:9 within 10 s")
     assert len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+# -- scenes: --family, --family-param, --scenes-from, --scene-unit ---------------------
+
+NOT_XML = "this is not a scene\n"
+UNKNOWN_PLUGIN = '<scene version="3.0.0"><shape type="teapot_of_doom"/></scene>\n'
+MISSING_FILE = ('<scene version="3.0.0"><shape type="ply"><string name="filename" '
+                'value="nowhere.ply"/></shape></scene>\n')
+GOOD = ('<scene version="3.0.0"><emitter type="constant"/><shape type="sphere">'
+        '<point name="center" x="1000" y="0" z="0"/><float name="radius" value="200"/>'
+        '</shape></scene>\n')
+
+
+def _dataset_error(tmp_path, capsys, args):
+    setup = tiny_setup_toml(tmp_path)
+    out = tmp_path / "new" / "ds"
+    try:
+        rc = main(["dataset", str(setup), "--out", str(out), *args])
+    except SystemExit as exc:  # argparse's own one-line errors
+        rc = exc.code
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert not (tmp_path / "new").exists()
+    return err
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--family", "forest"], "argument --family: invalid choice: 'forest'"),
+    (["--family", "procedural", "--family-param", "objects=0"],
+     "mitsweep: error: --family-param: objects: must be an integer in [1, 256], got 0"),
+    (["--family", "procedural", "--family-param", "shapes=torus"],
+     "mitsweep: error: --family-param: shapes: unknown 'torus'; allowed: sphere, cube"),
+    (["--family", "procedural", "--family-param", "hue=3"],
+     "mitsweep: error: --family-param: hue: not a parameter of the procedural family"),
+    (["--family", "procedural", "--family-param", "objects"],
+     "argument --family-param: expected KEY=VALUE, got 'objects'"),
+    (["--family-param", "objects=3"],
+     "mitsweep: error: --family-param: applies to --family procedural only, got --family room"),
+    (["--scene-unit", "m"], "mitsweep: error: --scene-unit: applies to --scenes-from scenes "
+                            "only"),
+])
+def test_bad_family_options_are_one_line(tmp_path, capsys, args, message):
+    assert message in _dataset_error(tmp_path, capsys, args)
+
+
+@pytest.mark.parametrize("files,extra,message", [
+    ({}, [], "no *.xml scene files"),
+    ({"a.xml": GOOD}, ["--family", "procedural"], "--family: not with --scenes-from (each "
+                                                  "*.xml file of"),
+    ({"a.xml": GOOD}, ["--scenes", "3"], "--scenes: not with --scenes-from"),
+    ({"a.xml": GOOD, "b.xml": NOT_XML}, [], "b.xml: not a Mitsuba XML scene"),
+    ({"a.xml": UNKNOWN_PLUGIN}, [], "teapot_of_doom"),
+    ({"a.xml": GOOD, "c.xml": MISSING_FILE}, [], "nowhere.ply"),
+])
+def test_bad_scene_directories_are_refused_up_front(tmp_path, capsys, files, extra, message):
+    folder = tmp_path / "scenes"
+    folder.mkdir()
+    for name, text in files.items():
+        (folder / name).write_text(text)
+    err = _dataset_error(tmp_path, capsys, ["--scenes-from", str(folder), *extra])
+    assert message in err
+    if len(files) > 1:  # the bad file is named, not the good one
+        bad = sorted(files)[-1]
+        assert bad in err and sorted(files)[0] not in err.replace(str(folder), "")
+
+
+def test_scenes_from_a_missing_directory_is_one_line(tmp_path, capsys):
+    err = _dataset_error(tmp_path, capsys, ["--scenes-from", str(tmp_path / "nope")])
+    assert "nope: not a directory (--scenes-from takes a folder of Mitsuba XML scenes)" in err
