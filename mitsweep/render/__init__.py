@@ -20,10 +20,11 @@ from .api import (AOV_NAMES, FOCUS_REFERENCE_DEPTH_MM, MODES, RenderResult, came
                   reference_sensor_distance, render_image, render_point_source, render_to_exr)
 from .mirror import mirror_shape
 from .sensor import PLUGIN_NAME, register
-from .user_scene import UserScene, UserSceneError, load_user_scene, user_scene
+from .user_scene import UserScene, UserSceneError, check_view, load_user_scene, user_scene
 
 __all__ = ["register", "PLUGIN_NAME", "render_image", "render_to_exr", "render_point_source",
            "RenderResult", "MODES", "AOV_NAMES", "camera_dict", "mode_camera",
            "reference_sensor_distance",
            "focus_distance_mirror_centre", "mirror_image_bbox", "FOCUS_REFERENCE_DEPTH_MM",
-           "mirror_shape", "user_scene", "load_user_scene", "UserScene", "UserSceneError"]
+           "mirror_shape", "user_scene", "load_user_scene", "check_view", "UserScene",
+           "UserSceneError"]

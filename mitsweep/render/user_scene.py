@@ -474,7 +474,7 @@ def check_view(scene, setup, sensor_distance: float, *, label: str = "scene",
         worst = max(blocked, key=blocked.get)
         share = sum(blocked.values()) / total
         raise UserSceneError(f"{label}: shape {worst!r} lies between the lens and the mirror "
-                             f"(it hides {100 * share:.0f} % of the probed mirror points); move "
+                             f"(it hides {100 * share:.2g} % of the probed lens-to-mirror rays); move "
                              f"the scene (scene.placement) or leave the camera's line of sight free")
     r = mi.Ray3f(mi.Point3f(*(pts + 1e-3 * out_dir).T.astype(np.float32)),
                  mi.Vector3f(*out_dir.T.astype(np.float32)))
