@@ -83,3 +83,16 @@ def test_batched_grid_bank_marks_the_same_points():
     assert both.metadata["valid"] == one.metadata["valid"]
     np.testing.assert_allclose(both.kernels, one.kernels, rtol=0, atol=1e-7)
     np.testing.assert_array_equal(both.vignetted, one.vignetted)
+
+
+def test_source_batch_refuses_sources_of_different_setups():
+    from mitsweep.tracer.ipsf import fit_sampling_box
+    from mitsweep.tracer.kernel import SourceBatch
+    from mitsweep.tracer.source import source_from_image
+
+    geoms = [source_from_image(s, 0.5, 0.0, 500.0, reference_sensor_distance=58.0).geometry(s)
+             for s in (SPHERE, TILTED)]
+    params = [fit_sampling_box(g)[0] for g in geoms]
+    with pytest.raises(ValueError, match="share the mirror"):
+        SourceBatch(geoms, params)
+    SourceBatch(geoms[:1] * 2, params[:1] * 2)  # one setup: accepted

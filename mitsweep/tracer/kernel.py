@@ -44,6 +44,7 @@ image coordinates (docs/design.md) the hit is ``h(i) = A + B i`` with ``A = −L
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -174,10 +175,19 @@ def _source_columns(geom: Geometry, params: TraceParams, center_uv=None) -> dict
     return dict(zip(_COLUMNS, (float(x) for x in values)))
 
 
-def _lattice_shifts(seed: int, offset: int) -> np.ndarray:
+@functools.lru_cache(maxsize=4096)
+def _block_shifts(seed: int, block: int) -> tuple:
+    return tuple(int(x) for x in np.random.default_rng([seed, block]).integers(
+        0, 2 ** 32, size=3, dtype=np.uint64))
+
+
+def _lattice_shifts(seed: int, offset: int) -> tuple:
     """Cranley-Patterson shifts of the lattice from the seed (and the 2^32 block)."""
-    return np.random.default_rng([seed, offset >> 32]).integers(0, 2 ** 32, size=3,
-                                                                dtype=np.uint64)
+    return _block_shifts(int(seed), int(offset) >> 32)
+
+
+def _shared_key(geom: Geometry) -> tuple:
+    return tuple(np.asarray(getattr(geom, name), dtype=float).tobytes() for name in _SHARED)
 
 
 class SourceBatch:
@@ -214,12 +224,9 @@ class SourceBatch:
         if center_uv is not None and len(center_uv) != len(geoms):
             raise ValueError("SourceBatch: give one window centre per source")
         first = geoms[0]
-        for g in geoms[1:]:
-            for name in _SHARED:
-                if not np.array_equal(np.asarray(getattr(g, name)),
-                                      np.asarray(getattr(first, name))):
-                    raise ValueError(f"SourceBatch: the sources must share the mirror, lens "
-                                     f"and rim ({name} differs)")
+        key = _shared_key(first)
+        if any(_shared_key(g) != key for g in geoms[1:]):
+            raise ValueError("SourceBatch: the sources must share the mirror, lens and rim")
         m, Float, _ = _types(double)
         rows = [_source_columns(g, p, None if center_uv is None else center_uv[j])
                 for j, (g, p) in enumerate(zip(geoms, params))]
