@@ -71,7 +71,7 @@ def write_dng(path, rgb: np.ndarray, *, black: int = 512, white: int = 15000,
 def synthetic_mirror_photo(setup, shape, center_offset_px, *, supersample: int = 3,
                            sweep_samples: int = 3, blur_px: float = 0.8, holder: bool = True,
                            arm: bool = True, vignetting: bool = True, seed: int = 0,
-                           mirror: bool = True) -> np.ndarray:
+                           mirror: bool = True, roll_deg: float = 0.0) -> np.ndarray:
     """A linear RGB "photo" (H, W, 3) of the setup's mirror, its axis at
     ``center_offset_px = (drow, dcol)`` from the image centre.
 
@@ -82,6 +82,8 @@ def synthetic_mirror_photo(setup, shape, center_offset_px, *, supersample: int =
     hits show a texture of the world-bound reflected direction, misses a textured
     background, a dark holder ring just outside the rim and an arm from it to the frame
     edge; then a Gaussian blur of ``blur_px`` (defocus) and cos⁴ vignetting.
+    ``roll_deg``: the camera turned about its axis, so that the image turns by that much
+    counter-clockwise as displayed.
     """
     from scipy.ndimage import gaussian_filter
 
@@ -104,6 +106,9 @@ def synthetic_mirror_photo(setup, shape, center_offset_px, *, supersample: int =
     cols = (np.arange(W)[:, None] + sub[None, :]).ravel()
     rr, cc = np.meshgrid(rows, cols, indexing="ij")
     u, v = pixel_to_sensor(rr, cc, (H, W), pitch, center_offset_px=center_offset_px)
+    if roll_deg:
+        t = np.radians(roll_deg)  # what the unrolled camera sees at R(-t)(u, v)
+        u, v = np.cos(t) * u + np.sin(t) * v, -np.sin(t) * u + np.cos(t) * v
     freq = rng.uniform(2.0, 9.0, size=(3, 2))
     phase = rng.uniform(0, 2 * np.pi, size=3)
     img = np.zeros(rr.shape + (3,))

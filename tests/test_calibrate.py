@@ -334,12 +334,88 @@ def test_calibrate_photo_raises_calibration_error_for_a_blank_image():
         calibrate_photo(np.full(FRAME, 0.5), small_setup("paraboloid"))
 
 
+# ------------------------------------------------- roll, and what a photo does not show
+
+#: Roll of the camera in the roll tests, degrees: enough to move a shift-only fit's axis
+#: ~0.55 px on the tilted outline (0.5% of its 70 px radius per degree).
+ROLL_DEG = 1.5
+
+
+@pytest.fixture(scope="module")
+def rolled_tilted_photos():
+    setup = small_setup("paraboloid_tilted")
+    return {r: synthetic_mirror_photo(setup, FRAME, OFFSET, supersample=2, roll_deg=r)
+            for r in (ROLL_DEG, -ROLL_DEG)}
+
+
+def test_a_rolled_camera_is_fitted_on_the_tilted_outline(rolled_tilted_photos):
+    """Rolled by +-1.5 deg: with the roll fitted the centre is within the bar and the
+    two rolls differ by 3 deg within 0.2 deg; each reads 0.6 deg high on this photo
+    (also unrolled: the arm and holder touch the rim on one side, and the outline's roll
+    signal is weak, 0.22 of its radius per radian), hence 0.75 deg on each. Left out,
+    the roll drags the axis beyond the bar."""
+    setup = small_setup("paraboloid_tilted")
+    rolls = {}
+    for r, img in rolled_tilted_photos.items():
+        fitted = calibrate_photo(img, setup, fit_roll=True)
+        assert np.abs(np.asarray(fitted.center_px) - true_centre()).max() < CENTRE_TOL_PX
+        assert abs(fitted.fit.roll_deg - r) < 0.75, (r, fitted.fit.roll_deg)
+        rolls[r] = fitted.fit.roll_deg
+        ignored = calibrate_photo(img, setup)
+        assert ignored.fit.roll_deg is None
+        assert np.abs(np.asarray(ignored.center_px) - true_centre()).max() > CENTRE_TOL_PX
+    assert abs(rolls[ROLL_DEG] - rolls[-ROLL_DEG] - 2 * ROLL_DEG) < 0.2, rolls
+
+
+def test_roll_is_not_fitted_on_a_circle_about_the_axis(photos):
+    cal = calibrate_photo(photos("paraboloid"), small_setup("paraboloid"), fit_roll=True)
+    assert cal.fit.roll_deg is None
+
+
+def test_photo_void_is_the_exact_zeros_a_renderer_skipped():
+    from mitsweep.optics.calibration import VOID_MARGIN_PX, photo_void
+
+    rng = np.random.default_rng(0)
+    img = rng.uniform(0.1, 1.0, (60, 80, 3))
+    assert not photo_void(img).any()
+    img[:, 50:] = 0.0  # a render's skipped columns
+    img[10, 10] = 0.0  # a single black pixel is photographed content
+    void = photo_void(img)
+    assert void[:, 50 - VOID_MARGIN_PX:].all() and not void[:, :50 - VOID_MARGIN_PX - 1].any()
+
+
+@pytest.mark.parametrize("name", ["paraboloid", "paraboloid_tilted"])
+def test_a_photo_cropped_to_the_mirrors_window_is_calibrated(photos, name):
+    """Exact zeros from 8 px outside the outline's extent (what ``mitsweep render``
+    writes by default): the window's border is not the rim."""
+    setup = small_setup(name)
+    img = photos(name).copy()
+    pts, _ = predicted_outline(setup).offsets_px(setup.sensor.pixel_pitch)
+    lo = np.floor(true_centre() + pts.min(axis=0)).astype(int) - 8
+    hi = np.ceil(true_centre() + pts.max(axis=0)).astype(int) + 9
+    keep = np.zeros(FRAME, bool)
+    keep[lo[0]:hi[0], lo[1]:hi[1]] = True
+    img[~keep] = 0.0
+    cal = calibrate_photo(img, setup)
+    assert np.abs(np.asarray(cal.center_px) - true_centre()).max() < CENTRE_TOL_PX
+    assert abs(cal.rim_radius_px - cal.predicted_radius_px) < RADIUS_TOL_PX
+
+
 # ----------------------------------------------------------- a rendered sweep photo
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name, mirror_only", [
-    ("paraboloid", False), ("paraboloid", True), ("paraboloid_tilted", False)],
-    ids=["paraboloid-full-frame", "paraboloid-cropped", "tilted-full-frame"])
+    pytest.param("paraboloid", False, id="paraboloid-full-frame"),
+    pytest.param("paraboloid", True, id="paraboloid-cropped"),
+    pytest.param("paraboloid_tilted", False, id="tilted-full-frame"),
+    # Known shortfall, measured: accepted (refused before the void handling), radius
+    # within the bar, centre 0.251 px (200 px, 128 spp) against the 0.25 bar; at 300 px
+    # 64 spp 0.30 px full-frame, 0.26 px cropped. The rim's top edges read ~0.3 px
+    # outward where the reflection's bright banner meets the faint rim, and its bottom
+    # edges are mostly below the noise, so the axis moves up.
+    pytest.param("paraboloid_tilted", True, id="tilted-cropped",
+                 marks=pytest.mark.xfail(strict=False, reason="tilted rim's centre "
+                                         "0.25-0.30 px on renders (bar 0.25)"))])
 def test_calibrate_finds_a_rendered_sweep_placed_off_centre(tmp_path, capsys, name,
                                                             mirror_only):
     """A Mitsuba sweep render (the real optics, independent of the outline code:
@@ -351,8 +427,10 @@ def test_calibrate_finds_a_rendered_sweep_placed_off_centre(tmp_path, capsys, na
     prominence's trimmed mean). On the tilted paraboloid the rim shows little contrast
     (the walls it reflects near the rim look like the walls behind it): the coarse
     search finds it by the detail of the reflection, and its edge points scatter by
-    ~1 px, so the fit's residual bar is 1.5 px. Measured (200 px, 64-512 spp): centre
-    within 0.10-0.18 px, radius within 0.28-0.42 px."""
+    ~1 px, so the fit's residual bar is 1.5 px. Measured (200 px, 128 spp): paraboloid
+    centre within 0.09 px, radius 0.08 px (full-frame and cropped); tilted paraboloid
+    centre within 0.24 px full-frame, 0.25 px cropped, radius (of the circle of the
+    outline's area) within 0.32 and 0.37 px."""
     from scipy.ndimage import fourier_shift
 
     from mitsweep.render.api import render_image

@@ -34,6 +34,12 @@ a wrong pixel pitch or lens–mirror distance:
    edges of a mount, an arm crossing the rim or a reflection do not pull the fit.
    Vignetting and smooth illumination changes do not move a gradient's centroid.
 
+What the photo does not show is left out: exact zeros (what a renderer skipped,
+:func:`photo_void`) are filled from the nearest shown pixel, so the border of a render
+cropped to the mirror's window is no edge, and outline points there are not asked for
+one. The camera's roll about its axis can be fitted as a fourth unknown where the
+outline shows it (a tilted mirror's; ``fit_roll``).
+
 A photograph without the mirror gives few consistent edge points, or an outline that
 is no clearer an edge than its surroundings (:func:`_edge_prominence`), or edges
 scattered by more than :data:`MAX_RESIDUAL_RMS_PX` about it, and
@@ -55,7 +61,8 @@ from .pixels import optical_center_px
 from .reference import reference_geometry
 
 __all__ = ["CalibrationError", "RimOutline", "RimFit", "Calibration", "predicted_outline",
-           "fit_rim", "calibrate_photo", "luminance", "PLAUSIBLE_SCALE", "WARN_SCALE"]
+           "fit_rim", "calibrate_photo", "luminance", "photo_void", "PLAUSIBLE_SCALE",
+           "WARN_SCALE"]
 
 logger = logging.getLogger(__name__)
 
@@ -99,6 +106,20 @@ COARSE_SCALE_STEP = 1.04
 #: The wide band of scales searched when the plausible one finds no mirror, so that a
 #: setup far off is reported as such, not as a photo without a mirror.
 WIDE_SCALES = (1.0 / 3.0, 3.0)
+#: Share of exact zeros (all channels) in a 5x5 neighbourhood from which a pixel is
+#: outside the photo (:func:`photo_void`): what a renderer skipped (``mitsweep render``
+#: writes only the mirror's window) is exactly zero, and stays half zero after a
+#: sub-pixel shift (the negative ringing clips to 0); a photographed scene is not.
+VOID_ZERO_SHARE = 0.4
+#: Pixels added around the void: the ringing of a shifted window's border.
+VOID_MARGIN_PX = 2
+#: The roll is fitted when a radian of it moves the outline's points by more than this
+#: share of its radius (RMS along the normals): never for a circle about the axis
+#: (0), for the tilted paraboloid 0.30.
+ROLL_OBSERVABLE = 0.01
+#: Roll (degrees) above which the calibration warns: setups have no roll, so banks and
+#: panoramas made from the calibrated setup are turned by it.
+WARN_ROLL_DEG = 0.5
 
 
 def _scales(lo: float, hi: float) -> np.ndarray:
@@ -232,6 +253,8 @@ class RimFit:
     inliers with normal residual RMS ``residual_rms_px``, which leaves the centre's row
     and column uncertain by ``center_se_px`` (standard error, the larger of the two).
     ``edge_points_px`` (N, 2) are the inliers' sub-pixel edge positions (row, col).
+    ``roll_deg`` is the camera's roll about its axis (degrees, counter-clockwise in the
+    image as displayed), fitted where the outline shows it (a tilted mirror's), else None.
     """
 
     center_px: tuple[float, float]
@@ -242,6 +265,40 @@ class RimFit:
     edge_points_px: np.ndarray = field(repr=False)
     iterations: int = 0
     center_se_px: float = math.nan
+    roll_deg: float | None = None
+
+
+def photo_void(image: np.ndarray) -> np.ndarray:
+    """(H, W) bool: pixels outside what the photo shows, the renderer's skipped pixels.
+
+    Where at least :data:`VOID_ZERO_SHARE` of a 5x5 neighbourhood is exactly zero in
+    every channel, in regions wider than 3 px, grown by :data:`VOID_MARGIN_PX`. A render
+    cropped to the mirror's window (black from 8 px outside the rim) has a strong
+    straight edge beside the rim there, which is not the photo's content: the rim fit
+    treats the void as unknown (:func:`fit_rim`). A photo without exact zeros has none.
+    """
+    from scipy.ndimage import binary_dilation, binary_opening, uniform_filter
+
+    a = np.asarray(image)
+    zero = (a == 0) if a.ndim == 2 else np.all(a == 0, axis=-1)
+    if not zero.any():
+        return zero
+    void = uniform_filter(zero.astype(np.float64), 5, mode="nearest") >= VOID_ZERO_SHARE
+    void = binary_opening(void, np.ones((3, 3), bool), iterations=1)
+    if VOID_MARGIN_PX > 0 and void.any():
+        void = binary_dilation(void, np.ones((3, 3), bool), iterations=VOID_MARGIN_PX)
+    return void
+
+
+def _fill_void(lum: np.ndarray, void: np.ndarray) -> np.ndarray:
+    """``lum`` with each void pixel set to its nearest shown pixel's value: the void's
+    border is then no edge (the profiles and orientation fields see nothing there)."""
+    from scipy.ndimage import distance_transform_edt
+
+    if not void.any() or void.all():
+        return lum
+    _, (ii, jj) = distance_transform_edt(void, return_indices=True)
+    return lum[ii, jj]
 
 
 def _smooth(img: np.ndarray, sigma: float) -> np.ndarray:
@@ -412,10 +469,41 @@ def _edge_prominence(lum_s, centre, scale, pts, nrm, half: float, radius: float)
     return float(on / (beside + 1e-30))
 
 
-def _noise_sigma(lum: np.ndarray) -> float:
-    """Robust per-pixel noise estimate (MAD of the diagonal second difference)."""
+def _noise_sigma(lum: np.ndarray, shown: np.ndarray | None = None) -> float:
+    """Robust per-pixel noise estimate (MAD of the diagonal second difference), over
+    the 2x2 blocks the photo shows (all of them by default)."""
     d = lum[1:, 1:] - lum[:-1, 1:] - lum[1:, :-1] + lum[:-1, :-1]
+    if shown is not None:
+        block = shown[1:, 1:] & shown[:-1, 1:] & shown[1:, :-1] & shown[:-1, :-1]
+        if block.any():
+            d = d[block]
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / 2.0)
+
+
+def _rotated(v: np.ndarray, angle: float) -> np.ndarray:
+    """(N, 2) ``(drow, dcol)`` vectors turned by ``angle`` rad, counter-clockwise as
+    displayed (rows down)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
+
+
+def _roll_column(pts: np.ndarray, nrm: np.ndarray) -> np.ndarray:
+    """(N,) normal displacement of each outline point per radian of roll about the
+    axis: ``(J p) · n`` with ``J p`` the derivative of :func:`_rotated` at 0."""
+    return -pts[:, 1] * nrm[:, 0] + pts[:, 0] * nrm[:, 1]
+
+
+def _in_void(void: np.ndarray, centre, scale: float, pts: np.ndarray) -> np.ndarray:
+    """(N,) bool: outline points (at ``centre``, ``scale``) on the photo's void; points
+    outside the image are not (they are counted as missing, as before)."""
+    if not void.any():
+        return np.zeros(len(pts), bool)
+    at = np.rint(np.asarray(centre)[None, :] + scale * pts).astype(int)
+    H, W = void.shape
+    inside = (at[:, 0] >= 0) & (at[:, 0] < H) & (at[:, 1] >= 0) & (at[:, 1] < W)
+    out = np.zeros(len(pts), bool)
+    out[inside] = void[at[inside, 0], at[inside, 1]]
+    return out
 
 
 def _centre_standard_error(A: np.ndarray, residuals: np.ndarray, length_px: float) -> float:
@@ -434,7 +522,8 @@ def _centre_standard_error(A: np.ndarray, residuals: np.ndarray, length_px: floa
 
 def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
             scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
-            max_iterations: int = 30, edge_half_width_px: float | None = None) -> RimFit:
+            max_iterations: int = 30, edge_half_width_px: float | None = None,
+            fit_roll: bool = False) -> RimFit:
     """Find the predicted outline in a photograph (see the module docstring).
 
     Parameters
@@ -453,6 +542,13 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
     edge_half_width_px : float, optional
         Half-width of the edge search along each normal (default: from the outline size:
         1.5% of its radius, at least 4 px).
+    fit_roll : bool
+        Also fit the camera's roll about its axis, where the outline shows it (not a
+        circle about the axis). A roll the fit leaves out moves a tilted outline's axis
+        by ~0.5% of its radius per degree; fitted, it is nearly a shift of that outline,
+        so the centre's standard error grows (x2.5 on the rendered tilted paraboloid,
+        whose faint rim then reads as a 1.1 deg roll and the axis 0.6 px off, against
+        0.25 px without): fit it for a camera that may be turned on its mount.
 
     Returns
     -------
@@ -474,32 +570,64 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         raise CalibrationError(f"the setup predicts a mirror image of radius {radius:.3g} px "
                                f"at pitch {pitch:g} mm: too small to calibrate on")
     scales = _scales(*scale_range)
-    centre, scale, coarse_score = _coarse_search(lum, pts, nrm, scales)
+    void = photo_void(image)
+    shown = ~void
+    if void.any() and shown.any():
+        filled = _fill_void(lum, void)
+        centre, scale, coarse_score = _coarse_search(filled, pts, nrm, scales)
+        hidden = _in_void(void, centre, scale, pts)
+        if hidden.mean() > 1.0 - MIN_INLIER_FRACTION:
+            # exact zeros around most of the rim: a clipped black background, not a
+            # renderer's skipped pixels; the rim's edge against it is real
+            logger.info("%.0f%% of the outline borders exact zeros: not treated as "
+                        "outside the photo", 100 * hidden.mean())
+            void[:] = False
+            shown[:] = True
+            centre, scale, coarse_score = _coarse_search(lum, pts, nrm, scales)
+        else:
+            logger.info("%d px of exact zeros treated as outside the photo (%.0f%% of the "
+                        "outline)", int(void.sum()), 100 * hidden.mean())
+            lum = filled
+    else:
+        centre, scale, coarse_score = _coarse_search(lum, pts, nrm, scales)
     logger.info("coarse rim search: centre (%.1f, %.1f) px, scale %.3f (score %.3g)",
                 *centre, scale, coarse_score)
     half = edge_half_width_px or max(4.0, 0.015 * radius * scale)
     lum_s = _smooth(lum, PROFILE_SMOOTHING_PX)
-    sigma = _noise_sigma(lum)
+    sigma = _noise_sigma(lum, shown)
     n = len(pts)
     off = np.full(n, np.nan)
     used = np.zeros(n, bool)
     rms = math.inf
     it = 0
+    # The camera's roll about its axis turns the outline about the axis point: a circle
+    # about the axis does not show it, a tilted mirror's outline does.
+    pts0, nrm0 = pts, nrm
+    roll = 0.0
+    fit_roll = bool(fit_roll) and float(np.sqrt(np.mean(_roll_column(pts, nrm) ** 2))) \
+        > ROLL_OBSERVABLE * radius
     # The first window covers the coarse search's steps: a reduced pixel and a scale step.
     factor = max(1, int(radius / COARSE_RADIUS_PX))
     search = max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
     for it in range(1, max_iterations + 1):
+        pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
         off, strength, _ = _edge_offsets(lum_s, centre, scale, pts, nrm, search,
                                          outermost=search <= half)
-        # An edge must rise above the noise (a step of 3 σ of one pixel) to count.
-        good = np.isfinite(off) & (strength > 3.0 * sigma + 1e-12)
-        if good.sum() < max(8, MIN_INLIER_FRACTION * n):
+        # An edge must rise above the noise (a step of 3 σ of one pixel) to count; only
+        # the outline's points the photo shows (not in its void) are asked for one.
+        seen = ~_in_void(void, centre, scale, pts)
+        n_seen = int(seen.sum())
+        good = np.isfinite(off) & (strength > 3.0 * sigma + 1e-12) & seen
+        if good.sum() < max(8, MIN_INLIER_FRACTION * n_seen):
             raise CalibrationError(
                 f"no visible mirror: only {int(good.sum())} of {n} points of the predicted "
                 f"outline (radius {radius:.1f} px at pitch {pitch:g} mm) show an edge; "
                 f"check that the photo shows the mirror of this setup")
-        # Normal displacement of point j: n_j · dc + dk (p_j · n_j).
-        A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])[good]
+        # Normal displacement of point j: n_j · dc + dk (p_j · n_j) [+ dθ k (J p_j · n_j)].
+        cols = [nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)]
+        if fit_roll:
+            cols.append(scale * _roll_column(pts, nrm))
+        A = np.column_stack(cols)[good]
         b = off[good]
         # An edge's position is as uncertain as noise / contrast (down to a floor set by
         # the texture): residuals are standardised by that before the robust weights, so
@@ -518,13 +646,16 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         res = b - A @ x
         centre = (centre[0] + x[0], centre[1] + x[1])
         scale += x[2]
+        d_roll = float(x[3]) if fit_roll else 0.0
+        roll += d_roll
         inl = wts > 0
         used = np.zeros(n, bool)
         used[np.flatnonzero(good)[inl]] = True
         rms = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else math.inf
         search = max(half, min(search, 4.0 * np.abs(x[:2]).max() + 2.0))
-        if np.abs(x[:2]).max() < 1e-3 and abs(x[2]) * radius < 1e-3:
+        if np.abs(x[:2]).max() < 1e-3 and max(abs(x[2]), abs(d_roll)) * radius < 1e-3:
             break
+    pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
     n_used = int(used.sum())
     prominence = _edge_prominence(lum_s, centre, scale, pts, nrm, half, radius * scale)
     logger.info("rim fit: %d of %d points, rms %.3f px, edge prominence %.2f after %d "
@@ -537,7 +668,7 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
     centre_se = _centre_standard_error(A[inl], res[inl], n_used / n * radius * scale
                                        * 2.0 * math.pi) if inl.any() else math.inf
     logger.info("rim fit: centre standard error %.3f px", centre_se)
-    if n_used < MIN_INLIER_FRACTION * n or rms > MAX_RESIDUAL_RMS_PX:
+    if n_used < MIN_INLIER_FRACTION * n_seen or rms > MAX_RESIDUAL_RMS_PX:
         raise CalibrationError(
             f"no visible mirror: the best outline found fits {n_used} of {n} points with "
             f"rms {rms:.2f} px (need {MIN_INLIER_FRACTION:.0%} within "
@@ -545,7 +676,8 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
     edges = np.asarray(centre)[None, :] + scale * pts + off[:, None] * nrm
     return RimFit(center_px=(float(centre[0]), float(centre[1])), scale=float(scale),
                   points_used=n_used, points_total=n, residual_rms_px=rms,
-                  edge_points_px=edges[used], iterations=it, center_se_px=centre_se)
+                  edge_points_px=edges[used], iterations=it, center_se_px=centre_se,
+                  roll_deg=math.degrees(roll) if fit_roll else None)
 
 
 @dataclass(frozen=True)
@@ -593,6 +725,7 @@ class Calibration:
                 "points_used": self.fit.points_used, "points_total": self.fit.points_total,
                 "residual_rms_px": self.fit.residual_rms_px,
                 "center_standard_error_px": self.fit.center_se_px,
+                "roll_deg": self.fit.roll_deg,
                 "warnings": list(self.warnings)}
 
 
@@ -641,7 +774,8 @@ def _implied_vertex_distance(setup, pitch: float, radius_px: float) -> float | N
 
 
 def calibrate_photo(image: np.ndarray, setup, *, pixel_pitch: float | None = None,
-                    plausible_scale: float = PLAUSIBLE_SCALE) -> Calibration:
+                    plausible_scale: float = PLAUSIBLE_SCALE,
+                    fit_roll: bool = False) -> Calibration:
     """Calibrate a photograph of the setup's mirror: centre, rim size, what it implies.
 
     Parameters
@@ -654,6 +788,8 @@ def calibrate_photo(image: np.ndarray, setup, *, pixel_pitch: float | None = Non
     plausible_scale : float
         Largest accepted relative difference between the measured and predicted
         outline sizes.
+    fit_roll : bool
+        Fit the camera's roll too (tilted mirrors), see :func:`fit_rim`.
 
     Returns
     -------
@@ -670,10 +806,11 @@ def calibrate_photo(image: np.ndarray, setup, *, pixel_pitch: float | None = Non
     predicted = outline.equivalent_radius_px(pitch)
     try:
         fit = fit_rim(image, outline, pitch,
-                      scale_range=(1 - plausible_scale, 1 + plausible_scale))
+                      scale_range=(1 - plausible_scale, 1 + plausible_scale),
+                      fit_roll=fit_roll)
     except CalibrationError as within:
         try:  # a mirror far off the predicted size is a wrong setup, not a missing mirror
-            fit = fit_rim(image, outline, pitch, scale_range=WIDE_SCALES)
+            fit = fit_rim(image, outline, pitch, scale_range=WIDE_SCALES, fit_roll=fit_roll)
         except CalibrationError:
             raise within from None
         if abs(fit.scale - 1.0) <= plausible_scale:  # found on the second look after all
@@ -704,6 +841,10 @@ def calibrate_photo(image: np.ndarray, setup, *, pixel_pitch: float | None = Non
             f"the rim is a faint edge: its {fit.points_used} edge points scatter by "
             f"{fit.residual_rms_px:.2f} px RMS, which leaves the centre uncertain by "
             f"{fit.center_se_px:.2f} px")
+    if fit.roll_deg is not None and abs(fit.roll_deg) > WARN_ROLL_DEG:
+        warnings.append(
+            f"the camera is rolled by {fit.roll_deg:+.2f} deg about its axis; setups have no "
+            f"roll, so banks and panoramas of the calibrated setup are turned by it")
     H, W = shape
     if not (0 <= fit.center_px[0] <= H - 1 and 0 <= fit.center_px[1] <= W - 1):
         warnings.append("the mirror's axis lies outside the photo")
