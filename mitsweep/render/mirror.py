@@ -25,13 +25,12 @@ import hashlib
 import json
 import logging
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..io.cache import cache_root
+from ..io.cache import cache_enabled, cache_root
 from ..optics import Profile, placement_of, profile_of
 
 __all__ = ["MirrorMesh", "tessellate", "mesh_errors", "mirror_mesh", "mirror_shape",
@@ -210,11 +209,6 @@ def _cache_key(profile: Profile, rim: float, sag_tol: float, normal_tol: float) 
                        "rim": rim, "sag_tol": sag_tol, "normal_tol": normal_tol,
                        "v": _MESH_VERSION}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
-
-
-def cache_enabled() -> bool:
-    """Whether meshes are cached on disk: not where ``$MITSWEEP_CACHE`` is ``0``/``off``."""
-    return os.environ.get("MITSWEEP_CACHE", "").strip().lower() not in ("0", "off", "false", "no")
 
 
 def _read_cached(path: Path) -> tuple[MirrorMesh, dict] | None:
