@@ -176,6 +176,8 @@ def test_xml_and_procedural_datasets_evaluate_end_to_end(tmp_path):
                        "sha256": sha256(folder / name), "unit": "m"}
     results = evaluate_dataset(tmp_path / "xml")
     assert _finite_scores(results, 2)
+    assert results["scenes"]["scene_001"]["source"]["file"].endswith("b_floor.xml")
+    assert "source" not in results["mean"]
     assert results["scenes"]["scene_000"]["focused"]["psnr"] != \
         results["scenes"]["scene_001"]["focused"]["psnr"]  # two different scenes
 
@@ -184,6 +186,7 @@ def test_xml_and_procedural_datasets_evaluate_end_to_end(tmp_path):
     assert manifest["complete"]
     results = evaluate_dataset(tmp_path / "proc")
     assert _finite_scores(results, 3)
+    assert [s["source"]["seed"] for s in results["scenes"].values()] == [0, 1, 2]
     psnrs = {s["focused"]["psnr"] for s in results["scenes"].values()}
     assert len(psnrs) == 3  # three scene variations, not one scene three times
     # Any item can be made again alone, from its manifest entry: the same bytes.

@@ -17,6 +17,8 @@ from .tasks import read_rgb, white_level
 __all__ = ["evaluate_dataset", "DEPTH_BANDS_MM"]
 
 DEPTH_BANDS_MM = (0.0, 300.0, 1000.0, 3000.0, math.inf)
+#: A scene's entry holding its render tasks' ``scene_source`` (procedural and XML scenes).
+_SOURCE = "source"
 
 
 def _checked_items(root: Path, manifest: dict) -> dict[str, Path]:
@@ -53,7 +55,9 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
     radial bin (pixels from the optical axis) and per depth band (mm), for ``edof``
     (Wiener), ``edof_<method>`` (every other restoration method the dataset holds),
     ``focused``, ``stopped``, ``sweep`` (not deconvolved) and the noisy variants
-    (``_<lux>lux``), each under its item's name.
+    (``_<lux>lux``), each under its item's name; a procedural or XML scene's entry
+    also holds ``source``, its render tasks' ``scene_source`` (family and seed and
+    parameters, or file and SHA-256).
 
     The manifest is validated (:func:`load_manifest`); the dataset must be complete,
     with every item's file present and unchanged, and every image finite.
@@ -83,6 +87,9 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
         r_max = float(np.max(np.hypot(ys - cy, xs - cx))) + 0.5
         edges = np.linspace(0.0, r_max, n_radial_bins + 1)
         scene_res: dict[str, Any] = {"white_level": level, "mirror_radius_px": r_max}
+        source = manifest["items"][f"{d.name}/pinhole.exr"]["params"].get("scene_source")
+        if source is not None:  # not the room: say which scene (family and seed, or file)
+            scene_res[_SOURCE] = source
         for name, path in files.items():  # every image of the scene, every EDOF
             if not name.startswith(f"{d.name}/") or path.suffix != ".exr" \
                     or path.stem == "pinhole":
@@ -99,7 +106,7 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
             scene_res[path.stem] = entry
         results["scenes"][d.name] = scene_res
     names = sorted({k for s in results["scenes"].values() for k, v in s.items()
-                    if isinstance(v, dict)})
+                    if isinstance(v, dict) and k != _SOURCE})
     results["mean"] = {n: {"psnr": float(np.nanmean([s[n]["psnr"] for s in results["scenes"].values() if n in s])),
                            "ssim": float(np.nanmean([s[n]["ssim"] for s in results["scenes"].values() if n in s]))}
                        for n in names}
