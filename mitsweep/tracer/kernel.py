@@ -287,7 +287,7 @@ class _Lanes:
             self.ellipse = batch.ellipse
             if self.ellipse is None:
                 self.is_ellipse = codes[3] != 0
-            # l = inf needs no branch here: 1/l = 0 and min(margin, l·1) = margin.
+            # l = inf needs no branch here: 1/l = 0 and min(margin, l·√(1 + 0)) = margin.
             self.infinite_depth = False
 
     def value(self, name: str):
