@@ -43,8 +43,8 @@ import numpy as np
 from ..optics.kinematics import Trapezoid
 from .arduino import MAX_SEGMENT_STEPS, MAX_STEP_RATE, MAX_TABLE_SEGMENTS, step_accel, step_rate
 from .errors import PlanError
-from .profile import (ProfileTable, check_followable, max_deviation, profile_knots,
-                      quantise_table, ramp_steps)
+from .profile import (TOLERANCE_MM, TOLERANCE_STEPS, ProfileTable, check_followable, max_deviation,
+                      profile_knots, quantise_table, ramp_steps)
 from .zaber import SPEED_UNIT, accel_data, accel_mm_s2, speed_data, speed_mm_s
 
 __all__ = ["CapturePlan", "plan_capture", "STAGE_KINDS"]
@@ -182,7 +182,8 @@ class CapturePlan:
             f"{p.exit_rate / spm:.4g} mm/s, peak {p.max_velocity_mm_s:.4g} mm/s, "
             f"acceleration up to {p.max_acceleration_mm_s2:.4g} mm/s^2",
             f"profile tolerance  table within {p.max_deviation_steps:.3f} steps "
-            f"({p.max_deviation_steps / spm * 1e3:.3f} um) of the profile"
+            f"({p.max_deviation_steps / spm * 1e3:.3f} um) of the profile's shape, placed "
+            f"{p.offset_steps:+.3f} steps from it"
             + (f", re-knotted ({p.resample_deviation_mm * 1e3:.3f} um chords)"
                if p.resample_deviation_mm else "")
             + f"; a ramping stage within {p.ramp_deviation_mm * 1e3:.3f} um more",
@@ -357,17 +358,26 @@ def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> Captur
         acceleration=rig.acceleration, sensor_mm=p)
     open_steps = int(round(x[0] * spm))
     travel_steps = direction * (x * spm - open_steps)    # from the open step, unrounded
-    steps, durations, driver = quantise_table(
-        times, travel_steps, stage=stage,
-        max_step_rate=MAX_STEP_RATE if stage == "arduino" else None,
-        speed_unit=SPEED_UNIT, max_segment_steps=MAX_SEGMENT_STEPS)
+    max_rate = rig.max_velocity * spm
+    if stage == "arduino":
+        max_rate = min(max_rate, MAX_STEP_RATE)
+    steps, durations, driver, _ = quantise_table(
+        times, travel_steps, stage=stage, max_rate=max_rate, speed_unit=SPEED_UNIT,
+        max_segment_steps=MAX_SEGMENT_STEPS, max_segments=MAX_TABLE_SEGMENTS)
     table_t = np.concatenate([[0.0], np.cumsum(durations)])
     table_x = np.concatenate([[0], np.cumsum(steps)]).astype(float)
+    deviation = max_deviation(table_t, table_x, times, travel_steps - travel_steps[0])
+    tolerance = max(TOLERANCE_STEPS, TOLERANCE_MM * spm)
+    if deviation > tolerance:
+        raise PlanError(f"motion profile: the best table of whole steps deviates from it by "
+                        f"{deviation:.2f} steps ({deviation / spm * 1e3:.3f} um), more than "
+                        f"{tolerance:.4g} steps ({tolerance / spm * 1e3:.3g} um) at "
+                        f"{spm:g} steps/mm")
     table = ProfileTable(
         stage=stage, steps=steps, durations_s=durations, driver=driver,
         knot_times_s=tuple(float(v) for v in times),
         knot_travel_steps=tuple(float(v) for v in travel_steps),
-        max_deviation_steps=max_deviation(table_t, table_x, times, travel_steps),
+        offset_steps=float(travel_steps[0]), max_deviation_steps=deviation,
         ramp_deviation_mm=ramp_dev, resample_deviation_mm=chord,
         max_velocity_mm_s=v_max, max_acceleration_mm_s2=a_max)
 

@@ -8,33 +8,48 @@ travel is piecewise linear through the cumulative knots ``(Σ T_j, Σ n_j)``.
 
 Quantisation (what the table differs from the profile by)
 ---------------------------------------------------------
-- positions: each knot's travel is rounded to the nearest step (cumulatively, so the
-  error never accumulates): ≤ 0.5 step at the knots; the stepper's position between
-  steps is the floor of its travel, so the stage is within 1.5 steps of the profile;
-- times: Arduino segments last whole microseconds of its ``micros()`` timer (knot times
-  rounded cumulatively: ≤ 0.5 µs); a Zaber segment lasts its step count over the speed
-  its ``maxspeed`` data value gives (1/1.6384 microstep/s resolution), which the table
-  keeps exactly: the exposure is the sum;
-- profiles with more segments than the board holds
-  (:data:`~mitsweep.rig.arduino.MAX_TABLE_SEGMENTS`) are re-knotted at evenly spaced times: the chord error is reported.
+- placement: the shutter opens on a whole step, the one nearest the profile's start:
+  the profile is placed within half a step (:attr:`ProfileTable.offset_steps`), as the
+  linear sweep's window is;
+- shape: segment boundaries lie where the profile crosses a whole step next to each of
+  its knots (the one crossed nearest in time: its own step times), the last at the
+  exposure's end; a segment's rate is then the profile's mean velocity between two of
+  its step crossings, never more than its peak, and the travel between boundaries
+  differs from the profile's only by the bend of a knot less than one step's time
+  (at the faster side) from a boundary: under a step (knots within a step share one);
+- times: Arduino segments last whole microseconds of its ``micros()`` timer (cumulative
+  rounding: no drift); a Zaber segment lasts its microsteps over the speed of its
+  ``maxspeed`` data value (1/1.6384 microstep/s resolution), chosen so that each
+  boundary comes nearest its time given the earlier segments' (no drift either);
+- profiles with more knots than the board holds
+  (:data:`~mitsweep.rig.arduino.MAX_TABLE_SEGMENTS`) are re-knotted at evenly spaced
+  times: the chord error is reported.
 
 :attr:`ProfileTable.max_deviation_steps` is the largest difference between the table's
-travel and the profile's over the exposure (exact: both are piecewise linear, compared
-at every knot of either).
+travel and the profile's shape over the exposure (exact: both are piecewise linear,
+compared at every knot of either); a plan refuses more than :data:`TOLERANCE_STEPS`
+(or :data:`TOLERANCE_MM`, where that is more steps).
+The stepper stands at the floor of its travel: one step more between steps.
 
 What the stage can follow
 -------------------------
-The profile's velocity in each segment ``v_k`` must not exceed ``rig.max_velocity`` (and
-the controller's top rate), and the change between consecutive segments must be
-reachable at ``rig.acceleration`` ``A`` between the segments' midpoints:
+The profile's velocity in each interval ``v_k`` (duration ``T_k``) must not exceed
+``rig.max_velocity`` (and the controller's top rate), must not be 0 (a dwell is no
+sweep), and the change at each knot must fit, at ``rig.acceleration`` ``A``, within the
+shorter of the two intervals beside it:
 
-.. math:: |v_{k+1} - v_k| \\le A \\, \\frac{T_k + T_{k+1}}{2}.
+.. math:: |v_{k+1} - v_k| \\le A \\, \\min(T_k, T_{k+1}).
 
-A stepper takes such a change as a rate jump of at most that size (the Arduino
-firmware); a stage that ramps at ``A`` centred on the knot deviates from the table by
-at most ``|Δv|² / (8 A)``, reported as :attr:`ProfileTable.ramp_deviation_mm`. The
-first and last segments must move (the stage ramps from rest to the entry rate before
-the shutter opens and from the exit rate to rest after it closes).
+A ramp centred on the knot then takes at most half of each interval (ramps never
+overlap), and a stage that ramps so deviates from the profile by at most ``|Δv|² /
+(8 A)`` between knots (:attr:`ProfileTable.ramp_deviation_mm`); the Arduino's stepper
+takes the change as a rate jump of at most ``A T_min``. For knots evenly spaced in
+sensor distance (``Δi``), as ``design-sweep`` writes them, the rule is ``v |Δv| <= A Δi``
+at the faster side: the stage's ``v dv/dx <= A``. (The mean of the two intervals in
+place of the shorter would let a profile jump from a slow, long interval to a fast,
+short one that no stage at ``A`` reaches in time.) The first and last intervals must
+move: the stage ramps from rest to the entry rate before the shutter opens and from
+the exit rate to rest after it closes.
 """
 
 from __future__ import annotations
@@ -47,10 +62,17 @@ import numpy as np
 from .errors import PlanError
 
 __all__ = ["ProfileTable", "profile_knots", "quantise_table", "check_followable",
-           "KNOTS_PER_RAMP"]
+           "max_deviation", "ramp_steps", "KNOTS_PER_RAMP", "LIMIT_RTOL", "TOLERANCE_STEPS",
+           "TOLERANCE_MM"]
 
 #: Chords per ramp when a trapezoidal profile is turned into knots.
 KNOTS_PER_RAMP = 16
+#: Largest deviation of a table from its profile's shape that a plan accepts: one step,
+#: or 1 µm where steps are finer (a Zaber microstep is ~0.05 µm; a speed quantum over a
+#: long slow segment moves the next boundary by ~10 µs, ~0.5 µm at 10 mm/s). 1 µm is a
+#: few % of the depth of focus (2 N × pixel = 36 µm at F2.8, 6.4 µm pixels).
+TOLERANCE_STEPS = 1.0
+TOLERANCE_MM = 1e-3
 #: Relative slack on the stage limits, as :mod:`mitsweep.optics.motion_file` allows: a
 #: profile designed exactly at a limit (an optimiser's active constraint) passes.
 LIMIT_RTOL = 1e-6
@@ -64,7 +86,10 @@ class ProfileTable:
 
     ``driver`` holds each segment in the controller's units: Arduino ``duration_us``;
     Zaber ``maxspeed`` data values. ``knot_times_s`` / ``knot_travel_steps`` are the
-    profile's own knots (time from shutter open, travel from the open step, unrounded).
+    profile's own knots (time from shutter open, travel from the open step, unrounded);
+    ``offset_steps`` (the first knot's travel, in [-0.5, 0.5]) is where the profile
+    starts relative to the open step, and ``max_deviation_steps`` the table's largest
+    difference from the profile's shape (``knot_travel_steps - offset_steps``).
     """
 
     stage: str
@@ -73,6 +98,7 @@ class ProfileTable:
     driver: tuple[int, ...]
     knot_times_s: tuple[float, ...]
     knot_travel_steps: tuple[float, ...]
+    offset_steps: float
     max_deviation_steps: float
     ramp_deviation_mm: float
     resample_deviation_mm: float
@@ -115,6 +141,7 @@ class ProfileTable:
                 "driver": list(self.driver), "total_steps": self.total_steps,
                 "duration_s": self.duration_s, "entry_rate_steps_s": self.entry_rate,
                 "exit_rate_steps_s": self.exit_rate,
+                "offset_steps": self.offset_steps,
                 "max_deviation_steps": self.max_deviation_steps,
                 "ramp_deviation_mm": self.ramp_deviation_mm,
                 "resample_deviation_mm": self.resample_deviation_mm,
@@ -161,8 +188,8 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
     """Refuse (:class:`PlanError`) what the stage cannot follow (module docstring).
 
     ``travel_mm`` is the stage travel from the shutter's opening along the motion,
-    non-decreasing. Returns (largest velocity mm/s, largest acceleration mm/s², the
-    centred-ramp deviation bound mm)."""
+    non-decreasing. Returns (largest velocity mm/s, largest acceleration mm/s² as the
+    rule measures it, the centred-ramp deviation bound mm)."""
     dt = np.diff(times_s)
     if np.any(dt <= 0):
         raise PlanError("motion profile: knot times must be strictly increasing")
@@ -173,61 +200,105 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
                         f"{sensor_mm[k]:.4f} .. {sensor_mm[k + 1]:.4f} mm (t = "
                         f"{times_s[k]:.4f} s), more than rig.max_velocity = "
                         f"{max_velocity:g} mm/s; lengthen the exposure")
-    if v[0] <= 0 or v[-1] <= 0:
-        end = "starts" if v[0] <= 0 else "ends"
-        raise PlanError(f"motion profile: it {end} at rest; the shutter must open and "
-                        f"close with the stage moving (drop the dwell knots)")
+    if np.any(v <= 0):
+        k = int(np.flatnonzero(v <= 0)[0])
+        raise PlanError(f"motion profile: the sensor rests at {sensor_mm[k]:.4f} mm from "
+                        f"t = {times_s[k]:.4f} to {times_s[k + 1]:.4f} s; a sweep moves "
+                        f"throughout the exposure (drop the dwell)")
     if v.size < 2:
         return float(v.max()), 0.0, 0.0
     dv = np.abs(np.diff(v))
-    acc = dv / (0.5 * (dt[:-1] + dt[1:]))
+    acc = dv / np.minimum(dt[:-1], dt[1:])
     j = int(np.argmax(acc))
     if acc[j] > acceleration * (1 + LIMIT_RTOL):
         raise PlanError(f"motion profile: the stage cannot follow it: the velocity changes "
                         f"from {v[j]:.4g} to {v[j + 1]:.4g} mm/s at {sensor_mm[j + 1]:.4f} mm "
-                        f"(t = {times_s[j + 1]:.4f} s), {acc[j]:.4g} mm/s^2, more than "
-                        f"rig.acceleration = {acceleration:g} mm/s^2")
+                        f"(t = {times_s[j + 1]:.4f} s) within {min(dt[j], dt[j + 1]):.4g} s, "
+                        f"{acc[j]:.4g} mm/s^2, more than rig.acceleration = "
+                        f"{acceleration:g} mm/s^2")
     return float(v.max()), float(acc.max()), float(np.max(dv) ** 2 / (8 * acceleration))
 
 
+def _first_crossings(times_s: np.ndarray, travel: np.ndarray, levels: np.ndarray) -> np.ndarray:
+    """When the (non-decreasing, piecewise-linear) ``travel`` first reaches each level."""
+    j = np.clip(np.searchsorted(travel, levels, side="left"), 1, travel.size - 1)
+    x0, x1 = travel[j - 1], travel[j]
+    f = np.where(x1 > x0, (levels - x0) / np.where(x1 > x0, x1 - x0, 1.0), 1.0)
+    return times_s[j - 1] + np.clip(f, 0.0, 1.0) * (times_s[j] - times_s[j - 1])
+
+
 def quantise_table(times_s: np.ndarray, travel_steps: np.ndarray, *, stage: str,
-                   max_step_rate: float | None, speed_unit: float, max_segment_steps: int
-                   ) -> tuple[tuple[int, ...], tuple[float, ...], tuple[int, ...]]:
+                   max_rate: float, speed_unit: float, max_segment_steps: int,
+                   max_segments: int
+                   ) -> tuple[tuple[int, ...], tuple[float, ...], tuple[int, ...], float]:
     """Whole steps per segment, and each segment's time as the controller runs it.
 
-    ``travel_steps``: the profile's travel from the open step at ``times_s`` (unrounded).
-    Returns (steps, durations s, driver values): Arduino durations in whole µs; Zaber
-    ``maxspeed`` data values (``speed_unit`` per microstep/s) and the durations they give.
+    ``travel_steps``: the profile's travel at ``times_s`` (steps, unrounded, increasing),
+    measured from where the shutter opens; the table starts from the open step, so its
+    shape is ``travel_steps - travel_steps[0]``. Segment boundaries lie where that shape
+    crosses a whole step next to each knot (the one crossed nearest in time: the
+    profile's own step times), so every segment's rate is the profile's mean velocity
+    between two of its step crossings, at most its peak: quantisation never asks for
+    more than the profile does. The last boundary is the exposure's end. Returns (steps, durations s, driver values, the
+    table's time at the last knot).
+
+    Arduino durations are whole µs (cumulative rounding), at least the firmware's
+    ``max_rate`` allows for their steps; Zaber segments get the ``maxspeed`` data value
+    (``speed_unit`` per microstep/s) that brings each boundary nearest its time given
+    the time the earlier segments took (no accumulated drift).
     """
-    cum = np.rint(travel_steps).astype(np.int64)
-    steps = np.diff(cum)
+    shape = np.asarray(travel_steps, dtype=float) - float(travel_steps[0])
+    t = np.asarray(times_s, dtype=float)
+    exposure = float(t[-1])
+    total = int(np.rint(shape[-1]))
+    if total < 1:
+        raise PlanError("motion profile: the stage moves less than one step during it")
+    # at each inner knot, the whole step (below or above it) crossed nearest in time:
+    # a boundary then sits on the profile, off its knot by less than one step's time at
+    # the faster of the two velocities, so the knot's bend moves it by under a step
+    inner, t_inner = shape[1:-1], t[1:-1]
+    below, above = np.floor(inner), np.ceil(inner)
+    t_below, t_above = _first_crossings(t, shape, below), _first_crossings(t, shape, above)
+    pick = np.abs(t_above - t_inner) < np.abs(t_below - t_inner)
+    levels = np.where(pick, above, below).astype(np.int64)
+    keep = (levels > 0) & (levels < total)
+    levels, first = np.unique(levels[keep], return_index=True)
+    bounds = np.concatenate([[0], levels, [total]]).astype(np.int64)
+    bt = np.concatenate([[0.0], np.where(pick, t_above, t_below)[keep][first], [exposure]])
+    # the last segment: rounding its steps up must not ask for more than the limit
+    if (bounds[-1] - bounds[-2]) / (bt[-1] - bt[-2]) > max_rate * (1 + LIMIT_RTOL):
+        bounds[-1] = int(np.floor(shape[-1]))
+        if bounds[-1] <= bounds[-2]:
+            bounds, bt = np.delete(bounds, -2), np.delete(bt, -2)
+    steps = np.diff(bounds)
+    if steps.size > max_segments:
+        raise PlanError(f"motion profile: {steps.size} segments of whole steps, more than "
+                        f"the {max_segments} a table holds")
     if np.any(steps > max_segment_steps):
         k = int(np.argmax(steps))
         raise PlanError(f"motion profile: segment {k} moves {steps[k]} steps, more than the "
                         f"{max_segment_steps} one segment holds; add knots")
-    if steps[0] < 1 or steps[-1] < 1:
-        raise PlanError("motion profile: its first and last segments must each move at "
-                        "least one step (the shutter opens and closes on a step)")
     if stage == "arduino":
-        us = np.diff(np.rint(np.asarray(times_s) * 1e6).astype(np.int64))
-        if np.any(us < 1):
-            raise PlanError("motion profile: a segment shorter than 1 µs (the board's timer)")
-        rate = steps * 1e6 / us
-        if max_step_rate is not None and np.any(rate > max_step_rate):
-            k = int(np.argmax(rate))
-            raise PlanError(f"motion profile: segment {k} needs {rate[k]:.1f} steps/s; the "
-                            f"Arduino controller runs at most {max_step_rate:g} steps/s")
-        return (tuple(int(s) for s in steps), tuple(float(u) * 1e-6 for u in us),
-                tuple(int(u) for u in us))
-    if np.any(steps < 1):
-        k = int(np.argmin(steps))
-        raise PlanError(f"motion profile: segment {k} moves no microstep (a dwell), which "
-                        f"a Zaber stream line cannot run; merge it with its neighbours")
-    dt = np.diff(np.asarray(times_s, dtype=float))
-    data = np.maximum(1, np.rint(steps / dt * speed_unit)).astype(np.int64)
-    durations = steps / (data / speed_unit)
-    return (tuple(int(s) for s in steps), tuple(float(d) for d in durations),
-            tuple(int(d) for d in data))
+        us = np.diff(np.rint(bt * 1e6).astype(np.int64))
+        least = np.ceil(steps * 1e6 / max_rate - 1e-9).astype(np.int64)
+        for k in range(us.size):          # µs rounding above the firmware's top rate
+            deficit = least[k] - us[k]
+            if deficit > 0:
+                us[k] = least[k]
+                if k + 1 < us.size and us[k + 1] - deficit >= least[k + 1]:
+                    us[k + 1] -= deficit
+        return (tuple(int(k) for k in steps), tuple(float(u) * 1e-6 for u in us),
+                tuple(int(u) for u in us), exposure)
+    data, durations, now = [], [], 0.0
+    top = int(np.floor(max_rate * speed_unit * (1 + LIMIT_RTOL)))
+    for k in range(steps.size):
+        want = max(bt[k + 1] - now, 1e-9)
+        d = int(min(max(1, round(steps[k] / want * speed_unit)), top))
+        data.append(d)
+        durations.append(steps[k] / (d / speed_unit))
+        now += durations[-1]
+    return (tuple(int(k) for k in steps), tuple(float(d) for d in durations),
+            tuple(data), exposure)
 
 
 def max_deviation(table_t: np.ndarray, table_x: np.ndarray, knot_t: np.ndarray,
