@@ -3,7 +3,11 @@ procedural family, each scene's source in its render tasks' parameters (so any i
 be made again alone), evaluated end to end; room datasets' options and parameters are
 what they were before the families existed."""
 
+import argparse
 import json
+import os
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -148,10 +152,19 @@ def test_a_scene_file_changed_after_planning_is_refused(tmp_path):
 
 
 def _regenerates_alone(root, manifest, name, tmp_path):
-    """An item made again from its manifest parameters alone has the recorded bytes."""
+    """An item made again from its manifest entry alone (the setup and the item's
+    parameters), in a fresh process with another hash seed, has the recorded bytes."""
     out = tmp_path / "again" / name
     out.parent.mkdir(parents=True, exist_ok=True)
-    tasks.render(TINY, out, **manifest["items"][name]["params"])
+    script = ("import json, sys\n"
+              "from mitsweep.config import setup_from_dict\n"
+              "from mitsweep.pipeline import tasks\n"
+              "m = json.load(open(sys.argv[1]))\n"
+              "tasks.render(setup_from_dict(m['setup']), sys.argv[3], "
+              "**m['items'][sys.argv[2]]['params'])\n")
+    env = dict(os.environ, PYTHONHASHSEED="12345")
+    subprocess.run([sys.executable, "-c", script, str(root / "manifest.json"), name, str(out)],
+                   check=True, env=env, timeout=600, capture_output=True)
     return sha256(out) == manifest["items"][name]["sha256"]
 
 
@@ -191,3 +204,23 @@ def test_xml_and_procedural_datasets_evaluate_end_to_end(tmp_path):
     assert len(psnrs) == 3  # three scene variations, not one scene three times
     # Any item can be made again alone, from its manifest entry: the same bytes.
     assert _regenerates_alone(tmp_path / "proc", manifest, "scene_002/pinhole.exr", tmp_path)
+
+
+def test_cli_family_options_make_the_dataset_options(tmp_path):
+    from mitsweep.cli import dataset as cli
+
+    p = argparse.ArgumentParser()
+    cli.add_arguments(p)
+    args = p.parse_args(["s.toml", "--out", "x", "--family", "procedural", "--scenes", "3",
+                         "--family-param", "objects=12", "--family-param", "shapes=sphere,cube",
+                         "--family-param", "env_scale=0.5"])
+    kw = cli._scene_options(args, TINY)
+    opts = DatasetOptions(**kw)
+    assert opts.scenes == 3 and opts.family == "procedural"
+    assert opts.family_params == resolve_params(objects=12, shapes="sphere,cube", env_scale=0.5)
+    folder = write_scenes(tmp_path / "scenes")
+    args = p.parse_args(["s.toml", "--out", "x", "--scenes-from", str(folder),
+                         "--scene-unit", "m"])
+    opts = DatasetOptions(**cli._scene_options(args, TINY))
+    assert opts.scenes == 2 and opts.family == "xml" and opts.scene_unit == "m"
+    assert opts.scene_files == scene_files_from(folder)
