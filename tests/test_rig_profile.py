@@ -435,7 +435,8 @@ def test_cli_capture_with_motion_file_against_simulator(rig_setup_file, sphere, 
 
 @pytest.mark.parametrize("case, message", [
     ("too fast", "cannot follow"),
-    ("too abrupt", "cannot follow"),
+    ("too abrupt", "mm/s^2"),
+    ("slow to fast", "within"),
     ("crosses focal length", "focal length"),
     ("empty", "empty table"),
     ("non-monotonic", "monotonic"),
@@ -448,9 +449,19 @@ def test_cli_bad_motion_exits_2_with_one_line_before_any_motion(rig_setup_file, 
     t, d, exposure = [0.0, 0.5, 1.0], [s0, 0.5 * (s0 + s1), s1], 0.7
     if case == "too fast":                       # ~14 mm/s > rig.max_velocity = 10
         exposure = 0.05
-    elif case == "too abrupt":                   # ~300 mm/s^2 > rig.acceleration = 100
-        d = [s0, s0 + 0.9 * (s1 - s0), s1]
-        exposure = 0.1
+    elif case == "too abrupt":                   # 9.4 -> 0.5 mm/s within 0.07 s:
+        d = [s0, s0 + 0.95 * (s1 - s0), s1]      # 127 mm/s^2 > rig.acceleration = 100
+        exposure = 0.14
+    elif case == "slow to fast":
+        # equal steps of sensor distance at 1, 0.06, 5, 5 mm/s: 0.06 -> 5 mm/s within the
+        # fast interval's 35 ms is 141 mm/s^2 (the file's check, spreading it over the
+        # two intervals' mean, sees 3.4 mm/s^2 and passes it: the plan refuses it)
+        step = (s1 - s0) / 4
+        dt = np.abs(step) / np.array([1.0, 0.06, 5.0, 5.0])
+        exposure = float(dt.sum())
+        t = np.concatenate([[0.0], np.cumsum(dt) / exposure]).tolist()
+        t[-1] = 1.0
+        d = (s0 + step * np.arange(5)).tolist()
     elif case == "crosses focal length":
         d = [f + 0.3, f + 0.05, f - 0.2]
     elif case == "empty":
