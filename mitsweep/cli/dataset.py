@@ -10,7 +10,8 @@ from .common import (UsageError, check_outputs, load_setup_arg, positive_float, 
                      print_json)
 
 NAME = "dataset"
-HELP = ("render a synthetic dataset: ground truth, focused, sweep and stopped images, depth "
+HELP = ("render a synthetic dataset of the built-in room, the procedural scene family or a "
+        "folder of Mitsuba scenes: ground truth, focused, sweep and stopped images, depth "
         "AOV, IPSF bank, noisy versions and EDOF images, with a manifest (resumable)")
 
 
