@@ -172,13 +172,50 @@ def test_traverse_exposes_parameters_and_updates_render():
     scene = _scene(_focalsweep(sensor_distance=I_DEFOCUS, f_number=4.0))
     params = mi.traverse(scene)
     keys = set(params.keys())
-    for k in ("to_world", "aperture_radius", "pixel_pitch", "sensor_distances"):
+    for k in ("to_world", "aperture_radius", "pixel_pitch", "sensor_distance"):
         assert f"sensor.{k}" in keys
-    params["sensor.sensor_distances"] = mi.Float([56.5])
+    params["sensor.sensor_distance"] = mi.Float([56.5])
     params.update()
     updated = _render(scene, 7)
     direct = _render(_scene(_focalsweep(sensor_distance=56.5, f_number=4.0)), 7)
     np.testing.assert_allclose(updated, direct, atol=1e-4)
+    # The key of earlier versions still works (an alias of the same variable).
+    params["sensor.sensor_distances"] = mi.Float([57.0])
+    params.update()
+    assert scene.sensors()[0].motion_span == pytest.approx((57.0, 57.0))
+
+
+@pytest.mark.parametrize("kind", ["linear", "trapezoidal", "tabulated"])
+def test_traverse_updates_of_the_sweep_equal_a_freshly_loaded_sweep(kind):
+    """Changing the sweep through mi.traverse renders what loading it directly renders."""
+    def sweep(start, end):
+        extra = {"profile": kind}
+        if kind == "trapezoidal":
+            extra["accel_fraction"] = 0.3
+        elif kind == "tabulated":
+            extra.update(times="0 0.5 1", positions=f"{start} {start + 0.3} {end}")
+        return _focalsweep(sensor_start=start, sensor_end=end, shutter_close=1.0,
+                           f_number=4.0, **extra)
+
+    scene = _scene(sweep(58.9, 58.2))
+    params = mi.traverse(scene)
+    if kind == "tabulated":
+        params["sensor.positions"] = mi.Float([57.0, 57.3, 58.0])
+    else:
+        params["sensor.sensor_start"] = mi.Float(57.0)
+        params["sensor.sensor_end"] = mi.Float(58.0)
+    params.update()
+    assert scene.sensors()[0].motion_span == pytest.approx((57.0, 58.0))
+    np.testing.assert_allclose(_render(scene, 7), _render(_scene(sweep(57.0, 58.0)), 7),
+                               atol=1e-4)
+
+
+def test_traverse_refuses_a_sweep_end_inside_the_focal_length():
+    scene = _scene(_focalsweep(sensor_start=58.9, sensor_end=58.2, shutter_close=1.0))
+    params = mi.traverse(scene)
+    params["sensor.sensor_end"] = mi.Float(49.0)
+    with pytest.raises(ValueError, match="focal"):
+        params.update()
 
 
 def test_sweep_blurs_between_its_end_focus_images():

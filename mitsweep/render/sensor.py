@@ -54,6 +54,58 @@ Importance for light tracing (:meth:`FocalSweepSensor.sample_direction`) samples
 aperture uniformly; the contribution is ``W(ω) / dist²`` with the pinhole importance
 ``W = 1 / (A cos³θ)``, ``A = W H p² / i(t)²`` the image area at unit distance, and the
 pixel found where the ray through the aperture point crosses the focal plane.
+
+Differentiation (``*_ad_*`` variants)
+-------------------------------------
+:func:`mitsuba.traverse` exposes the motion under the names of the plugin's own
+properties; these are differentiable in forward and reverse mode, the sensor distance
+``i(t)`` staying attached to them all the way into the ray origins and directions:
+
+.. list-table::
+   :header-rows: 1
+
+   * - motion
+     - differentiable keys
+     - how ``i(t)`` depends on them
+   * - fixed (``sensor_distance``)
+     - ``sensor_distance`` (alias ``sensor_distances``, the key of earlier versions)
+     - ``i = sensor_distance``
+   * - ``linear``, ``trapezoidal``
+     - ``sensor_start``, ``sensor_end``
+     - ``i = start + (end − start) g(t)``, ``g(t) = t`` or the trapezoid's normalised
+       shape (fixed by ``accel_fraction``)
+   * - ``tabulated``
+     - ``positions`` (all n knots; ``sensor_start``/``end`` are its first and last)
+     - linear between the two knots around t; the knot index and weight come from the
+       (detached) time by a binary search, the value from the differentiable knots
+
+Not differentiable: ``to_world`` (as in Mitsuba's own cameras), ``aperture_radius``,
+``pixel_pitch``, ``focal_length`` and the tabulated ``times``; ``accel_fraction`` is
+not exposed. Enabling a gradient on one of these (``dr.enable_grad(params[key])``)
+raises :class:`NotDifferentiableError` at ``params.update()`` or at the next render,
+instead of Mitsuba's warning and a zero derivative. The scalar variant has no AD.
+
+Usage::
+
+    params = mi.traverse(scene)
+    dr.enable_grad(params["sensor.sensor_end"])
+    params.update()
+    img = mi.render(scene, params, seed=1, seed_grad=2)
+    dr.forward(params["sensor.sensor_end"])     # dr.grad(img): dI/d(end), an image
+    # or: dr.backward(loss(img)); dr.grad(params["sensor.sensor_end"])
+
+Integrators: mitsweep's ``mirrorview`` (the built-in emissive scenes' integrator)
+differentiates through the mirror's reflections; Mitsuba's ``path``, ``direct`` and
+``direct_projective`` differentiate what the camera sees directly, but ``path`` drops the
+derivative after the first bounce (a silent zero for a scene seen through the mirror:
+its recorded loop does not carry the ray's gradient); ``prb``, ``prb_basic`` and
+``prb_projective`` detach the camera rays and raise (Mitsuba's "not attached to the AD
+graph"). The derivative is that of the image's continuous part: as
+for any camera parameter differentiated by plain AD, an edge (silhouette, a texture with
+nearest filtering) that moves across pixels as the sweep changes contributes a boundary
+term that is not included (``tests/test_render_sweep_grad.py`` checks the derivative
+against finite differences on a smoothly textured scene; ``examples/inverse_sweep.py``
+recovers a sweep end from an image).
 """
 
 from __future__ import annotations
@@ -72,10 +124,9 @@ __all__ = ["register", "motion_table", "NotDifferentiableError", "PLUGIN_NAME",
 logger = logging.getLogger(__name__)
 
 PLUGIN_NAME = "focalsweep"
-#: Trapezoidal and tabulated motions are resampled on this many uniform intervals of t
-#: and interpolated linearly in the kernel. Error: at most ``|Δv| h / 4`` at a kink of a
-#: tabulated profile (Δv the change of di/dt, mm per unit t; h = 1/65536), 4e-6 mm for
-#: Δv = 1 mm, about the float32 spacing at 58 mm; ``v h² / (8 a)`` on trapezoidal ramps.
+#: The trapezoidal motion's normalised shape is resampled on this many uniform intervals
+#: of t and interpolated linearly in the kernel: error ``v h² / (8 a)`` on its ramps
+#: (h = 1/65536). Tabulated motions are evaluated exactly (linear between their knots).
 MOTION_TABLE_SIZE = 65536
 
 _registered_for: set[str] = set()
