@@ -32,10 +32,11 @@ from mitsweep.config import SetupError, load_setup
 from mitsweep.optics import optimal_sweep_range
 from mitsweep.optics.motion import MotionProfile
 from mitsweep.optics.motion_file import save_motion_file
-from mitsweep.rig import (DeviceFault, PortLost, ProtocolError, ReplyTimeout, RigPorts,
+from mitsweep.rig import (DeviceError, DeviceFault, PortLost, ProtocolError, ReplyTimeout, RigPorts,
                           load_capture_record, measured_motion, plan_capture, run_capture)
 from mitsweep.rig.arduino import MAX_STEP_RATE, MAX_TABLE_SEGMENTS, ArduinoSweepController
 from mitsweep.rig.errors import PlanError
+from mitsweep.rig.sim.base import command
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
 from mitsweep.rig.testing import expected_protocol, fast_rig_setup
 from mitsweep.rig.zaber import SPEED_UNIT, ZaberStage
@@ -259,6 +260,35 @@ def test_arduino_table_with_a_wrong_total_fails_before_motion():
         with expected_protocol(lambda t: ArduinoSweepController(t, steps_per_mm=400),
                                exchanges) as board:
             board.load_table([40, 20], [100000, 100000])
+
+
+def test_a_protocol_2_board_runs_linear_sweeps_but_no_table():
+    exchanges = [(b"ID\n", b"OK ID mitsweep-sweep 1.1 2\n")]
+    with expected_protocol(lambda t: ArduinoSweepController(t, steps_per_mm=400),
+                           exchanges) as board:
+        assert board.identify() == "mitsweep-sweep 1.1 (protocol 2)"
+        with pytest.raises(DeviceError, match="no step-rate tables"):
+            board.load_table([40], [100000])     # nothing sent
+
+
+class Protocol2Board(ArduinoModel):
+    """Firmware 1.1: the watchdog, no tables."""
+
+    @command("ID", nargs=0)
+    def _cmd_id(self, nums, now):
+        return [self._line("OK ID mitsweep-sweep 1.1 2")]
+
+
+def test_profile_capture_on_a_protocol_2_board_fails_before_any_motion(sphere, profile,
+                                                                        tmp_path):
+    plan = plan_capture(sphere, motion=profile, exposure_s=0.7)
+    out = tmp_path / "capture.json"
+    with PtyDevice(Protocol2Board()) as dev:
+        with pytest.raises(DeviceError, match="flash scripts/firmware"):
+            run_capture(sphere, RigPorts(arduino=dev.port), out=out, plan=plan)
+        words = [text.split()[0] for _, d, text in dev.model.log if d == "rx"]
+    assert not {"HOME", "MOVE", "TABLE", "TSWEEP"} & set(words), words
+    assert load_capture_record(out)["status"] == "error"
 
 
 def test_zaber_stream_is_stored_then_started_by_one_command():

@@ -51,10 +51,9 @@ def test_arduino_ready_and_identify():
 
 @pytest.mark.parametrize("reply, error", [
     (b"OK ID other-board 1.0 1\n", "not 'mitsweep-sweep'"),
-    # a board still running protocol-1 firmware (no watchdog) is refused, and one
-    # running protocol 2 (no step-rate tables)
-    (b"OK ID mitsweep-sweep 1.0 1\n", "protocol version 1, this driver speaks 3"),
-    (b"OK ID mitsweep-sweep 1.1 2\n", "protocol version 2, this driver speaks 3"),
+    # a board still running protocol-1 firmware (no watchdog) is refused
+    (b"OK ID mitsweep-sweep 1.0 1\n", "protocol version 1, this driver speaks 2 or 3"),
+    (b"OK ID mitsweep-sweep 1.3 4\n", "protocol version 4, this driver speaks 2 or 3"),
     (b"OK IDENT mitsweep-sweep 1.0 1\n", "unexpected reply"),
     (b"OK ID mitsweep-sweep 1.0\n", "unexpected reply"),
 ])

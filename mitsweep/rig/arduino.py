@@ -55,7 +55,9 @@ open step on the board's µs clock, whole microseconds, no drift), closes the sh
 the table's last step (``close`` must be ``open`` ± the table's total steps), cruises at
 the last segment's rate and ramps down to rest at ``target``. The board checks that
 both ramps fit (``ERR RANGE``); what rate changes the stage can follow is the plan's
-business (:mod:`mitsweep.rig.profile`). Linear sweeps (``SWEEP``) are unchanged. Events are
+business (:mod:`mitsweep.rig.profile`). Linear sweeps (``SWEEP``) are unchanged, and
+the driver still runs them on a protocol-2 board (firmware 1.1); a motion profile on one
+is refused after ``ID``, before any motion (:meth:`ArduinoSweepController.require_tables`). Events are
 ``EV <NAME> <t_us> <pos> [<detail>]``; ``EV FAULT <t> <pos> <CODE>`` (e.g. HOME_SWITCH,
 LIMIT) means the board has already released the shutter and stopped the motor.
 
@@ -84,12 +86,17 @@ from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, XorChecksum
 __all__ = ["ArduinoSweepController", "BoardEvent", "BoardClock", "FIRMWARE_NAME",
            "PROTOCOL_VERSION", "MAX_STEP_RATE", "step_rate", "step_accel", "EVENT_NAMES", "ERROR_CODES",
            "POS_EVENT_PERIOD_US", "MAX_WATCHDOG_MS", "HEARTBEATS_PER_TIMEOUT",
-           "MAX_TABLE_SEGMENTS", "MAX_SEGMENT_STEPS"]
+           "MAX_TABLE_SEGMENTS", "MAX_SEGMENT_STEPS", "SUPPORTED_PROTOCOLS", "TABLE_PROTOCOL"]
 
 logger = logging.getLogger(__name__)
 
 FIRMWARE_NAME = "mitsweep-sweep"
 PROTOCOL_VERSION = 3
+#: Protocols this driver speaks: 2 (linear sweeps, watchdog) and 3 (also step-rate tables).
+#: Protocol 1 (no watchdog) is refused: a killed host could leave the rig moving.
+SUPPORTED_PROTOCOLS = (2, 3)
+#: The first protocol with step-rate tables.
+TABLE_PROTOCOL = 3
 #: Highest step rate the firmware generates reliably (steps/s), polling micros() on a 16 MHz Uno.
 MAX_STEP_RATE = 4000
 #: Segments a step-rate table holds (``TABLE <n>``): 6 bytes each of the Uno's 2 KiB SRAM
@@ -179,6 +186,7 @@ class ArduinoSweepController(Stage, Shutter):
         self.shutter_open: bool | None = None   # as last reported by STATE
         self.stopped_at: int | None = None      # step position of the last STOP
         self.heartbeat_s: float | None = None   # PING period while waiting; None: off
+        self.protocol: int | None = None        # as the board identified itself
 
     # -- link ---------------------------------------------------------------------------
     def wait_ready(self, timeout_s: float = 3.0) -> bool:
@@ -215,10 +223,20 @@ class ArduinoSweepController(Stage, Shutter):
         name, fw, proto = fields
         if name != FIRMWARE_NAME:
             raise ProtocolError(f"{self.name}: device is {name!r}, not {FIRMWARE_NAME!r}")
-        if proto != str(PROTOCOL_VERSION):
+        if proto not in {str(v) for v in SUPPORTED_PROTOCOLS}:
+            speaks = " or ".join(str(v) for v in SUPPORTED_PROTOCOLS)
             raise ProtocolError(f"{self.name}: protocol version {proto}, this driver speaks "
-                                f"{PROTOCOL_VERSION}; update the firmware or mitsweep")
+                                f"{speaks}; update the firmware or mitsweep")
+        self.protocol = int(proto)
         return f"{name} {fw} (protocol {proto})"
+
+    def require_tables(self) -> None:
+        """Refuse a board whose firmware (protocol 2) has no step-rate tables."""
+        if self.protocol is not None and self.protocol < TABLE_PROTOCOL:
+            raise DeviceError(f"{self.name}: the firmware speaks protocol {self.protocol}, "
+                              f"which has no step-rate tables (TABLE/SEG/TSWEEP, protocol "
+                              f"{TABLE_PROTOCOL}): flash scripts/firmware/mitsweep_sweep to "
+                              f"run a motion profile")
 
     def state(self) -> StageState:
         t, pos, homed, moving, shutter = self._ints(self._query("STATE", n_fields=5), "STATE")
@@ -260,6 +278,7 @@ class ArduinoSweepController(Stage, Shutter):
         segment; the board acknowledges every segment with its running totals of steps
         and µs, which must be the host's (a lost, repeated or altered segment fails here,
         before any motion)."""
+        self.require_tables()
         steps, durations_us = list(steps), list(durations_us)
         n = len(steps)
         if not 1 <= n <= MAX_TABLE_SEGMENTS or len(durations_us) != n:

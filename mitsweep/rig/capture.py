@@ -259,6 +259,8 @@ def _prepare(dev: _Devices, plan: CapturePlan, setup, ports: RigPorts,
     if ports.checksums:
         a.enable_checksums()
     record.devices["arduino"] = a.identify()
+    if plan.profile is not None and dev.zaber is None:
+        a.require_tables()                  # before any motion: a protocol-2 board
     if dev.zaber is not None:
         if ports.checksums:
             dev.zaber.enable_checksums()
