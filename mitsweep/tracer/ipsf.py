@@ -63,6 +63,7 @@ _BATCH_DEPOSIT_RAYS = 1 << 18
 _PILOT_LOG2 = 14
 _PILOT = 1 << _PILOT_LOG2
 _PILOT_KEYS = ("landed_free", "a", "b")
+_PILOT_RAY_BYTES = 2 * (1 + 4 + 4) + 8 + 8 + 1
 _SENSOR_TABLE = 4097
 #: Chords per ramp of a trapezoidal motion in the exact method's time CDF: its sensor
 #: distance then deviates from the parabola by < |Δi| a / (8·256² (1 − a)) mm
@@ -123,6 +124,8 @@ def fit_sampling_boxes(geoms, *, seeds, double: bool = False, max_rounds: int = 
         Per source ``(params, info)``, or the ``ValueError`` its fit raised.
     """
     geoms = list(geoms)
+    # a round's three arrays per ray, in Dr.Jit (float32, bool) and as float64 NumPy copies
+    check_allocation(f"pilot rounds of {len(geoms)} sources", len(geoms) * _PILOT * _PILOT_RAY_BYTES)
     results: list = [None] * len(geoms)
     pending = {}
     for j, (geom, seed) in enumerate(zip(geoms, seeds)):
