@@ -73,6 +73,37 @@ def setup_file(setup: str, pitch: str, out: Path) -> Path:
     return path
 
 
+def fov_scores(directory: Path) -> tuple[float | None, dict]:
+    """PSNR of every image of scene 0 inside the part of the mirror's image that the
+    radial bank covers (r <= its last radius: the design FOV; the mask reaches the
+    mirror's rim beyond it, where the sweep was not designed and no kernel was traced).
+    ``(None, {})`` for a grid bank."""
+    import numpy as np
+
+    from mitsweep.deconv import psnr
+    from mitsweep.deconv.kernels import radii_px
+    from mitsweep.io.bank import load_bank
+    from mitsweep.optics.pixels import optical_center_px
+    from mitsweep.pipeline.tasks import read_rgb, white_level
+
+    bank = load_bank(directory / "bank.npz")
+    if bank.kind != "radial":
+        return None, {}
+    scene = directory / "scene_000"
+    gt, chans, _ = read_rgb(scene / "pinhole.exr")
+    mask = chans["mask.Y"] > 0.5
+    level = white_level(gt, chans["mask.Y"])
+    r_fov = float(radii_px(bank).max())
+    cy, cx = optical_center_px(mask.shape)
+    yy, xx = np.mgrid[:mask.shape[0], :mask.shape[1]]
+    inside = mask & (np.hypot(yy - cy, xx - cx) <= r_fov)
+    out = {}
+    for path in sorted(scene.glob("*.exr")):
+        if path.stem != "pinhole":
+            out[path.stem] = psnr(read_rgb(path)[0] / level, gt / level, mask=inside)
+    return r_fov, out
+
+
 def _images(methods: list[str]) -> list[tuple[str, str, str]]:
     """(row label, light, item stem) of every image the tables show."""
     rows = []
@@ -96,31 +127,36 @@ def _entry(scene: dict, stem: str) -> dict | None:
             "per_radius_ssim": pr.get("ssim"), "radius_px": pr.get("radius_px")}
 
 
-def tables(results: dict, methods_of: dict) -> tuple[str, dict]:
-    """Markdown and JSON of the study from ``{key: evaluate's JSON}``."""
+def tables(results: dict, methods_of: dict, fov: dict) -> tuple[str, dict]:
+    """Markdown and JSON of the study from ``{key: evaluate's JSON}`` and
+    ``{key: fov_scores}``."""
     md, js = [], {}
     summary = ["| setup | pitch | light | focused | F11 | best EDOF (method) | EDOF − F11 | "
                "EDOF − focused |", "|---|---|---|---|---|---|---|---|"]
     for key, res in results.items():
         setup, pitch = key
         scene = next(iter(res["scenes"].values()))
+        r_fov, in_fov = fov.get(key, (None, {}))
         rows = {}
         for label, light, stem in _images(methods_of[key]):
             e = _entry(scene, stem)
             if e is not None:
-                rows[stem] = dict(e, label=label, light=light)
+                rows[stem] = dict(e, label=label, light=light, psnr_fov=in_fov.get(stem))
         radius = next((r["radius_px"] for r in rows.values() if r["radius_px"]), [])
         js[f"{setup}@{pitch}"] = {"setup": setup, "pitch": pitch, "images": rows,
-                                  "mirror_radius_px": scene.get("mirror_radius_px")}
+                                  "mirror_radius_px": scene.get("mirror_radius_px"),
+                                  "fov_radius_px": r_fov}
         head = " / ".join(f"{r:.0f}" for r in radius)
+        fov_head = f"PSNR r ≤ {r_fov:.0f} px (FOV)" if r_fov else "PSNR in FOV"
         md += [f"\n### {setup}, pitch {pitch}\n",
-               f"| image | light | PSNR dB | SSIM | PSNR per radius ({head} px) |",
-               "|---|---|---|---|---|"]
+               f"| image | light | PSNR dB | SSIM | {fov_head} | PSNR per radius ({head} px) |",
+               "|---|---|---|---|---|---|"]
         for stem, r in rows.items():
             per = " / ".join("–" if v is None or v != v else f"{v:.1f}"
                              for v in (r["per_radius_psnr"] or []))
+            f = "–" if r["psnr_fov"] is None else f"{r['psnr_fov']:.2f}"
             md.append(f"| {r['label']} | {r['light']} | {r['psnr']:.2f} | {r['ssim']:.3f} "
-                      f"| {per} |")
+                      f"| {f} | {per} |")
         focused = rows.get("focused")
         for light in ["none", *LUX]:
             suffix = "" if light == "none" else f"_{light}lux"
@@ -146,6 +182,8 @@ def main(argv=None) -> int:
     ap.add_argument("--pitches", nargs="+", default=["demo", str(PAPER_PITCH_MM)],
                     help="'demo' (the scene file's) and/or pitches in mm (default: demo "
                          f"{PAPER_PITCH_MM})")
+    ap.add_argument("--fine-setups", nargs="+", choices=SETUPS,
+                    help="setups at pitches other than demo (default: --setups)")
     ap.add_argument("--scenes", type=int, default=1)
     ap.add_argument("--spp", nargs=4, default=["16", "16", "64", "16"],
                     metavar=("PINHOLE", "FOCUSED", "SWEEP", "STOPPED"))
@@ -164,9 +202,9 @@ def main(argv=None) -> int:
                 ok = False
             if not ok:
                 ap.error(f"--pitches: 'demo' or a pitch in mm > 0, got {p!r}")
-    results, methods_of, seconds = {}, {}, {}
+    results, methods_of, seconds, fov = {}, {}, {}, {}
     for pitch in args.pitches:
-        for setup in args.setups:
+        for setup in args.setups if pitch == "demo" else (args.fine_setups or args.setups):
             key = (setup, pitch)
             methods = args.methods if pitch == "demo" else args.fine_methods
             methods_of[key] = methods.split(",")
@@ -180,8 +218,9 @@ def main(argv=None) -> int:
             _run(cmd)
             results[key] = json.loads(_run(["evaluate", str(out), "--json",
                                             "--out", str(out / "evaluation.json")]))
+            fov[key] = fov_scores(out)
             seconds[f"{setup}@{pitch}"] = time.perf_counter() - t0
-    text, js = tables(results, methods_of)
+    text, js = tables(results, methods_of, fov)
     meta = {"spp": dict(zip(("pinhole", "focused", "sweep", "stopped"), map(int, args.spp))),
             "scenes": args.scenes, "seconds": seconds}
     (args.out / "study.md").write_text(text, encoding="utf-8")

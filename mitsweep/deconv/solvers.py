@@ -233,20 +233,24 @@ class _PolarProblem:
             # the divergence guard of _run_hqs catches what that can grow
             lap = (2 * np.sin(np.pi * p) / self.dr) ** 2 + \
                 (2 * np.sin(np.pi * m / self.n_a) / (b.radius * dth)) ** 2
-            # the first step's: the natural prior's |2πf|², as polar Wiener's filter
-            lap0 = (2 * np.pi * p / self.dr) ** 2 + (m / b.radius) ** 2
             self.cache.append((np.conj(b.H) * Y, (np.abs(b.H) ** 2).astype(dt),
-                               lap.astype(dt), lap0.astype(dt), off))
+                               lap.astype(dt), off))
 
     def xstep(self, v, beta):
         spec_v = None if v is None else sfft.rfft(v, axis=1, workers=-1)
         acc = np.zeros_like(self.spec_y)
-        for b, (HY, H2, lap, lap0, off) in zip(self.bands, self.cache):
+        for b, (HY, H2, lap, off) in zip(self.bands, self.cache):
             num = HY.copy()
             if spec_v is not None:
                 ext, _ = _sym_ext(spec_v[b.s0:b.s1, :b.mc], b.L)
                 num += self.dt.type(beta) * sfft.fft(ext, axis=0, workers=-1)
-            num /= H2 + self.dt.type(beta) * (lap if spec_v is not None else lap0)
+            else:
+                # the first step: the natural prior's |2πf|², as polar Wiener's filter
+                # (the difference symbol above regularises high frequencies 2.5x less)
+                p = sfft.fftfreq(b.L)[:, None]
+                m = np.arange(b.mc)[None, :]
+                lap = ((2 * np.pi * p / self.dr) ** 2 + (m / b.radius) ** 2).astype(self.dt)
+            num /= H2 + self.dt.type(beta) * lap
             u = sfft.ifft(num, axis=0, workers=-1, overwrite_x=True)
             w = b.weights[:, None]
             acc[b.lo:b.hi, :b.mc] += w * u[b.lo - b.s0 + off:b.hi - b.s0 + off]
@@ -294,11 +298,10 @@ class _TileProblem:
             fy = sfft.fftfreq(M).astype(dt)[:, None]
             fx = sfft.rfftfreq(N).astype(dt)[None, :]
             lap = (2 * np.sin(np.pi * fy)) ** 2 + (2 * np.sin(np.pi * fx)) ** 2
-            lap0 = (2 * np.pi) ** 2 * (fy * fy + fx * fx)    # the first step's (Wiener's)
             HY = np.conj(Hk) * sfft.rfft2(ext, workers=-1)
             self.tiles.append((y0, y1, x0, x1, None if win is None else win.astype(dt),
                                (M, N), oy, ox, HY, (np.abs(Hk) ** 2).astype(dt),
-                               lap.astype(dt), lap0.astype(dt)))
+                               lap.astype(dt)))
 
     @staticmethod
     def _ext(a, shape):
@@ -311,12 +314,16 @@ class _TileProblem:
         out = np.zeros(self.shape, dtype=self.dt)
         vpad = None if v is None else np.pad(v, m, mode="symmetric")
         b = self.dt.type(beta)
-        for y0, y1, x0, x1, win, (M, N), oy, ox, HY, H2, lap, lap0 in self.tiles:
+        for y0, y1, x0, x1, win, (M, N), oy, ox, HY, H2, lap in self.tiles:
             num = HY.copy()
             if vpad is not None:
                 ext, _, _ = self._ext(vpad[y0:y1 + 2 * m, x0:x1 + 2 * m], (M, N))
                 num += b * sfft.rfft2(ext, workers=-1)
-            num /= H2 + b * (lap if vpad is not None else lap0)
+            else:                   # the first step: the natural prior's |2πf|², as Wiener's
+                fy = sfft.fftfreq(M)[:, None]
+                fx = sfft.rfftfreq(N)[None, :]
+                lap = ((2 * np.pi) ** 2 * (fy * fy + fx * fx)).astype(self.dt)
+            num /= H2 + b * lap
             u = sfft.irfft2(num, s=(M, N), workers=-1)[oy + m:oy + m + y1 - y0,
                                                      ox + m:ox + m + x1 - x0]
             out[y0:y1, x0:x1] += u if win is None else win * u
