@@ -289,7 +289,7 @@ def _make_class():
                 opaque += [self.m_times, self.m_positions]
             dr.make_opaque(*opaque)
 
-        def _fixed_parameters(self):
+        def _non_differentiable_parameters(self):
             """(name, value) of the parameters exposed as non-differentiable."""
             out = [("to_world", self.m_to_world), ("aperture_radius", self.m_aperture),
                    ("pixel_pitch", self.m_pitch), ("focal_length", self.m_f)]
@@ -297,16 +297,17 @@ def _make_class():
                 out.append(("times", self.m_times))
             return out
 
-        def _refuse_gradients_of_fixed_parameters(self):
+        def _refuse_gradients_of_non_differentiable(self):
             """Raise if a non-differentiable parameter was given a gradient: Mitsuba would
-            only log a warning and return a zero derivative."""
-            for name, value in self._fixed_parameters():
+            only log a warning, and the derivative would be zero or unchecked."""
+            if self._scalar:
+                return
+            for name, value in self._non_differentiable_parameters():
                 if dr.grad_enabled(value):
                     allowed = ", ".join(self.differentiable_parameters())
                     raise NotDifferentiableError(
-                        f"focalsweep: {name} is not differentiable (its gradient would "
-                        f"be silently zero); with profile {self.motion_kind!r} the "
-                        f"differentiable parameters are: {allowed}")
+                        f"focalsweep: {name} is not differentiable; with motion "
+                        f"{self.motion_kind!r} the differentiable parameters are: {allowed}")
 
         # -- geometry -----------------------------------------------------------------
         def _sensor_distance(self, time):
@@ -360,7 +361,7 @@ def _make_class():
             return u, v
 
         def _rays(self, time, sample1, sample2, sample3, active, differentials):
-            self._refuse_gradients_of_fixed_parameters()
+            self._refuse_gradients_of_non_differentiable()
             wavelengths, wav_weight = self.sample_wavelengths(
                 dr.zeros(mi.SurfaceInteraction3f), sample1, active)
             i = self._sensor_distance(time)
@@ -399,7 +400,7 @@ def _make_class():
 
         def sample_direction(self, it, sample, active=True):
             """Connect a scene point to a sampled aperture point (for light tracing)."""
-            self._refuse_gradients_of_fixed_parameters()
+            self._refuse_gradients_of_non_differentiable()
             to_world = self.world_transform()
             ref = to_world.inverse() @ it.p
             i = self._sensor_distance(it.time)
@@ -464,7 +465,7 @@ def _make_class():
             super().parameters_changed(keys)
             if self._scalar:
                 return
-            self._refuse_gradients_of_fixed_parameters()
+            self._refuse_gradients_of_non_differentiable()
             sizes = [("sensor_start", self.m_start, 1), ("sensor_end", self.m_end, 1)]
             if self.motion_kind == "tabulated":
                 sizes += [("positions", self.m_positions, len(self._positions)),
