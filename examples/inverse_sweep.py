@@ -9,14 +9,22 @@ span and minimises the image L2 loss
 
 with Adam (``mi.ad.Adam``), the gradient ``dL/de`` coming from reverse-mode
 differentiation of the render (``dr.backward``) through the sensor's differentiable
-``sensor_end`` parameter. Each step renders with fresh seeds (primal and gradient
-seeds differ, so ``2 (I − T) · dI/de`` is an unbiased gradient of the expected
-loss); the estimate is the mean of the last quarter of the iterates.
+``sensor_end`` parameter, or with Gauss-Newton steps ``e ← e − Σ (I − T) J / Σ J²``,
+the Jacobian image ``J = dI/de`` coming from forward mode (``dr.forward``). Each step
+renders with fresh seeds (primal and gradient seeds differ, so ``2 (I − T) · dI/de``
+is an unbiased gradient of the expected loss); the estimate is the mean of the last
+half of the iterates. One 32 px, 32 spp render alone fixes the end to about ±10 µm,
+so the averaging matters.
 
 Run::
 
-    python examples/inverse_sweep.py                # 48 px, 60 steps, ~1 min on 2 cores
-    python examples/inverse_sweep.py --json         # the result as JSON
+    python examples/inverse_sweep.py                          # Adam, 48 px, 80 steps
+    python examples/inverse_sweep.py --method gauss-newton --steps 30
+    python examples/inverse_sweep.py --json                   # the result as JSON
+
+Measured (2 cores shared with other jobs, so the times are upper bounds): Adam ends
+1.5 µm from the true end 58.4 mm (3 % of the initial 48 µm error, 0.12 % of the 1.2 mm
+span) in 54 s; Gauss-Newton 0.3 µm (0.6 %) in 30 s.
 
 Needs an ``*_ad_*`` Mitsuba variant (the default ``llvm_ad_rgb`` / ``cuda_ad_rgb``).
 """
