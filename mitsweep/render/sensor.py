@@ -94,13 +94,18 @@ Usage::
     dr.forward(params["sensor.sensor_end"])     # dr.grad(img): dI/d(end), an image
     # or: dr.backward(loss(img)); dr.grad(params["sensor.sensor_end"])
 
+The gradient pass draws its samples from ``seed_grad``: a finite-difference check with
+common random numbers renders with ``seed=seed_grad``.
+
 Integrators: mitsweep's ``mirrorview`` (the built-in emissive scenes' integrator)
 differentiates through the mirror's reflections; Mitsuba's ``path``, ``direct`` and
 ``direct_projective`` differentiate what the camera sees directly, but ``path`` drops the
-derivative after the first bounce (a silent zero for a scene seen through the mirror:
-its recorded loop does not carry the ray's gradient); ``prb``, ``prb_basic`` and
+derivative after the first bounce (measured: exactly zero for a scene seen through a
+mirror, with symbolic or evaluated loops); ``prb``, ``prb_basic`` and
 ``prb_projective`` detach the camera rays and raise (Mitsuba's "not attached to the AD
-graph"). The derivative is that of the image's continuous part: as
+graph"). Light tracing (``ptracer``, through :meth:`FocalSweepSensor.sample_direction`)
+is not covered: there the sweep moves the pixel a sample lands in, a derivative plain
+AD does not give. The derivative is that of the image's continuous part: as
 for any camera parameter differentiated by plain AD, an edge (silhouette, a texture with
 nearest filtering) that moves across pixels as the sweep changes contributes a boundary
 term that is not included (``tests/test_render_sweep_grad.py`` checks the derivative
