@@ -293,7 +293,7 @@ def test_profile_capture_on_a_protocol_2_board_fails_before_any_motion(sphere, p
 
 def test_zaber_stream_is_stored_then_started_by_one_command():
     ok = b"@01 0 OK IDLE -- 0\r\n"
-    sent = [b"stream 1 setup disable", b"stream 1 buffer 1 erase",
+    sent = [b"stream 1 setup disable", b"stream buffer 1 erase",
             b"stream 1 setup store 1 1", b"stream 1 set tanaccel 164",
             b"stream 1 set maxspeed 1638", b"stream 1 line abs 2000",
             b"stream 1 set maxspeed 3277", b"stream 1 line abs 4000",

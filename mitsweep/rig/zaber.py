@@ -226,7 +226,7 @@ class ZaberStage(Stage):
         1 set maxspeed <v>`` and ``stream 1 line abs <target>``; ``accel`` (an ``accel``
         data value) is the stream's ``tanaccel``. Sent as (Zaber ASCII protocol, streams)::
 
-            /1 0 stream 1 buffer 1 erase
+            /1 0 stream buffer 1 erase
             /1 0 stream 1 setup store 1 1
             /1 0 stream 1 set tanaccel <accel>
             /1 0 stream 1 set maxspeed <v>      (each line)
@@ -237,7 +237,7 @@ class ZaberStage(Stage):
         s, b = STREAM_ID, STREAM_BUFFER
         # a stream left live (or in error) by an earlier capture: disable it first
         self.command(f"stream {s} setup disable", axis=0, allow_rejection=True)
-        self.command(f"stream {s} buffer {b} erase", axis=0)
+        self.command(f"stream buffer {b} erase", axis=0)
         self.command(f"stream {s} setup store {b} 1", axis=0)
         self.command(f"stream {s} set tanaccel {int(accel)}", axis=0)
         for target, speed in lines:

@@ -191,8 +191,15 @@ class ZaberModel(Model):
 
     @command("stream", nargs=None)
     def _stream(self, args, now):
-        """``stream 1 ...``: buffer erase, setup store/live/disable, set maxspeed/tanaccel,
+        """``stream buffer 1 erase`` and ``stream 1 ...``: setup store/live/disable, set maxspeed/tanaccel,
         line abs, call."""
+        if args[:1] == ["buffer"] and len(args) == 3 and args[2] == "erase":
+            # ``stream buffer <b> erase``: a device-scope command, no stream number
+            try:
+                self.buffers.pop(int(args[1]), None)
+            except ValueError:
+                return False, "BADDATA"
+            return True, "0"
         try:
             words = [args[0], *args[1:]]
             if int(words[0]) != 1:
@@ -202,9 +209,6 @@ class ZaberModel(Model):
         rest = words[1:]
         mode, buffer = self.stream_mode
         try:
-            if rest[:1] == ["buffer"] and rest[2:] == ["erase"]:
-                self.buffers.pop(int(rest[1]), None)
-                return True, "0"
             if rest[:2] == ["setup", "store"] and len(rest) == 4 and rest[3] == "1":
                 self.stream_mode = ("store", int(rest[2]))
                 self.buffers[int(rest[2])] = []
