@@ -15,6 +15,15 @@ importing this module keeps its own matplotlib state.
 - :func:`plot_bank` — an IPSF bank across the field and over depths (Fig. 4–5).
 - :func:`plot_table1` — the paper's Table 1 as bar charts.
 - :func:`plot_per_radius` — PSNR per radius of an evaluated dataset.
+
+The paper's figures as ``mitsweep figures`` draws them (:mod:`mitsweep.pipeline.figures`
+computes their data); each takes one path or a sequence of paths (one per format):
+
+- :func:`plot_psf_planes` — PSFs across the mirror at several focal planes (Fig. 3).
+- :func:`plot_ipsf_depths` — IPSFs across the mirror, cross-sections over depths (Fig. 4).
+- :func:`plot_sweep_ranges` — cross-sections for several sweep ranges (Fig. 5).
+- :func:`plot_pipeline` — the processing pipeline step by step (Fig. 8).
+- :func:`plot_insets` — images side by side with magnified, labelled regions (Figs. 9, 10).
 """
 
 from __future__ import annotations
@@ -30,7 +39,8 @@ import numpy as np
 from .io.atomic import atomic_path
 
 __all__ = ["check_figure_path", "new_figure", "save_figure", "plot_focal_surfaces",
-           "plot_ipsf", "plot_bank", "plot_table1", "plot_per_radius"]
+           "plot_ipsf", "plot_bank", "plot_table1", "plot_per_radius", "plot_psf_planes",
+           "plot_ipsf_depths", "plot_sweep_ranges", "plot_pipeline", "plot_insets"]
 
 logger = logging.getLogger(__name__)
 
@@ -138,23 +148,27 @@ def plot_focal_surfaces(setup, sweep, path: str | Path,
     for d in ds:
         c = next(colors, "k")
         if d == 0:
-            ax.plot(p[ok, 0], p[ok, 2], "-", color=c, lw=1, label="depth 0 mm")
+            ax.plot(p[ok, 0], p[ok, 2], "-", color=c, lw=1, label="depth 0 (on the mirror)")
             continue
         dm, dsg = focal_distances(setup, xs[ok], d)
         for dist, style, nm in ((dm, "-", "meridional"), (dsg, "--", "sagittal")):
             q = p[ok] - dist[:, None] * ray.to_lens[ok]
-            ax.plot(q[:, 0], q[:, 2], style, color=c, lw=1, label=f"{nm}, depth {d:g} mm")
+            ax.plot(q[:, 0], q[:, 2], style, color=c, lw=1, label=f"{nm}, {_depth_label(d)}")
     vd = setup.mirror.vertex_distance
     for f, lab in ((sweep.focus_min, "focus min"), (sweep.focus_max, "focus max")):
         ax.axhline(vd - f, color="0.5", lw=0.6, ls=":")
-        ax.text(xs[0], vd - f, f" {lab} {f:.1f} mm", fontsize=7, va="bottom")
+        # Right of the axes, level with its line: inside, every place along the line
+        # is near a curve (the sweep's ends touch the focal surfaces by definition).
+        ax.annotate(f" {lab}\n {f:.1f} mm", (1.0, vd - f), xycoords=("axes fraction", "data"),
+                    fontsize=7, va="center", ha="left", annotation_clip=False)
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("z (mm), camera above")
     ax.set_aspect("equal")
     ax.set_title(f"{setup.name}: focal surfaces (FOV {sweep.fov_deg:g}°)")
-    # Outside the axes: inside, every corner holds a curve or a focus label.
-    _legend_outside(ax)
-    return save_figure(fig, path)
+    # Below the axes: inside, every corner holds a curve; the right holds the focus labels.
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncols=3,
+              borderaxespad=0.0, framealpha=1.0)
+    return _save_all(fig, path)
 
 
 def _thumbnail(ax, kernel, pitch_um: float, title: str):
@@ -317,7 +331,7 @@ def plot_table1(result: dict, path: str | Path) -> Path:
     a1.set_ylabel("kurtosis (Gaussian = 3, dotted)")
     a1.set_xlabel("sweep range (focus distances)")
     _legend_outside(a1)
-    return save_figure(fig, path)
+    return _save_all(fig, path)
 
 
 #: Colour of each image kind in :func:`plot_per_radius` (noisy versions share it).
@@ -397,3 +411,368 @@ def plot_per_radius(results: dict, path: str | Path) -> Path:
               ncols=math.ceil(len(key) / LEGEND_ROWS), loc="upper left",
               bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, framealpha=1.0)
     return save_figure(fig, path)
+
+
+# -- the paper's figures (mitsweep figures: mitsweep.pipeline.figures) ------------------
+
+#: Line style and marker of each depth's cross-section in Figs. 4 and 5, nearest first.
+DEPTH_STYLES = (("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"))
+#: Colours of the radial and tangential cross-sections (the paper's blue and red).
+DIRECTION_COLORS = {"radial": "tab:blue", "tangential": "tab:red"}
+#: Colour of the rectangles marking the magnified regions of Figs. 9 and 10.
+INSET_COLORS = ("#ffd400", "#00e5ff", "#ff3dd8", "#7CFC00")
+
+
+def _paths(path) -> list[Path]:
+    """One path or a sequence of them (one figure written in several formats)."""
+    if isinstance(path, (str, Path)):
+        return [Path(path)]
+    return [Path(p) for p in path]
+
+
+def _save_all(fig, path):
+    """Write ``fig`` to each path; return the first (or the only) one."""
+    paths = [save_figure(fig, p) for p in _paths(path)]
+    return paths[0] if len(paths) == 1 else paths
+
+
+def _depth_label(depth_mm: float) -> str:
+    if math.isinf(depth_mm):
+        return "depth ∞"
+    return f"depth {depth_mm / 10:g} cm" if depth_mm < 1000 else f"depth {depth_mm / 1000:g} m"
+
+
+def _energy_half_extent(kernels, pitch_um: float, fraction: float = 0.995) -> float:
+    """Half side (µm) of the centred square holding ``fraction`` of every kernel's
+    energy, plus two pixels: the window the thumbnails and cross-sections show."""
+    k = np.asarray(kernels, dtype=np.float64)
+    k = k.reshape(-1, *k.shape[-2:])
+    K = k.shape[-1]
+    y, x = np.mgrid[:K, :K] - K // 2
+    ring = np.maximum(np.abs(x), np.abs(y)).ravel()
+    widest = 0
+    for kk in k:
+        total = kk.sum()
+        if not total > 0:
+            continue
+        energy = np.cumsum(np.bincount(ring, kk.ravel(), minlength=K // 2 + 1)) / total
+        widest = max(widest, int(np.searchsorted(energy, fraction)))
+    return (min(widest + 2, K // 2) + 0.5) * pitch_um
+
+
+def _set_window(axes, half_um: float) -> None:
+    for ax in axes:
+        ax.set_xlim(-half_um, half_um)
+        ax.set_ylim(-half_um, half_um)
+
+
+def _display(image, white: float) -> np.ndarray:
+    """Linear radiance → 8-bit-ready sRGB in [0, 1], ``white`` mapped to 1."""
+    from .io.png import linear_to_srgb
+
+    return linear_to_srgb(np.clip(np.asarray(image, dtype=np.float64) / white, 0.0, 1.0))
+
+
+def _kernel_grid(fig, kernels, pitch_um: float, col_titles, row_titles, *, suptitle: str,
+                 half_extent_um: float | None = None):
+    """Thumbnails (rows × cols), each normalised to its maximum, one shared colour bar."""
+    n_rows, n_cols = kernels.shape[:2]
+    axes = fig.subplots(n_rows, n_cols, sharex=True, sharey=True, squeeze=False)
+    im = None
+    for i in range(n_rows):
+        for j in range(n_cols):
+            ax = axes[i, j]
+            im = _thumbnail(ax, kernels[i, j], pitch_um, col_titles[j] if i == 0 else "")
+            if half_extent_um is not None:
+                ax.set_xlim(-half_extent_um, half_extent_um)
+                ax.set_ylim(-half_extent_um, half_extent_um)
+            if i < n_rows - 1:
+                ax.set_xlabel("")
+            if j == 0:
+                ax.set_ylabel(f"{row_titles[i]}\nv (µm)", fontsize=7)
+    fig.colorbar(im, ax=axes.ravel().tolist(), label="PSF / its maximum", shrink=0.8,
+                 aspect=30)
+    fig.suptitle(suptitle, fontsize=10)
+    return axes
+
+
+def plot_psf_planes(kernels, path, *, pitch_mm: float, focus_mm: Sequence[float],
+                    sensor_mm: Sequence[float], positions: Sequence[str],
+                    title: str) -> Path:
+    """PSFs across the mirror for several focal planes (paper Fig. 3).
+
+    Parameters
+    ----------
+    kernels : (n_planes, n_points, K, K) array_like
+        PSF of each image point (columns) with the sensor at each plane (rows).
+    path : path or sequence of paths
+        One file per format (e.g. ``fig3.png`` and ``fig3.pdf``).
+    pitch_mm : float
+        Pixel pitch of the kernels, mm.
+    focus_mm, sensor_mm : sequences of float
+        Each plane's focus distance (object side) and sensor distance, mm.
+    positions : sequence of str
+        Each point's position on the mirror (column titles).
+    title : str
+    """
+    k = np.asarray(kernels, dtype=np.float64)
+    n_rows, n_cols = k.shape[:2]
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(1.5 * n_cols + 1.8, 1.4 * n_rows + 1.0), layout="constrained")
+    rows = [f"focus {f:.0f} mm\n(sensor {s:.2f} mm)" for f, s in zip(focus_mm, sensor_mm)]
+    _kernel_grid(fig, k, pitch_mm * 1e3, list(positions), rows, suptitle=title,
+                 half_extent_um=_energy_half_extent(k, pitch_mm * 1e3))
+    return _save_all(fig, path)
+
+
+def plot_ipsf_depths(kernels, path, *, pitch_mm: float, depths_mm: Sequence[float],
+                     positions: Sequence[str],
+                     sections: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]],
+                     title: str) -> Path:
+    """IPSFs across the mirror and their cross-sections over depths (paper Fig. 4).
+
+    Parameters
+    ----------
+    kernels : (n_depths, n_points, K, K) array_like
+        Unit-sum IPSFs; the thumbnails show the first depth.
+    path : path or sequence of paths
+    pitch_mm : float
+    depths_mm : sequence of float
+        The depths of ``kernels``' first axis, mm.
+    positions : sequence of str
+        Each point's position on the mirror (thumbnail titles).
+    sections : mapping of str to a sequence of ``(x, radial, tangential)``
+        Per panel title (e.g. ``"centre, ρ = 0 mm"``), one point's cross-sections at each
+        depth (``x`` in pixels, as :func:`mitsweep.tracer.metrics.cross_sections`).
+    title : str
+    """
+    from matplotlib.figure import Figure
+
+    k = np.asarray(kernels, dtype=np.float64)
+    n_depths, n = k.shape[:2]
+    for name, per_depth in sections.items():
+        if len(per_depth) != n_depths:
+            raise ValueError(f"sections[{name!r}]: need one per depth ({n_depths}), "
+                             f"got {len(per_depth)}")
+    pitch_um = pitch_mm * 1e3
+    fig = Figure(figsize=(max(1.7 * n + 1.4, 9.0), 7.0), layout="constrained")
+    top, bottom = fig.subfigures(2, 1, height_ratios=(1.0, 1.5))
+    thumbs = top.subplots(1, n, sharex=True, sharey=True, squeeze=False)[0]
+    im = None
+    for j in range(n):
+        im = _thumbnail(thumbs[j], k[0, j], pitch_um, positions[j])
+    half = _energy_half_extent(k, pitch_um)
+    _set_window(thumbs, half)
+    thumbs[0].set_ylabel("v (µm)", fontsize=7)
+    top.colorbar(im, ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
+    top.suptitle(f"{title}: IPSFs across the mirror, {_depth_label(depths_mm[0])}",
+                 fontsize=10)
+    _section_panels(bottom, sections, depths_mm, pitch_um, half_um=half,
+                    suptitle="cross-sections at each depth (unit-sum IPSFs)")
+    return _save_all(fig, path)
+
+
+def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str | None,
+                    half_um: float | None = None, axes=None, legend: bool = True):
+    """Radial (blue) and tangential (red) cross-sections, one line style and marker per
+    depth; one key for the figure, below the panels."""
+    from matplotlib.lines import Line2D
+
+    if axes is None:
+        axes = fig.subplots(1, max(len(sections), 1), squeeze=False)[0]
+    for ax, (name, per_depth) in zip(axes, sections.items()):
+        for d, sec in enumerate(per_depth):
+            ls, marker = DEPTH_STYLES[d % len(DEPTH_STYLES)]
+            x, rad, tan = (np.asarray(a, dtype=np.float64) for a in sec)
+            every = max(len(x) // 8, 1)
+            for values, direction in ((rad, "radial"), (tan, "tangential")):
+                ax.plot(x * pitch_um, values, linestyle=ls, marker=marker, ms=3.5,
+                        markevery=(d % every, every), lw=1.1,
+                        color=DIRECTION_COLORS[direction])
+        ax.set_title(name, fontsize=9)
+        ax.set_xlabel("position along the direction (µm)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(color=GRID_COLOR)
+        ax.set_ylim(bottom=0.0)
+        if half_um is not None:
+            ax.set_xlim(-half_um, half_um)
+    axes[0].set_ylabel("IPSF (unit sum)", fontsize=8)
+    if legend:
+        key = [Line2D([], [], color=c, lw=2, label=f"{d} direction")
+               for d, c in DIRECTION_COLORS.items()]
+        key += [Line2D([], [], color="k", lw=1.1, linestyle=DEPTH_STYLES[d % len(DEPTH_STYLES)][0],
+                       marker=DEPTH_STYLES[d % len(DEPTH_STYLES)][1], ms=3.5,
+                       label=_depth_label(depth)) for d, depth in enumerate(depths_mm)]
+        fig.legend(handles=key, loc="outside lower center", ncols=len(key), fontsize=7,
+                   framealpha=1.0)
+    if suptitle:
+        fig.suptitle(suptitle, fontsize=9)
+    return axes
+
+
+def plot_sweep_ranges(sections, path, *, pitch_mm: float, ranges_mm: Sequence[tuple],
+                      depths_mm: Sequence[float], title: str,
+                      optimal: tuple[float, float] | None = None) -> Path:
+    """IPSF cross-sections at the mirror's centre and periphery for several sweep ranges
+    and depths (paper Fig. 5).
+
+    Parameters
+    ----------
+    sections : sequence (one per range) of mapping str → sequence of ``(x, rad, tan)``
+        For each range, per place (e.g. ``"centre"``, ``"periphery"``: the rows), the
+        cross-sections at each depth.
+    path : path or sequence of paths
+    pitch_mm : float
+    ranges_mm : sequence of (focus_min, focus_max)
+        Column titles, mm.
+    depths_mm : sequence of float
+    title : str
+    optimal : (focus_min, focus_max), optional
+        The optimal range (Eq. 8–9), marked "optimal" in its column's titles.
+    """
+    from matplotlib.figure import Figure
+
+    places = list(sections[0])
+    n = len(ranges_mm)
+    x_half = max(float(np.max(np.abs(np.asarray(sec[0])[np.maximum(np.asarray(sec[1]),
+                                                                  np.asarray(sec[2]))
+                                                       > 1e-3 * max(np.max(sec[1]),
+                                                                    np.max(sec[2]))])))
+                 for col in sections for per_depth in col.values() for sec in per_depth)
+    x_half = (x_half + 2.0) * pitch_mm * 1e3
+    fig = Figure(figsize=(2.7 * n + 1.2, 2.5 * len(places) + 1.2), layout="constrained")
+    axes = fig.subplots(len(places), n, squeeze=False, sharey="row", sharex="row")
+    for j, (lo, hi) in enumerate(ranges_mm):
+        col = {p: sections[j][p] for p in places}
+        for i, p in enumerate(places):
+            ax = axes[i, j]
+            mark = " (optimal)" if optimal is not None and np.allclose((lo, hi), optimal) else ""
+            _section_panels(fig, {f"{p}, sweep {lo:.0f}–{hi:.0f} mm{mark}": col[p]}, depths_mm,
+                            pitch_mm * 1e3, suptitle=None, axes=[ax], half_um=x_half,
+                            legend=(i == 0 and j == 0))
+            if j > 0:
+                ax.set_ylabel("")
+    fig.suptitle(f"{title}: IPSF cross-sections for several sweep ranges (same exposure "
+                 f"per range)", fontsize=10)
+    return _save_all(fig, path)
+
+
+def plot_pipeline(steps: Sequence[dict], path, *, bank_kernels, bank_positions: Sequence[str],
+                  pitch_mm: float, white: float, title: str) -> Path:
+    """The processing pipeline step by step (paper Fig. 8): the IPSF bank, then images.
+
+    Parameters
+    ----------
+    steps : sequence of dict
+        Each ``{"title", "image"}`` (linear RGB (H, W, 3), shown as sRGB with ``white``
+        → 1) and optionally ``"extent"`` (left, right, bottom, top) with ``"xlabel"`` and
+        ``"ylabel"`` (polar images: angle and radius; drawn on the last rows), else pixel
+        axes, with ``"window"`` (x, y, w, h) the part shown (the mirror's image).
+    path : path or sequence of paths
+    bank_kernels : (n, K, K) array_like
+        The IPSFs the deconvolution uses, shown in a row above the images.
+    bank_positions : sequence of str
+        Their positions (thumbnail titles).
+    pitch_mm : float
+        Pixel pitch of the kernels, mm.
+    white : float
+        Linear value shown as white (the ground truth's white level).
+    title : str
+    """
+    from matplotlib.figure import Figure
+
+    # Cartesian images on the first row(s), polar ones (wide: 360°) on the next, at
+    # most three a row, each row filling the width.
+    cartesian = [st for st in steps if st.get("extent") is None]
+    polar = [st for st in steps if st.get("extent") is not None]
+    rows = [group[i:i + 3] for group in (cartesian, polar) for i in range(0, len(group), 3)]
+    kernels = np.asarray(bank_kernels, dtype=np.float64)
+    fig = Figure(figsize=(12.0, 1.9 + 3.9 * len(rows)), layout="constrained")
+    top, bottom = fig.subfigures(2, 1, height_ratios=(1.6, 3.9 * len(rows)))
+    thumbs = top.subplots(1, len(kernels), sharex=True, sharey=True, squeeze=False)[0]
+    im = None
+    for j, k in enumerate(kernels):
+        im = _thumbnail(thumbs[j], k, pitch_mm * 1e3, bank_positions[j])
+    _set_window(thumbs, _energy_half_extent(kernels, pitch_mm * 1e3))
+    thumbs[0].set_ylabel("v (µm)", fontsize=7)
+    top.colorbar(im, ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
+    top.suptitle("(a) the IPSF bank the deconvolution uses (depth 50 cm)", fontsize=9)
+    mosaic = [[f"{r}:{j}" for j, _ in enumerate(row) for _ in range(6 // len(row))]
+              for r, row in enumerate(rows)]
+    axes = bottom.subplot_mosaic(mosaic)
+    for r, row in enumerate(rows):
+        for j, step in enumerate(row):
+            ax = axes[f"{r}:{j}"]
+            extent = step.get("extent")
+            shown = _display(step["image"], white)
+            if step.get("window") is not None:
+                x0, y0, w, h = step["window"]
+                shown = shown[y0:y0 + h, x0:x0 + w]
+                extent = (x0 - 0.5, x0 + w - 0.5, y0 + h - 0.5, y0 - 0.5)
+            ax.imshow(shown, extent=extent, origin="upper", interpolation="nearest",
+                      aspect="auto" if step.get("extent") is not None else "equal")
+            ax.set_title(step["title"], fontsize=9)
+            ax.set_xlabel(step.get("xlabel", "x (pixels)"), fontsize=8)
+            ax.set_ylabel(step.get("ylabel", "y (pixels)"), fontsize=8)
+            ax.tick_params(labelsize=7)
+    fig.suptitle(title, fontsize=11)
+    return _save_all(fig, path)
+
+
+def plot_insets(images: Sequence[tuple[str, np.ndarray]], path, *,
+                regions: Sequence[tuple[int, int, int]], labels: Sequence[str], white: float,
+                crop: tuple[int, int, int, int] | None = None, title: str) -> Path:
+    """Images side by side, each with magnified regions below it (paper Figs. 9, 10).
+
+    Parameters
+    ----------
+    images : sequence of (str, (H, W, 3) ndarray)
+        Title and linear RGB image of each column.
+    path : path or sequence of paths
+    regions : sequence of (row, col, size)
+        Top-left corner and side of each magnified square, pixels of the full image; the
+        same regions in every image, each framed in its own colour.
+    labels : sequence of str
+        One per region (e.g. its distance from the mirror, "≈ 1.2 m").
+    white : float
+        Linear value shown as white.
+    crop : (x, y, w, h), optional
+        Show only this window of each image (the mirror's image).
+    title : str
+    """
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
+
+    n_img, n_reg = len(images), len(regions)
+    fig = Figure(figsize=(5.0 * n_img, 5.0 + 5.0 / n_reg + 0.6), layout="constrained")
+    cols = fig.subfigures(1, n_img, wspace=0.02)
+    cols = np.atleast_1d(cols)
+    x0, y0, w, h = crop if crop is not None else (0, 0, images[0][1].shape[1],
+                                                  images[0][1].shape[0])
+    for sub, (name, image) in zip(cols, images):
+        shown = _display(image, white)
+        main_ax, *inset_axes = sub.subplot_mosaic([["main"] * n_reg, list(range(n_reg))],
+                                                  height_ratios=(n_reg, 1.0)).values()
+        main_ax.imshow(shown[y0:y0 + h, x0:x0 + w], extent=(x0 - 0.5, x0 + w - 0.5,
+                                                            y0 + h - 0.5, y0 - 0.5),
+                       interpolation="nearest")
+        main_ax.set_title(name, fontsize=10)
+        main_ax.set_xlabel("x (pixels)", fontsize=8)
+        main_ax.set_ylabel("y (pixels)", fontsize=8)
+        main_ax.tick_params(labelsize=7)
+        for k, ((r, c, s), label, ax) in enumerate(zip(regions, labels, inset_axes)):
+            color = INSET_COLORS[k % len(INSET_COLORS)]
+            main_ax.add_patch(Rectangle((c - 0.5, r - 0.5), s, s, fill=False, lw=1.5,
+                                        edgecolor=color))
+            main_ax.annotate(str(k + 1), (c + s, r - 0.5), color=color, fontsize=8,
+                             fontweight="bold", va="bottom", ha="left")
+            ax.imshow(shown[r:r + s, c:c + s], interpolation="nearest")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            for spine in ax.spines.values():
+                spine.set_edgecolor(color)
+                spine.set_linewidth(2.0)
+            ax.set_title(f"{k + 1}: {label}", fontsize=8)
+    fig.suptitle(title, fontsize=11)
+    return _save_all(fig, path)

@@ -127,8 +127,14 @@ def test_focal_surfaces_png_with_the_legend_off_the_curves(scenes_dir, tmp_path,
     ax = fig.axes[0]
     legend = ax.get_legend().get_window_extent(renderer)
     assert not _boxes_overlap(legend, ax.get_window_extent(renderer))
-    labels = {t.get_text().strip().split(" ")[1] for t in ax.texts}
+    labels = {t.get_text().split()[1] for t in ax.texts}
     assert labels == {"min", "max"}   # both focus lines labelled, neither hidden
+    # The focus labels sit outside the axes (inside, they ran over the curves) and off
+    # the legend.
+    for t in ax.texts:
+        box = t.get_window_extent(renderer)
+        assert not _boxes_overlap(box, ax.get_window_extent(renderer)), t.get_text()
+        assert not _boxes_overlap(box, legend), t.get_text()
 
 
 def test_ipsf_png_has_a_colour_bar_and_unclashing_labels(tmp_path, drawn):

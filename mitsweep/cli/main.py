@@ -23,6 +23,7 @@ COMMANDS = [
     "ipsf",
     "design_sweep",
     "table1",
+    "figures",
     "dataset",
     "deconvolve",
     "evaluate",

@@ -1,0 +1,206 @@
+"""``mitsweep figures``: every named file of the paper's figures, the refusals at the CLI,
+and the pieces the figures are made of (field points, inset regions, the builders)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.image import imread
+
+from conftest import run_cli
+from mitsweep import plots
+from mitsweep.cli.main import main
+from mitsweep.config import load_setup
+from mitsweep.optics import optimal_sweep_range
+from mitsweep.optics.reference import reference_geometry
+from mitsweep.pipeline.figures import (PAPER_SETUPS, field_points, figure_files,
+                                       inset_regions)
+from mitsweep.tracer.metrics import cross_sections
+
+from test_plots import _boxes_overlap, gaussian_kernel, png_size
+
+PDF_SIGNATURE = b"%PDF-"
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures save_figure writes, drawn on an Agg canvas: [(fig, renderer)]."""
+    figures = []
+    original = plots.save_figure
+
+    def capture(fig, path, dpi=plots.DPI):
+        out = original(fig, path, dpi)
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        figures.append((fig, canvas.get_renderer()))
+        return out
+
+    monkeypatch.setattr(plots, "save_figure", capture)
+    return figures
+
+
+# -- the command --------------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_quick_run_writes_every_named_file_and_refuses_a_second_run(tmp_path):
+    """The default (the paper's three setups) with --quick: every PNG decodes at a
+    figure's size, every PDF is a PDF; a second run without --force writes nothing."""
+    out = tmp_path / "figs"
+    rc, stdout, stderr = run_cli("figures", "--quick", "--out", out, timeout=1800)
+    assert rc == 0, stderr
+    setups = [load_setup(f"scenes/{name}.toml") for name in PAPER_SETUPS]
+    expected = [name for s in setups for name in figure_files(s)]
+    assert len(expected) == 3 * 7 * 2 + 2 * 4   # 7 figures each, Table 1 for 2 untilted
+    for name in expected:
+        path = out / name
+        assert path.is_file() and path.stat().st_size > 0, name
+        if name.endswith(".png"):
+            width, height = png_size(path)
+            # 120 dpi figures 5-13 inches wide: no empty canvas, no runaway legend
+            assert 500 <= width <= 2000 and 400 <= height <= 2000, (name, width, height)
+            assert imread(path).shape[:2] == (height, width)
+        elif name.endswith(".pdf"):
+            assert path.read_bytes()[:5] == PDF_SIGNATURE, name
+    report = json.loads((out / "figures.json").read_text())
+    assert report["quality"]["name"] == "quick"
+    assert sorted(report["setups"]) == sorted(PAPER_SETUPS)
+    table = json.loads((out / "table1_sphere.json").read_text())
+    assert len(table["rows"]) == 4 and table["conventional"]["v_avg"] > 0
+    assert f"{len(expected)} files" in stdout
+
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+    rc, _, stderr = run_cli("figures", "--quick", "--out", out)
+    assert rc == 2
+    assert stderr.count("\n") == 1 and "--force" in stderr and "exists" in stderr
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_an_existing_figure_is_refused_without_force(tmp_path, capsys):
+    out = tmp_path / "figs"
+    out.mkdir()
+    old = out / "fig6_sphere.png"
+    old.write_bytes(b"an earlier run")
+    assert main(["figures", "--quick", "--setup", "sphere", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("mitsweep: error: ")
+    assert str(old) in err and "--force" in err
+    assert old.read_bytes() == b"an earlier run"
+    assert sorted(p.name for p in out.iterdir()) == ["fig6_sphere.png"]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--setup", "ellipsoid"], ["ellipsoid", *PAPER_SETUPS]),
+    (["--setup", "missing.toml"], ["missing.toml", ".toml"]),
+    (["--setup", "sphere", "--setup", "sphere"], ["sphere", "twice"]),
+])
+def test_bad_setup_is_refused_in_one_line(tmp_path, capsys, argv, words):
+    out = tmp_path / "figs"
+    assert main(["figures", "--quick", "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("mitsweep: error: ")
+    assert "Traceback" not in err
+    for w in words:
+        assert w in err
+    assert not out.exists()
+
+
+# -- the pieces ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", PAPER_SETUPS)
+def test_field_points_run_from_the_centre_across_the_field(scenes_dir, name):
+    setup = load_setup(scenes_dir / f"{name}.toml")
+    sweep = optimal_sweep_range(setup)
+    ref = reference_geometry(setup, sweep=sweep).sensor_distance
+    points = field_points(setup, sweep, ref)
+    xs = [p.x_mm for p in points]
+    assert 0.0 in xs and xs == sorted(xs)
+    assert max(abs(x) for x in xs) <= max(abs(sweep.rho_start), abs(sweep.rho_end))
+    if setup.mirror.is_symmetric:
+        # On the axis of a symmetric mirror the chief ray images the centre at (0, 0),
+        # and the image radius grows along the +u half-axis.
+        assert xs[0] == 0.0 and math.hypot(points[0].u, points[0].v) < 1e-9
+        us = [p.u for p in points]
+        assert all(abs(p.v) < 1e-9 for p in points) and us == sorted(us)
+
+
+def test_inset_regions_lie_in_the_mask_in_their_zones_apart_and_on_detail():
+    n = 200
+    y, x = np.mgrid[:n, :n]
+    r = np.hypot(y - 100, x - 100)
+    mask = (r < 90).astype(np.float32)
+    guide = np.full((n, n, 3), 0.5)
+    # Detail (a checkerboard) in one spot of each zone; flat elsewhere.
+    checker = ((y // 2 + x // 2) % 2).astype(float)[..., None]
+    for cy, cx in ((100, 125), (100, 20)):   # 0.28 and 0.89 of the radius
+        sl = (slice(cy - 10, cy + 10), slice(cx - 10, cx + 10))
+        guide[sl] = checker[sl]
+    regions = inset_regions(mask, guide)
+    assert len(regions) == 2
+    radius = math.sqrt(mask.sum() / math.pi)
+    for (row, col, side), (lo, hi), (cy, cx) in zip(regions, ((0.15, 0.5), (0.75, 0.97)),
+                                                      ((100, 125), (100, 20))):
+        assert np.all(mask[row:row + side, col:col + side] > 0.5)
+        d = math.hypot(row + side / 2 - 100, col + side / 2 - 100) / radius
+        assert lo <= d <= hi
+        assert row <= cy < row + side and col <= cx < col + side   # on the detail
+    (r1, c1, s), (r2, c2, _) = regions
+    assert abs(r1 - r2) >= 2 * s or abs(c1 - c2) >= 2 * s
+
+
+def test_inset_regions_refuse_an_empty_mask():
+    with pytest.raises(ValueError, match="mask is empty"):
+        inset_regions(np.zeros((32, 32)), np.zeros((32, 32)))
+
+
+def test_psf_planes_share_one_colour_bar_and_window(tmp_path, drawn):
+    kernels = np.stack([np.stack([gaussian_kernel(0.5 + 0.1 * i + 0.1 * j)
+                                  for j in range(3)]) for i in range(2)])
+    paths = plots.plot_psf_planes(kernels, [tmp_path / "f.png", tmp_path / "f.pdf"],
+                                  pitch_mm=0.018, focus_mm=[340.0, 360.0],
+                                  sensor_mm=[58.6, 58.1], positions=["a", "b", "c"],
+                                  title="t")
+    assert [p.name for p in paths] == ["f.png", "f.pdf"]
+    assert (tmp_path / "f.pdf").read_bytes()[:5] == PDF_SIGNATURE
+    fig, renderer = drawn[0]
+    thumbs = [ax for ax in fig.axes if ax.images]
+    assert len(thumbs) == 6
+    assert sum(ax.images[0].colorbar is not None for ax in thumbs) == 1
+    # The window holds the widest kernel's energy, narrower than the whole kernel.
+    lo, hi = thumbs[0].get_xlim()
+    assert -lo == pytest.approx(hi) and hi < 15 / 2 * 18.0
+
+
+def test_sweep_ranges_key_clears_the_panels_and_depths_differ_in_style(tmp_path, drawn):
+    depths = (500.0, 5000.0, 50000.0)
+    per_depth = [cross_sections(gaussian_kernel(1.0 + 0.1 * d), 0.0) for d in range(3)]
+    sections = [{"centre": per_depth, "periphery": per_depth} for _ in range(3)]
+    ranges = [(339.0, 348.0), (339.0, 357.0), (339.0, 364.0)]
+    plots.plot_sweep_ranges(sections, tmp_path / "f5.png", pitch_mm=0.018, ranges_mm=ranges,
+                            depths_mm=depths, title="t", optimal=(339.0, 364.0))
+    fig, renderer = drawn[0]
+    panels = [ax for ax in fig.axes if ax.lines]
+    assert len(panels) == 6
+    legend = fig.legends[0].get_window_extent(renderer)
+    assert not any(_boxes_overlap(legend, ax.get_window_extent(renderer)) for ax in panels)
+    styles = {(ln.get_linestyle(), ln.get_marker()) for ln in panels[0].lines}
+    assert len(styles) == len(depths)
+    assert sum("(optimal)" in ax.get_title() for ax in panels) == 2
+
+
+def test_insets_frame_each_region_and_label_it(tmp_path, drawn):
+    rng = np.random.default_rng(0)
+    a, b = rng.random((64, 64, 3)), rng.random((64, 64, 3))
+    plots.plot_insets([("left", a), ("right", b)], tmp_path / "f9.png",
+                      regions=[(5, 5, 10), (40, 30, 10)], labels=["≈ 30 cm", "≈ 2.0 m"],
+                      white=1.0, title="t")
+    fig, renderer = drawn[0]
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles.count("1: ≈ 30 cm") == 2 and titles.count("2: ≈ 2.0 m") == 2
+    mains = [ax for ax in fig.axes if ax.get_title() in ("left", "right")]
+    assert all(len(ax.patches) == 2 for ax in mains)
+    width, height = png_size(tmp_path / "f9.png")
+    assert width > height > 0
