@@ -175,7 +175,7 @@ def test_procedural_scene_loads_in_mitsuba_with_every_object():
     scene_dict, info = build_scene(DEFAULT_SETUP, cam, surroundings=False, extra=objects,
                                    max_depth=params["max_depth"])
     assert info["integrator"] == "path" and info["max_depth"] == 4
-    scene = mi.load_dict(scene_dict)
+    scene = mi.load_dict(scene_dict, optimize=False)  # cubes sharing a BSDF stay apart
     shapes = {s.id(): s for s in scene.shapes()}
     assert len(shapes) == len(layout["objects"]) + len(layout["lights"]) + 1  # + mirror
     for k, o in enumerate(layout["objects"]):
@@ -189,6 +189,10 @@ def test_procedural_scene_loads_in_mitsuba_with_every_object():
         assert np.all(np.abs(corners - o["center"]) <= o["radius"] * 1.01 + 1e-3)
     assert len(scene.emitters()) == len(layout["lights"]) + 1  # + the environment map
     assert scene.environment() is not None
+    # One BSDF per palette entry, shared by the objects that use it.
+    bsdfs = {id(objects[f"object_{k:03d}_{o['shape']}"]["bsdf"]): o["material_index"]
+             for k, o in enumerate(layout["objects"])}
+    assert len(bsdfs) == len(set(bsdfs.values())) <= params["palette"]
 
 
 @pytest.mark.slow  # ~30 s loaded, most of it compiling the path integrator's kernel
