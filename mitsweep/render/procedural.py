@@ -7,8 +7,9 @@ and parameters give the same scene, so a dataset records only those
 :data:`DEFAULT_PARAMS` lists them and :func:`resolve_params` checks them.
 
 Geometry
-    ``objects`` shapes drawn from ``shapes`` (spheres, cubes, rectangles, open
-    cylinders, disks). Each is placed where a pixel looks: a point drawn uniformly over
+    ``objects`` shapes drawn from ``shapes`` (spheres, cubes turned at random,
+    rectangles and disks facing the mirror with a random tilt, open cylinders along a
+    coordinate axis). Each is placed where a pixel looks: a point drawn uniformly over
     the mirror's image (chief rays through image points, :func:`~mitsweep.optics.
     mirror_point_from_image`), at a depth ``l`` drawn log-uniformly over
     ``[depth_min_mm, depth_max_mm]`` widened to the setup's own depth range, along the
