@@ -131,7 +131,7 @@ def _error_vs_time(setup, budgets, n_planes):
         t_c, img_c = _timed(sweep, 1, spp)
         acc, t_p = 0.0, 0.0
         for k, i in enumerate(dists):
-            params["sensor.sensor_distances"] = mi.Float([float(i)])
+            params["sensor.sensor_distance"] = mi.Float([float(i)])
             params.update()
             t, img = _timed(fixed, 100 + k, per)
             acc, t_p = acc + img, t_p + t

@@ -68,7 +68,7 @@ properties; these are differentiable in forward and reverse mode, the sensor dis
      - differentiable keys
      - how ``i(t)`` depends on them
    * - fixed (``sensor_distance``)
-     - ``sensor_distance`` (alias ``sensor_distances``, the key of earlier versions)
+     - ``sensor_distance``
      - ``i = sensor_distance``
    * - ``linear``, ``trapezoidal``
      - ``sensor_start``, ``sensor_end``
@@ -457,8 +457,6 @@ def _make_class():
             kind = self.motion_kind
             if kind == "fixed":
                 callback.put("sensor_distance", self.m_start, flag.Differentiable)
-                # Deprecated alias of sensor_distance (the key of mitsweep <= 0.x).
-                callback.put("sensor_distances", self.m_start, flag.Differentiable)
             elif kind == "tabulated":
                 callback.put("positions", self.m_positions, flag.Differentiable)
                 callback.put("times", self.m_times, flag.NonDifferentiable)
