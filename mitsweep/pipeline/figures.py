@@ -188,6 +188,7 @@ class _SetupFigures:
         self.periphery = max(self.points, key=lambda p: abs(p.x_mm))
         self.kernel_size = bank_kernel_size(setup.sensor.pixel_pitch)
         self._ipsfs: dict = {}
+        self._data: dict | None = None
         self.timings: dict[str, float] = {}
 
     def _timed(self, key: str, fn, *args, **kw):
@@ -199,14 +200,13 @@ class _SetupFigures:
     def ipsf(self, x_mm: float, depth: float, focus: tuple[float, float] | None = None):
         """The IPSF of the mirror point ``x_mm`` at ``depth`` over the sweep ``focus``
         (default the optimal range), traced once."""
+        from ..optics.reference import reference_geometry
         from ..tracer import integrated_psf
 
         focus = focus or (self.sweep.focus_min, self.sweep.focus_max)
         key = (round(x_mm, 9), float(depth), round(focus[0], 9), round(focus[1], 9))
         if key not in self._ipsfs:
             setup, sweep = _range_setup(self.setup, *focus)
-            from ..optics.reference import reference_geometry
-
             ref = reference_geometry(setup, sweep=sweep).sensor_distance
             (p,) = field_points(setup, sweep, ref, xs=[x_mm])
             kernel, _ = self._timed("ipsf_s", integrated_psf, setup, p.u, p.v, depth,
@@ -297,7 +297,7 @@ class _SetupFigures:
 
     def dataset(self) -> dict:
         """Build (or resume) the dataset of Figs. 8–10; its images in memory."""
-        if hasattr(self, "_data"):
+        if self._data is not None:
             return self._data
         from ..io.bank import load_bank
         from . import DatasetOptions, build_dataset
@@ -380,11 +380,16 @@ class _SetupFigures:
                      f"magnified regions from the mirror)")
 
     def fig10(self):
+        from ..deconv import paper_fig10_settings
+        from .tasks import NOISE_PIXEL_MM
+
         d = self.dataset()
         lux = f"{FIG10_LUX:g}lux"
+        cam = {k: f"F{n.f_number:g}, {n.exposure_s:g} s, ISO {n.iso:g}"
+               for k, n in paper_fig10_settings(NOISE_PIXEL_MM, FIG10_LUX).items()}
         self._insets(f"fig10_{self.setup.name}",
-                     [(f"EDOF, F2.8 0.6 s ISO 100", d[f"edof_{lux}"]),
-                      (f"stopped down, F11 0.6 s ISO 1600", d[f"stopped_{lux}"])],
+                     [(f"EDOF ({cam['sweep']})", d[f"edof_{lux}"]),
+                      (f"stopped down ({cam['stopped']})", d[f"stopped_{lux}"])],
                      f"{self.setup.name}: EDOF against a stopped-down aperture at "
                      f"{FIG10_LUX:g} lux")
 
@@ -414,8 +419,8 @@ def inset_regions(mask: np.ndarray, guide: np.ndarray, zones=((0.15, 0.5), (0.75
     A zone is a range of distances from the centre of the mirror's image, as fractions
     of its radius (the mask's equivalent-disc radius about its centroid); in each, the
     square wholly inside ``mask`` with the most detail in ``guide`` (mean gradient
-    magnitude of its luminance, e.g. the ground truth's), so that the insets show what
-    blur removes rather than a flat wall.
+    magnitude of its luminance smoothed over 1.5 px, e.g. the ground truth's), so that
+    the insets show what blur removes rather than a flat wall.
     """
     inside = mask > 0.5
     rows, cols = np.nonzero(inside)
@@ -424,9 +429,12 @@ def inset_regions(mask: np.ndarray, guide: np.ndarray, zones=((0.15, 0.5), (0.75
     cy, cx = rows.mean(), cols.mean()
     radius = math.sqrt(len(rows) / math.pi)
     side = max(int(round(size_fraction * radius)), 8)
+    from scipy.ndimage import gaussian_filter
+
     g = np.asarray(guide, dtype=np.float64)
     lum = g.mean(axis=-1) if g.ndim == 3 else g
-    gy, gx = np.gradient(lum)
+    # Structure, not pixel-scale texture or render noise: the gradient at 1.5 px scale.
+    gy, gx = np.gradient(gaussian_filter(lum, 1.5))
     detail = np.hypot(gx, gy) * inside
     # Sums over every side × side square, from the integral images.
     def box_sums(a):
