@@ -607,8 +607,9 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         circle about the axis). A roll the fit leaves out moves a tilted outline's axis
         by ~0.5% of its radius per degree; fitted, it is nearly a shift of that outline,
         so the centre's standard error grows (x2.5 on the rendered tilted paraboloid,
-        whose faint rim then reads as a 1.1 deg roll and the axis 0.6 px off, against
-        0.25 px without): fit it for a camera that may be turned on its mount.
+        whose faint rim then reads as a 0.5-0.75 deg roll and the axis 0.26-0.31 px off,
+        against 0.10-0.13 px without): fit it for a camera that may be turned on its
+        mount.
 
     Returns
     -------
