@@ -33,7 +33,7 @@ a wrong pixel pitch or lens–mirror distance:
    the mid-travel outline. The peak, not the lobe's centroid: where content of the
    reflection meets the rim (a bright banner whose far edge has the other sign) the
    lobe's flanks are not the blur's, and on Mitsuba renders of the tilted paraboloid
-   its centroid moved the axis by 0.2-0.3 px, its peak by 0.02-0.18 px. Normal offsets are fitted by iteratively reweighted least
+   its centroid moved the axis by 0.21-0.35 px, its peak by 0.05-0.18 px. Normal offsets are fitted by iteratively reweighted least
    squares (Tukey's biweight, scale from the median absolute deviation), so that
    edges of a mount, an arm crossing the rim or a reflection do not pull the fit.
    Vignetting and smooth illumination changes do not move a gradient's centroid.
@@ -102,7 +102,7 @@ MAX_EDGE_SNR = 30.0
 #: Largest RMS normal residual (px) of the inliers of an accepted fit: an outline of
 #: the wrong shape (the square border of a render cropped to the mirror's window, found
 #: at +7..17% of the rim's size) leaves 1.8-2.0 px on the renders, the true rim of the
-#: rendered tilted paraboloid 1.0-1.2 px (its weak edges scatter against the detailed
+#: rendered tilted paraboloid 0.65-0.95 px (its weak edges scatter against the detailed
 #: reflection).
 MAX_RESIDUAL_RMS_PX = 1.5
 #: Standard error (px) of the fitted centre (from the inliers' scatter) above which the
