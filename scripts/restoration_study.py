@@ -11,6 +11,11 @@ printed) and JSON (``study.json``)::
     .venv/bin/python scripts/restoration_study.py --out data/study
     .venv/bin/python scripts/restoration_study.py --out data/study --pitches demo \\
         --spp 8 8 32 8 --setups sphere          # a quick look
+    .venv/bin/python scripts/restoration_study.py --out data/study \\
+        --fine-setups sphere paraboloid         # the tilted case only at the demo pitch
+
+Each image is also scored inside the design FOV (r up to the radial bank's last radius):
+the mirror's image reaches the rim beyond it, where no kernel was traced.
 
 A pitch other than ``demo`` renders the setup on a sensor of the same size with pixels
 of that pitch (mm): the resolution grows by the pitch ratio (sphere 512 px at 18 µm:
