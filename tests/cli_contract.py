@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import warnings
 
 from mitsweep.cli.main import main
@@ -11,7 +12,9 @@ def refused(capsys, argv) -> str:
     """Run ``mitsweep ARGV`` and assert a clean refusal; return the error line.
 
     A clean refusal: exit status 2, exactly one line on stderr starting with
-    ``mitsweep: error:``, no traceback, no Python warning, nothing on stdout.
+    ``mitsweep: error:``, no traceback, no Python warning, nothing on stdout; with
+    ``--json``, stdout holds one JSON object ``{"error", "command", "exit_status"}``
+    whose error is the stderr line's message.
     """
     capsys.readouterr()
     with warnings.catch_warnings(record=True) as caught:
@@ -26,5 +29,11 @@ def refused(capsys, argv) -> str:
     assert len(lines) == 1, lines
     assert "error:" in lines[0] and "Traceback" not in err
     assert not caught, [str(w.message) for w in caught]
-    assert out == ""
+    if "--json" in [str(a) for a in argv]:
+        obj = json.loads(out)  # one object and nothing else
+        assert obj == {"error": lines[0].split("error: ", 1)[1], "command": obj["command"],
+                       "exit_status": 2}, obj
+        assert obj["command"] in [str(a) for a in argv], obj
+    else:
+        assert out == ""
     return lines[0]

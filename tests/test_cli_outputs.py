@@ -4,6 +4,7 @@
 to an input are caught; the commands call it before any work.
 """
 
+import json
 import os
 import shutil
 
@@ -12,6 +13,7 @@ import pytest
 from mitsweep.cli.common import UsageError, check_outputs
 from mitsweep.cli.main import main
 from mitsweep.pipeline import MANIFEST, build_dataset
+from cli_contract import refused
 from test_io_write_errors import tiny_setup_toml
 from test_pipeline_dataset import TINY, TINY_OPTS
 
@@ -117,3 +119,33 @@ def test_evaluate_checks_its_outputs_before_scoring(tiny_dataset, tmp_path, caps
     assert rc == 2
     assert err.strip() == (f"mitsweep: error: cannot write {missing}: directory "
                            f"{missing.parent} does not exist")
+
+
+# --json: a failure is one JSON object on stdout too (the stderr line and exit 2 unchanged).
+
+@pytest.mark.parametrize("argv,command,message", [
+    (["sweep-range", "{tmp}/missing.toml", "--json"], "sweep-range", "missing.toml"),
+    (["evaluate", "{tmp}", "--json"], "evaluate", "not a mitsweep dataset"),
+    (["table1", "{setup}", "--plot", "{setup}", "--json"], "table1",
+     "refusing to overwrite an input"),
+    (["sweep-range", "{setup}", "--fov", "-3", "--json"], "sweep-range",
+     "argument --fov: must be > 0"),  # argparse's own refusal
+    (["design-sweep", "{setup}", "--out", "{tmp}/p.txt", "--json"], "design-sweep",
+     "must end in .json"),
+])
+def test_json_commands_report_failures_as_json(tmp_path, setup_file, capsys, argv, command,
+                                               message):
+    argv = [a.format(tmp=tmp_path, setup=setup_file) for a in argv]
+    line = refused(capsys, argv)  # the contract, with stdout's object matching stderr's line
+    assert message in line
+    try:
+        rc = main(argv)
+    except SystemExit as exc:  # argparse's refusals
+        rc = exc.code
+    obj = json.loads(capsys.readouterr().out)
+    assert obj == {"error": line.split("error: ", 1)[1], "command": command,
+                   "exit_status": 2} and rc == 2
+
+
+def test_failure_without_json_leaves_stdout_empty(tmp_path, capsys):
+    refused(capsys, ["sweep-range", tmp_path / "missing.toml"])  # asserts stdout == ""

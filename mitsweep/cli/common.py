@@ -13,8 +13,9 @@ from typing import Any, Iterable, Union
 
 from ..config import SetupError, load_setup
 
-__all__ = ["UsageError", "USER_ERRORS", "ArgumentParser", "check_outputs", "load_setup_arg",
-           "print_json", "positive_float", "positive_int", "user_error_message"]
+__all__ = ["UsageError", "USER_ERRORS", "ArgumentParser", "ArgumentParserError",
+           "check_outputs", "load_setup_arg", "print_error_json", "print_json",
+           "positive_float", "positive_int", "user_error_message"]
 
 
 class UsageError(ValueError):
@@ -35,16 +36,35 @@ def _user_errors() -> tuple[type[BaseException], ...]:
 USER_ERRORS = _user_errors()
 
 
-def user_error_message(exc: BaseException) -> str:
+def user_error_message(exc: BaseException, *, prefix: bool = True) -> str:
+    """The one line a user error prints: its message's first line, after
+    ``mitsweep: error: `` unless ``prefix`` is false."""
     text = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return f"mitsweep: error: {text}"
+    return f"mitsweep: error: {text}" if prefix else text
+
+
+def print_error_json(message: str, command: str | None, exit_status: int) -> None:
+    """A failed ``--json`` command's stdout: one object ``{"error": MESSAGE, "command":
+    NAME, "exit_status": STATUS}``, so that a script parsing stdout sees the failure
+    (the line on stderr and the exit status stay as without ``--json``)."""
+    print_json({"error": message, "command": command, "exit_status": exit_status})
+
+
+class ArgumentParserError(SystemExit):
+    """A command line argparse refused; the line is on stderr, ``message`` keeps it
+    without the ``PROG: error:`` prefix."""
+
+    def __init__(self, message: str, code: int = 2):
+        super().__init__(code)
+        self.message = message
 
 
 class ArgumentParser(argparse.ArgumentParser):
     """argparse that exits with status 2 and one line (argparse's own convention)."""
 
     def error(self, message: str):  # noqa: D401
-        self.exit(2, f"{self.prog}: error: {message}\n")
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise ArgumentParserError(message, 2)
 
 
 PathArg = Union[str, os.PathLike, None]

@@ -13,7 +13,8 @@ import signal
 import sys
 import threading
 
-from .common import USER_ERRORS, ArgumentParser, configure_logging, user_error_message
+from .common import (USER_ERRORS, ArgumentParser, ArgumentParserError, configure_logging,
+                     print_error_json, user_error_message)
 
 # Module names under mitsweep.cli, in the order shown by --help.
 COMMANDS = [
@@ -54,7 +55,13 @@ def build_parser() -> ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = parser.parse_args(argv)
+    except ArgumentParserError as exc:  # the line is on stderr already
+        if _wants_json(argv):
+            print_error_json(exc.message, _command_name(argv), exc.code)
+        raise
     configure_logging(args.verbose)
     try:
         with _terminate_cleanly():
@@ -68,7 +75,21 @@ def main(argv: list[str] | None = None) -> int:
         # ValueError is broad: keep the traceback one `-vv` away for bug reports.
         logging.getLogger("mitsweep").debug("user error", exc_info=True)
         print(user_error_message(exc), file=sys.stderr)
+        if getattr(args, "json", False):
+            print_error_json(user_error_message(exc, prefix=False), args.command, 2)
         return 2
+
+
+def _wants_json(argv: list[str]) -> bool:
+    """Whether ``--json`` is among the options (before a ``--``)."""
+    options = argv[:argv.index("--")] if "--" in argv else argv
+    return "--json" in options
+
+
+def _command_name(argv: list[str]) -> str | None:
+    """The subcommand named on a command line that failed to parse, if any."""
+    names = {name.replace("_", "-") for name in COMMANDS}
+    return next((a for a in argv if a in names), None)
 
 
 @contextlib.contextmanager
