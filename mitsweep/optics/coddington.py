@@ -12,7 +12,8 @@ virtual focal images behind it, on the chief ray, at distances
 
 The second forms take ``l = ∞`` exactly (``d_m = R_m c / 2``, the caustic of
 Swaminathan). They hold where the plane of incidence contains a principal direction:
-every point of a mirror seen on its axis, and the tilt plane of a tilted one.
+every point of a mirror seen on its axis, and the tilt plane of a tilted one. The
+general form is Burkhard and Shealy's [1]_; the paper states it as its Eq. 4–7 [2]_.
 
 References
 ----------

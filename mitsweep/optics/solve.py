@@ -22,7 +22,7 @@ _INV_PHI = (math.sqrt(5.0) - 1.0) / 2.0  # 1/φ
 def bracketed_root(f: Callable[[float], float], a: float, b: float, *,
                    xtol: float = 1e-12, max_iter: int = 200) -> float:
     """A root of continuous ``f`` in ``[a, b]``, where ``f(a)`` and ``f(b)`` differ in
-    sign (or one is zero), to within ``xtol`` (bisection: ⌈log2(|b − a|/xtol)⌉ steps).
+    sign (or one is zero), to within ``xtol`` (bisection: ``⌈log2(|b − a| / xtol)⌉`` steps).
 
     Raises ``ValueError`` when ``[a, b]`` does not bracket a sign change.
     """

@@ -11,37 +11,37 @@ Protocol (version 3)
 On reset (opening the port resets an Uno) the board prints
 ``READY mitsweep-sweep <firmware-version> <protocol>``.
 
-==========================================  ==============================================
-host → board                                board → host
-==========================================  ==============================================
-``ID``                                      ``OK ID mitsweep-sweep <fw> <protocol>``
-``STATE``                                   ``OK STATE <t_us> <pos> <homed> <moving>
-                                            <shutter>`` (0/1 flags)
-``CHK 1`` / ``CHK 0``                       ``OK CHK 1``: from then on every line both
-                                            ways ends in ``*HH`` (XOR of its bytes)
-``LIMITS <min> <max>``                      ``OK LIMITS <min> <max>``: soft limits, steps
-``HOME <rate>``                             ``OK HOME``; later ``EV HOMED <t> 0``
-``MOVE <target> <rate> <accel>``            ``OK MOVE``; later ``EV DONE <t> <pos>``
-``SWEEP <target> <rate> <accel> <open>      ``OK SWEEP``; events ``START``, ``OPEN``,
-<close>``                                   ``POS`` (every 50 ms), ``CLOSE``, ``DONE``
-``TABLE <n>``                               ``OK TABLE <n>``: a step-rate table of n
-                                            segments follows (1..64; replaces the last)
-``SEG <i> <steps> <duration_us>``           ``OK SEG <i> <total_steps> <total_us>``:
-                                            segment i (in order, from 0), steps >= 0,
-                                            duration >= 1 µs, at most 4000 steps/s;
-                                            the reply's running totals let the host
-                                            check the whole table
-``TSWEEP <target> <accel> <open> <close>``  ``OK TSWEEP``; events as for ``SWEEP``
-``SHUTTER <delay_us> <duration_us>``        ``OK SHUTTER <t_us>``; later ``EV OPEN``,
-                                            ``EV CLOSE``
-``CLOSE``                                   ``OK CLOSE`` (shutter released now)
-``STOP``                                    ``OK STOP <t_us> <pos>`` (shutter released
-                                            first, then the motor stopped)
-``WATCHDOG <ms>``                           ``OK WATCHDOG <ms>``: 0 (the default after a
-                                            reset) turns it off; at most 600000
-``PING``                                    ``OK PING <t_us>`` (a heartbeat; any line
-                                            counts as one)
-==========================================  ==============================================
+================================================  ==============================================
+host → board                                      board → host
+================================================  ==============================================
+``ID``                                            ``OK ID mitsweep-sweep <fw> <protocol>``
+``STATE``                                         ``OK STATE <t_us> <pos> <homed> <moving>
+                                                  <shutter>`` (0/1 flags)
+``CHK 1`` / ``CHK 0``                             ``OK CHK 1``: from then on every line both
+                                                  ways ends in ``*HH`` (XOR of its bytes)
+``LIMITS <min> <max>``                            ``OK LIMITS <min> <max>``: soft limits, steps
+``HOME <rate>``                                   ``OK HOME``; later ``EV HOMED <t> 0``
+``MOVE <target> <rate> <accel>``                  ``OK MOVE``; later ``EV DONE <t> <pos>``
+``SWEEP <target> <rate> <accel> <open> <close>``  ``OK SWEEP``; events ``START``, ``OPEN``,
+                                                  ``POS`` (every 50 ms), ``CLOSE``, ``DONE``
+``TABLE <n>``                                     ``OK TABLE <n>``: a step-rate table of n
+                                                  segments follows (1..64; replaces the last)
+``SEG <i> <steps> <duration_us>``                 ``OK SEG <i> <total_steps> <total_us>``:
+                                                  segment i (in order, from 0), steps >= 0,
+                                                  duration >= 1 µs, at most 4000 steps/s;
+                                                  the reply's running totals let the host
+                                                  check the whole table
+``TSWEEP <target> <accel> <open> <close>``        ``OK TSWEEP``; events as for ``SWEEP``
+``SHUTTER <delay_us> <duration_us>``              ``OK SHUTTER <t_us>``; later ``EV OPEN``,
+                                                  ``EV CLOSE``
+``CLOSE``                                         ``OK CLOSE`` (shutter released now)
+``STOP``                                          ``OK STOP <t_us> <pos>`` (shutter released
+                                                  first, then the motor stopped)
+``WATCHDOG <ms>``                                 ``OK WATCHDOG <ms>``: 0 (the default after a
+                                                  reset) turns it off; at most 600000
+``PING``                                          ``OK PING <t_us>`` (a heartbeat; any line
+                                                  counts as one)
+================================================  ==============================================
 
 ``SWEEP`` ramps at ``accel`` to ``rate`` and back to rest at ``target``; the shutter is
 held open from the step that reaches ``open`` to the step that reaches ``close`` — both

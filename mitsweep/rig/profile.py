@@ -303,7 +303,7 @@ def quantise_table(times_s: np.ndarray, travel_steps: np.ndarray, *, stage: str,
 
 def max_deviation(table_t: np.ndarray, table_x: np.ndarray, knot_t: np.ndarray,
                   knot_x: np.ndarray) -> float:
-    """Largest |table − profile| of two piecewise-linear travels (steps), exact: at every
+    """Largest ``|table − profile|`` of two piecewise-linear travels (steps), exact: at every
     knot of either (each is linear between the union of the knots)."""
     t = np.union1d(table_t, knot_t)
     t = t[(t >= 0) & (t <= min(table_t[-1], knot_t[-1]))]

@@ -4,7 +4,7 @@ the shutter opto, events with ``micros()`` timestamps (optionally started near t
 32-bit wrap), step-rate tables (``TABLE``/``SEG``/``TSWEEP``: the table's segments
 at constant rate, rate changes at once as the firmware's stepper makes them), and the
 firmware's watchdog (``WATCHDOG <ms>``: while it moves or an
-exposure is pending or open, a host silent for that long gets ``EV FAULT ... WATCHDOG``
+exposure is pending or open, a host silent for that long gets ``EV FAULT <t> <pos> WATCHDOG``
 after the shutter was released and the motor stopped).
 """
 

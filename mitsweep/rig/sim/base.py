@@ -24,12 +24,16 @@ FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event", "slo
 class Fault:
     """One injected fault.
 
-    kind : one of :data:`FAULT_KINDS`.
-    command : for ``no_reply`` / ``garbage`` / ``slow_reply``: the command word it hits
+    kind
+        One of :data:`FAULT_KINDS`.
+    command
+        For ``no_reply`` / ``garbage`` / ``slow_reply``: the command word it hits
         (``"SWEEP"``, ``"STATE"``, ``"move"``, ...); the first such command only.
-    at_fraction : for ``fault_flag`` / ``unplug``: fraction of the next long move
-        (SWEEP, or a Zaber ``move``) at which it happens.
-    delay_s : for ``late_event``: how late the end-of-exposure events are; for
+    at_fraction
+        For ``fault_flag`` / ``unplug``: fraction of the next long move (SWEEP, or a
+        Zaber ``move``) at which it happens.
+    delay_s
+        For ``late_event``: how late the end-of-exposure events are; for
         ``slow_reply``: how late the reply is.
     """
 
