@@ -1,6 +1,7 @@
 """CLI: mitsweep ipsf, mitsweep table1, mitsweep sweep-range --verify (tracer side)."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -39,6 +40,43 @@ def test_ipsf_bank_to_npz(tmp_path, capsys):
     np.testing.assert_allclose(bank.kernels.sum(axis=(2, 3)), 1.0, atol=1e-5)
 
 
+@pytest.mark.parametrize("suffix", [".exr", ".npz"])
+def test_ipsf_several_depths_for_one_point_write_one_kernel_per_depth(tmp_path, capsys,
+                                                                      suffix):
+    """--depth 500 inf at one point: two IPSFs, each file named for its depth, each the
+    kernel a one-depth run traces (same seed: identical, the traces are independent)."""
+    out = tmp_path / f"k{suffix}"
+    common = ["ipsf", "scenes/sphere.toml", "--radius", "3", "--rays", "50000",
+              "--kernel-size", "15"]
+    res = _json(capsys, [*common, "--depth", "500", "inf", "-o", str(out),
+                         "--plot", str(tmp_path / "k.png"), "--json"])
+    assert res["depths_mm"] == [500.0, "inf"] and res["image_uv_mm"] == [3.0, 0.0]
+    names = [(f"k_l500mm{suffix}", "k_l500mm.png"), (f"k_linf{suffix}", "k_linf.png")]
+    assert [(Path(e["output"]).name, Path(e["plot"]).name) for e in res["ipsfs"]] == names
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(sum(names, ()))
+
+    def kernel(path):
+        return read_exr(path)[0]["Y"] if suffix == ".exr" else load_bank(path).kernels[0, 0]
+
+    for entry, depth in zip(res["ipsfs"], ("500", "inf")):
+        one = tmp_path / "one" / f"k{suffix}"
+        one.parent.mkdir(exist_ok=True)
+        single = _json(capsys, [*common, "--depth", depth, "-o", str(one), "--json"])
+        assert single["depth_mm"] == entry["depth_mm"]
+        np.testing.assert_array_equal(kernel(entry["output"]), kernel(one))
+    # the two depths differ (a focal sweep's IPSF is nearly, not exactly, depth-invariant)
+    k500, kinf = (kernel(e["output"]) for e in res["ipsfs"])
+    assert np.abs(k500 - kinf).sum() > 0
+
+
+def test_ipsf_several_depths_print_one_block_per_depth(capsys):
+    assert main(["ipsf", "scenes/sphere.toml", "--rays", "20000", "--kernel-size", "15",
+                 "--depth", "500", "2000"]) == 0
+    text = capsys.readouterr().out
+    assert "-- depth 500 mm" in text and "-- depth 2000 mm" in text
+    assert text.index("-- depth 500 mm") < text.index("-- depth 2000 mm")
+
+
 def test_ipsf_psf_at_one_sensor_distance(capsys):
     res = _json(capsys, ["ipsf", "scenes/paraboloid.toml", "--point", "1", "0.5",
                          "--sensor-distance", "58.2", "--rays", "100000", "--json"])
@@ -49,7 +87,7 @@ def test_ipsf_psf_at_one_sensor_distance(capsys):
     (["--point", "60", "0"], "outside the mirror"),
     (["--kernel-size", "30"], "odd"),
     (["--bank", "radial", "--point", "1", "0"], "drop --point"),
-    (["--depth", "500", "900"], "several need --bank"),
+    (["--depth", "500", "900", "500"], "give each depth once"),
     (["-o", "x.txt"], "must end in"),
 ])
 def test_ipsf_bad_input_is_one_line_and_status_2(capsys, argv, match):
@@ -76,3 +114,10 @@ def test_sweep_range_verify_adds_traced_range(capsys):
     # Same field and depths as the analytic range; see test_tracer_focus for the bound.
     assert res["traced_focus_min_mm"] == pytest.approx(res["focus_min_mm"], abs=0.05)
     assert res["traced_focus_max_mm"] == pytest.approx(res["focus_max_mm"], abs=0.05)
+
+
+def test_ipsf_refusal_with_json_is_a_json_object(capsys):
+    from cli_contract import refused
+
+    line = refused(capsys, ["ipsf", "scenes/sphere.toml", "--depth", "500", "500", "--json"])
+    assert "give each depth once" in line

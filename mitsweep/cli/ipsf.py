@@ -60,7 +60,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--grid", type=positive_int, nargs=2, default=(9, 9),
                    metavar=("ROWS", "COLS"), help="grid bank shape (9 9)")
     p.add_argument("--depth", type=_depth, nargs="+", default=[500.0], metavar="MM",
-                   help="depth(s) l of the source from the mirror, mm (500; inf allowed)")
+                   help="depth(s) l of the source from the mirror, mm (500; inf allowed); "
+                        "several for one point: one IPSF per depth, each -o / --plot file "
+                        "named per depth (FILE_l500mm.exr, FILE_linf.exr)")
     p.add_argument("--sensor-distance", type=positive_float, metavar="MM",
                    help="a PSF at this one sensor distance instead of the sweep's IPSF")
     p.add_argument("--method", choices=["exact", "continuous", "planes"], default="exact",
@@ -123,6 +125,27 @@ def _geometry(setup, table_path, designed=None):
     return reference_geometry(setup, sweep=sweep, motion=motion_for(setup, sweep, table=table))
 
 
+def depth_tag(depth: float) -> str:
+    """The file-name tag of a depth: ``l500mm``, ``l1e06mm``, ``linf``."""
+    if math.isinf(depth):
+        return "linf"
+    return "l" + f"{depth:.10g}".replace("+", "") + "mm"
+
+
+def per_depth_path(path: str, depth: float) -> str:
+    """``path`` with the depth's tag before its suffix: ``k.exr`` → ``k_l500mm.exr``."""
+    p = Path(path)
+    return str(p.with_name(f"{p.stem}_{depth_tag(depth)}{p.suffix}"))
+
+
+def _outputs(args) -> list[str | None]:
+    """Every file the run writes: with several depths for one point, one of each per
+    depth (a bank holds its depths in one file)."""
+    if args.bank or len(args.depth) == 1:
+        return [args.output, args.plot]
+    return [per_depth_path(f, d) for f in (args.output, args.plot) if f for d in args.depth]
+
+
 def _check_output(path: str | None, allowed: tuple[str, ...], what: str) -> None:
     if path is not None and Path(path).suffix.lower() not in allowed:
         raise UsageError(f"{path}: {what} output must end in {' or '.join(allowed)}")
@@ -138,7 +161,10 @@ def run(args) -> int:
     from ..tracer import integrated_psf, ipsf_bank, psf
     from ..tracer.source import source_from_image
 
-    check_outputs([args.setup, args.motion_table, args.motion], [args.output, args.plot])
+    if not args.bank and len(set(args.depth)) != len(args.depth):
+        given = " ".join(f"{d:g}" for d in args.depth)
+        raise UsageError(f"--depth {given}: give each depth once (one IPSF per depth)")
+    check_outputs([args.setup, args.motion_table, args.motion], _outputs(args))
     if args.plot:  # before the traces, not after
         from ..plots import check_figure_path
 
@@ -211,8 +237,6 @@ def run(args) -> int:
         return _report(args, out)
 
     _check_output(args.output, (".npz", ".exr"), "an IPSF")
-    if len(args.depth) != 1:
-        raise UsageError("give one --depth for a single IPSF (several need --bank)")
     if args.radius is not None:
         a = math.radians(args.angle)
         u, v = args.radius * math.cos(a), args.radius * math.sin(a)
@@ -220,45 +244,57 @@ def run(args) -> int:
         u, v = args.point
     else:
         u = v = 0.0
-    depth = args.depth[0]
     where = (f"--radius {args.radius:g} --angle {args.angle:g}" if args.radius is not None
              else f"--point {u:g} {v:g}")
-    try:  # the image point must see the mirror: say which flag put it elsewhere
-        source_from_image(setup, u, v, depth, reference_sensor_distance=i_ref)
-    except ValueError as exc:
-        raise UsageError(f"{where}: {exc}") from None
-    if args.sensor_distance is not None:
-        kernel, info = psf(setup, u, v, depth, args.sensor_distance, double=args.float64,
-                           reference_sensor_distance=i_ref, **common)
-    else:
-        kernel, info = integrated_psf(setup, u, v, depth, sweep=sweep, motion=motion,
-                                      method=args.method, time_samples=args.time_samples,
-                                      n_planes=args.planes, double=args.float64, **common)
-    out.update({k: v for k, v in info.items()})
-    if args.output:
-        setup_dict = setup_to_dict(setup)
-        meta = {"setup": setup_dict, "sweep_range": sweep.as_dict(), **info}
-        if args.output.lower().endswith(".exr"):
-            write_exr(args.output, kernel, metadata=meta)
+    for depth in args.depth:  # before any trace
+        try:  # the image point must see the mirror: say which flag put it elsewhere
+            source_from_image(setup, u, v, depth, reference_sensor_distance=i_ref)
+        except ValueError as exc:
+            raise UsageError(f"{where}: {exc}") from None
+    several = len(args.depth) > 1
+    entries = []
+    for depth in args.depth:
+        if args.sensor_distance is not None:
+            kernel, info = psf(setup, u, v, depth, args.sensor_distance, double=args.float64,
+                               reference_sensor_distance=i_ref, **common)
         else:
-            depths = np.array([depth])
-            bank = IPSFBank(kernels=kernel[None, None], points_uv=np.array([[u, v]]),
-                            depths_mm=depths, pixel_pitch=setup.sensor.pixel_pitch,
-                            reference_sensor_distance=info["reference_sensor_distance_mm"],
-                            kind="grid", grid_shape=(1, 1),
-                            vignetted=np.array([[info["vignetted_fraction"]]]), metadata=meta,
-                            optics=optics_sections(setup_dict, motion.as_dict()))
-            save_bank(args.output, bank)
-        out["output"] = args.output
-    if args.plot:
-        from ..plots import plot_ipsf
-        from ..tracer.metrics import cross_sections
+            kernel, info = integrated_psf(setup, u, v, depth, sweep=sweep, motion=motion,
+                                          method=args.method, time_samples=args.time_samples,
+                                          n_planes=args.planes, double=args.float64, **common)
+        entry = dict(info)
+        if args.output:
+            path = per_depth_path(args.output, depth) if several else args.output
+            setup_dict = setup_to_dict(setup)
+            meta = {"setup": setup_dict, "sweep_range": sweep.as_dict(), **info}
+            if path.lower().endswith(".exr"):
+                write_exr(path, kernel, metadata=meta)
+            else:
+                bank = IPSFBank(kernels=kernel[None, None], points_uv=np.array([[u, v]]),
+                                depths_mm=np.array([depth]),
+                                pixel_pitch=setup.sensor.pixel_pitch,
+                                reference_sensor_distance=info["reference_sensor_distance_mm"],
+                                kind="grid", grid_shape=(1, 1),
+                                vignetted=np.array([[info["vignetted_fraction"]]]),
+                                metadata=meta,
+                                optics=optics_sections(setup_dict, motion.as_dict()))
+                save_bank(path, bank)
+            entry["output"] = path
+        if args.plot:
+            from ..plots import plot_ipsf
+            from ..tracer.metrics import cross_sections
 
-        title = "PSF" if args.sensor_distance else "IPSF"
-        plot_ipsf(kernel, args.plot, pitch_mm=setup.sensor.pixel_pitch,
-                  sections=cross_sections(kernel, math.atan2(v, u) if (u or v) else 0.0),
-                  title=f"{title} at ({u:.2f}, {v:.2f}) mm, l = {depth:g} mm")
-        out["plot"] = args.plot
+            path = per_depth_path(args.plot, depth) if several else args.plot
+            title = "PSF" if args.sensor_distance else "IPSF"
+            plot_ipsf(kernel, path, pitch_mm=setup.sensor.pixel_pitch,
+                      sections=cross_sections(kernel, math.atan2(v, u) if (u or v) else 0.0),
+                      title=f"{title} at ({u:.2f}, {v:.2f}) mm, l = {depth:g} mm")
+            entry["plot"] = path
+        entries.append(entry)
+    if several:  # one entry per depth, in the order given
+        out.update(image_uv_mm=[float(u), float(v)], depths_mm=list(args.depth),
+                   ipsfs=entries)
+    else:
+        out.update(entries[0])
     return _report(args, out)
 
 
@@ -266,6 +302,14 @@ def _report(args, out: dict) -> int:
     if args.json:
         print_json(out)
         return 0
+    _print_table({k: v for k, v in out.items() if k != "ipsfs"})
+    for entry in out.get("ipsfs", []):
+        sys.stdout.write(f"-- depth {entry['depth_mm']:g} mm\n")
+        _print_table(entry)
+    return 0
+
+
+def _print_table(out: dict) -> None:
     skip = {"motion", "box_mm", "ellipse_mm", "mirror_point_mm", "points_uv_mm", "version"}
     for key, value in out.items():
         if key in skip:
@@ -275,4 +319,3 @@ def _report(args, out: dict) -> int:
         elif isinstance(value, (tuple, list)) and value and isinstance(value[0], float):
             value = "(" + ", ".join(f"{x:.6g}" for x in value) + ")"
         sys.stdout.write(f"{key:<30s} {value}\n")
-    return 0
