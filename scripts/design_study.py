@@ -36,7 +36,8 @@ SETUPS = ("sphere", "paraboloid", "paraboloid_tilted")
 LUX = (50.0, 2.0, 0.5)
 
 
-def predicted(out: Path, *, planes: int, rays: int, grid: tuple[int, int]) -> list[dict]:
+def predicted(out: Path, *, planes: int, rays: int, grid: tuple[int, int],
+              radii: int) -> list[dict]:
     from mitsweep.config import load_setup
     from mitsweep.deconv import paper_fig10_settings
     from mitsweep.design import design_sweep, plane_bank, wiener_model
@@ -51,7 +52,7 @@ def predicted(out: Path, *, planes: int, rays: int, grid: tuple[int, int]) -> li
             noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
             t0 = time.perf_counter()
             d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, grid=grid,
-                             bank=bank)
+                             n_radii=radii, bank=bank)
             bank = d.bank
             if held is None:  # held-out bank: another seed, twice the rays
                 held = plane_bank(setup, bank.points_uv, bank.depths_mm, bank.edges_mm,
@@ -182,6 +183,7 @@ def main(argv=None) -> int:
     p.add_argument("--planes", type=int, default=64)
     p.add_argument("--rays", type=int, default=1 << 16)
     p.add_argument("--grid", type=int, nargs=2, default=(5, 5))
+    p.add_argument("--radii", type=int, default=9)
     p.add_argument("--measured", nargs=2, metavar=("SETUP", "LUX"))
     p.add_argument("--spp", type=int, default=128)
     p.add_argument("--seed", type=int, default=0)
@@ -194,7 +196,7 @@ def main(argv=None) -> int:
                        planes=a.planes, rays=a.rays)
         print(json.dumps(res, indent=1))
         return 0
-    rows = predicted(out, planes=a.planes, rays=a.rays, grid=tuple(a.grid))
+    rows = predicted(out, planes=a.planes, rays=a.rays, grid=tuple(a.grid), radii=a.radii)
     text = table(rows)
     (out / "predicted.md").write_text(text)
     print(text)
