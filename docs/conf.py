@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import importlib
+import inspect
 import os
+import pkgutil
+import re
 import sys
 from pathlib import Path
 
@@ -25,7 +29,6 @@ version = release
 
 extensions = [
     "sphinx.ext.autodoc",
-    "sphinx.ext.autosummary",
     "sphinx.ext.mathjax",
     "sphinx.ext.viewcode",
     "numpydoc",
@@ -34,11 +37,8 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
-templates_path = ["_templates"]
-
-# The API reference: one page per module, generated from the docstrings.
-autosummary_generate = True
-autosummary_imported_members = False
+# The API reference: one page per package and module (written into api/generated/ by
+# _write_api_pages below, before each build), documented by autodoc from the docstrings.
 autodoc_default_options = {"member-order": "bysource"}
 autodoc_typehints = "none"          # numpydoc's Parameters sections carry the types
 numpydoc_show_class_members = False  # members are listed by autodoc, once
@@ -51,3 +51,102 @@ myst_heading_anchors = 3
 html_theme = "furo"
 html_title = f"mitsweep {release}"
 html_static_path: list[str] = []
+
+
+# -- the API reference ------------------------------------------------------------------
+# Written here rather than by autosummary: a package that re-exports a function named like
+# its module (mitsweep.optics.chief_ray, mitsweep.rig.capture, mitsweep.render.user_scene)
+# would get the function's page in place of the module's.
+
+#: The public packages and modules (their submodules are found by walking them).
+API_ROOTS = ["mitsweep.config", "mitsweep.optics", "mitsweep.tracer", "mitsweep.render",
+             "mitsweep.deconv", "mitsweep.design", "mitsweep.pipeline", "mitsweep.rig",
+             "mitsweep.io", "mitsweep.backend", "mitsweep.resources", "mitsweep.plots"]
+_ABBREVIATIONS = ("Eq.", "Eqs.", "Fig.", "Figs.", "Sec.", "e.g.", "i.e.", "et al.", "vs.")
+
+
+def _summary(module) -> str:
+    """The first sentence of a module's docstring (its first paragraph if a sentence
+    cut there would break inline markup)."""
+    doc = inspect.getdoc(module) or ""
+    para = " ".join(doc.split("\n\n", 1)[0].split())
+    for m in re.finditer(r"\.(\s|$)", para):
+        head = para[:m.start() + 1]
+        if head.endswith(_ABBREVIATIONS) or head.count("``") % 2 or head.count("`") % 2:
+            continue
+        return head
+    return para
+
+
+def _title(name: str) -> list[str]:
+    text = name.replace("_", "\\_")
+    return [text, "=" * len(text), ""]
+
+
+def _module_page(name: str, pages: dict[str, str]) -> None:
+    module = importlib.import_module(name)
+    lines = _title(name)
+    if hasattr(module, "__path__"):  # a package: its overview, its names, its modules
+        lines += [f".. automodule:: {name}", ""]
+        exported = []
+        for attr in getattr(module, "__all__", []):
+            obj = getattr(module, attr, None)
+            home = getattr(obj, "__module__", None)
+            if home and home != name and home.startswith("mitsweep") and hasattr(obj, "__qualname__"):
+                exported.append(f"- :py:obj:`{attr} <{home}.{obj.__qualname__}>`")
+        if exported:
+            lines += ["Names", "-----", "", f"Exported by ``{name}``, documented where they are "
+                      "defined:", "", *exported, ""]
+        subs = sorted(info.name for info in pkgutil.iter_modules(module.__path__)
+                      if not info.name.startswith("_"))
+        if subs:
+            lines += ["Modules", "-------", ""]
+            for sub in subs:
+                full = f"{name}.{sub}"
+                lines.append(f"- :py:mod:`{full}`: {_summary(importlib.import_module(full))}")
+                _module_page(full, pages)
+            lines += ["", ".. toctree::", "   :hidden:", "", *(f"   {name}.{s}" for s in subs), ""]
+    else:
+        lines += [f".. automodule:: {name}", "   :members:", "   :show-inheritance:", ""]
+    pages[name] = "\n".join(lines)
+
+
+def _write_api_pages(app) -> None:
+    out = Path(app.srcdir) / "api" / "generated"
+    out.mkdir(parents=True, exist_ok=True)
+    pages: dict[str, str] = {}
+    for name in API_ROOTS:
+        _module_page(name, pages)
+    for name, text in pages.items():
+        path = out / f"{name}.rst"
+        if not path.is_file() or path.read_text() != text:  # unchanged pages stay unchanged
+            path.write_text(text)
+    for path in out.glob("*.rst"):
+        if path.stem not in pages:
+            path.unlink()
+
+
+def _resolve_reexport(app, env, node, contnode):
+    """A reference to a name through the package that re-exports it
+    (``mitsweep.tracer.integrated_psf``) resolves to where it is documented
+    (``mitsweep.tracer.ipsf.integrated_psf``)."""
+    if node.get("refdomain") != "py":
+        return None
+    target = node.get("reftarget", "")
+    modname, _, attr = target.rpartition(".")
+    if not modname.startswith("mitsweep"):
+        return None
+    try:
+        obj = getattr(importlib.import_module(modname), attr)
+    except (ImportError, AttributeError):
+        return None
+    home, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+    if not home or not qualname or f"{home}.{qualname}" == target:
+        return None
+    return env.get_domain("py").resolve_xref(env, node["refdoc"], app.builder, node["reftype"],
+                                             f"{home}.{qualname}", node, contnode)
+
+
+def setup(app):
+    app.connect("builder-inited", _write_api_pages)
+    app.connect("missing-reference", _resolve_reexport)
