@@ -154,3 +154,57 @@ def test_bank_that_is_not_npz_is_named(tmp_path):
     bad.write_text("hello")
     with pytest.raises(BankError, match="not an IPSF bank"):
         load_bank(bad)
+
+
+def test_a_tilted_mirrors_grid_bank_is_refined_to_its_image_and_recorded():
+    """The bank task's recorded grid is the one traced: refined for the tilted
+    paraboloid (whose image a 9x9 frame grid crosses with 5 nodes), as given otherwise."""
+    from conftest import SCENES
+
+    from mitsweep.config import load_setup
+    from mitsweep.deconv.spatial import mirror_grid_shape
+    from mitsweep.pipeline.tasks import BANK, plan
+
+    opts = pipeline.DatasetOptions()
+    tilted = load_setup(SCENES / "paraboloid_tilted.toml")
+    sphere = load_setup(SCENES / "sphere.toml")
+
+    def grid(setup):
+        return next(t for t in plan(opts, setup) if t.name == BANK).params["grid"]
+
+    fine = mirror_grid_shape(tilted)
+    assert grid(tilted) == [max(9, fine[0]), max(9, fine[1])]
+    assert min(grid(tilted)) > 9
+    assert grid(sphere) == [9, 9] == grid(None)
+
+
+def test_a_dataset_with_a_motion_profile_renders_and_traces_that_motion(tmp_path, tiny_dataset):
+    """``DatasetOptions(motion=...)`` (``dataset --motion``): the sweep render and the bank
+    follow the profile, the manifest records it (and a room dataset's options do not
+    mention it); the other modes share the profile's reference grid."""
+    from mitsweep.io.bank import load_bank
+    from mitsweep.io.exr import read_exr
+    from mitsweep.optics.sweep import optimal_sweep_range
+
+    sr = optimal_sweep_range(TINY)
+    a, b = sr.sensor_start, sr.sensor_end
+    motion = {"times": [0.0, 0.8, 1.0], "positions_mm": [a, a + 0.1 * (b - a), b]}
+    opts = replace(TINY_OPTS, motion=motion)
+    manifest = build_dataset(TINY, tmp_path, opts, progress=False)
+    assert manifest["options"]["motion"] == motion
+    linear_root, linear = tiny_dataset
+    assert "motion" not in linear["options"]
+    bank = load_bank(tmp_path / "bank.npz")
+    assert bank.metadata["motion"]["kind"] == "tabulated"
+    assert bank.metadata["motion"]["positions_mm"] == motion["positions_mm"]
+
+    def sweep(root):
+        ch, meta = read_exr(root / "scene_000" / "sweep.exr")
+        return ch["R"], meta
+
+    img, meta = sweep(tmp_path)
+    lin, lin_meta = sweep(linear_root)
+    assert np.abs(img - lin).max() > 0
+    assert meta["motion"]["kind"] == "tabulated" and lin_meta["motion"]["kind"] != "tabulated"
+    with pytest.raises(DatasetError, match="motion"):
+        replace(TINY_OPTS, motion={"times": [0.0, 1.0], "positions_mm": [a, a]})

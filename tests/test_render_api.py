@@ -207,3 +207,39 @@ def test_render_cli_offers_exactly_the_render_modes_and_aovs():
     from mitsweep.render.user_scene import MM_PER_UNIT
 
     assert choices["scene_unit"] == tuple(MM_PER_UNIT) == SCENE_UNITS
+
+
+def test_render_cli_runs_a_motion_profile_file_as_the_api_does(tmp_path):
+    """``render --motion PROFILE.json``: the sweep of the file's profile, the same image
+    as render_image(motion=...) with that profile; a file the setup cannot run is one
+    line before any render."""
+    from mitsweep.cli.main import main
+    from mitsweep.config import setup_to_toml
+    from mitsweep.io.exr import read_exr
+    from mitsweep.optics.motion import MotionProfile
+    from mitsweep.optics.motion_file import save_motion_file
+    from mitsweep.optics.sweep import optimal_sweep_range
+
+    setup = small("sphere", 32)
+    (tmp_path / "s.toml").write_text(setup_to_toml(setup))
+    sr = optimal_sweep_range(setup)
+    a, b = sr.sensor_start, sr.sensor_end
+    # an uneven profile: most of the exposure near the start of the range
+    prof = MotionProfile.tabulated([0.0, 0.7, 1.0], [a, a + 0.2 * (b - a), b])
+    save_motion_file(tmp_path / "p.json", prof, exposure_s=None, provenance={"test": 1})
+    out = tmp_path / "r.exr"
+    assert main(["render", str(tmp_path / "s.toml"), "--mode", "sweep", "--spp", "4",
+                 "--motion", str(tmp_path / "p.json"), "--out", str(out)]) == 0
+    chans, _ = read_exr(out)
+    got = np.stack([chans[c] for c in "RGB"], axis=-1)
+    want = render_image(setup, "sweep", spp=4, motion=prof).image
+    np.testing.assert_array_equal(got, want)
+    linear = render_image(setup, "sweep", spp=4).image
+    assert np.abs(linear - want).max() > 0      # the profile changed the image
+
+    bad = MotionProfile.tabulated([0.0, 1.0], [setup.lens.focal_length * 0.9, b])
+    save_motion_file(tmp_path / "bad.json", bad, exposure_s=None, provenance={})
+    assert main(["render", str(tmp_path / "s.toml"), "--mode", "sweep", "--spp", "4",
+                 "--motion", str(tmp_path / "bad.json"), "--out",
+                 str(tmp_path / "bad.exr")]) == 2
+    assert not (tmp_path / "bad.exr").exists()

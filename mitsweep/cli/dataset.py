@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
                      print_json)
+from .motion import add_motion_argument, motion_from_args
 
 NAME = "dataset"
 HELP = ("render a synthetic dataset of the built-in room, the procedural scene family or a "
@@ -63,6 +64,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    metavar="SECONDS",
                    help="if another run holds the directory, wait for it (for ever, or at "
                         "most SECONDS) instead of refusing at once")
+    add_motion_argument(p)
     p.add_argument("--json", action="store_true", help="print the manifest as JSON")
 
 
@@ -133,7 +135,8 @@ def _non_negative_int(text: str) -> int:
 _OPTION_OF = {"scenes": "--scenes", "seed": "--seed", "spp": "--spp",
               "light_levels_lux": "--lux", "methods": "--methods", "bank_rays": "--bank-rays",
               "family": "--family", "family_params": "--family-param",
-              "scene_files": "--scenes-from", "scene_unit": "--scene-unit"}
+              "scene_files": "--scenes-from", "scene_unit": "--scene-unit",
+              "motion": "--motion"}
 
 
 def _scene_options(args, setup) -> dict:
@@ -186,6 +189,10 @@ def run(args) -> int:
         raise UsageError("--out: must name a directory")
     setup = load_setup_arg(args.setup)
     scenes = _scene_options(args, setup)
+    motion = motion_from_args(args, setup)
+    if motion is not None:
+        scenes["motion"] = {"times": motion.times.tolist(),
+                            "positions_mm": motion.positions.tolist()}
     try:
         opts = DatasetOptions(seed=args.seed,
                               spp=dict(zip(("pinhole", "focused", "sweep", "stopped"), args.spp)),
@@ -201,8 +208,8 @@ def run(args) -> int:
     if args.scheduler and args.executor not in (None, "dask"):
         raise UsageError(f"--scheduler: needs --executor dask (or no --executor), got "
                          f"--executor {args.executor}")
-    check_dataset_outputs([args.setup, *(f["path"] for f in opts.scene_files)], out, opts,
-                          args.shard)
+    check_dataset_outputs([args.setup, args.motion, *(f["path"] for f in opts.scene_files)],
+                          out, opts, args.shard)
     manifest = build_dataset(setup, out, opts, executor=args.executor or "serial",
                              jobs=args.jobs, scheduler=args.scheduler, shard=args.shard,
                              retries=args.retries, wait=args.wait)

@@ -8,6 +8,7 @@ import sys
 
 from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
                      print_json)
+from .motion import add_motion_argument, motion_from_args
 
 NAME = "render"
 HELP = ("render a setup's scene, or your own Mitsuba scene, through the mirror (pinhole "
@@ -43,6 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene-unit", choices=["mm", "cm", "m"],
                    help="length unit of the scene file (default: the setup's [scene] unit, "
                         "else mm)")
+    add_motion_argument(p)
     p.add_argument("--json", action="store_true", help="print a JSON summary")
 
 
@@ -61,7 +63,8 @@ def run(args) -> int:
     from ..render import render_image, render_to_exr
 
     setup = load_setup_arg(args.setup)
-    check_outputs([args.setup, args.scene or setup.scene.file], [args.out, args.preview])
+    check_outputs([args.setup, args.scene or setup.scene.file, args.motion],
+                  [args.out, args.preview])
     _check_out(args.out, ".exr")
     if args.preview:
         _check_out(args.preview, ".png")
@@ -73,7 +76,8 @@ def run(args) -> int:
     if args.scene_unit is not None and args.scene is None and setup.scene.file is None:
         raise UsageError("--scene-unit applies to a scene file (--scene, or [scene] file in "
                          "the setup)")
-    result = render_image(setup, args.mode, spp=args.spp, seed=args.seed,
+    motion = motion_from_args(args, setup)
+    result = render_image(setup, args.mode, spp=args.spp, seed=args.seed, motion=motion,
                           aovs=tuple(dict.fromkeys(args.aov)), f_number=args.f_number,
                           mirror_only=not args.full_frame, progress=sys.stderr.isatty(),
                           sampler=args.sampler, scene=args.scene, scene_unit=args.scene_unit)
@@ -90,6 +94,8 @@ def run(args) -> int:
                "mean": float(result.image.mean())}
     if args.preview:
         summary["preview"] = args.preview
+    if args.motion:
+        summary["motion"] = args.motion
     if "user_scene" in m:
         summary["scene"] = {k: m["user_scene"][k] for k in ("source", "sha256", "unit", "replaced")}
     if args.json:

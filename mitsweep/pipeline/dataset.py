@@ -225,6 +225,6 @@ def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | N
                                f"({manifest['setup'].get('name')!r}); use a new directory")
 
     with open_executor(executor, jobs=jobs, scheduler=scheduler) as (pool, lost):
-        return run_tasks(out_dir, plan(opts), setup, header, read_manifest=read_manifest,
+        return run_tasks(out_dir, plan(opts, setup), setup, header, read_manifest=read_manifest,
                          check_header=same_setup, executor=pool, lost=lost, shard=shard,
                          wait=wait, progress=progress, retries=retries, desc="dataset")

@@ -103,6 +103,7 @@ class DatasetOptions:
     family_params: dict = field(default_factory=dict)
     scene_files: tuple[dict, ...] = ()
     scene_unit: str | None = None
+    motion: dict | None = None
 
     def __post_init__(self) -> None:
         _require(_is_int(self.scenes) and 1 <= self.scenes <= MAX_SCENES, "scenes",
@@ -134,6 +135,7 @@ class DatasetOptions:
                  f"must be true or false, got {self.diffraction!r}")
         methods = _methods(self.methods)
         self._check_scenes()
+        self._check_motion()
         object.__setattr__(self, "spp", {m: int(self.spp[m]) for m in MODES})
         object.__setattr__(self, "light_levels_lux", lux)
         object.__setattr__(self, "bank_depths_mm", depths)
@@ -182,6 +184,23 @@ class DatasetOptions:
             files.append({"path": f["path"], "sha256": sha})
         object.__setattr__(self, "scene_files", tuple(files))
 
+    def _check_motion(self) -> None:
+        """``motion``: None (the setup's sweep) or a tabulated profile,
+        ``{"times": [...], "positions_mm": [...]}`` (e.g. a motion-profile file's)."""
+        if self.motion is None:
+            return
+        from ..optics.motion import MotionProfile
+
+        m = self.motion
+        _require(isinstance(m, dict) and set(m) == {"times", "positions_mm"}, "motion",
+                 f"must be null or an object with exactly times and positions_mm, got {m!r}")
+        try:
+            prof = MotionProfile.tabulated(m["times"], m["positions_mm"])
+        except (TypeError, ValueError) as exc:
+            raise DatasetError(f"motion: {exc}") from None
+        object.__setattr__(self, "motion", {"times": prof.times.tolist(),
+                                            "positions_mm": prof.positions.tolist()})
+
     def as_dict(self) -> dict:
         d = {"scenes": self.scenes, "seed": self.seed, "spp": dict(self.spp),
              "light_levels_lux": list(self.light_levels_lux),
@@ -197,13 +216,15 @@ class DatasetOptions:
         if self.family == "xml":
             d["scene_files"] = [dict(f) for f in self.scene_files]
             d["scene_unit"] = self.scene_unit
+        if self.motion is not None:
+            d["motion"] = {k: list(v) for k, v in self.motion.items()}
         return d
 
 
 #: Keys a manifest's options may omit (datasets written before they existed), with the
 #: value those datasets were made with.
 _ADDED_LATER = {"methods": ["wiener"], "family": "room", "family_params": {},
-                "scene_files": [], "scene_unit": None}
+                "scene_files": [], "scene_unit": None, "motion": None}
 
 
 def options_from_dict(d: Any) -> DatasetOptions:

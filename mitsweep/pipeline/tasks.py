@@ -125,12 +125,24 @@ def _user_scene(setup: Setup, source: dict):
     return str(path), source["unit"], None
 
 
+def _motion(motion: dict | None):
+    """The :class:`~mitsweep.optics.motion.MotionProfile` of a task's ``motion``
+    parameter (:attr:`DatasetOptions.motion`), None for the setup's own sweep."""
+    if motion is None:
+        return None
+    from ..optics.motion import MotionProfile
+
+    return MotionProfile.tabulated(motion["times"], motion["positions_mm"])
+
+
 def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: int,
            f_number: float | None, diffraction: bool, sampler: str,
-           scene_source: dict | None = None) -> dict:
+           scene_source: dict | None = None, motion: dict | None = None) -> dict:
     """Render scene variation ``scene`` in ``mode`` (the pinhole one with the depth and
     mask AOVs) with ``sampler``; ``f_number``: the stopped mode's; ``diffraction``: add
-    the lens's; ``scene_source``: the scene, if not the room (:func:`scene_source`)."""
+    the lens's; ``scene_source``: the scene, if not the room (:func:`scene_source`);
+    ``motion``: the sweep's profile, if not the setup's (every mode is rendered on its
+    reference grid, mid-travel)."""
     from ..optics.diffraction import add_diffraction
     from ..render import render_image, render_to_exr
 
@@ -140,7 +152,7 @@ def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: in
     if scene_source is not None:
         kw["scene"], kw["scene_unit"], kw["max_depth"] = _user_scene(setup, scene_source)
     result = render_image(s, mode, spp=spp, seed=seed, aovs=aovs, f_number=f_number,
-                          sampler=sampler, **kw)
+                          sampler=sampler, motion=_motion(motion), **kw)
     timings = {k: result.metadata.pop(k) for k in _RENDER_TIMINGS if k in result.metadata}
     result.metadata["scene_index"] = scene
     if scene_source is not None:
@@ -155,8 +167,9 @@ def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: in
 
 
 def trace_bank(setup: Setup, out: Path, *, depths: list, rays: int | None, grid: list,
-               seed: int) -> dict:
-    """Trace the IPSF bank: radial for a rotationally symmetric setup, else a grid."""
+               seed: int, motion: dict | None = None) -> dict:
+    """Trace the IPSF bank: radial for a rotationally symmetric setup, else a grid;
+    ``motion``: the sweep's profile, if not the setup's."""
     from ..io.bank import bank_kernel_size, save_bank
     from ..tracer import ipsf_bank
 
@@ -167,6 +180,8 @@ def trace_bank(setup: Setup, out: Path, *, depths: list, rays: int | None, grid:
         kw["rays"] = rays
     if kind == "grid":
         kw["grid"] = tuple(grid)
+    if motion is not None:
+        kw["motion"] = _motion(motion)
     bank = ipsf_bank(setup, **kw)
     seconds = bank.metadata.pop("seconds", None)
     save_bank(out, bank, reproducible=True)
@@ -235,14 +250,32 @@ def edof_name(method: str, suffix: str = "") -> str:
     return ("edof" if method == "wiener" else f"edof_{method}") + suffix
 
 
-def plan(opts: DatasetOptions) -> list[Task]:
-    """Every task of a dataset with ``opts``, inputs first; each scene is one shard
-    group, the bank is shared. Task names are the items' paths in the directory."""
+def bank_grid(opts: DatasetOptions, setup: Setup | None) -> list[int]:
+    """The grid bank's (rows, cols): ``opts.grid``, refined for a mirror whose image
+    covers only part of the frame (a tilted one) so that
+    :func:`mitsweep.deconv.spatial.mirror_grid_shape` nodes lie across it: a 9x9 grid
+    over the frame puts 5 across the tilted paraboloid's image and loses ~1 dB. Unused
+    (and unchanged) for a rotationally symmetric mirror's radial bank."""
+    grid = [int(g) for g in opts.grid]
+    if setup is None or setup.mirror.is_symmetric:
+        return grid
+    from ..deconv.spatial import mirror_grid_shape
+
+    fine = mirror_grid_shape(setup)
+    return [max(grid[0], int(fine[0])), max(grid[1], int(fine[1]))]
+
+
+def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
+    """Every task of a dataset with ``opts`` (of ``setup``, which sizes a tilted mirror's
+    grid bank: :func:`bank_grid`), inputs first; each scene is one shard group, the bank
+    is shared. Task names are the items' paths in the directory."""
     from ..deconv import paper_fig10_settings
 
-    tasks = [Task(BANK, trace_bank, {"depths": list(opts.bank_depths_mm),
-                                     "rays": opts.bank_rays, "grid": list(opts.grid),
-                                     "seed": opts.seed})]
+    bank = {"depths": list(opts.bank_depths_mm), "rays": opts.bank_rays,
+            "grid": bank_grid(opts, setup), "seed": opts.seed}
+    if opts.motion is not None:   # in the parameters only when set: older manifests hold
+        bank["motion"] = opts.motion
+    tasks = [Task(BANK, trace_bank, bank)]
     settings = [paper_fig10_settings(NOISE_PIXEL_MM, lux) for lux in opts.light_levels_lux]
     for i in range(opts.scenes):
         d = f"scene_{i:03d}"
@@ -258,6 +291,8 @@ def plan(opts: DatasetOptions) -> list[Task]:
                       "sampler": MODE_SAMPLERS[mode]}
             if source is not None:
                 params["scene_source"] = source
+            if opts.motion is not None:
+                params["motion"] = opts.motion
             add(f"{mode}.exr", render, params)
         for m in opts.methods:
             add(f"{edof_name(m)}.exr", restore, {"method": m, "nsr": None},

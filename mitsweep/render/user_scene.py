@@ -160,9 +160,17 @@ def _canonical(value: Any) -> Any:
     if matrix is not None:
         return {"matrix": np.array(matrix, dtype=np.float64).tolist()}
     try:
-        return np.asarray(value, dtype=np.float64).tolist()
+        arr = np.asarray(value)
     except (TypeError, ValueError):
         return repr(value)
+    if arr.dtype == object:
+        return repr(value)
+    if arr.size <= 16:      # colours, vectors: readable values
+        return np.asarray(arr, dtype=np.float64).tolist()
+    # a bitmap or a tensor: its bytes' digest (a list of millions of floats took minutes)
+    arr = np.ascontiguousarray(arr)
+    return {"shape": list(arr.shape), "dtype": str(arr.dtype),
+            "sha256": hashlib.sha256(arr.tobytes()).hexdigest()}
 
 
 def _source(scene) -> tuple[str, str, Path | None]:
