@@ -46,8 +46,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def board_world() -> dict:
-    """A scene dict in mm: a checkered board 2 m behind the camera side of the mirror,
-    a sphere 40 cm from it and a constant sky, all emitting or lit by the sky."""
+    """A scene dict in mm (the mirror's vertex at the origin, the camera along +z): a
+    checkered board 2 m from the mirror on the camera's side and a ball 40 cm from it,
+    lit by a constant sky."""
     from mitsweep.render import register
 
     register()
