@@ -196,6 +196,9 @@ def main(argv=None) -> int:
                     help="methods at the demo pitch")
     ap.add_argument("--fine-methods", default="wiener,tv,hyperlaplacian",
                     help="methods at other pitches")
+    ap.add_argument("--tables-only", action="store_true",
+                    help="make no dataset: the tables from each dataset's evaluation.json "
+                         "of an earlier run")
     ap.add_argument("--jobs", type=int, default=1,
                     help="local processes per dataset (default 1: this process)")
     args = ap.parse_args(argv)
@@ -220,9 +223,12 @@ def main(argv=None) -> int:
                    "--methods", methods]
             if args.jobs > 1:
                 cmd += ["--executor", "process", "--jobs", str(args.jobs)]
-            _run(cmd)
-            results[key] = json.loads(_run(["evaluate", str(out), "--json",
-                                            "--out", str(out / "evaluation.json")]))
+            if args.tables_only:
+                results[key] = json.loads((out / "evaluation.json").read_text(encoding="utf-8"))
+            else:
+                _run(cmd)
+                results[key] = json.loads(_run(["evaluate", str(out), "--json",
+                                                "--out", str(out / "evaluation.json")]))
             fov[key] = fov_scores(out)
             seconds[f"{setup}@{pitch}"] = time.perf_counter() - t0
     text, js = tables(results, methods_of, fov)
