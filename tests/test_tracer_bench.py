@@ -13,6 +13,11 @@ def test_bench_tracer_quick_json(capsys):
     res = json.loads(capsys.readouterr().out)
     assert res["rays_per_s"] > 0 and res["rays_landed"] > 0.5 * res["rays"]
     assert res["rays_per_s_exact"] > 0
+    # the LLVM vector width, and the cheapest deposit at the native and default widths
+    from mitsweep import backend
+
+    assert res["llvm_vector_width"] == backend.llvm_vector_width()
+    assert [r["width"] for r in res["llvm_widths"]] == _compared_widths()
     # Error per second: every method judged on the same reference bank; the exact
     # segment deposit reaches L1 <= 1e-3 in every kernel within the ladder (measured at
     # 2^18-2^19 rays per kernel), with no more rays than any other method needs.
@@ -50,3 +55,31 @@ def test_bench_without_batoid_reports_null(monkeypatch):
     monkeypatch.setattr(builtins, "__import__", fake_import)
     res = bench._batoid_rate(None, None, None, 10, 1)
     assert res["peer_rays_per_s"] is None and "not installed" in res["peer_note"]
+
+
+def _compared_widths():
+    from mitsweep import backend
+
+    if backend.select_backend() != "llvm":
+        return []
+    widths = sorted({backend.native_llvm_vector_width(), backend._auto_width(),
+                     backend.llvm_vector_width()})
+    return widths if len(widths) > 1 else []
+
+
+def test_width_comparison_times_each_width_and_restores_the_width():
+    from mitsweep import backend
+    from mitsweep.optics.reference import reference_geometry
+    from mitsweep.tracer import bench
+    from mitsweep.tracer.bank import field_radius
+
+    setup = bench._setup()
+    geometry = reference_geometry(setup)
+    backend.select_backend()  # applies MITSWEEP_LLVM_VECTOR_WIDTH
+    before = backend.llvm_vector_width()
+    rows = bench._width_comparison(setup, 0.9 * field_radius(setup, geometry), 500.0,
+                                   geometry.sweep, 1 << 14, 1)
+    assert backend.llvm_vector_width() == before
+    assert [r["width"] for r in rows] == _compared_widths()
+    for row in rows:
+        assert 0 < row["cpu_seconds_per_ray"] < 1e-3 and row["rays_per_s"] > 0

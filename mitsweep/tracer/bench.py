@@ -11,6 +11,12 @@ NumPy beforehand, not timed) off the same sphere on the same threads; only its
 the lens aperture (computed afterwards, not timed), so the comparison favours the peer.
 Both run in this process, one after the other, so the ratio survives a noisy machine.
 
+The LLVM backend's vector width (``llvm_vector_width``, set by
+``MITSWEEP_LLVM_VECTOR_WIDTH``, :func:`mitsweep.backend.set_llvm_vector_width`) is
+reported, and ``llvm_widths`` times the cheapest deposit at the CPU's register width and
+at the default width side by side, interleaved in this process (Dr.Jit compiles a
+kernel per width), with the peer's CPU per ray over each.
+
 Useful rays are reported for the cheapest deposit (one stratified sweep time per ray),
 the default 4 times and the exact segment deposit; ``ratio_cpu`` compares the CPU
 seconds per ray of the same two runs (all threads), which a loaded machine disturbs
@@ -29,6 +35,7 @@ import time
 
 import numpy as np
 
+from .. import backend
 from ..config import load_setup, DEFAULT_SETUP
 from ..optics.reference import reference_geometry
 from .bank import field_radius, ipsf_bank
@@ -122,6 +129,32 @@ def _batoid_rate(setup, source, center, n: int, threads: int) -> dict:
     out["peer_center_landed_mismatch"] = int((landed != r["landed"]).sum())
     out["peer_center_max_slope_diff"] = float(np.max(np.abs(slope_u[both] - r["Bu"][both])))
     return out
+
+
+def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: int) -> list:
+    """The cheapest deposit (one sweep time per ray) at the native and the default LLVM
+    vector widths, interleaved: per width, the best of ``repeats`` CPU seconds per ray
+    and useful rays per second. Empty off the LLVM backend or when both widths agree."""
+    if backend.select_backend() != "llvm":
+        return []
+    widths = sorted({backend.native_llvm_vector_width(), backend._auto_width(),
+                     backend.llvm_vector_width()} - {None})
+    if len(widths) < 2:
+        return []
+    rows = {w: {"width": w, "cpu_seconds_per_ray": math.inf, "rays_per_s": 0.0}
+            for w in widths}
+    for rep in range(-1, repeats):  # rep -1 compiles each width's kernels
+        for w in widths:
+            with backend.llvm_vector_width_scope(w):
+                c0 = time.process_time()
+                _, info = integrated_psf(setup, u, 0.0, depth, sweep=sweep, time_samples=1,
+                                         rays=(1 << 16) if rep < 0 else rays, seed=rep + 1)
+                cpu = time.process_time() - c0
+            if rep >= 0:
+                row = rows[w]
+                row["cpu_seconds_per_ray"] = min(row["cpu_seconds_per_ray"], cpu / rays)
+                row["rays_per_s"] = max(row["rays_per_s"], info["rays_landed"] / info["seconds"])
+    return [rows[w] for w in widths]
 
 
 #: The error-per-second target: L1 of every kernel of the bank against the reference.
@@ -228,6 +261,7 @@ def run_bench(args) -> dict:
     depth = 500.0
     rays = (1 << 23) if quick else (1 << 26)
     threads = os.cpu_count() or 1
+    llvm = backend.select_backend() == "llvm"
     # Warm-up: compile the kernel (Dr.Jit caches it for the process and on disk).
     integrated_psf(setup, u, 0.0, depth, rays=1 << 16, sweep=sweep)
 
@@ -277,6 +311,13 @@ def run_bench(args) -> dict:
     # traced ray; the landed fractions cancel as in "ratio").
     peer_cpu = out.get("peer_cpu_seconds_per_ray")
     out["ratio_cpu"] = (peer_cpu / out["cpu_seconds_per_ray"]) if peer_cpu else None
+    out["llvm_vector_width"] = backend.llvm_vector_width() if llvm else None
+    out["llvm_native_vector_width"] = backend.native_llvm_vector_width() if llvm else None
+    out["llvm_widths"] = _width_comparison(setup, u, depth, sweep, (1 << 21) if quick
+                                           else (1 << 23), 2 if quick else 3)
+    for row in out["llvm_widths"]:
+        row["ratio_cpu"] = (peer_cpu / row["cpu_seconds_per_ray"]) if peer_cpu else None
+        row["ratio"] = (row["rays_per_s"] / peer) if peer else None
     # Error per second: a whole bank at L1 <= 1e-3 per kernel, each method side by side
     # (quick: a 3 x 2 bank).
     if quick:
