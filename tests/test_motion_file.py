@@ -97,11 +97,12 @@ def test_nan_and_broken_json_are_refused():
 
 def test_stage_kinematics_of_a_known_profile():
     # 0.1 mm in the first quarter, 0.4 mm in the rest, over 2 s: 0.2 and 0.2667 mm/s;
-    # the change happens over the midpoints' distance (0.25 + 0.75)/2 · 2 s = 1 s
+    # the change is made within the shorter interval beside the knot, 0.25 · 2 s = 0.5 s
+    # (the rig's rule), not over the midpoints' distance (1 s)
     p = MotionProfile.tabulated([0, 0.25, 1], [366.0, 366.1, 366.5])
     v, a = stage_kinematics(p, 2.0)
     np.testing.assert_allclose(v, [0.2, 0.4 / 1.5], rtol=1e-12)
-    np.testing.assert_allclose(a, [(0.4 / 1.5 - 0.2) / 1.0], rtol=1e-12)
+    np.testing.assert_allclose(a, [(0.4 / 1.5 - 0.2) / 0.5], rtol=1e-12)
 
 
 @pytest.fixture(scope="module")

@@ -25,9 +25,9 @@ mean 0.5, relative exposure, white = 1) under the sensor noise at the given ligh
 :mod:`mitsweep.design.planes`) on an n × n DFT grid, ``n_px`` the sensor's size in
 pixels. ``objective="worst"`` minimises ``max_{p,l} MSE_{p,l}``, ``"mean"`` the mean,
 subject to ``Σ τ_k = 1``, the stage's velocity (``Δi_k / (τ_k T) <= rig.max_velocity``)
-and acceleration (``|v_{k+1} − v_k| <= rig.acceleration · (τ_k + τ_{k+1}) T / 2``, the
-velocity change spread over the time between bin midpoints; imposed as it stands, not
-linearised). The uniform sweep (τ_k = 1/N) is the paper's linear sweep.
+and acceleration (``|v_{k+1} − v_k| <= rig.acceleration · min(τ_k, τ_{k+1}) T``, the
+velocity change made within the shorter of the two bins, as the rig's plan requires;
+imposed as it stands, not linearised). The uniform sweep (τ_k = 1/N) is the paper's linear sweep.
 
 The optimiser is local (SLSQP, deterministic); its certificate is a lower bound on the
 optimum from a convex relaxation (:mod:`mitsweep.design.optimize`) and exhaustive search

@@ -7,10 +7,11 @@ The problem (docs in :mod:`mitsweep.design`): over bins of widths ``Δi_k`` (mm)
 - the exposure: ``Σ_k τ_k = 1`` (the exposure ``T`` is fixed);
 - the stage's velocity: ``v_k = Δi_k / (τ_k T) <= v_max``, i.e. ``τ_k >= Δi_k / (v_max T)``
   (linear);
-- its acceleration: ``|v_{k+1} − v_k| <= a_max (τ_k + τ_{k+1}) T / 2`` at every inner knot,
-  the velocity change spread over the time between the bins' midpoints (as
-  :func:`mitsweep.optics.motion_file.stage_kinematics` measures it). This is not
-  linearised: it is imposed as it stands, a smooth non-convex constraint, by the local
+- its acceleration: ``|v_{k+1} − v_k| <= a_max min(τ_k, τ_{k+1}) T`` at every inner knot,
+  the velocity change made within the shorter of the two bins (as
+  :func:`mitsweep.optics.motion_file.stage_kinematics` and the rig's plan measure it),
+  imposed as the two smooth constraints ``|v_{k+1} − v_k| <= a_max τ_j T``, j = k, k+1.
+  This is not linearised: it is imposed as it stands, non-convex, by the local
   optimiser; the convex bound drops it (a relaxation, so the bound stays a bound).
 
 Local optimiser: SLSQP (deterministic) on ``x = τ / τ_lin`` (``x = 1`` is the uniform
@@ -85,7 +86,7 @@ def _reduce(mse: np.ndarray, objective: str) -> float:
 def _velocity_accel(tau, widths, limits: StageLimits):
     T = limits.exposure_s
     v = widths / (tau * T)
-    a = np.diff(v) / (0.5 * (tau[:-1] + tau[1:]) * T)
+    a = np.diff(v) / (np.minimum(tau[:-1], tau[1:]) * T)
     return v, a
 
 
@@ -103,33 +104,42 @@ def stage_feasible(tau, widths, limits: StageLimits, *, rtol: float = 1e-6,
 
 
 def _accel_constraints(tau_lin, widths, limits: StageLimits):
-    """SLSQP inequality ``1 ∓ a_k / a_max >= 0`` in x = τ/τ_lin, with its Jacobian."""
+    """SLSQP inequalities ``1 ∓ Δv_k / (a_max τ_j T) >= 0`` for j = k and k + 1 (the
+    min-interval rule as smooth constraints) in x = τ/τ_lin, with their Jacobian."""
     T, A = limits.exposure_s, limits.acceleration * (1 - _MARGIN)
     n = tau_lin.size
+    m = n - 1
+    k = np.arange(m)
 
-    def parts(x):
-        tau = tau_lin * x[:n]
+    def parts(z):
+        x = z[:n]                                         # z may carry the epigraph t
+        tau = tau_lin * x
         v = widths / (tau * T)
-        dv_dx = -v / x[:n]                      # ∂v_k/∂x_k
-        s = 0.5 * (tau[:-1] + tau[1:]) * T
-        a = np.diff(v) / s
-        # ∂a_k/∂x_k, ∂a_k/∂x_{k+1}
-        ds_dx0, ds_dx1 = 0.5 * T * tau_lin[:-1], 0.5 * T * tau_lin[1:]
-        da0 = (-dv_dx[:-1] * s - np.diff(v) * ds_dx0) / s ** 2
-        da1 = (dv_dx[1:] * s - np.diff(v) * ds_dx1) / s ** 2
-        return a, da0, da1
+        dv = np.diff(v)
+        dv_d0, dv_d1 = v[:-1] / x[:-1], -v[1:] / x[1:]    # ∂Δv_k/∂x_k, ∂Δv_k/∂x_{k+1}
+        rows = []
+        for j, own in ((k, 0), (k + 1, 1)):               # the interval dividing Δv_k
+            c = A * T * tau[j]
+            q = dv / c
+            d0, d1 = dv_d0 / c, dv_d1 / c
+            if own == 0:
+                d0 = d0 - q / x[j]
+            else:
+                d1 = d1 - q / x[j]
+            rows.append((q, d0, d1))
+        return rows
 
     def fun(z):
-        a, _, _ = parts(z)
-        return np.concatenate([1 - a / A, 1 + a / A])
+        rows = parts(z)
+        return np.concatenate([f(q) for q, _, _ in rows for f in (lambda q: 1 - q,
+                                                                  lambda q: 1 + q)])
 
     def jac(z):
-        _, da0, da1 = parts(z)
-        m = n - 1
-        J = np.zeros((2 * m, z.size))
-        k = np.arange(m)
-        J[k, k], J[k, k + 1] = -da0 / A, -da1 / A
-        J[m + k, k], J[m + k, k + 1] = da0 / A, da1 / A
+        J = np.zeros((4 * m, z.size))
+        for r, (_, d0, d1) in enumerate(parts(z)):
+            for sign, off in ((-1.0, (2 * r) * m), (1.0, (2 * r + 1) * m)):
+                J[off + k, k] = sign * d0
+                J[off + k, k + 1] = sign * d1
         return J
 
     return {"type": "ineq", "fun": fun, "jac": jac}

@@ -253,7 +253,7 @@ def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
     v_opt, v_depths = _v_avg(kernels, depths)
     v_lin, _ = _v_avg(kernels_lin, depths)
     velocity = widths / (tau * T)
-    accel = np.diff(velocity) / (0.5 * (tau[:-1] + tau[1:]) * T)
+    accel = np.diff(velocity) / (np.minimum(tau[:-1], tau[1:]) * T)
     value = sol.value
     gap = value - bound
     report = {
