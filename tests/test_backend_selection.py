@@ -95,6 +95,23 @@ def test_machine_description_is_json_and_names_the_choice():
     assert info["llvm"].startswith("19.") or int(info["llvm"].split(".")[0]) >= 19
     assert info["cores_usable"] <= info["cores_logical"]
     assert isinstance(info["gpus"], list)
+    if info["backend"] == "llvm":
+        assert info["llvm_vector_width"] == backend.llvm_vector_width() >= \
+            info["llvm_native_vector_width"] > 0
+    else:
+        assert info["llvm_vector_width"] is None
+
+
+def test_a_cuda_choice_leaves_the_llvm_width_setting_unapplied(fresh):
+    # MITSWEEP_LLVM_VECTOR_WIDTH is read only when LLVM is chosen: a bad value does not
+    # stop a CUDA machine, and is refused as soon as LLVM is selected
+    fresh.setenv("MITSWEEP_LLVM_VECTOR_WIDTH", "12")
+    _probe(fresh, True)
+    assert backend.select_backend() == "cuda"
+    backend.select_backend.cache_clear()
+    _probe(fresh, False)
+    with pytest.raises(backend.BackendError, match="MITSWEEP_LLVM_VECTOR_WIDTH"):
+        backend.select_backend()
 
 
 # -- on a GPU machine only ------------------------------------------------------------
