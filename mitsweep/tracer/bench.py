@@ -143,12 +143,12 @@ def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: 
         return []
     rows = {w: {"width": w, "cpu_seconds_per_ray": math.inf, "rays_per_s": 0.0}
             for w in widths}
-    for rep in range(-1, repeats):  # rep -1 compiles each width's kernels
+    for rep in range(-1, repeats):  # rep -1: each width's kernels compiled, not timed
         for w in widths:
             with backend.llvm_vector_width_scope(w):
                 c0 = time.process_time()
-                _, info = integrated_psf(setup, u, 0.0, depth, sweep=sweep, time_samples=1,
-                                         rays=(1 << 16) if rep < 0 else rays, seed=rep + 1)
+                _, info = integrated_psf(setup, u, 0.0, depth, rays=rays, sweep=sweep,
+                                         seed=rep + 1, time_samples=1, method="continuous")
                 cpu = time.process_time() - c0
             if rep >= 0:
                 row = rows[w]
@@ -313,8 +313,7 @@ def run_bench(args) -> dict:
     out["ratio_cpu"] = (peer_cpu / out["cpu_seconds_per_ray"]) if peer_cpu else None
     out["llvm_vector_width"] = backend.llvm_vector_width() if llvm else None
     out["llvm_native_vector_width"] = backend.native_llvm_vector_width() if llvm else None
-    out["llvm_widths"] = _width_comparison(setup, u, depth, sweep, (1 << 21) if quick
-                                           else (1 << 23), 2 if quick else 3)
+    out["llvm_widths"] = _width_comparison(setup, u, depth, sweep, rays, 2 if quick else 3)
     for row in out["llvm_widths"]:
         row["ratio_cpu"] = (peer_cpu / row["cpu_seconds_per_ray"]) if peer_cpu else None
         row["ratio"] = (row["rays_per_s"] / peer) if peer else None
