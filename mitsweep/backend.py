@@ -117,10 +117,12 @@ LLVM_WIDTH_ENV = "MITSWEEP_LLVM_VECTOR_WIDTH"
 #: Widest width allowed: at 32 Dr.Jit 1.5 emits LLVM IR that does not parse (a mask
 #: ``zext i32 … to i32``) and aborts the process on the first kernel.
 MAX_LLVM_VECTOR_WIDTH = 16
-#: ``auto``: twice the register width (one unrolled step), at most the maximum. Measured
-#: on AVX2 (8 lanes), widths interleaved in one process: 16 lanes cut the tracer's CPU
-#: time per ray by 11-25 % and left Mitsuba renders unchanged (within 1 %); ``mitsweep
-#: bench tracer`` reports both widths side by side (``llvm_widths``).
+#: ``auto``: twice the register width (each kernel's loop body unrolled once), at most
+#: the maximum. Measured on AVX2 (8 lanes), widths interleaved in one process (load
+#: 2-3 on 2 cores): 16 lanes cut the continuous tracer deposit's CPU time per ray by
+#: 22-29 %; the exact deposit (-11 % to +4 %) and Mitsuba renders (pinhole and sweep
+#: modes, -4 % to +3 % in three runs) stayed within the noise. ``mitsweep bench
+#: tracer`` times both widths side by side (``llvm_widths``).
 _AUTO_FACTOR = 2
 
 # drjit-core's C API (include/drjit-core/jit.h), C++-mangled in libdrjit-core
