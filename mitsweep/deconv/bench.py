@@ -9,6 +9,7 @@ sensor noise) is restored by
   (the paper's Fig. 8 pipeline), resampling included in the time;
 
 (the three mitsweep methods use the noise model's NSR with the natural-image prior)
+
 - ``spatial``: :func:`~mitsweep.deconv.spatial.spatially_varying_deconvolve` with a grid
   bank;
 - ``wiener_single``: :func:`~mitsweep.deconv.wiener.wiener_deconvolve` with one IPSF

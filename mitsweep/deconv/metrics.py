@@ -1,6 +1,6 @@
 """Image quality inside the mirror's image: PSNR and SSIM, per radius, per depth band.
 
-SSIM uses Wang et al. (2004)'s settings through :func:`skimage.metrics.structural_similarity`
+SSIM uses Wang et al. (2004)'s settings [1]_ through :func:`skimage.metrics.structural_similarity`
 (Gaussian weights σ = 1.5, K1 = 0.01, K2 = 0.03, population covariance), whose full SSIM
 map is then averaged over the mask, so that pixels outside the mirror's image never count.
 

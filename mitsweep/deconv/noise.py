@@ -7,7 +7,7 @@ average,
 
 .. math:: J = 10^{15}\,\frac{t\, I\, R\, q\, \Delta^2}{N^2}\quad\text{photo-electrons}
 
-(paper [5], Sec. V: :math:`I` illuminance in lux, :math:`R` reflectance, :math:`t`
+(paper [5]_, Sec. V: :math:`I` illuminance in lux, :math:`R` reflectance, :math:`t`
 exposure in s, :math:`N` the f-number, :math:`q` the quantum efficiency, :math:`\Delta`
 the pixel size in metres; :math:`10^{15}` ≈ photons per lux-second-m² at 555 nm over
 the 4 of the Lambertian image irradiance :math:`I R / 4 N^2`). The recorded value is

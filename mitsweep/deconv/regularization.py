@@ -4,17 +4,17 @@ r"""Regularisation chosen from the noise model and the image, not guessed.
   :class:`~mitsweep.deconv.noise.SensorNoise` model, a given number, or the image
   itself (Donoho's wavelet estimate, :func:`~mitsweep.deconv.wiener.estimate_noise_sigma`).
 - :func:`discrepancy_nsr`: the Wiener NSR (natural-image prior) by Morozov's
-  discrepancy principle: the NSR at which the restoration explains the data to the
+  discrepancy principle [1]_: the NSR at which the restoration explains the data to the
   noise, :math:`\lVert A\hat x - y\rVert^2 = \tau N \sigma^2`. The residual of a
   Wiener filter is analytic in the Fourier domain, so the search costs one FFT of the
   image; the spatially varying blur is stood in for by the bank's IPSF at the radius
   that halves the restored disk's area (the residual is a global sum).
-- :func:`gcv_noise`: the NSR by generalised cross-validation and the σ it implies,
+- :func:`gcv_noise`: the NSR by generalised cross-validation [3]_ [4]_ and the σ it implies,
   with no noise model: the level of everything the blur and the prior leave
   unexplained (heavy-tailed Monte Carlo noise, which the wavelet estimate's median
   sees only the core of, a bank that does not fit the image). The prior-based solvers
   take the largest of this, the given or estimated σ, and the discrepancy's leftover.
-- :func:`prior_weight`: the weight λ of a gradient prior :math:`\lambda \sum |\nabla x|^\alpha`
+- :func:`prior_weight`: the weight λ of a gradient prior [2]_ :math:`\lambda \sum |\nabla x|^\alpha`
   as the MAP weight of a generalised-Gaussian gradient law fitted to a first estimate,
   :math:`\lambda = \kappa_\alpha\, \sigma^2 / (\alpha\, \overline{|\nabla x_0|^\alpha})`,
   with one constant :math:`\kappa_\alpha` per prior (:data:`PRIOR_WEIGHT_SCALE`).
@@ -81,7 +81,7 @@ def noise_sigma(image: np.ndarray, noise=None) -> float:
         σ, at least 1 % of the image's standard deviation (as
         :data:`~mitsweep.deconv.wiener.DEFAULT_NSR_FLOOR`: a noiseless render still
         carries ~1e-4 relative error, and a zero σ would leave spectral zeros
-        unregularised), and at least 1e-6 (1 + max |image|).
+        unregularised), and at least ``1e-6 (1 + max |image|)``.
     """
     img = np.asarray(image, dtype=np.float64)
     floor = float(np.sqrt(DEFAULT_NSR_FLOOR)) * float(np.std(img))
@@ -133,13 +133,13 @@ def gcv_noise(image: np.ndarray, psf: np.ndarray, *,
               mask: np.ndarray | None = None) -> tuple[float, float]:
     r"""Wiener NSR by generalised cross-validation, and the noise σ it implies.
 
-    GCV [3]_ needs no σ: it minimises
+    GCV (Golub, Heath and Wahba) needs no σ: it minimises
     :math:`V(\nu) = \frac{1}{N}\lVert (I - A G_\nu) y\rVert^2 /
     \left(\frac{1}{N}\operatorname{tr}(I - A G_\nu)\right)^2`
     over the natural-prior NSR ν, with :math:`I - A G_\nu` diagonal in the Fourier
     domain, :math:`R/(|H|^2 + R)`. The noise variance then follows as
     :math:`\hat\sigma^2 = \lVert (I - A G)y\rVert^2 / \operatorname{tr}(I - A G)`
-    (Wahba 1983 [4]_): everything the blur and the prior do not explain counts, Monte
+    (Wahba 1983): everything the blur and the prior do not explain counts, Monte
     Carlo noise and a kernel that does not quite fit included.
 
     Returns ``(nsr, sigma)``; NSR in [DEFAULT_NSR_FLOOR, MAX_NSR].

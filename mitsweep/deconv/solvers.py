@@ -66,7 +66,7 @@ DEFAULT_HQS_STEPS = 8
 _BETA_RATE = 2.0 * math.sqrt(2.0)
 #: Richardson–Lucy's cap when the stopping rule decides.
 MAX_RL_ITERATIONS = 60
-#: Largest β of the continuation, in units of the data term's largest |H|² (1): beyond,
+#: Largest β of the continuation, in units of the data term's largest ``|H|²`` (1): beyond,
 #: the prior's quadratic term outweighs the data's so far that the approximate x-steps
 #: (the polar bands' D^T D at their centre radius) stop being pinned by the data, and
 #: the solution drifted in rings from step to step (a 0.05-lux image with its noise
@@ -407,7 +407,7 @@ def hqs_deconvolve(image: np.ndarray, bank: IPSFBank, *, prior: str = "hyperlapl
     bank : IPSFBank
         ``kind="radial"`` (polar quadratic step) or ``kind="grid"`` (tiled).
     prior : {"tv", "hyperlaplacian"}
-        φ(g) = |g| (isotropic TV) or |g₁|^{2/3} + |g₂|^{2/3}.
+        ``φ(g) = |g|`` (isotropic TV) or ``|g₁|^{2/3} + |g₂|^{2/3}``.
     weight : float, optional
         λ; default :func:`~mitsweep.deconv.regularization.prior_weight` from σ and the
         gradients of the first (Wiener) step, where σ is the largest of ``noise``'s,

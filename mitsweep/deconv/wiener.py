@@ -2,7 +2,7 @@
 
 Compared with :func:`skimage.restoration.wiener` (see docs/design.md) this keeps the
 complex transfer function whole, pads the image against circular wrap-around, uses a
-stated regulariser (a constant noise-to-signal ratio, or the natural-image 1/|f|²
+stated regulariser (a constant noise-to-signal ratio, or the natural-image ``1/|f|²``
 power spectrum that the V metric weighs with), picks fast FFT lengths, keeps float32 as
 float32 and never clips.
 """
@@ -32,8 +32,8 @@ DEFAULT_NSR_FLOOR = 1e-4
 #: Largest NSR accepted: at 1e6 the filter's gain is below 1e-3 at every frequency the
 #: prior regularises, so the output is the image's mean; beyond, R overflows float32.
 MAX_NSR = 1e6
-#: Largest |value| of an image to deconvolve. An FFT coefficient is at most the sum of
-#: |values| (<= 2^31 pixels of a padded 32768² image: 2e29 at 1e20), which leaves the
+#: Largest ``|value|`` of an image to deconvolve. An FFT coefficient is at most the sum of
+#: ``|values|`` (<= 2^31 pixels of a padded 32768² image: 2e29 at 1e20), which leaves the
 #: filter's gain a factor 1e9 below float32's 3.4e38; beyond, float32 FFTs overflow.
 MAX_ABS_VALUE = 1e20
 
@@ -68,11 +68,11 @@ def wiener_memory_bytes(shape: tuple[int, int], channels: int, dtype) -> float:
 
 
 def natural_prior_scale(n_px: float) -> float:
-    """2π ln(n_px / 2): R(f) = nsr · scale · |f|² for a 1/|f|² signal spectrum.
+    """2π ln(n_px / 2): ``R(f) = nsr · scale · |f|²`` for a ``1/|f|²`` signal spectrum.
 
-    A power spectrum S(f) = A / |f|² between the lowest frequency 1/n_px and the Nyquist
+    A power spectrum ``S(f) = A / |f|²`` between the lowest frequency 1/n_px and the Nyquist
     1/2 (cycles/pixel) holds the variance σ_s² = 2π A ln(n_px / 2); so with
-    nsr = σ_n² / σ_s² the noise-to-signal ratio at frequency f is nsr · 2π ln(n_px/2) |f|².
+    nsr = σ_n² / σ_s² the noise-to-signal ratio at frequency f is ``nsr · 2π ln(n_px/2) |f|²``.
     """
     return 2 * np.pi * np.log(max(float(n_px) / 2, 2.0))
 
@@ -131,9 +131,9 @@ def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64
       image mean is known to 1/N of the noise variance, so a constant image passes
       unchanged). Textbook, but natural images hold far less than their variance at
       high frequencies, so this under-regularises noisy images.
-    - ``"natural"``: signal power falling as 1/|f|² (amplitude 1/|f|, the natural-image
-      weight W of the V metric, paper Eq. 2): R = nsr · 2π ln(n/2) · |f|²
-      (:func:`natural_prior_scale`), |f| in cycles/pixel; R = 0 at DC.
+    - ``"natural"``: signal power falling as ``1/|f|²`` (amplitude ``1/|f|``, the
+      natural-image weight W of the V metric, paper Eq. 2): ``R = nsr · 2π ln(n/2) · |f|²``
+      (:func:`natural_prior_scale`), ``|f|`` in cycles/pixel; R = 0 at DC.
 
     ``freqs`` optionally gives the two frequency arrays (cycles/pixel), broadcastable;
     ``n_px`` the image size that sets the spectrum's lowest frequency (default the
@@ -155,9 +155,9 @@ def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64
 
 
 def wiener_filter(H: np.ndarray, R) -> np.ndarray:
-    """G = conj(H) / (|H|² + R); ``R`` an array broadcastable to ``H`` or a scalar.
+    """``G = conj(H) / (|H|² + R)``; ``R`` an array broadcastable to ``H`` or a scalar.
 
-    Where |H|² + R is exactly zero (a kernel spectral zero with no regularisation) G is
+    Where ``|H|² + R`` is exactly zero (a kernel spectral zero with no regularisation) G is
     set to 0: nothing can be recovered there, and 0 is the Wiener limit for R → 0⁺
     taken jointly with H → 0.
     """
@@ -231,7 +231,7 @@ def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None =
         from the image (:func:`estimate_nsr`); from a sensor model use
         :meth:`mitsweep.deconv.noise.SensorNoise.nsr`.
     prior : {"natural", "constant"}
-        How the signal's variance spreads over frequency: the natural-image 1/|f|²
+        How the signal's variance spreads over frequency: the natural-image ``1/|f|²``
         fall-off (default: with the noise model's NSR it restores noisy images
         2-5 dB better than the flat prior, measured from 50 to 0.05 lux) or flat
         (classic constant-NSR Wiener, DC exempt); see :func:`regulariser`.

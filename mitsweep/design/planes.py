@@ -78,7 +78,7 @@ class PlaneBank:
 
     @property
     def widths_mm(self) -> np.ndarray:
-        """|e_{k+1} − e_k| of each bin, mm."""
+        """``|e_{k+1} − e_k|`` of each bin, mm."""
         return np.abs(np.diff(self.edges_mm))
 
     def ipsf(self, tau) -> np.ndarray:
