@@ -1,6 +1,6 @@
-"""Dependency rules of DESIGN.md, checked on the source (AST), and the backend guard.
+"""Dependency rules of docs/design.md, checked on the source (AST), and the backend guard.
 
-DESIGN.md: ``optics`` ← ``tracer``, ``render``, ``deconv`` ← ``cli``; ``rig`` depends
+docs/design.md: ``optics`` ← ``tracer``, ``render``, ``deconv`` ← ``cli``; ``rig`` depends
 only on ``optics`` (and ``config``/``io``); ``optics`` and ``deconv`` never import
 ``mitsuba`` or ``drjit``; only ``render`` imports ``mitsuba``. The checker sees every
 import a module can make from its source: ``import x``, ``from x import y``, relative
@@ -38,7 +38,7 @@ LAYERS = {
     "optics": set(),
     "backend": set(),
     "plots": {"optics", "io"},
-    # The tracer and the renderer are independent implementations (DESIGN.md): they
+    # The tracer and the renderer are independent implementations (docs/design.md): they
     # share optics, never each other.
     "tracer": {"optics", "io", "backend"},
     "render": {"optics", "io", "backend"},

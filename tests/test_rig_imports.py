@@ -1,4 +1,4 @@
-"""``mitsweep.rig`` depends only on optics, config and the small io helpers (DESIGN.md):
+"""``mitsweep.rig`` depends only on optics, config and the small io helpers (docs/design.md):
 never on the renderer, the tracer, Mitsuba or Dr.Jit."""
 
 from __future__ import annotations
