@@ -68,3 +68,25 @@ def _busy_cores_from_env():
         return
     with busy_processes(int(text)):
         yield
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """The figures ``mitsweep.plots.save_figure`` writes, drawn on an Agg canvas:
+    [(fig, renderer)] (for layout checks: overlaps, legends, colour bars)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from mitsweep import plots
+
+    figures = []
+    original = plots.save_figure
+
+    def capture(fig, path, dpi=plots.DPI):
+        out = original(fig, path, dpi)
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        figures.append((fig, canvas.get_renderer()))
+        return out
+
+    monkeypatch.setattr(plots, "save_figure", capture)
+    return figures

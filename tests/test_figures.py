@@ -8,7 +8,6 @@ import math
 
 import numpy as np
 import pytest
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.image import imread
 
 from conftest import run_cli
@@ -24,23 +23,6 @@ from mitsweep.tracer.metrics import cross_sections
 from test_plots import _boxes_overlap, gaussian_kernel, png_size
 
 PDF_SIGNATURE = b"%PDF-"
-
-
-@pytest.fixture
-def drawn(monkeypatch):
-    """The figures save_figure writes, drawn on an Agg canvas: [(fig, renderer)]."""
-    figures = []
-    original = plots.save_figure
-
-    def capture(fig, path, dpi=plots.DPI):
-        out = original(fig, path, dpi)
-        canvas = FigureCanvasAgg(fig)
-        canvas.draw()
-        figures.append((fig, canvas.get_renderer()))
-        return out
-
-    monkeypatch.setattr(plots, "save_figure", capture)
-    return figures
 
 
 # -- the command --------------------------------------------------------------------------

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.image import imread
 
 from mitsweep import plots
@@ -49,23 +48,6 @@ def assert_real_png(path, figsize_in) -> None:
     # A figure, not a blank page: many distinct colours.
     assert len(np.unique(pixels.reshape(-1, pixels.shape[-1]), axis=0)) > 20
     assert not list(path.parent.glob(f".{path.name}.*")), "temporary left behind"
-
-
-@pytest.fixture
-def drawn(monkeypatch):
-    """The figures save_figure writes, drawn on an Agg canvas: [(fig, renderer)]."""
-    figures = []
-    original = plots.save_figure
-
-    def capture(fig, path, dpi=plots.DPI):
-        out = original(fig, path, dpi)
-        canvas = FigureCanvasAgg(fig)
-        canvas.draw()
-        figures.append((fig, canvas.get_renderer()))
-        return out
-
-    monkeypatch.setattr(plots, "save_figure", capture)
-    return figures
 
 
 def gaussian_kernel(sigma_px: float, shift_px: float = 0.0) -> np.ndarray:
