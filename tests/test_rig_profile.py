@@ -466,7 +466,7 @@ def test_cli_capture_with_motion_file_against_simulator(rig_setup_file, sphere, 
 @pytest.mark.parametrize("case, message", [
     ("too fast", "cannot follow"),
     ("too abrupt", "mm/s^2"),
-    ("slow to fast", "within"),
+    ("slow to fast", "at knot 2"),
     ("crosses focal length", "focal length"),
     ("empty", "empty table"),
     ("non-monotonic", "monotonic"),
@@ -484,8 +484,9 @@ def test_cli_bad_motion_exits_2_with_one_line_before_any_motion(rig_setup_file, 
         exposure = 0.14
     elif case == "slow to fast":
         # equal steps of sensor distance at 1, 0.06, 5, 5 mm/s: 0.06 -> 5 mm/s within the
-        # fast interval's 35 ms is 141 mm/s^2 (the file's check, spreading it over the
-        # two intervals' mean, sees 3.4 mm/s^2 and passes it: the plan refuses it)
+        # fast interval's 35 ms is 141 mm/s^2 (the file's check once spread it over the
+        # two intervals' mean, saw 3.4 mm/s^2 and passed it to the plan; now it applies
+        # the plan's rule and refuses it first, naming the knot)
         step = (s1 - s0) / 4
         dt = np.abs(step) / np.array([1.0, 0.06, 5.0, 5.0])
         exposure = float(dt.sum())
