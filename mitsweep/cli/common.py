@@ -13,7 +13,7 @@ from typing import Any, Iterable, Union
 
 from ..config import SetupError, load_setup
 
-__all__ = ["UsageError", "USER_ERRORS", "ArgumentParser", "ArgumentParserError",
+__all__ = ["depth_mm", "UsageError", "USER_ERRORS", "ArgumentParser", "ArgumentParserError",
            "check_outputs", "load_setup_arg", "print_error_json", "print_json",
            "positive_float", "positive_int", "user_error_message"]
 
@@ -141,6 +141,18 @@ def positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not (x > 0) or math.isnan(x):
         raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return x
+
+
+def depth_mm(text: str) -> float:
+    """An object depth in mm for argparse: a number > 0, ``inf`` allowed."""
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a depth in mm (or inf), got {text!r}") \
+            from None
+    if not x > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0 mm (inf allowed), got {text}")
     return x
 
 

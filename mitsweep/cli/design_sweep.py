@@ -11,22 +11,12 @@ import argparse
 import math
 import sys
 
-from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
-                     print_json)
+from .common import (UsageError, check_outputs, depth_mm, load_setup_arg, positive_float,
+                     positive_int, print_json)
 
 NAME = "design-sweep"
 HELP = ("design the sensor's time profile over the sweep (not only its range) that "
         "minimises the predicted Wiener restoration error, and write it as a motion file")
-
-
-def _depth(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a depth in mm, got {text!r}") from None
-    if not x > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0 mm (inf allowed), got {text}")
-    return x
 
 
 def _distance(text: str) -> float:
@@ -60,7 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="field radii from the centre to the FOV's edge (9; untilted mirrors)")
     p.add_argument("--grid", type=positive_int, nargs=2, default=(5, 5), metavar=("ROWS", "COLS"),
                    help="grid of field points over the sensor (5 5; tilted mirrors)")
-    p.add_argument("--depth", type=_depth, nargs="+", metavar="MM",
+    p.add_argument("--depth", type=depth_mm, nargs="+", metavar="MM",
                    help="depths, mm (default: the setup's depth range's ends and the V_avg "
                         "depths 500, 1000, 5000, 10000 within it)")
     p.add_argument("--rays", type=positive_int, default=1 << 16,

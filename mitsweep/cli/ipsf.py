@@ -7,24 +7,13 @@ import math
 import sys
 from pathlib import Path
 
-from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
-                     print_json)
+from .common import (UsageError, check_outputs, depth_mm, load_setup_arg, positive_float,
+                     positive_int, print_json)
 from .motion import add_motion_argument, motion_from_args
 
 NAME = "ipsf"
 HELP = ("trace the integrated PSF of a point source over the focal sweep (or a PSF at one "
         "sensor distance, or a radial/grid IPSF bank) with the Dr.Jit tracer")
-
-
-def _depth(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a depth in mm (or inf), got {text!r}") \
-            from None
-    if not x > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0 mm (inf allowed), got {text}")
-    return x
 
 
 def _finite(text: str) -> float:
@@ -59,7 +48,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--radii", type=positive_int, default=19, help="radial bank size (19)")
     p.add_argument("--grid", type=positive_int, nargs=2, default=(9, 9),
                    metavar=("ROWS", "COLS"), help="grid bank shape (9 9)")
-    p.add_argument("--depth", type=_depth, nargs="+", default=[500.0], metavar="MM",
+    p.add_argument("--depth", type=depth_mm, nargs="+", default=[500.0], metavar="MM",
                    help="depth(s) l of the source from the mirror, mm (500; inf allowed); "
                         "several for one point: one IPSF per depth, each -o / --plot file "
                         "named per depth (FILE_l500mm.exr, FILE_linf.exr)")
