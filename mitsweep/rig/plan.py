@@ -197,6 +197,18 @@ class CapturePlan:
         return f"zaber units        maxspeed {u['maxspeed']}, accel {u['accel']} (data values)"
 
 
+def _check_soft_limits(what: str, approach_steps: int, end_steps: int, spm: float,
+                       lo: float, hi: float, s0: float, delta: float) -> None:
+    """Refuse a plan whose approach or end position (steps) is outside the soft limits
+    ``lo .. hi`` mm; ``s0 + delta · x`` is the sensor distance at stage position x."""
+    for name, steps in (("approach", approach_steps), ("end", end_steps)):
+        x = steps / spm
+        if not lo - 1e-9 <= x <= hi + 1e-9:
+            raise PlanError(f"the {what}'s {name} position {x:.4f} mm (sensor distance "
+                            f"{s0 + delta * x:.4f} mm) is outside the soft limits "
+                            f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
+
+
 def plan_capture(setup, *, stage: str = "arduino", sweep_range=None, motion=None,
                  exposure_s: float | None = None) -> CapturePlan:
     """Resolve a setup's focal sweep into a stage move.
@@ -303,12 +315,7 @@ def plan_capture(setup, *, stage: str = "arduino", sweep_range=None, motion=None
     close_steps = open_steps + direction * travel_steps
     approach_steps = open_steps - direction * margin
     end_steps = close_steps + direction * margin
-    for name, steps in (("approach", approach_steps), ("end", end_steps)):
-        x = steps / spm
-        if not lo - 1e-9 <= x <= hi + 1e-9:
-            raise PlanError(f"the sweep's {name} position {x:.4f} mm (sensor distance "
-                            f"{s0 + delta * x:.4f} mm) is outside the soft limits "
-                            f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
+    _check_soft_limits("sweep", approach_steps, end_steps, spm, lo, hi, s0, delta)
     sweep = Trapezoid((travel_steps + 2 * margin) / spm, v_run, a_run)   # approach -> end
     return CapturePlan(
         setup=setup.name, stage=stage, steps_per_mm=spm,
@@ -410,12 +417,7 @@ def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> Captur
         raise PlanError(f"the profile needs {span:.4f} mm of stage travel (sensor travel "
                         f"{travel:.4f} mm, ramps and settle distances), more than the soft "
                         f"limits allow ({lo:g} .. {hi:g} mm = {hi - lo:g} mm)")
-    for name, steps_at in (("approach", approach_steps), ("end", end_steps)):
-        xs = steps_at / spm
-        if not lo - 1e-9 <= xs <= hi + 1e-9:
-            raise PlanError(f"the profile's {name} position {xs:.4f} mm (sensor distance "
-                            f"{s0 + delta * xs:.4f} mm) is outside the soft limits "
-                            f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
+    _check_soft_limits("profile", approach_steps, end_steps, spm, lo, hi, s0, delta)
     v_in, v_out = table.entry_rate / spm, table.exit_rate / spm
     def ramp_and_settle_s(v: float, ramp: int) -> float:   # ramp at a_run, then cruise
         return v / a_run + ((ramp + settle) / spm - v * v / (2 * a_run)) / v
