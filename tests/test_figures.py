@@ -3,6 +3,7 @@ and the pieces the figures are made of (field points, inset regions, the builder
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -186,3 +187,41 @@ def test_insets_frame_each_region_and_label_it(tmp_path, drawn):
     assert all(len(ax.patches) == 2 for ax in mains)
     width, height = png_size(tmp_path / "f9.png")
     assert width > height > 0
+
+
+def test_fig5_and_table1_draw_one_set_of_traced_banks(tmp_path, scenes_dir, monkeypatch):
+    """Table 1's banks are traced once per setup and serve Fig. 5 too: its centre and
+    periphery curves are those banks' first and last radii (no IPSF traced for Fig. 5)."""
+    import mitsweep.plots
+    import mitsweep.tracer.table1 as t1
+    from mitsweep.pipeline.figures import QUICK, _SetupFigures
+
+    calls, drawn_sections = [], []
+    traced = t1.table1_banks
+
+    def counting(*args, **kw):
+        calls.append(kw)
+        return traced(*args, **kw)
+
+    monkeypatch.setattr(t1, "table1_banks", counting)
+    monkeypatch.setattr(mitsweep.plots, "plot_sweep_ranges",
+                        lambda sections, path, **kw: drawn_sections.append((sections, kw)))
+    monkeypatch.setattr(mitsweep.plots, "plot_table1", lambda result, path: None)
+    tiny = dataclasses.replace(QUICK, table1_rays=2_000, table1_radii=2)
+    figs = _SetupFigures(load_setup(scenes_dir / "sphere.toml"), tiny, tmp_path, seed=0,
+                         step=lambda msg: None)
+    figs.fig5()
+    figs.table1()
+    assert len(calls) == 1 and not figs._ipsfs
+    (sections, kw), = drawn_sections
+    banks = figs.table1_banks()
+    lengths = [hi - lo for lo, hi in kw["ranges_mm"]]
+    assert lengths == sorted(lengths)   # columns by sweep length
+    table = json.loads((tmp_path / "table1_sphere.json").read_text())
+    for col, (lo, hi) in zip(sections, kw["ranges_mm"]):
+        (bank,) = [b for b in banks if np.allclose(
+            (b.metadata["sweep_range"]["focus_min_mm"], b.metadata["sweep_range"]["focus_max_mm"]),
+            (lo, hi))]
+        x, rad, tan = col["periphery"][0]
+        np.testing.assert_array_equal(rad, cross_sections(bank.kernels[0, -1], 0.0)[1])
+    assert len(table["rows"]) == len(banks) and list(kw["depths_mm"]) == table["depths_mm"]

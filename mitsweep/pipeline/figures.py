@@ -5,13 +5,15 @@ each figure needs is computed once and shared:
 
 - the optimal sweep range (Eq. 4–9) → Fig. 6 (focal surfaces);
 - PSFs at five focal planes of the sweep for five points across the mirror → Fig. 3;
-- IPSFs of those points at 50 cm, 5 m and 50 m over the optimal sweep → Fig. 4, and the
-  centre and periphery of the optimal-range column of Fig. 5 (the other ranges of
-  Fig. 5 are traced for it alone);
+- IPSFs of those points at 50 cm, 5 m and 50 m over the optimal sweep → Fig. 4;
+- Table 1's radial banks (one per sweep range, at its depths 0.5, 1, 5 and 10 m) → both
+  Table 1 and Fig. 5, whose centre and periphery are those banks' first and last radii
+  (a tilted mirror has no Table 1: its Fig. 5 IPSFs are traced for it);
 - one synthetic dataset (:func:`mitsweep.pipeline.build_dataset`, the demo's
   machinery: renders, IPSF bank, 50-lux noise, Wiener EDOF images), kept under
   ``data/<setup>[_quick]/`` → Figs. 8, 9 and 10;
-- Table 1 (:func:`mitsweep.tracer.table1.table1`, untilted mirrors only) → ``table1_*``.
+- Table 1 (:func:`mitsweep.tracer.table1.table1` of those banks, untilted mirrors only)
+  → ``table1_*``.
 
 Every figure is written as PNG and PDF (:data:`FORMATS`); ``figures.json`` records the
 setups, the quality, the sweep ranges, the files and the timings.
@@ -41,7 +43,7 @@ logger = logging.getLogger(__name__)
 PAPER_SETUPS = ("sphere", "paraboloid", "paraboloid_tilted")
 #: Formats of every figure.
 FORMATS = ("png", "pdf")
-#: Depths of Figs. 4 and 5, mm (the paper's 50 cm, 5 m and 50 m).
+#: Depths of Fig. 4, mm (the paper's 50 cm, 5 m and 50 m; Fig. 5 draws Table 1's depths).
 SECTION_DEPTHS_MM = (500.0, 5000.0, 50000.0)
 #: Depth of the Fig. 3 PSFs, mm (the paper's world points 50 cm from the mirror).
 PSF_DEPTH_MM = 500.0
@@ -189,6 +191,7 @@ class _SetupFigures:
         self.kernel_size = bank_kernel_size(setup.sensor.pixel_pitch)
         self._ipsfs: dict = {}
         self._data: dict | None = None
+        self._banks: list | None = None
         self.timings: dict[str, float] = {}
 
     def _timed(self, key: str, fn, *args, **kw):
@@ -259,20 +262,45 @@ class _SetupFigures:
                          title=f"{s.name} (sweep {self.sweep.focus_min:.0f}–"
                                f"{self.sweep.focus_max:.0f} mm)")
 
+    def table1_banks(self) -> list:
+        """Table 1's radial banks, one per :func:`~mitsweep.tracer.table1.default_ranges`
+        range (untilted mirrors), traced once: Table 1 measures them and Fig. 5 draws
+        their centre and periphery."""
+        if self._banks is None:
+            from ..tracer.table1 import table1_banks
+
+            q = self.quality
+            self._banks = self._timed("table1_banks_s", table1_banks, self.setup,
+                                      n_radii=q.table1_radii, rays=q.table1_rays,
+                                      seed=self.seed)
+        return self._banks
+
     def fig5(self):
         from ..plots import plot_sweep_ranges
-        from ..tracer.table1 import default_ranges
+        from ..tracer.metrics import cross_sections
+        from ..tracer.table1 import PAPER_DEPTHS_MM, default_ranges
 
         s = self.setup
-        ranges = sorted(default_ranges(s), key=lambda r: r[1] - r[0])
-        sections = [{"centre": self.sections(self.centre, SECTION_DEPTHS_MM, r),
-                     "periphery": self.sections(self.periphery, SECTION_DEPTHS_MM, r)}
-                    for r in ranges]
-        plot_sweep_ranges(sections, _paths(self.out, f"fig5_{s.name}"),
-                          pitch_mm=s.sensor.pixel_pitch, ranges_mm=ranges,
-                          depths_mm=SECTION_DEPTHS_MM,
+        ranges = default_ranges(s)
+        if s.mirror.is_symmetric:
+            # Table 1's IPSFs: the centre (radius 0) and periphery (the FOV's edge) of
+            # each range's bank, cut along the +u axis (radial = u).
+            banks = self.table1_banks()
+            sections = [{place: [cross_sections(b.kernels[j, i], 0.0)
+                                 for j in range(len(PAPER_DEPTHS_MM))]
+                         for place, i in (("centre", 0), ("periphery", -1))} for b in banks]
+            periphery = f"r = {banks[0].radii_mm[-1]:.2f} mm from the image centre"
+        else:
+            sections = [{"centre": self.sections(self.centre, PAPER_DEPTHS_MM, r),
+                         "periphery": self.sections(self.periphery, PAPER_DEPTHS_MM, r)}
+                        for r in ranges]
+            periphery = self.periphery.label()
+        order = np.argsort([hi - lo for lo, hi in ranges], kind="stable")
+        plot_sweep_ranges([sections[i] for i in order], _paths(self.out, f"fig5_{s.name}"),
+                          pitch_mm=s.sensor.pixel_pitch, ranges_mm=[ranges[i] for i in order],
+                          depths_mm=PAPER_DEPTHS_MM,
                           optimal=(self.sweep.focus_min, self.sweep.focus_max),
-                          title=f"{s.name} (periphery: {self.periphery.label()})")
+                          title=f"{s.name} (periphery: {periphery})")
 
     def fig6(self):
         from ..plots import plot_focal_surfaces
@@ -286,7 +314,8 @@ class _SetupFigures:
 
         s = self.setup
         result = self._timed("table1_s", table1, s, n_radii=self.quality.table1_radii,
-                             rays=self.quality.table1_rays, seed=self.seed)
+                             rays=self.quality.table1_rays, seed=self.seed,
+                             banks=self.table1_banks())
         stem = f"table1_{s.name}"
         plot_table1(result, _paths(self.out, stem))
         write_text_atomic(self.out / f"{stem}.json",

@@ -19,7 +19,7 @@ from .bank import ipsf_bank
 from .metrics import EPSILON, cross_sections, kurtosis, v_avg
 
 __all__ = ["PAPER_DEPTHS_MM", "PAPER_RANGE_FRACTIONS", "default_ranges", "conventional_psf",
-           "conventional_v_avg", "table1"]
+           "conventional_v_avg", "table1_banks", "table1"]
 
 logger = logging.getLogger(__name__)
 
@@ -78,9 +78,34 @@ def conventional_v_avg(setup, depths=PAPER_DEPTHS_MM, *, kernel_size: int = 63,
     return v_avg(kernels, epsilon=epsilon), float(focus)
 
 
+def _range_setup(setup, fmin: float, fmax: float):
+    if not (setup.lens.focal_length < fmin < fmax):
+        raise ValueError(f"sweep range {fmin:g}-{fmax:g} mm: need "
+                         f"lens.focal_length ({setup.lens.focal_length:g}) < min < max")
+    s = dataclasses.replace(setup, sweep=dataclasses.replace(setup.sweep, focus_min=fmin,
+                                                             focus_max=fmax))
+    return s, optimal_sweep_range(s)  # the given range; the field is still the setup's FOV
+
+
+def table1_banks(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
+                 rays: int = 1_000_000, kernel_size: int = 63, seed: int = 0,
+                 progress=None) -> list:
+    """The radial IPSF banks Table 1 measures, one per sweep range (parameters as
+    :func:`table1`): to reuse them elsewhere (Fig. 5) and pass them back as its
+    ``banks``."""
+    ranges = default_ranges(setup) if ranges is None else [tuple(map(float, r)) for r in ranges]
+    banks = []
+    for fmin, fmax in ranges:
+        s, sr = _range_setup(setup, fmin, fmax)
+        banks.append(ipsf_bank(s, kind="radial", n_radii=n_radii, depths=depths, rays=rays,
+                               kernel_size=kernel_size, seed=seed, sweep=sr,
+                               progress=progress))
+    return banks
+
+
 def table1(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
            rays: int = 1_000_000, kernel_size: int = 63, seed: int = 0,
-           epsilon: float = EPSILON, progress=None) -> dict:
+           epsilon: float = EPSILON, progress=None, banks=None) -> dict:
     """Compute Table 1 for a rotationally symmetric setup.
 
     Parameters
@@ -93,6 +118,9 @@ def table1(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
         Bank parameters (:func:`mitsweep.tracer.ipsf_bank`).
     progress : callable, optional
         Called after each IPSF.
+    banks : sequence of mitsweep.io.bank.IPSFBank, optional
+        The banks of :func:`table1_banks` with these parameters, one per range, already
+        traced; each is checked against its range, depths and radii.
 
     Returns
     -------
@@ -105,16 +133,21 @@ def table1(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
         raise ValueError("table1: needs a rotationally symmetric setup (radial IPSF bank); "
                          f"this mirror is tilted by {setup.mirror.tilt_deg:g} deg")
     ranges = default_ranges(setup) if ranges is None else [tuple(map(float, r)) for r in ranges]
+    if banks is None:
+        banks = table1_banks(setup, ranges=ranges, depths=depths, n_radii=n_radii, rays=rays,
+                             kernel_size=kernel_size, seed=seed, progress=progress)
+    elif len(banks) != len(ranges):
+        raise ValueError(f"banks: one per sweep range ({len(ranges)}), got {len(banks)}")
     rows = []
-    for fmin, fmax in ranges:
-        if not (setup.lens.focal_length < fmin < fmax):
-            raise ValueError(f"sweep range {fmin:g}-{fmax:g} mm: need "
-                             f"lens.focal_length ({setup.lens.focal_length:g}) < min < max")
-        sw = dataclasses.replace(setup.sweep, focus_min=fmin, focus_max=fmax)
-        s = dataclasses.replace(setup, sweep=sw)
-        sr = optimal_sweep_range(s)  # the given range; the field is still the setup's FOV
-        bank = ipsf_bank(s, kind="radial", n_radii=n_radii, depths=depths, rays=rays,
-                         kernel_size=kernel_size, seed=seed, sweep=sr, progress=progress)
+    for (fmin, fmax), bank in zip(ranges, banks):
+        _, sr = _range_setup(setup, fmin, fmax)
+        swept = bank.metadata["sweep_range"]
+        if (bank.kind != "radial" or len(bank.radii_mm) != int(n_radii)
+                or not np.allclose(bank.depths_mm, depths)
+                or not np.allclose((swept["focus_min_mm"], swept["focus_max_mm"]), (fmin, fmax))):
+            raise ValueError(f"banks: the bank for {fmin:g}-{fmax:g} mm is not Table 1's "
+                             f"(radial, {int(n_radii)} radii, depths {list(depths)} mm, that "
+                             f"range)")
         kz = {}
         for where, idx in (("center", 0), ("periphery", len(bank.radii_mm) - 1)):
             tan, rad = [], []
