@@ -6,18 +6,25 @@ per setup, it does not depend on the light level), and both profiles re-scored o
 held-out plane bank (another seed, twice the rays), which shows whether the optimiser
 fitted the Monte Carlo noise of its own bank.
 
-Measured (``--measured SETUP LUX``): the dataset's steps for one scene, done here with
-the setup's motion replaced by each profile (the pipeline has no motion option yet): the
-pinhole ground truth, a sweep render per profile (same spp and seed), the lens's
-diffraction, the same sensor noise draw, an IPSF bank traced for each profile
-(:func:`mitsweep.tracer.ipsf_bank` with ``motion=``), Wiener deconvolution with the
-dataset's NSR rule, PSNR overall and per radius inside the mirror against the ground
-truth (as :func:`mitsweep.pipeline.evaluation.evaluate_dataset` scores).
+Measured (``--measured SETUP LUX``, or ``--all`` for the nine cases): for each setup,
+the linear profile over the optimal range and one designed per light level are written as
+motion-profile files, and each runs through the dataset pipeline
+(``mitsweep dataset SETUP --motion PROFILE.json``, then ``mitsweep evaluate``): the same
+scenes, render seeds and spp, the same light levels in the same order (so the same noise
+draw), the same exposure (the noise model's 0.6 s; the profiles share the setup's sweep
+exposure), and each profile's own IPSF bank with the dataset's NSR rule. The two
+datasets' ground truths are checked to be the same pixels. Per case: EDOF PSNR of both
+profiles per scene, the paired differences (mean, standard error, range), per-radius PSNR
+and the design's predictions beside them (``measured.md``, ``measured.json``). The
+datasets and profiles stay under OUT_DIR: a rerun reuses the finished items and the
+designs of the same setup file, planes and rays.
 
 Usage::
 
     python scripts/design_study.py OUT_DIR [--planes 64] [--rays 65536]
-    python scripts/design_study.py OUT_DIR --measured paraboloid 0.5 [--spp 128]
+    python scripts/design_study.py OUT_DIR --measured paraboloid 0.5 [--scenes 3]
+    python scripts/design_study.py OUT_DIR --all [--scenes 3] [--family room|procedural]
+        [--spp P F S ST] [--resolution N]
 """
 
 from __future__ import annotations
@@ -25,6 +32,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -120,61 +128,246 @@ def table(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def measured(out: Path, name: str, lux: float, *, spp: int, seed: int, planes: int,
-             rays: int) -> dict:
-    from mitsweep.config import load_setup
-    from mitsweep.deconv import (deconvolve, estimate_nsr, paper_fig10_settings, per_radius,
-                                 psnr)
-    from mitsweep.design import design_sweep
-    from mitsweep.io.bank import bank_kernel_size
-    from mitsweep.optics import optimal_sweep_range
-    from mitsweep.optics.diffraction import add_diffraction
-    from mitsweep.optics.motion import MotionProfile
-    from mitsweep.optics.pixels import optical_center_px
-    from mitsweep.pipeline import NOISE_PIXEL_MM
-    from mitsweep.pipeline.tasks import DECONV_PRIOR, white_level
-    from mitsweep.render import render_image
-    from mitsweep.tracer import ipsf_bank
+def setup_file(name: str, out: Path, resolution: int | None) -> Path:
+    """The scene file of setup ``name``: as it is, or (``resolution``) an N × N sensor of
+    the same size (the pitch scaled), written under ``out/setups``."""
+    src = ROOT / "scenes" / f"{name}.toml"
+    if resolution is None:
+        return src
+    import dataclasses
 
-    setup = load_setup(ROOT / "scenes" / f"{name}.toml")
-    noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
+    from mitsweep.config import load_setup, setup_to_toml
+
+    s = load_setup(src)
+    n = int(resolution)
+    pitch = s.sensor.pixel_pitch * s.sensor.resolution[0] / n
+    s = dataclasses.replace(s, name=f"{s.name}_{n}px",
+                            sensor=dataclasses.replace(s.sensor, pixel_pitch=pitch,
+                                                       resolution=(n, n)))
+    path = out / "setups" / f"{name}_{n}px.toml"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(setup_to_toml(s, header=f"{src.name} at {n}x{n} px (same sensor size): "
+                                            f"scripts/design_study.py"), encoding="utf-8")
+    return path
+
+
+def _mitsweep(args: list[str]) -> str:
+    """Run ``mitsweep ARGS`` in a child process (nice as this one); its stdout."""
+    cmd = [sys.executable, "-c", "import sys; from mitsweep.cli.main import main; "
+           "sys.exit(main(sys.argv[1:]))", *args]
+    logging.info("$ mitsweep %s", " ".join(args))
+    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.stderr.write(proc.stderr[-4000:])
+        raise SystemExit(f"mitsweep {args[0]} failed (exit {proc.returncode})")
+    return proc.stdout
+
+
+def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path, *,
+                      planes: int, rays: int) -> dict:
+    """The linear profile and one designed per light level (worst-case objective, as
+    ``mitsweep design-sweep`` by default), as motion-profile files under ``out``, and the
+    designs' reports. A profile whose file and report exist from an earlier run with the
+    same setup file, planes and rays is read, not designed again."""
+    from mitsweep.config import load_setup
+    from mitsweep.deconv import paper_fig10_settings
+    from mitsweep.design import design_sweep
+    from mitsweep.optics import optimal_sweep_range
+    from mitsweep.optics.motion import MotionProfile
+    from mitsweep.optics.motion_file import save_motion_file
+    from mitsweep.pipeline import NOISE_PIXEL_MM
+
+    setup = load_setup(setup_path)
     sweep = optimal_sweep_range(setup)
-    t0 = time.perf_counter()
-    design = design_sweep(setup, noise=noise, n_planes=planes, rays=rays)
-    profiles = {"linear": MotionProfile.linear(sweep.sensor_start, sweep.sensor_end),
-                "optimized": design.profile}
-    gt_r = render_image(setup, "pinhole", spp=16, seed=seed, aovs=("depth", "mask"),
-                        motion=profiles["linear"])
-    gt, mask = gt_r.image, gt_r.aovs["mask"]
-    level = white_level(gt, mask)
-    ref = gt / level
-    m = mask > 0.5
-    ys, xs = np.nonzero(m)
-    cy, cx = optical_center_px(m.shape)
-    edges = np.linspace(0.0, float(np.max(np.hypot(ys - cy, xs - cx))) + 0.5, 9)
-    kind = "radial" if setup.mirror.is_symmetric else "grid"
-    res: dict = {"setup": name, "lux": lux, "spp": spp, "seed": seed,
-                 "design": {k: design.report[k] for k in ("linear_worst_mse",
-                                                          "optimized_worst_mse",
-                                                          "linear_mean_mse",
-                                                          "optimized_mean_mse")}}
-    for pname, prof in profiles.items():
-        r = render_image(setup, "sweep", spp=spp, seed=seed, motion=prof)
-        img = add_diffraction(r.image, setup.lens.f_number, setup.sensor.pixel_pitch)
-        noisy = noise.apply(np.maximum(img / level, 0.0).astype(np.float32),
-                            np.random.default_rng([seed, 7]))
-        bank = ipsf_bank(setup, kind=kind, depths=(500.0,), motion=prof,
-                         kernel_size=bank_kernel_size(setup.sensor.pixel_pitch))
-        nsr = max(estimate_nsr(noisy), noise.nsr(0.5))
-        edof = deconvolve(noisy, bank, method="wiener", nsr=nsr, prior=DECONV_PRIOR)
-        res[pname] = {"psnr_sweep": psnr(noisy, ref, mask=m), "psnr_edof": psnr(edof, ref, mask=m),
-                      "per_radius_psnr_edof": per_radius(edof, ref, edges, mask=m)["psnr"].tolist(),
-                      "nsr": nsr}
-        logging.info("%s: EDOF PSNR %.2f dB", pname, res[pname]["psnr_edof"])
-    res["radius_px_edges"] = edges.tolist()
-    res["seconds"] = time.perf_counter() - t0
-    (out / f"measured_{name}_{lux:g}lux.json").write_text(json.dumps(res, indent=1))
+    key = {"setup_file": setup_path.read_text(encoding="utf-8"), "planes": planes, "rays": rays}
+    out.mkdir(parents=True, exist_ok=True)
+    linear = out / f"{name}_linear.json"
+    save_motion_file(linear, MotionProfile.linear(sweep.sensor_start, sweep.sensor_end),
+                     exposure_s=float(sweep.exposure_s),
+                     provenance={"generator": "scripts/design_study.py", "setup": name,
+                                 "profile": "linear over the optimal range"})
+    res = {"linear": linear, "designs": {}}
+    bank = None
+    for lux in luxes:
+        path, rep = out / f"{name}_{lux:g}lux.json", out / f"{name}_{lux:g}lux_design.json"
+        if path.is_file() and rep.is_file():
+            old = json.loads(rep.read_text(encoding="utf-8"))
+            if old.get("key") == key:
+                logging.info("%s %g lux: profile from the earlier run (%s)", name, lux, path)
+                res["designs"][lux] = (path, old["report"])
+                continue
+        noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
+        d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank)
+        bank = d.bank
+        save_motion_file(path, d.profile, exposure_s=d.exposure_s,
+                         provenance={"generator": "scripts/design_study.py", "setup": name,
+                                     "lux": lux, "planes": planes, "rays": rays})
+        report = dict(d.report, points_uv_mm=d.points_uv.tolist())
+        rep.write_text(json.dumps({"key": key, "report": report}), encoding="utf-8")
+        logging.info("%s %g lux: designed, predicted worst %.2f -> %.2f dB", name, lux,
+                     report["linear_worst_psnr_db"], report["optimized_worst_psnr_db"])
+        res["designs"][lux] = (path, report)
     return res
+
+
+def _predicted_per_bin(report: dict, edges_px: np.ndarray, pitch_mm: float) -> dict:
+    """The design's predicted MSE per field point, mean over its depths, gathered into
+    the evaluation's radial bins (pixels from the optical axis): PSNR per bin, None for a
+    bin without a design point (beyond the FOV's edge)."""
+    r_px = np.hypot(*np.asarray(report["points_uv_mm"]).T) / pitch_mm
+    out = {}
+    for which in ("linear", "optimized"):
+        mse = np.asarray(report["per_point"][f"{which}_mse"]).mean(axis=0)
+        b = np.clip(np.digitize(r_px, edges_px) - 1, 0, len(edges_px) - 2)
+        out[which] = [float(10 * np.log10(1 / mse[b == k].mean())) if np.any(b == k) else None
+                      for k in range(len(edges_px) - 1)]
+    return out
+
+
+def _same_ground_truth(a: Path, b: Path, scenes: int) -> bool:
+    """Whether two datasets' ground truths (RGB, depth and mask) are the same pixels
+    (their files differ in the motion recorded in the metadata)."""
+    from mitsweep.pipeline.tasks import read_rgb
+
+    for i in range(scenes):
+        ca, cb = (read_rgb(d / f"scene_{i:03d}" / "pinhole.exr")[1] for d in (a, b))
+        if ca.keys() != cb.keys() or any(not np.array_equal(ca[k], cb[k]) for k in ca):
+            return False
+    return True
+
+
+def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, seed: int,
+                   family: str, spp: list[str] | None, resolution: int | None, planes: int,
+                   rays: int) -> list[dict]:
+    """Datasets rendered with the linear and each designed profile, deconvolved with their
+    own banks and scored (``mitsweep dataset --motion`` and ``mitsweep evaluate``); one
+    row per (setup, lux) case.
+
+    Both profiles of a setup run through the same dataset options: the same scenes and
+    render seeds, and the same light levels in the same order (the noise draw of scene
+    ``i`` at the ``j``-th level is seeded ``[seed, i, j]``), so each pair of EDOF images
+    differs by the profile alone. Their ground truths must be the same images (same
+    span, so the same reference grid): checked by SHA-256."""
+    levels = list(LUX) + sorted({lux for _, lux in cases} - set(LUX))
+    rows = []
+    for name in dict.fromkeys(n for n, _ in cases):
+        luxes = [lux for n, lux in cases if n == name]
+        t0 = time.perf_counter()
+        sfile = setup_file(name, out, resolution)
+        prof = designed_profiles(sfile, name, luxes, out / "profiles", planes=planes,
+                                 rays=rays)
+        t_design = time.perf_counter() - t0
+        common = [str(sfile), "--scenes", str(scenes), "--seed", str(seed), "--family",
+                  family, "--lux", *(f"{x:g}" for x in levels)]
+        if spp:
+            common += ["--spp", *spp]
+        evals, dirs, seconds = {}, {}, {}
+        for tag, mfile in [("linear", prof["linear"]),
+                           *((f"opt_{lux:g}lux", prof["designs"][lux][0]) for lux in luxes)]:
+            d = out / "datasets" / name / tag
+            t1 = time.perf_counter()
+            _mitsweep(["dataset", *common, "--out", str(d), "--motion", str(mfile)])
+            evals[tag] = json.loads(_mitsweep(["evaluate", str(d), "--json", "--out",
+                                               str(d / "evaluation.json")]))
+            dirs[tag], seconds[tag] = d, time.perf_counter() - t1
+        from mitsweep.config import load_setup
+
+        pitch = load_setup(sfile).sensor.pixel_pitch
+        for lux in luxes:
+            tag = f"opt_{lux:g}lux"
+            if not _same_ground_truth(dirs["linear"], dirs[tag], scenes):
+                raise SystemExit(f"{name}: the ground truths of {tag} and linear differ "
+                                 f"(the profiles' reference grids do not agree)")
+            rows.append(case_row(name, lux, evals["linear"], evals[tag],
+                                 prof["designs"][lux][1], pitch,
+                                 seconds={"design_s": t_design,
+                                          "linear_dataset_s": seconds["linear"],
+                                          "optimized_dataset_s": seconds[tag]}))
+            logging.info("%s %g lux: EDOF %.2f -> %.2f dB (paired %+.2f +- %.2f)", name, lux,
+                         rows[-1]["linear"]["psnr_mean"], rows[-1]["optimized"]["psnr_mean"],
+                         rows[-1]["paired_db"]["mean"], rows[-1]["paired_db"]["se"])
+        (out / "measured.json").write_text(json.dumps(
+            {"options": {"scenes": scenes, "seed": seed, "family": family,
+                         "spp": spp or "dataset default", "resolution": resolution,
+                         "planes": planes, "rays": rays, "light_levels": levels},
+             "cases": rows}, indent=1), encoding="utf-8")
+    return rows
+
+
+def case_row(name: str, lux: float, ev_lin: dict, ev_opt: dict, report: dict,
+             pitch_mm: float, *, seconds: dict) -> dict:
+    """One case: EDOF and noisy-sweep PSNR per scene of both profiles, paired differences
+    (mean, standard error, range), per-radius PSNR (mean over scenes), and the design's
+    predictions beside them."""
+    key, raw = f"edof_{lux:g}lux", f"sweep_{lux:g}lux"
+    scenes = sorted(ev_lin["scenes"])
+    row: dict = {"setup": name, "lux": lux, "scenes": len(scenes)}
+    for which, ev in (("linear", ev_lin), ("optimized", ev_opt)):
+        s = [ev["scenes"][k] for k in scenes]
+        ps = np.array([x[key]["psnr"] for x in s])
+        pr = np.array([x[key]["per_radius"]["psnr"] for x in s])
+        row[which] = {"psnr": ps.tolist(), "psnr_mean": float(ps.mean()),
+                      "ssim_mean": float(np.mean([x[key]["ssim"] for x in s])),
+                      "sweep_psnr_mean": float(np.mean([x[raw]["psnr"] for x in s])),
+                      "per_radius_psnr": pr.mean(axis=0).tolist(),
+                      "per_radius_psnr_scenes": pr.tolist()}
+    d = np.array(row["optimized"]["psnr"]) - np.array(row["linear"]["psnr"])
+    se = float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else float("nan")
+    row["paired_db"] = {"per_scene": d.tolist(), "mean": float(d.mean()), "se": se,
+                        "min": float(d.min()), "max": float(d.max())}
+    pr_d = (np.array(row["optimized"]["per_radius_psnr_scenes"])
+            - np.array(row["linear"]["per_radius_psnr_scenes"]))
+    row["per_radius_paired_db"] = pr_d.mean(axis=0).tolist()
+    row["per_radius_paired_se"] = (pr_d.std(axis=0, ddof=1) / np.sqrt(len(scenes))).tolist() \
+        if len(scenes) > 1 else [float("nan")] * pr_d.shape[1]
+    s0 = ev_lin["scenes"][scenes[0]]
+    edges = np.asarray(s0[key]["per_radius"]["edges_px"], dtype=float)
+    row["radius_px_edges"] = edges.tolist()
+    worst_lin = int(np.argmin(row["linear"]["per_radius_psnr"]))
+    row["worst_bin"] = {"bin": worst_lin, "linear": row["linear"]["per_radius_psnr"][worst_lin],
+                        "optimized": row["optimized"]["per_radius_psnr"][worst_lin],
+                        "optimized_worst": float(np.min(row["optimized"]["per_radius_psnr"]))}
+    row["predicted"] = {k: report[k] for k in ("linear_worst_psnr_db", "optimized_worst_psnr_db",
+                                               "linear_mean_psnr_db", "optimized_mean_psnr_db")}
+    row["predicted"]["per_radius_psnr"] = _predicted_per_bin(report, edges, pitch_mm)
+    row["predicted"]["tau_range"] = [float(min(report["tau"])), float(max(report["tau"]))]
+    row["predicted"]["planes"] = report["planes"]
+    row["seconds"] = seconds
+    return row
+
+
+def measured_table(rows: list[dict]) -> str:
+    """Markdown: per case the predicted gains, the measured EDOF PSNR of both profiles
+    (mean over scenes), the paired difference and the worst radial bin; then the
+    per-radius differences, measured against predicted."""
+    f = lambda x: "–" if x is None else f"{x:+.2f}"  # noqa: E731
+    lines = ["| setup | lux | predicted worst / mean gain (dB) | EDOF PSNR lin → opt (dB) | "
+             "paired Δ ± SE (dB) [min, max] | worst radial bin lin → opt (dB) | "
+             "noisy sweep lin → opt (dB) |", "|" + "---|" * 7]
+    for r in rows:
+        p, w, dd = r["predicted"], r["worst_bin"], r["paired_db"]
+        lines.append(
+            f"| {r['setup']} | {r['lux']:g} | "
+            f"{f(p['optimized_worst_psnr_db'] - p['linear_worst_psnr_db'])} / "
+            f"{f(p['optimized_mean_psnr_db'] - p['linear_mean_psnr_db'])} | "
+            f"{r['linear']['psnr_mean']:.2f} → {r['optimized']['psnr_mean']:.2f} | "
+            f"{dd['mean']:+.2f} ± {dd['se']:.2f} [{dd['min']:+.2f}, {dd['max']:+.2f}] | "
+            f"{w['linear']:.2f} → {w['optimized']:.2f} (bin {w['bin'] + 1}) | "
+            f"{r['linear']['sweep_psnr_mean']:.2f} → {r['optimized']['sweep_psnr_mean']:.2f} |")
+    n = len(rows[0]["per_radius_paired_db"]) if rows else 0
+    lines += ["", "Per radial bin (1 = centre): measured Δ opt − lin, mean over scenes "
+              "(predicted Δ, mean over depths; – where no design point lies in the bin):", "",
+              "| setup | lux | " + " | ".join(f"bin {k + 1}" for k in range(n)) + " |",
+              "|" + "---|" * (n + 2)]
+    for r in rows:
+        pp = r["predicted"]["per_radius_psnr"]
+        cells = []
+        for k in range(n):
+            pl, po = pp["linear"][k], pp["optimized"][k]
+            pred = "–" if pl is None else f"{po - pl:+.2f}"
+            cells.append(f"{r['per_radius_paired_db'][k]:+.2f} ({pred})")
+        lines.append(f"| {r['setup']} | {r['lux']:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def main(argv=None) -> int:
@@ -184,17 +377,46 @@ def main(argv=None) -> int:
     p.add_argument("--rays", type=int, default=1 << 16)
     p.add_argument("--grid", type=int, nargs=2, default=(5, 5))
     p.add_argument("--radii", type=int, default=9)
-    p.add_argument("--measured", nargs=2, metavar=("SETUP", "LUX"))
-    p.add_argument("--spp", type=int, default=128)
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--measured", nargs=2, metavar=("SETUP", "LUX"),
+                      help="measure one case: datasets with the linear and the designed "
+                           "profile")
+    mode.add_argument("--all", action="store_true",
+                      help="measure the nine cases (3 setups x 50, 2, 0.5 lux)")
+    p.add_argument("--scenes", type=int, default=3, help="scenes per case (default 3)")
+    p.add_argument("--family", choices=("room", "procedural"), default="room")
+    p.add_argument("--spp", nargs=4, metavar=("PINHOLE", "FOCUSED", "SWEEP", "STOPPED"),
+                   help="samples per pixel (default: the dataset's, 16 64 128 64)")
+    p.add_argument("--resolution", type=int,
+                   help="render an N x N sensor of the same size (default: the setup's)")
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args(argv)
+    if a.measured:
+        if a.measured[0] not in SETUPS:
+            p.error(f"--measured: setup must be one of {', '.join(SETUPS)}, got "
+                    f"{a.measured[0]!r}")
+        try:
+            ok = float(a.measured[1]) > 0
+        except ValueError:
+            ok = False
+        if not ok:
+            p.error(f"--measured: LUX must be a number > 0, got {a.measured[1]!r}")
+    if a.scenes < 1:
+        p.error(f"--scenes: need at least 1, got {a.scenes}")
+    if a.resolution is not None and a.resolution < 16:
+        p.error(f"--resolution: need at least 16 px, got {a.resolution}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s", stream=sys.stderr)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    if a.measured:
-        res = measured(out, a.measured[0], float(a.measured[1]), spp=a.spp, seed=a.seed,
-                       planes=a.planes, rays=a.rays)
-        print(json.dumps(res, indent=1))
+    if a.measured or a.all:
+        cases = [(a.measured[0], float(a.measured[1]))] if a.measured else \
+            [(n, lux) for n in SETUPS for lux in LUX]
+        rows = measured_cases(out, cases, scenes=a.scenes, seed=a.seed, family=a.family,
+                              spp=a.spp, resolution=a.resolution, planes=a.planes,
+                              rays=a.rays)
+        text = measured_table(rows)
+        (out / "measured.md").write_text(text, encoding="utf-8")
+        print(text)
         return 0
     rows = predicted(out, planes=a.planes, rays=a.rays, grid=tuple(a.grid), radii=a.radii)
     text = table(rows)
