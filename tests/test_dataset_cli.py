@@ -8,6 +8,22 @@ from mitsweep.pipeline import DatasetError, DatasetOptions, edof_name, item_name
 from test_io_write_errors import tiny_setup_toml
 
 
+def _dataset_error(tmp_path, capsys, args):
+    """``mitsweep dataset`` of a tiny setup with ``args``, which must fail: exit status 2,
+    one line on stderr (returned), nothing created."""
+    setup = tiny_setup_toml(tmp_path)
+    out = tmp_path / "new" / "ds"
+    try:
+        rc = main(["dataset", str(setup), "--out", str(out), *args])
+    except SystemExit as exc:  # argparse's own one-line errors
+        rc = exc.code
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert not (tmp_path / "new").exists()
+    return err
+
+
 @pytest.mark.parametrize("args,message", [
     (["--shard", "3/2"], "argument --shard: must be K/N with 1 <= K <= N <= 10000, got 3/2"),
     (["--shard", "0/4"], "argument --shard: must be K/N with 1 <= K <= N"),
@@ -30,17 +46,7 @@ from test_io_write_errors import tiny_setup_toml
     (["--retries", "-1"], "argument --retries: must be >= 0, got -1"),
 ])
 def test_bad_scale_out_options_are_one_line(tmp_path, capsys, args, message):
-    setup = tiny_setup_toml(tmp_path)
-    out = tmp_path / "new" / "ds"
-    try:
-        rc = main(["dataset", str(setup), "--out", str(out), *args])
-    except SystemExit as exc:  # argparse's own one-line errors
-        rc = exc.code
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
-    assert message in err
-    assert not (tmp_path / "new").exists()
+    assert message in _dataset_error(tmp_path, capsys, args)
 
 
 def test_methods_are_read_from_deconv_at_validation_time(monkeypatch):
@@ -58,15 +64,9 @@ def test_methods_are_read_from_deconv_at_validation_time(monkeypatch):
 
 
 def test_unreachable_scheduler_is_one_line(tmp_path, capsys):
-    setup = tiny_setup_toml(tmp_path)
-    out = tmp_path / "ds"
-    rc = main(["dataset", str(setup), "--out", str(out), "--scheduler", "tcp://127.0.0.1:9"])
-    err = capsys.readouterr().err
-    assert rc == 2
+    err = _dataset_error(tmp_path, capsys, ["--scheduler", "tcp://127.0.0.1:9"])
     assert err.startswith("mitsweep: error: scheduler: cannot reach a Dask scheduler at "
                           "tcp://127.0.0.1:9 within 10 s")
-    assert len(err.strip().splitlines()) == 1
-    assert not out.exists()
 
 
 # -- scenes: --family, --family-param, --scenes-from, --scene-unit ---------------------
@@ -78,20 +78,6 @@ MISSING_FILE = ('<scene version="3.0.0"><shape type="ply"><string name="filename
 GOOD = ('<scene version="3.0.0"><emitter type="constant"/><shape type="sphere">'
         '<point name="center" x="1000" y="0" z="0"/><float name="radius" value="200"/>'
         '</shape></scene>\n')
-
-
-def _dataset_error(tmp_path, capsys, args):
-    setup = tiny_setup_toml(tmp_path)
-    out = tmp_path / "new" / "ds"
-    try:
-        rc = main(["dataset", str(setup), "--out", str(out), *args])
-    except SystemExit as exc:  # argparse's own one-line errors
-        rc = exc.code
-    err = capsys.readouterr().err
-    assert rc == 2, err
-    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
-    assert not (tmp_path / "new").exists()
-    return err
 
 
 @pytest.mark.parametrize("args,message", [

@@ -8,37 +8,15 @@ import os
 import signal
 import threading
 import time
-from pathlib import Path
 
 import pytest
+from rig_fixtures import ZABER_MAX_POSITION, assert_safe, soft_limit_steps
+from rig_fixtures import sphere, sphere_zaber  # noqa: F401 - fixtures
 
-from mitsweep.config import load_setup
 from mitsweep.rig import (CaptureInterrupted, DeviceFault, PortLost, ProtocolError,
                           ReplyTimeout, RigPorts, load_capture_record, plan_capture,
                           run_capture)
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
-from mitsweep.rig.testing import fast_rig_setup
-
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
-ZABER_STEPS_PER_MM = 1 / 0.047625e-3
-
-
-@pytest.fixture(scope="module")
-def sphere():
-    return fast_rig_setup(load_setup(SCENES / "sphere.toml"))
-
-
-@pytest.fixture(scope="module")
-def sphere_zaber():
-    return fast_rig_setup(load_setup(SCENES / "sphere.toml"), steps_per_mm=ZABER_STEPS_PER_MM)
-
-
-def assert_safe(model, plan, lo_steps, hi_steps):
-    """Stage at rest inside the soft limits, shutter closed."""
-    now = time.monotonic()
-    assert not model.moving(now), "stage still moving"
-    assert lo_steps <= model.position(now) <= hi_steps
-    assert not getattr(model, "shutter_open", False), "shutter left open"
 
 
 def assert_incomplete(out, status):
@@ -61,15 +39,14 @@ def test_arduino_fault_stops_and_records_incomplete(sphere, tmp_path, fault, err
                                                     stop_ok):
     plan = plan_capture(sphere)
     out = tmp_path / "capture.json"
-    lo, hi = (round(x * plan.steps_per_mm) for x in (plan.soft_limit_min_mm,
-                                                      plan.soft_limit_max_mm))
+    lo, hi = soft_limit_steps(plan)
     with PtyDevice(ArduinoModel([fault], homed=True, position=plan.approach_steps)) as dev:
         t0 = time.monotonic()
         with pytest.raises(error):
             run_capture(sphere, RigPorts(arduino=dev.port), out=out)
         # no hanging: the deadline is the sweep's duration plus a bounded slack
         assert time.monotonic() - t0 < plan.sweep_duration_s * 1.25 + 2.5
-        assert_safe(dev.model, plan, lo, hi)
+        assert_safe(dev.model, lo, hi)
     data = assert_incomplete(out, status)
     assert data["safety"][0]["ok"] is stop_ok
     if fault.kind in ("fault_flag", "unplug"):
@@ -87,10 +64,9 @@ def test_zaber_fault_releases_shutter_and_records_incomplete(sphere_zaber, tmp_p
                                                              error, status):
     plan = plan_capture(sphere_zaber, stage="zaber")
     out = tmp_path / "capture.json"
-    lo, hi = (round(x * plan.steps_per_mm) for x in (plan.soft_limit_min_mm,
-                                                      plan.soft_limit_max_mm))
+    lo, hi = soft_limit_steps(plan)
     zaber = ZaberModel([fault], homed=True, position=plan.approach_steps,
-                       max_position=int(26 * ZABER_STEPS_PER_MM))
+                       max_position=ZABER_MAX_POSITION)
     with PtyDevice(ArduinoModel(homed=True)) as board, PtyDevice(zaber) as stage:
         with pytest.raises(error):
             run_capture(sphere_zaber, RigPorts(arduino=board.port, zaber=stage.port), out=out)
@@ -104,7 +80,7 @@ def test_zaber_fault_releases_shutter_and_records_incomplete(sphere_zaber, tmp_p
             # the link is gone but the stage finishes the commanded move on its own
             # supply: it ends inside the limits the driver set on the device itself
             time.sleep(plan.sweep_duration_s)
-        assert_safe(stage.model, plan, lo, hi)
+        assert_safe(stage.model, lo, hi)
 
 
 class _InterruptingBoard(ArduinoModel):
@@ -121,7 +97,7 @@ def test_ctrl_c_during_sweep_stops_and_records_interrupted(sphere, tmp_path):
     with PtyDevice(_InterruptingBoard(homed=True, position=plan.approach_steps)) as dev:
         with pytest.raises(KeyboardInterrupt):
             run_capture(sphere, RigPorts(arduino=dev.port), out=out)
-        assert_safe(dev.model, plan, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
+        assert_safe(dev.model, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
         assert dev.model.stopped
     data = assert_incomplete(out, "interrupted")
     assert data["safety"][0]["ok"]
@@ -165,7 +141,7 @@ def test_sigterm_during_sweep_runs_the_safety_path_and_restores_handlers(sphere,
         with PtyDevice(_TerminatedBoard(homed=True, position=plan.approach_steps)) as dev:
             with pytest.raises(CaptureInterrupted) as info:
                 run_capture(sphere, RigPorts(arduino=dev.port), out=out)
-            assert_safe(dev.model, plan, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
+            assert_safe(dev.model, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
             assert dev.model.stopped
         assert info.value.signal_name == "SIGTERM"
         assert info.value.capture_record.signal == "SIGTERM"

@@ -18,6 +18,8 @@ import subprocess
 from pathlib import Path
 
 import pytest
+from rig_fixtures import bent_profile
+from rig_fixtures import sphere  # noqa: F401 - fixture
 
 from mitsweep.rig import arduino as driver
 from mitsweep.rig.testing import expected_protocol
@@ -171,56 +173,13 @@ class HostBoard:
         return [tuple(int(v) for v in ln.split()) for ln in text.splitlines()]
 
 
-def test_sketch_runs_a_capture_with_the_python_driver(host_firmware, tmp_path):
-    """The firmware's own parsing, ramps, shutter window and events, driven by
-    run_capture over a real pty: the record is complete, the shutter pin was high once,
-    exactly between the planned steps, for the planned time."""
-    from mitsweep.config import load_setup
-    from mitsweep.rig import RigPorts, load_capture_record, plan_capture, run_capture
-    from mitsweep.rig.testing import fast_rig_setup
+def capture_on_host_board(host_firmware, tmp_path, setup, plan):
+    """``plan`` run by run_capture on the host-built sketch over a real pty. Checks what
+    every such capture must show: a complete record whose measured exposure is the
+    planned one, and the shutter pin high once, exactly between the planned steps.
+    Returns the record and the board's (open, close) times of the shutter pin, µs."""
+    from mitsweep.rig import RigPorts, load_capture_record, run_capture
 
-    setup = fast_rig_setup(load_setup(SKETCH_DIR.parents[2] / "scenes" / "sphere.toml"))
-    plan = plan_capture(setup)
-    board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
-    out = tmp_path / "capture.json"
-    try:
-        run_capture(setup, RigPorts(arduino=board.port, checksums=True), out=out)
-    finally:
-        board.close()
-    data = load_capture_record(out)
-    assert data["complete"] and data["homed"]
-    exp = data["measured"]["exposure"]
-    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
-                                                       abs=HOST_TIMING_TOLERANCE_S)
-    shutter = board.pin_changes(6)   # PIN_SHUTTER
-    assert [v for _, v, _ in shutter] == [1, 0]
-    (t_open, _, x_open), (t_close, _, x_close) = shutter
-    assert (x_open, x_close) == (plan.open_steps, plan.close_steps)
-    # the board's events report the shutter edges it drove
-    assert exp["measured_exposure_s"] == pytest.approx((t_close - t_open) * 1e-6,
-                                                       abs=SAME_TURN_S)
-    assert [e["name"] for e in data["events"]].count("POS") >= 10
-
-
-def test_sketch_runs_a_motion_profile_with_the_python_driver(host_firmware, tmp_path):
-    """The firmware's own table execution (TABLE/SEG/TSWEEP), driven by run_capture over
-    a real pty with an optimised-like profile: the shutter pin was high once, exactly
-    between the planned steps, for the table's time, and the board's positions follow
-    the plan (one step, plus the peak rate over the host build's scheduling delay)."""
-    import numpy as np
-
-    from mitsweep.config import load_setup
-    from mitsweep.optics import optimal_sweep_range
-    from mitsweep.optics.motion import MotionProfile
-    from mitsweep.rig import RigPorts, load_capture_record, plan_capture, run_capture
-    from mitsweep.rig.testing import fast_rig_setup
-
-    setup = fast_rig_setup(load_setup(SKETCH_DIR.parents[2] / "scenes" / "sphere.toml"))
-    sr = optimal_sweep_range(setup)
-    t = np.linspace(0.0, 1.0, 64)
-    u = t + 0.3 * t * (1.0 - t)          # 1.3x the mean velocity at the start, 0.7x at the end
-    motion = MotionProfile.tabulated(t, sr.sensor_start + (sr.sensor_end - sr.sensor_start) * u)
-    plan = plan_capture(setup, motion=motion, exposure_s=0.7)
     board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
     out = tmp_path / "capture.json"
     try:
@@ -229,13 +188,42 @@ def test_sketch_runs_a_motion_profile_with_the_python_driver(host_firmware, tmp_
         board.close()
     data = load_capture_record(out)
     assert data["complete"]
-    exp = data["measured"]["exposure"]
-    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
-                                                       abs=HOST_TIMING_TOLERANCE_S)
+    assert data["measured"]["exposure"]["measured_exposure_s"] == pytest.approx(
+        plan.planned_exposure_s, abs=HOST_TIMING_TOLERANCE_S)
     shutter = board.pin_changes(6)   # PIN_SHUTTER
     assert [v for _, v, _ in shutter] == [1, 0]
     (t_open, _, x_open), (t_close, _, x_close) = shutter
     assert (x_open, x_close) == (plan.open_steps, plan.close_steps)
+    return data, (t_open, t_close)
+
+
+def test_sketch_runs_a_capture_with_the_python_driver(host_firmware, sphere, tmp_path):
+    """The firmware's own parsing, ramps, shutter window and events, driven by
+    run_capture over a real pty: the record is complete, the shutter pin was high once,
+    exactly between the planned steps, for the planned time."""
+    from mitsweep.rig import plan_capture
+
+    data, (t_open, t_close) = capture_on_host_board(host_firmware, tmp_path, sphere,
+                                                    plan_capture(sphere))
+    assert data["homed"]
+    # the board's events report the shutter edges it drove
+    assert data["measured"]["exposure"]["measured_exposure_s"] == pytest.approx(
+        (t_close - t_open) * 1e-6, abs=SAME_TURN_S)
+    assert [e["name"] for e in data["events"]].count("POS") >= 10
+
+
+def test_sketch_runs_a_motion_profile_with_the_python_driver(host_firmware, sphere, tmp_path):
+    """The firmware's own table execution (TABLE/SEG/TSWEEP), driven by run_capture over
+    a real pty with an optimised-like profile: the shutter pin was high once, exactly
+    between the planned steps, for the table's time, and the board's positions follow
+    the plan (one step, plus the peak rate over the host build's scheduling delay)."""
+    from mitsweep.optics import optimal_sweep_range
+    from mitsweep.rig import plan_capture
+
+    # 1.3x the mean velocity at the start, 0.7x at the end
+    motion = bent_profile(optimal_sweep_range(sphere))
+    plan = plan_capture(sphere, motion=motion, exposure_s=0.7)
+    data, (t_open, t_close) = capture_on_host_board(host_firmware, tmp_path, sphere, plan)
     # the table is timed from the open step on the board's clock: its last step, which
     # closes the shutter, is due the table's duration later (late by scheduling only)
     assert (t_close - t_open) * 1e-6 == pytest.approx(plan.profile.duration_s,

@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import ROOT, run_cli
+from rig_fixtures import ZABER_MAX_POSITION, assert_safe, bent_profile
+from rig_fixtures import sphere, sphere_zaber  # noqa: F401 - fixtures
 from test_rig_cli import setup_file
 from test_rig_firmware import HostBoard, host_firmware  # noqa: F401 - fixture
 from test_rig_signals import ZABER_RIG, finish, received, signal_exit_status, wait_for
@@ -38,31 +40,10 @@ from mitsweep.rig.arduino import MAX_STEP_RATE, MAX_TABLE_SEGMENTS, ArduinoSweep
 from mitsweep.rig.errors import PlanError
 from mitsweep.rig.sim.base import command
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
-from mitsweep.rig.testing import expected_protocol, fast_rig_setup
+from mitsweep.rig.testing import expected_protocol
 from mitsweep.rig.zaber import SPEED_UNIT, ZaberStage
 
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
-ZABER_STEPS_PER_MM = 1 / 0.047625e-3
 TIMER_RESOLUTION_S = 2e-6               # two 1 µs micros() stamps
-
-
-def bent_profile(sr, n: int = 64, bend: float = 0.3) -> MotionProfile:
-    """A monotonic, non-uniform profile over the sweep range: ``u = t + bend t (1 - t)``
-    (fast at the start, ``(1 + bend)`` times the mean velocity, slow at the end,
-    ``(1 - bend)``), as ``n`` tabulated knots."""
-    t = np.linspace(0.0, 1.0, n)
-    u = t + bend * t * (1.0 - t)
-    return MotionProfile.tabulated(t, sr.sensor_start + (sr.sensor_end - sr.sensor_start) * u)
-
-
-@pytest.fixture(scope="module")
-def sphere():
-    return fast_rig_setup(load_setup(SCENES / "sphere.toml"))
-
-
-@pytest.fixture(scope="module")
-def sphere_zaber():
-    return fast_rig_setup(load_setup(SCENES / "sphere.toml"), steps_per_mm=ZABER_STEPS_PER_MM)
 
 
 @pytest.fixture(scope="module")
@@ -353,7 +334,7 @@ def test_zaber_capture_runs_the_profile_as_a_stream(sphere_zaber, profile, tmp_p
     plan = plan_capture(sphere_zaber, stage="zaber", motion=profile, exposure_s=0.7)
     out = tmp_path / "capture.json"
     with PtyDevice(ArduinoModel()) as board, \
-            PtyDevice(ZaberModel(max_position=int(26 * ZABER_STEPS_PER_MM))) as stage:
+            PtyDevice(ZaberModel(max_position=ZABER_MAX_POSITION)) as stage:
         run_capture(sphere_zaber, RigPorts(arduino=board.port, zaber=stage.port,
                                            checksums=True), out=out, plan=plan)
         assert stage.model.position(time.monotonic()) == plan.end_steps
@@ -375,13 +356,6 @@ def test_zaber_capture_runs_the_profile_as_a_stream(sphere_zaber, profile, tmp_p
 
 
 # -- safety during a table sweep --------------------------------------------------------
-def assert_safe(model, lo, hi):
-    now = time.monotonic()
-    assert not model.moving(now), "stage still moving"
-    assert lo <= model.position(now) <= hi
-    assert not getattr(model, "shutter_open", False), "shutter left open"
-
-
 @pytest.mark.parametrize("fault, error, status", [
     (Fault("no_reply", command="TSWEEP"), ReplyTimeout, "timeout"),
     (Fault("garbage", command="SEG"), ProtocolError, "error"),
@@ -413,7 +387,7 @@ def test_zaber_fault_during_stream_stops_and_releases_the_shutter(sphere_zaber, 
     out = tmp_path / "capture.json"
     with PtyDevice(ArduinoModel()) as board, \
             PtyDevice(ZaberModel([Fault("fault_flag", at_fraction=0.5)],
-                                 max_position=int(26 * ZABER_STEPS_PER_MM))) as stage:
+                                 max_position=ZABER_MAX_POSITION)) as stage:
         with pytest.raises(DeviceFault):
             run_capture(sphere_zaber, RigPorts(arduino=board.port, zaber=stage.port),
                         out=out, plan=plan)
@@ -526,6 +500,21 @@ def start_profile_capture(setup_path, motion_path, out, board, stage=None):
                             text=True)
 
 
+def sigkill_mid_table(setup_path, motion_path, out, board, shutter_is_open) -> float:
+    """Start the profile capture, SIGKILL it once ``shutter_is_open()``; the kill's
+    ``time.monotonic()``."""
+    proc = start_profile_capture(setup_path, motion_path, out, board)
+    try:
+        wait_for(shutter_is_open, "the shutter open mid-table", proc)
+        t_kill = time.monotonic()
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        proc.kill()
+        proc.wait()
+    return t_kill
+
+
 def slow_profile_rig(tmp_path, rig_kind, extra_rig=""):
     """(setup path, motion path, plan) of the slow profile on a fast-positioning rig."""
     setup_path = setup_file(tmp_path, (ZABER_RIG if rig_kind == "zaber" else "") + extra_rig)
@@ -546,7 +535,7 @@ def test_sigterm_mid_table_sweep_stops_the_rig_and_records_interrupted(tmp_path,
     stage = None
     if rig_kind == "zaber":
         stage = PtyDevice(ZaberModel(homed=True, position=plan.approach_steps,
-                                     max_position=int(26 * ZABER_STEPS_PER_MM)))
+                                     max_position=ZABER_MAX_POSITION))
     motor = stage or board
     with contextlib.ExitStack() as devices:
         for dev in filter(None, (board, stage)):
@@ -574,15 +563,8 @@ def test_sigterm_mid_table_sweep_stops_the_rig_and_records_interrupted(tmp_path,
 def test_sigkilled_host_mid_table_the_simulated_board_stops_within_watchdog(tmp_path):
     setup_path, motion_path, plan = slow_profile_rig(tmp_path, "arduino", WATCHDOG_RIG)
     with PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps)) as board:
-        proc = start_profile_capture(setup_path, motion_path, tmp_path / "rec.json", board)
-        try:
-            wait_for(lambda: board.model.shutter_open, "the shutter open mid-table", proc)
-            t_kill = time.monotonic()
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=10)
-        finally:
-            proc.kill()
-            proc.wait()
+        t_kill = sigkill_mid_table(setup_path, motion_path, tmp_path / "rec.json", board,
+                                   lambda: board.model.shutter_open)
         wait_for(lambda: not board.model.shutter_open
                  and not board.model.moving(time.monotonic()), "the board at rest",
                  timeout_s=10.0)
@@ -597,15 +579,8 @@ def test_sigkilled_host_mid_table_the_firmware_stops_within_watchdog(
     board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
     shutter = lambda: [v for _, v, _ in board.pin_changes(6)]  # noqa: E731 - PIN_SHUTTER
     try:
-        proc = start_profile_capture(setup_path, motion_path, tmp_path / "rec.json", board)
-        try:
-            wait_for(lambda: shutter() == [1], "the shutter open mid-table", proc)
-            t_kill = time.monotonic()
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=10)
-        finally:
-            proc.kill()
-            proc.wait()
+        t_kill = sigkill_mid_table(setup_path, motion_path, tmp_path / "rec.json", board,
+                                   lambda: shutter() == [1])
         wait_for(lambda: shutter() == [1, 0], "the shutter's release", timeout_s=10.0)
         elapsed = board.pin_times(6)[-1][0] - t_kill
         faults = [ln for ln in read_lines(board.slave, 0.5) if ln.startswith("EV FAULT")]
