@@ -124,7 +124,7 @@ import numpy as np
 from ..backend import set_mitsuba_variant
 
 __all__ = ["register", "motion_table", "NotDifferentiableError", "PLUGIN_NAME",
-           "MOTION_TABLE_SIZE"]
+           "MOTION_TABLE_SIZE", "refuse_integrators_that_drop_the_sweep"]
 
 logger = logging.getLogger(__name__)
 
@@ -143,6 +143,80 @@ _DIFFERENTIABLE = {"fixed": ("sensor_distance",), "linear": ("sensor_start", "se
 
 class NotDifferentiableError(ValueError):
     """A gradient was asked of a ``focalsweep`` parameter that is not differentiable."""
+
+
+#: Integrators (by class name) whose derivative with respect to the camera is lost in any
+#: scene: the ``prb`` family detaches the camera rays; light tracing moves the pixel a
+#: sample lands in, which plain AD does not differentiate.
+_DROP_ALWAYS = {"PRBIntegrator": "prb", "BasicPRBIntegrator": "prb_basic",
+                "PRBProjectiveIntegrator": "prb_projective",
+                "PRBVolpathIntegrator": "prbvolpath", "ParticleTracerIntegrator": "ptracer"}
+#: Integrators that differentiate what the camera sees directly but detach the ray at a
+#: BSDF sample (``path``, ``volpath``) or never follow one (``direct``): through a
+#: delta-reflecting (or null) surface, a mirror, their derivative is exactly zero.
+_DROP_AT_DELTA = {"PathIntegrator": "path", "VolumetricSimplePathIntegrator": "volpath",
+                  "VolumetricPathIntegrator": "volpath",
+                  "VolumetricMISPathIntegrator": "volpathmis", "DirectIntegrator": "direct",
+                  "DirectProjectiveIntegrator": "direct_projective"}
+_MITSUBA_BASES = ("Integrator", "SamplingIntegrator", "MonteCarloIntegrator",
+                  "AdjointIntegrator")
+
+
+def _integrator_class(integrator) -> str:
+    """Class name of an integrator (a Python plugin's own, else the C++ one's)."""
+    name = type(integrator).__name__
+    return integrator.class_name() if name in _MITSUBA_BASES else name
+
+
+def refuse_integrators_that_drop_the_sweep(integrator, scene, keys=("sensor_start",
+                                                                    "sensor_end")) -> None:
+    """Raise :class:`NotDifferentiableError` where ``integrator`` would return a zero
+    (or no) derivative of the sweep ``keys`` for ``scene`` (see the module: the ``prb``
+    family and ``ptracer`` always; ``path``, ``volpath``, ``direct`` when a shape
+    reflects or transmits in a delta or null lobe, e.g. the mirror)."""
+    import mitsuba as mi
+
+    cls = _integrator_class(integrator)
+    asked = ", ".join(keys)
+    fix = ("render with mitsweep's 'mirrorpath' (lit scenes) or 'mirrorview' (emissive "
+           "scenes, faster), which keep the camera rays attached through the mirror")
+    if cls in _DROP_ALWAYS:
+        raise NotDifferentiableError(
+            f"focalsweep: a gradient of {asked} was asked, but the {_DROP_ALWAYS[cls]!r} "
+            f"integrator does not differentiate the camera's rays; {fix}")
+    if cls in _DROP_AT_DELTA:
+        delta = [sh.id() or f"shape {k}" for k, sh in enumerate(scene.shapes())
+                 if sh.bsdf() is not None
+                 and mi.has_flag(sh.bsdf().flags(), mi.BSDFFlags.Delta)]
+        if delta:
+            raise NotDifferentiableError(
+                f"focalsweep: a gradient of {asked} was asked, but the "
+                f"{_DROP_AT_DELTA[cls]!r} integrator does not differentiate through delta "
+                f"reflections: through {delta[0]!r} its derivative would be exactly zero; "
+                f"{fix}")
+
+
+def _differentiated_render():
+    """The ``mitsuba.render`` operation whose derivative is being computed, if any.
+
+    Mitsuba's :func:`mitsuba.render` differentiates through a ``drjit.CustomOp``
+    (``mitsuba.python.util._RenderOp``) whose ``forward``/``backward`` call the
+    integrator, which calls the sensor: that frame holds the scene and the integrator.
+    Not found (a direct ``Integrator.render_forward`` call, another Mitsuba version):
+    None, and nothing is checked.
+    """
+    import sys
+
+    frame = sys._getframe(1)
+    for _ in range(64):
+        if frame is None:
+            return None
+        op = frame.f_locals.get("self") if frame.f_code.co_name in ("forward",
+                                                                    "backward") else None
+        if type(op).__name__ == "_RenderOp" and hasattr(op, "integrator"):
+            return op
+        frame = frame.f_back
+    return None
 
 
 def _floats(value, name: str) -> np.ndarray:
@@ -365,8 +439,26 @@ def _make_class():
             v = (0.5 - py) * (self.size[1] * self.m_pitch)
             return u, v
 
+        def _refuse_integrators_that_drop_the_sweep(self):
+            """Inside the derivative pass of ``mi.render`` with a sweep gradient, refuse
+            an integrator that would return zero (see the module)."""
+            if self._scalar:
+                return
+            op = _differentiated_render()
+            if op is None:
+                return
+            keys = self.differentiable_parameters()
+            values = {"sensor_distance": self.m_start, "sensor_start": self.m_start,
+                      "sensor_end": self.m_end,
+                      "positions": getattr(self, "m_positions", None)}
+            with dr.resume_grad():  # the prb family calls the sensor with AD suspended
+                asked = [k for k in keys if dr.grad_enabled(values[k])]
+            if asked:
+                refuse_integrators_that_drop_the_sweep(op.integrator, op.scene, asked)
+
         def _rays(self, time, sample1, sample2, sample3, active, differentials):
             self._refuse_gradients_of_non_differentiable()
+            self._refuse_integrators_that_drop_the_sweep()
             wavelengths, wav_weight = self.sample_wavelengths(
                 dr.zeros(mi.SurfaceInteraction3f), sample1, active)
             i = self._sensor_distance(time)
@@ -406,6 +498,7 @@ def _make_class():
         def sample_direction(self, it, sample, active=True):
             """Connect a scene point to a sampled aperture point (for light tracing)."""
             self._refuse_gradients_of_non_differentiable()
+            self._refuse_integrators_that_drop_the_sweep()
             to_world = self.world_transform()
             ref = to_world.inverse() @ it.p
             i = self._sensor_distance(it.time)
