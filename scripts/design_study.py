@@ -164,11 +164,12 @@ def _mitsweep(args: list[str]) -> str:
 
 
 def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path, *,
-                      planes: int, rays: int) -> dict:
+                      planes: int, rays: int, tables_only: bool = False) -> dict:
     """The linear profile and one designed per light level (worst-case objective, as
     ``mitsweep design-sweep`` by default), as motion-profile files under ``out``, and the
     designs' reports. A profile whose file and report exist from an earlier run with the
-    same setup file, planes and rays is read, not designed again."""
+    same setup file, planes and rays is read, not designed again (``tables_only``: must
+    be)."""
     from mitsweep.config import load_setup
     from mitsweep.deconv import paper_fig10_settings
     from mitsweep.design import design_sweep
@@ -196,6 +197,9 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
                 logging.info("%s %g lux: profile from the earlier run (%s)", name, lux, path)
                 res["designs"][lux] = (path, old["report"])
                 continue
+        if tables_only:
+            raise SystemExit(f"{rep}: no design of this setup, planes and rays (run without "
+                             f"--tables-only first)")
         noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
         d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank)
         bank = d.bank
@@ -238,7 +242,7 @@ def _same_ground_truth(a: Path, b: Path, scenes: int) -> bool:
 
 def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, seed: int,
                    family: str, spp: list[str] | None, resolution: int | None, planes: int,
-                   rays: int) -> list[dict]:
+                   rays: int, tables_only: bool = False) -> list[dict]:
     """Datasets rendered with the linear and each designed profile, deconvolved with their
     own banks and scored (``mitsweep dataset --motion`` and ``mitsweep evaluate``); one
     row per (setup, lux) case.
@@ -247,7 +251,8 @@ def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, se
     render seeds, and the same light levels in the same order (the noise draw of scene
     ``i`` at the ``j``-th level is seeded ``[seed, i, j]``), so each pair of EDOF images
     differs by the profile alone. Their ground truths must be the same images (same
-    span, so the same reference grid): checked by SHA-256."""
+    span, so the same reference grid): checked pixel for pixel. ``tables_only``: no
+    design or dataset is made; the rows from an earlier run's designs and evaluations."""
     levels = list(LUX) + sorted({lux for _, lux in cases} - set(LUX))
     rows = []
     for name in dict.fromkeys(n for n, _ in cases):
@@ -255,7 +260,7 @@ def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, se
         t0 = time.perf_counter()
         sfile = setup_file(name, out, resolution)
         prof = designed_profiles(sfile, name, luxes, out / "profiles", planes=planes,
-                                 rays=rays)
+                                 rays=rays, tables_only=tables_only)
         t_design = time.perf_counter() - t0
         common = [str(sfile), "--scenes", str(scenes), "--seed", str(seed), "--family",
                   family, "--lux", *(f"{x:g}" for x in levels)]
@@ -266,10 +271,14 @@ def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, se
                            *((f"opt_{lux:g}lux", prof["designs"][lux][0]) for lux in luxes)]:
             d = out / "datasets" / name / tag
             t1 = time.perf_counter()
-            _mitsweep(["dataset", *common, "--out", str(d), "--motion", str(mfile)])
-            evals[tag] = json.loads(_mitsweep(["evaluate", str(d), "--json", "--out",
-                                               str(d / "evaluation.json")]))
-            dirs[tag], seconds[tag] = d, time.perf_counter() - t1
+            if tables_only:
+                evals[tag] = json.loads((d / "evaluation.json").read_text(encoding="utf-8"))
+            else:
+                _mitsweep(["dataset", *common, "--out", str(d), "--motion", str(mfile)])
+                evals[tag] = json.loads(_mitsweep(["evaluate", str(d), "--json", "--out",
+                                                   str(d / "evaluation.json")]))
+            dirs[tag] = d
+            seconds[tag] = None if tables_only else time.perf_counter() - t1
         from mitsweep.config import load_setup
 
         pitch = load_setup(sfile).sensor.pixel_pitch
@@ -280,7 +289,7 @@ def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, se
                                  f"(the profiles' reference grids do not agree)")
             rows.append(case_row(name, lux, evals["linear"], evals[tag],
                                  prof["designs"][lux][1], pitch,
-                                 seconds={"design_s": t_design,
+                                 seconds={"design_s": None if tables_only else t_design,
                                           "linear_dataset_s": seconds["linear"],
                                           "optimized_dataset_s": seconds[tag]}))
             logging.info("%s %g lux: EDOF %.2f -> %.2f dB (paired %+.2f +- %.2f)", name, lux,
@@ -309,6 +318,10 @@ def case_row(name: str, lux: float, ev_lin: dict, ev_opt: dict, report: dict,
         row[which] = {"psnr": ps.tolist(), "psnr_mean": float(ps.mean()),
                       "ssim_mean": float(np.mean([x[key]["ssim"] for x in s])),
                       "sweep_psnr_mean": float(np.mean([x[raw]["psnr"] for x in s])),
+                      "noiseless_edof_psnr_mean": float(np.mean([x["edof"]["psnr"] for x in s])),
+                      "per_depth_band_psnr": np.nanmean(
+                          [np.asarray(x[key]["per_depth_band"]["psnr"], dtype=float)
+                           for x in s], axis=0).tolist(),
                       "per_radius_psnr": pr.mean(axis=0).tolist(),
                       "per_radius_psnr_scenes": pr.tolist()}
     d = np.array(row["optimized"]["psnr"]) - np.array(row["linear"]["psnr"])
@@ -321,6 +334,8 @@ def case_row(name: str, lux: float, ev_lin: dict, ev_opt: dict, report: dict,
     row["per_radius_paired_se"] = (pr_d.std(axis=0, ddof=1) / np.sqrt(len(scenes))).tolist() \
         if len(scenes) > 1 else [float("nan")] * pr_d.shape[1]
     s0 = ev_lin["scenes"][scenes[0]]
+    row["depth_band_edges_mm"] = s0[key]["per_depth_band"]["edges_mm"]
+    row["depth_band_pixels"] = s0[key]["per_depth_band"]["pixels"]
     edges = np.asarray(s0[key]["per_radius"]["edges_px"], dtype=float)
     row["radius_px_edges"] = edges.tolist()
     worst_lin = int(np.argmin(row["linear"]["per_radius_psnr"]))
@@ -343,7 +358,7 @@ def measured_table(rows: list[dict]) -> str:
     f = lambda x: "–" if x is None else f"{x:+.2f}"  # noqa: E731
     lines = ["| setup | lux | predicted worst / mean gain (dB) | EDOF PSNR lin → opt (dB) | "
              "paired Δ ± SE (dB) [min, max] | worst radial bin lin → opt (dB) | "
-             "noisy sweep lin → opt (dB) |", "|" + "---|" * 7]
+             "noisy sweep lin → opt (dB) | noiseless EDOF lin → opt (dB) |", "|" + "---|" * 8]
     for r in rows:
         p, w, dd = r["predicted"], r["worst_bin"], r["paired_db"]
         lines.append(
@@ -353,7 +368,9 @@ def measured_table(rows: list[dict]) -> str:
             f"{r['linear']['psnr_mean']:.2f} → {r['optimized']['psnr_mean']:.2f} | "
             f"{dd['mean']:+.2f} ± {dd['se']:.2f} [{dd['min']:+.2f}, {dd['max']:+.2f}] | "
             f"{w['linear']:.2f} → {w['optimized']:.2f} (bin {w['bin'] + 1}) | "
-            f"{r['linear']['sweep_psnr_mean']:.2f} → {r['optimized']['sweep_psnr_mean']:.2f} |")
+            f"{r['linear']['sweep_psnr_mean']:.2f} → {r['optimized']['sweep_psnr_mean']:.2f} | "
+            f"{r['linear']['noiseless_edof_psnr_mean']:.2f} → "
+            f"{r['optimized']['noiseless_edof_psnr_mean']:.2f} |")
     n = len(rows[0]["per_radius_paired_db"]) if rows else 0
     lines += ["", "Per radial bin (1 = centre): measured Δ opt − lin, mean over scenes "
               "(predicted Δ, mean over depths; – where no design point lies in the bin):", "",
@@ -367,6 +384,15 @@ def measured_table(rows: list[dict]) -> str:
             pred = "–" if pl is None else f"{po - pl:+.2f}"
             cells.append(f"{r['per_radius_paired_db'][k]:+.2f} ({pred})")
         lines.append(f"| {r['setup']} | {r['lux']:g} | " + " | ".join(cells) + " |")
+    if rows:
+        e = rows[0]["depth_band_edges_mm"]
+        bands = [f"{e[k]:g}–{e[k + 1]:g} mm" for k in range(len(e) - 1)]
+        lines += ["", "Per depth band: EDOF PSNR lin → opt (dB), mean over scenes:", "",
+                  "| setup | lux | " + " | ".join(bands) + " |", "|" + "---|" * (len(e) + 1)]
+        for r in rows:
+            cells = [f"{a:.2f} → {b:.2f}" for a, b in zip(r["linear"]["per_depth_band_psnr"],
+                                                         r["optimized"]["per_depth_band_psnr"])]
+            lines.append(f"| {r['setup']} | {r['lux']:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -390,6 +416,9 @@ def main(argv=None) -> int:
     p.add_argument("--resolution", type=int,
                    help="render an N x N sensor of the same size (default: the setup's)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--tables-only", action="store_true",
+                   help="with --measured or --all: design and render nothing, the tables "
+                        "from an earlier run's designs and evaluations in OUT_DIR")
     a = p.parse_args(argv)
     if a.measured:
         if a.measured[0] not in SETUPS:
@@ -413,7 +442,7 @@ def main(argv=None) -> int:
             [(n, lux) for n in SETUPS for lux in LUX]
         rows = measured_cases(out, cases, scenes=a.scenes, seed=a.seed, family=a.family,
                               spp=a.spp, resolution=a.resolution, planes=a.planes,
-                              rays=a.rays)
+                              rays=a.rays, tables_only=a.tables_only)
         text = measured_table(rows)
         (out / "measured.md").write_text(text, encoding="utf-8")
         print(text)
