@@ -351,6 +351,121 @@ def case_row(name: str, lux: float, ev_lin: dict, ev_opt: dict, report: dict,
     return row
 
 
+def _used_nsr(dataset: Path, lux: float, scenes: int) -> list[float]:
+    """The NSR each scene's EDOF image at ``lux`` was deconvolved with (its metadata)."""
+    from mitsweep.io import read_exr
+
+    return [float(read_exr(dataset / f"scene_{i:03d}" / f"edof_{lux:g}lux.exr")[1]["nsr"])
+            for i in range(scenes)]
+
+
+def deployed_prediction(setup, report: dict, noise, *, nsr_used: float,
+                        kernel_depth_mm: float = 500.0) -> dict:
+    """The design's Wiener model with the deconvolution the dataset runs, for the linear
+    and the designed τ: per field point one kernel, the IPSF at ``kernel_depth_mm`` (the
+    dataset's bank depth), applied to the image of every depth, with the NSR the dataset
+    used. The MSE of a filter ``G`` on an image blurred by ``H_l`` is
+
+    ``Σ_f w_f (|1 − G H_l|² S(f) + |G|² σ²)``, ``S = σ²/R`` (the 1/f² prior),
+    ``G = conj(H_b) / (|H_b|² + R nsr_used/nsr)``;
+
+    with ``H_b = H_l`` and the model's NSR it is the design's MSE (checked here, on the
+    plane bank traced again with the design's seeds). Returns worst and mean PSNR (dB)
+    of: ``matched`` (the design's), ``one_kernel`` (the 500-mm kernel, the model's NSR)
+    and ``deployed`` (that kernel and the used NSR)."""
+    from mitsweep.design import plane_bank, wiener_model
+    from mitsweep.optics import optimal_sweep_range
+    from mitsweep.optics.motion import MotionProfile
+    from mitsweep.optics.reference import reference_geometry
+
+    depths = np.asarray(report["depths_mm"], dtype=float)
+    if kernel_depth_mm not in depths:
+        raise ValueError(f"the design has no depth {kernel_depth_mm:g} mm")
+    edges = np.asarray(report["edges_mm"], dtype=float)
+    sweep = optimal_sweep_range(setup)
+    geom = reference_geometry(setup, sweep=sweep,
+                              motion=MotionProfile.linear(edges[0], edges[-1]))
+    pb = report["plane_bank"]
+    bank = plane_bank(setup, report["points_uv_mm"], depths, edges,
+                      reference_sensor_distance=geom.sensor_distance, rays=pb["rays"],
+                      kernel_size=pb["kernel_size"], seed=pb["seed"],
+                      sub_planes=pb["sub_planes"])
+    n_px = float(np.sqrt(np.prod(setup.sensor.resolution)))
+    model = wiener_model(bank.kernels, noise, n_fft=report["n_fft"], n_px=n_px)
+    D, P = len(depths), len(report["points_uv_mm"])
+    b = int(np.flatnonzero(depths == kernel_depth_mm)[0])
+    sigma2, w, R = model.noise_var, model.weight, model.reg
+    S = sigma2 / R
+    scale = nsr_used / float(noise.nsr(0.5))
+    taus = {"linear": np.full(len(edges) - 1, 1.0 / (len(edges) - 1)),
+            "optimized": np.asarray(report["tau"], dtype=float)}
+    out: dict = {"nsr_model": float(noise.nsr(0.5)), "nsr_used": nsr_used,
+                 "kernel_depth_mm": kernel_depth_mm}
+    db = lambda m: float(10 * np.log10(1 / m))  # noqa: E731
+    for which, tau in taus.items():
+        kr, ki = model._transfer(tau)
+        H = (kr + 1j * ki).reshape(D, P, -1)
+        mse = {}
+        for kind, hb, r in (("matched", H, R), ("one_kernel", H[b][None], R),
+                            ("deployed", H[b][None], R * scale)):
+            G = np.conj(hb) / (np.abs(hb) ** 2 + r)
+            mse[kind] = ((np.abs(1 - G * H) ** 2 * S + np.abs(G) ** 2 * sigma2) * w).sum(-1)
+        ref = np.asarray(report["per_point"][f"{which}_mse"])
+        if not np.allclose(mse["matched"], ref, rtol=1e-6, atol=0):
+            raise SystemExit(f"{setup.name}: the plane bank traced again does not give the "
+                             f"design's MSE (max rel. diff "
+                             f"{np.max(np.abs(mse['matched'] / ref - 1)):.2g})")
+        out[which] = {kind: {"worst_db": db(m.max()), "mean_db": db(m.mean()),
+                             "per_depth_mean_db": [db(x) for x in m.mean(axis=1)]}
+                      for kind, m in mse.items()}
+    out["depths_mm"] = depths.tolist()
+    return out
+
+
+def diagnose(out: Path, rows: list[dict], *, resolution: int | None) -> None:
+    """Add to each row the design's model with the dataset's deconvolution
+    (:func:`deployed_prediction`)."""
+    from mitsweep.config import load_setup
+    from mitsweep.deconv import paper_fig10_settings
+    from mitsweep.pipeline import NOISE_PIXEL_MM
+
+    for r in rows:
+        name, lux = r["setup"], r["lux"]
+        setup = load_setup(setup_file(name, out, resolution))
+        report = json.loads((out / "profiles" / f"{name}_{lux:g}lux_design.json")
+                            .read_text(encoding="utf-8"))["report"]
+        noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
+        used = {w: _used_nsr(out / "datasets" / name / t, lux, r["scenes"])
+                for w, t in (("linear", "linear"), ("optimized", f"opt_{lux:g}lux"))}
+        nsr = float(np.mean(used["linear"] + used["optimized"]))
+        r["diagnosis"] = deployed_prediction(setup, report, noise, nsr_used=nsr)
+        r["diagnosis"]["nsr_used_per_scene"] = used
+        d = r["diagnosis"]
+        logging.info("%s %g lux: predicted mean gain matched %+.2f, one kernel %+.2f, "
+                     "deployed %+.2f dB", name, lux,
+                     *(d["optimized"][k]["mean_db"] - d["linear"][k]["mean_db"]
+                       for k in ("matched", "one_kernel", "deployed")))
+
+
+def diagnosis_table(rows: list[dict]) -> str:
+    """Markdown: predicted gains (opt − lin, dB) of the design's model, with one kernel
+    per point (the dataset's 500-mm bank), and with the NSR the dataset used; measured."""
+    lines = ["| setup | lux | NSR model / used | worst gain: matched, one kernel, deployed "
+             "(dB) | mean gain: matched, one kernel, deployed (dB) | measured paired Δ (dB) |",
+             "|" + "---|" * 6]
+    for r in rows:
+        d = r.get("diagnosis")
+        if d is None:
+            continue
+        g = {k: [d["optimized"][m][k] - d["linear"][m][k]
+                 for m in ("matched", "one_kernel", "deployed")] for k in ("worst_db", "mean_db")}
+        lines.append(f"| {r['setup']} | {r['lux']:g} | {d['nsr_model']:.3g} / {d['nsr_used']:.3g} | "
+                     + ", ".join(f"{x:+.2f}" for x in g["worst_db"]) + " | "
+                     + ", ".join(f"{x:+.2f}" for x in g["mean_db"]) + " | "
+                     f"{r['paired_db']['mean']:+.2f} ± {r['paired_db']['se']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
 def measured_table(rows: list[dict]) -> str:
     """Markdown: per case the predicted gains, the measured EDOF PSNR of both profiles
     (mean over scenes), the paired difference and the worst radial bin; then the
@@ -416,6 +531,10 @@ def main(argv=None) -> int:
     p.add_argument("--resolution", type=int,
                    help="render an N x N sensor of the same size (default: the setup's)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--diagnose", action="store_true",
+                   help="with --measured or --all: also the design's model with the "
+                        "dataset's deconvolution (one 500-mm kernel per point, the NSR it "
+                        "used); traces each design's plane bank again")
     p.add_argument("--tables-only", action="store_true",
                    help="with --measured or --all: design and render nothing, the tables "
                         "from an earlier run's designs and evaluations in OUT_DIR")
@@ -444,6 +563,13 @@ def main(argv=None) -> int:
                               spp=a.spp, resolution=a.resolution, planes=a.planes,
                               rays=a.rays, tables_only=a.tables_only)
         text = measured_table(rows)
+        if a.diagnose:
+            diagnose(out, rows, resolution=a.resolution)
+            text += ("\nThe design's model with the dataset's deconvolution (predicted gain "
+                     "opt − lin):\n\n" + diagnosis_table(rows))
+            js = json.loads((out / "measured.json").read_text(encoding="utf-8"))
+            js["cases"] = rows
+            (out / "measured.json").write_text(json.dumps(js, indent=1), encoding="utf-8")
         (out / "measured.md").write_text(text, encoding="utf-8")
         print(text)
         return 0
