@@ -174,7 +174,7 @@ def test_procedural_scene_loads_in_mitsuba_with_every_object():
     cam = camera_dict(DEFAULT_SETUP, sensor_distance=60.0, spp=1)
     scene_dict, info = build_scene(DEFAULT_SETUP, cam, surroundings=False, extra=objects,
                                    max_depth=params["max_depth"])
-    assert info["integrator"] == "path" and info["max_depth"] == 4
+    assert info["integrator"] == "mirrorpath" and info["max_depth"] == 4
     scene = mi.load_dict(scene_dict, optimize=False)  # cubes sharing a BSDF stay apart
     shapes = {s.id(): s for s in scene.shapes()}
     assert len(shapes) == len(layout["objects"]) + len(layout["lights"]) + 1  # + mirror
@@ -212,5 +212,5 @@ def test_procedural_scene_renders_through_the_mirror():
     seen = depth[mask & (depth > 0)]
     assert seen.size > 0.2 * mask.sum()
     assert seen.min() < 1000.0 and seen.max() > 3000.0
-    assert result.metadata["scene"]["integrator"] == "path"
+    assert result.metadata["scene"]["integrator"] == "mirrorpath"
     assert result.metadata["scene"]["max_depth"] == params["max_depth"]

@@ -11,6 +11,8 @@ import mitsuba as mi  # noqa: E402
 from mitsweep.config import load_setup  # noqa: E402
 from mitsweep.render.api import (SAMPLERS, _multijitter_count, camera_dict,  # noqa: E402
                                  mode_camera, pass_counts)
+from mitsweep.render.ad_integrator import INTEGRATOR_NAME as LIT_NAME  # noqa: E402
+from mitsweep.render.ad_integrator import MAX_DEPTH as LIT_MAX_DEPTH  # noqa: E402
 from mitsweep.render.integrator import INTEGRATOR_NAME, integrator_dict  # noqa: E402
 from mitsweep.render.scene import build_scene  # noqa: E402
 from mitsweep.render.sensor import register  # noqa: E402
@@ -50,18 +52,24 @@ def test_mirrorview_gives_the_path_integrators_image_bit_for_bit(name, mode):
 
 
 def test_build_scene_uses_mirrorview_only_where_it_is_exact():
+    """mirrorview for emissive scenes; lit ones (in the *_ad_* variant of the tests)
+    mirrorpath, differentiable through the mirror, up to its depth limit; path beyond."""
     register()
     emissive, lit = small("sphere"), small("sphere", lighting="lit")
     cam = camera_dict(emissive, spp=1, sensor_distance=58.3)
+    assert "_ad_" in mi.variant()
     assert build_scene(emissive, cam)[1]["integrator"] == INTEGRATOR_NAME
-    assert build_scene(lit, cam)[1]["integrator"] == "path"
+    assert build_scene(lit, cam)[1]["integrator"] == LIT_NAME
+    assert build_scene(lit, cam, max_depth=LIT_MAX_DEPTH + 1)[1]["integrator"] == "path"
     assert build_scene(emissive, cam, max_depth=-1)[1]["integrator"] == "path"
     grey = {"type": "sphere", "radius": 1.0, "bsdf": {"type": "diffuse", "reflectance": 0.5}}
-    assert build_scene(emissive, cam, extra={"ball": grey})[1]["integrator"] == "path"
+    assert build_scene(emissive, cam, extra={"ball": grey})[1]["integrator"] == LIT_NAME
     black = dict(grey, bsdf={"type": "diffuse", "reflectance": 0.0},
                  emitter={"type": "area", "radiance": 1.0})
     assert build_scene(emissive, cam, extra={"src": black})[1]["integrator"] == INTEGRATOR_NAME
     assert integrator_dict("emissive", 9)["type"] == "path"
+    assert integrator_dict("lit", 3)["type"] == "path"       # not asked to be differentiable
+    assert integrator_dict("lit", 3, differentiable=True)["type"] == LIT_NAME
 
 
 @pytest.mark.parametrize("sampler", SAMPLERS)

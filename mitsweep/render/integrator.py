@@ -23,7 +23,9 @@ weight of a delta-sampled hit is 1), but evaluates emitter sampling, shadow rays
 MIS for every lane of its recorded loop. With the same sampler and seed the images are
 bit for bit identical (``tests/test_render_integrator.py``) and about 4× cheaper
 (``mitsweep bench render``). :func:`integrator_dict` picks it only where it is exact:
-emissive lighting and a finite depth.
+emissive lighting and a finite depth. Lit scenes get ``mirrorpath``
+(:mod:`mitsweep.render.ad_integrator`: ``path``'s estimator, differentiable through the
+mirror) where a gradient can be asked (``differentiable``), else ``path``.
 """
 
 from __future__ import annotations
@@ -41,15 +43,24 @@ MAX_DEPTH = 8
 _registered_for: set[str] = set()
 
 
-def integrator_dict(lighting: str, max_depth: int) -> dict:
-    """The integrator of a scene: ``mirrorview`` where it is exact, else ``path``.
+def integrator_dict(lighting: str, max_depth: int, *, differentiable: bool = False) -> dict:
+    """The integrator of a scene: ``mirrorview`` where it is exact, else ``mirrorpath``
+    (``differentiable``) or ``path``.
 
     ``mirrorview`` needs ``lighting == "emissive"`` (every non-mirror BSDF black) and
-    ``1 <= max_depth <= MAX_DEPTH``; ``path`` (``hide_emitters`` off) takes the rest,
-    e.g. ``lit`` surroundings or an unlimited depth (-1).
+    ``1 <= max_depth <= MAX_DEPTH``. Otherwise, with ``differentiable`` (an ``*_ad_*``
+    variant) and ``1 <= max_depth <= ad_integrator.MAX_DEPTH``: ``mirrorpath``, whose
+    image is ``path``'s and whose derivative passes through the mirror (``path``'s is
+    zero there). ``path`` (``hide_emitters`` off) takes the rest, e.g. an unlimited
+    depth (-1): a sweep gradient asked of it through a mirror raises
+    :class:`~mitsweep.render.sensor.NotDifferentiableError`.
     """
+    from .ad_integrator import INTEGRATOR_NAME as LIT_NAME, MAX_DEPTH as LIT_MAX_DEPTH
+
     if lighting == "emissive" and 1 <= max_depth <= MAX_DEPTH:
         return {"type": INTEGRATOR_NAME, "max_depth": int(max_depth)}
+    if differentiable and 1 <= max_depth <= LIT_MAX_DEPTH:
+        return {"type": LIT_NAME, "max_depth": int(max_depth)}
     return {"type": "path", "max_depth": int(max_depth), "hide_emitters": False}
 
 

@@ -14,8 +14,10 @@ so a camera ray needs one bounce off the mirror (integrator ``max_depth = 2``) a
 only noise is the lens and pixel sampling; ``lit`` uses diffuse textured surfaces under
 a ceiling light (``max_depth = 3``: mirror, diffuse surface, light). Emissive scenes are
 rendered by the ``mirrorview`` integrator (:mod:`mitsweep.render.integrator`: the
-``path`` integrator's image, bit for bit, at a quarter of its cost), lit ones by
-``path``.
+``path`` integrator's image, bit for bit, at a quarter of its cost), lit ones (and user
+scenes) in ``*_ad_*`` variants by ``mirrorpath`` (:mod:`mitsweep.render.ad_integrator`:
+``path``'s image with the same seed, and a sweep derivative through the mirror), else
+by ``path``.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import math
 import numpy as np
 
 from ..optics import placement_of
+from . import ad_integrator
 from .integrator import INTEGRATOR_NAME, integrator_dict, register_integrator
 from .mirror import mirror_shape
 from .textures import TEXTURE_NAMES, texture
@@ -202,8 +205,9 @@ def build_scene(setup, sensor: dict, *, surroundings: bool = True, extra: dict |
         Integrator depth (default :func:`integrator_depth`).
 
     The integrator is ``mirrorview`` where it is exact (emissive lighting, a finite
-    depth, every extra object black; not in scalar variants), else ``path``; the
-    description's ``integrator`` says which.
+    depth, every extra object black; not in scalar variants), else ``mirrorpath`` in
+    ``*_ad_*`` variants at a depth of 1 to 8 (so a sweep gradient of the scene passes
+    through the mirror), else ``path``; the description's ``integrator`` says which.
     """
     sc = setup.scene
     shape, info = mirror_shape(setup, force_mesh=mirror_mesh, sag_tol=sag_tol,
@@ -229,13 +233,16 @@ def _is_black(obj) -> bool:
 
 
 def _integrator(lighting: str, depth: int) -> dict:
-    """``mirrorview`` where it is exact and fast (vectorised variants), else ``path``."""
+    """``mirrorview`` where it is exact and fast (vectorised variants), ``mirrorpath``
+    where a gradient can be asked (``*_ad_*`` variants), else ``path``."""
     import mitsuba as mi
 
     if mi.variant() is None or mi.variant().startswith("scalar"):
         # Python integrators run per sample in scalar variants: keep the C++ one there.
         return integrator_dict("lit", depth)
-    d = integrator_dict(lighting, depth)
+    d = integrator_dict(lighting, depth, differentiable="_ad_" in mi.variant())
     if d["type"] == INTEGRATOR_NAME:
         register_integrator()
+    elif d["type"] == ad_integrator.INTEGRATOR_NAME:
+        ad_integrator.register_integrator()
     return d
