@@ -209,8 +209,17 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
     return {}
 
 
+def _sensor_noise(d: dict):
+    """The :class:`~mitsweep.deconv.SensorNoise` of its ``as_dict()`` (the pitch under
+    its JSON key ``pixel_size_mm``)."""
+    from ..deconv import SensorNoise
+
+    return SensorNoise(**{("pixel_pitch" if k == "pixel_size_mm" else k): v
+                          for k, v in d.items()})
+
+
 def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
-            nsr: float | None) -> dict:
+            nsr: float | None, noise: dict | None = None) -> dict:
     """Deconvolve ``image`` with ``method``; Wiener with NSR = max(the noise model's,
     the image's own estimate).
 
@@ -222,19 +231,39 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     prior: on the demo's sphere that pair came within 0.1 dB of the best hand-tuned
     constant NSR at 50 and 2 lux and beat it at 0.5 and 0.1 lux (README). Other methods
     get the same NSR, their noise level.
+
+    ``noise``: the sensor noise model the image carries (``SensorNoise.as_dict()``, as
+    :func:`add_noise` records it), for the prior-based methods (RL, TV,
+    hyper-Laplacian), whose σ is then at least the model's (each takes the largest of
+    it and its own estimates). The model is in relative exposure, so they restore the
+    image divided by its recorded white level and the result is scaled back. It must be
+    the noise the image's metadata records. Wiener's NSR is ``nsr`` (from the same
+    model), so it takes none.
     """
     from ..deconv import deconvolve, estimate_nsr
     from ..io.bank import load_bank
 
     img, _, meta = read_rgb(image)
+    if noise is not None and method == "wiener":
+        raise ValueError("restore: method 'wiener' takes its noise as nsr, not noise=")
+    if noise is not None and (meta.get("noise") != noise or "white_level" not in meta):
+        raise DatasetError(f"{Path(image).name}: its metadata does not record the noise "
+                           f"model this restoration was planned with ({noise}); recorded: "
+                           f"{meta.get('noise')}, white level {meta.get('white_level')}")
     ipsf = load_bank(bank)
     estimated = estimate_nsr(img)
     used = max(estimated, nsr) if nsr is not None else estimated
     kw: dict[str, Any] = {"nsr": used}
     if method == "wiener":
         kw["prior"] = DECONV_PRIOR
+    x = img.astype(np.float32)
+    if noise is not None:
+        level = np.float32(meta["white_level"])
+        kw["noise"], x = _sensor_noise(noise), x / level
     t0 = time.perf_counter()
-    restored = deconvolve(img.astype(np.float32), ipsf, method=method, **kw)
+    restored = deconvolve(x, ipsf, method=method, **kw)
+    if noise is not None:
+        restored = restored * level
     seconds = time.perf_counter() - t0
     meta = dict(meta, deconvolved_from=Path(image).name, bank=Path(bank).name,
                 method=method, nsr=used, nsr_model=nsr, nsr_estimated=estimated)
@@ -307,8 +336,12 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
                     {"ground_truth": f"{d}/pinhole.exr", "image": f"{d}/{mode}.exr"})
             nsr = settings[j]["sweep"].nsr(0.5)
             for m in opts.methods:
-                add(f"{edof_name(m, f'_{lux:g}lux')}.exr", restore,
-                    {"method": m, "nsr": nsr},
+                # the prior methods get the noise model itself (Wiener: its NSR); in
+                # their parameters, so a dataset restored before they had it is redone
+                params = {"method": m, "nsr": nsr}
+                if m != "wiener":
+                    params["noise"] = settings[j]["sweep"].as_dict()
+                add(f"{edof_name(m, f'_{lux:g}lux')}.exr", restore, params,
                     {"image": f"{d}/sweep_{lux:g}lux.exr", "bank": BANK})
     return tasks
 

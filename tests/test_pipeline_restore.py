@@ -1,0 +1,100 @@
+"""The dataset's restoration task: the prior-based methods get the sensor noise model the
+dataset applied to the image (Wiener gets it as its NSR), in the model's units."""
+
+import numpy as np
+import pytest
+
+from mitsweep import deconv
+from mitsweep.deconv import SensorNoise, paper_fig10_settings
+from mitsweep.io import bank as bank_io
+from mitsweep.io import read_exr, write_exr
+from mitsweep.pipeline import DatasetError, DatasetOptions
+from mitsweep.pipeline import tasks
+from test_pipeline_dataset import TINY
+
+LUX = 2.0
+WHITE = 0.37          # renders' units: far from 1, so that a lost white level shows
+
+
+@pytest.fixture
+def noisy_sweep(tmp_path):
+    """A noisy sweep made by the dataset's own add_noise task from a smooth synthetic
+    render, and the noise model the plan gave it: (path, noise model)."""
+    y, x = np.mgrid[0:32, 0:32] / 32.0
+    render = (WHITE * (0.2 + 0.6 * np.stack([x, y, x * y], axis=-1))).astype(np.float32)
+    write_exr(tmp_path / "pinhole.exr", render,
+              channels={"mask.Y": np.ones((32, 32), np.float32)})
+    write_exr(tmp_path / "sweep.exr", render)
+    opts = DatasetOptions(scenes=1, light_levels_lux=(LUX,), methods=("wiener", "tv"))
+    task = next(t for t in tasks.plan(opts) if t.name == f"scene_000/sweep_{LUX:g}lux.exr")
+    tasks.add_noise(TINY, tmp_path / "noisy.exr", ground_truth=tmp_path / "pinhole.exr",
+                    image=tmp_path / "sweep.exr", **task.params)
+    return tmp_path / "noisy.exr", paper_fig10_settings(tasks.NOISE_PIXEL_MM, LUX)["sweep"]
+
+
+@pytest.fixture
+def calls(monkeypatch):
+    """deconvolve replaced by a spy that returns its input: [(image, kwargs)]."""
+    seen = []
+
+    def spy(image, bank, **kw):
+        seen.append((np.array(image), kw))
+        return np.array(image)
+
+    monkeypatch.setattr(deconv, "deconvolve", spy)
+    monkeypatch.setattr(bank_io, "load_bank", lambda path: None)
+    return seen
+
+
+def restore_params(method: str) -> dict:
+    opts = DatasetOptions(scenes=1, light_levels_lux=(LUX,), methods=(method,))
+    name = f"scene_000/{tasks.edof_name(method, f'_{LUX:g}lux')}.exr"
+    return next(t for t in tasks.plan(opts) if t.name == name).params
+
+
+@pytest.mark.parametrize("method", ["rl", "tv", "hyperlaplacian"])
+def test_prior_methods_get_the_noise_the_dataset_applied(noisy_sweep, calls, tmp_path,
+                                                         method):
+    path, model = noisy_sweep
+    level = read_exr(path)[1]["white_level"]
+    assert level != pytest.approx(1.0, rel=0.1)        # the units matter here
+    tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
+                  **restore_params(method))
+    (seen, kw), = calls
+    assert kw["noise"] == model
+    assert isinstance(kw["noise"], SensorNoise)
+    # the model is in relative exposure: the method sees the image divided by the level
+    noisy = tasks.read_rgb(path)[0]
+    np.testing.assert_allclose(seen, noisy / level, rtol=1e-6)   # float32 division
+    # and its result is scaled back to the renders' units (the spy returns its input)
+    np.testing.assert_allclose(tasks.read_rgb(tmp_path / "edof.exr")[0], noisy, rtol=1e-6)
+    assert kw["nsr"] >= model.nsr(0.5)
+
+
+def test_wiener_gets_the_noise_as_its_nsr_unchanged(noisy_sweep, calls, tmp_path):
+    path, model = noisy_sweep
+    params = restore_params("wiener")
+    assert params == {"method": "wiener", "nsr": model.nsr(0.5)}  # older manifests' params
+    tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
+                  **params)
+    (seen, kw), = calls
+    assert "noise" not in kw and kw["prior"] == tasks.DECONV_PRIOR
+    assert kw["nsr"] >= model.nsr(0.5)
+    np.testing.assert_array_equal(seen, tasks.read_rgb(path)[0])  # in the renders' units
+
+
+def test_noiseless_sweeps_are_restored_without_a_noise_model():
+    opts = DatasetOptions(scenes=1, light_levels_lux=(LUX,), methods=("tv",))
+    task = next(t for t in tasks.plan(opts) if t.name == "scene_000/edof_tv.exr")
+    assert task.params == {"method": "tv", "nsr": None}
+
+
+def test_a_noise_model_the_image_does_not_carry_is_refused(noisy_sweep, calls, tmp_path):
+    path, model = noisy_sweep
+    params = restore_params("tv")
+    params["noise"] = dict(params["noise"], iso=1600.0)
+    with pytest.raises(DatasetError, match="noisy.exr: its metadata does not record the "
+                                           "noise model"):
+        tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
+                      **params)
+    assert calls == [] and not (tmp_path / "edof.exr").exists()
