@@ -10,7 +10,7 @@ from mitsweep.optics.reference import reference_geometry
 from mitsweep.tracer import integrated_psf
 from mitsweep.tracer.bank import field_radius
 from mitsweep.tracer.ipsf import fit_sampling_box, sweep_cdf
-from mitsweep.tracer.kernel import deposit_segments, trace_arrays
+from mitsweep.tracer.kernel import deposit_segments, fold_buffer, trace_arrays
 from mitsweep.tracer.source import source_from_image
 
 SPHERE = load_setup("scenes/sphere.toml")
@@ -45,7 +45,7 @@ def _exact(setup, src, geom, params, n, motion, K):
     buf = deposit_segments(geom, params, n, offset=0, kernel_size=K,
                            pitch=setup.sensor.pixel_pitch, center_uv=src.image_uv,
                            span=motion.span, cdf_table=sweep_cdf(motion))
-    return np.asarray(buf.numpy(), dtype=np.float64)
+    return fold_buffer(buf, 1, K)[0]
 
 
 MOTIONS = {

@@ -36,8 +36,8 @@ from ..optics.motion import MotionProfile
 from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..optics.reference import reference_geometry
 from ..resources import check_allocation
-from .kernel import (SourceBatch, TraceParams, deposit, deposit_batch, deposit_segments,
-                     trace_arrays, trace_arrays_batch)
+from .kernel import (SourceBatch, TraceParams, deposit, deposit_batch, deposit_copies,
+                     deposit_segments, fold_buffer, trace_arrays, trace_arrays_batch)
 from .source import PointSource, source_from_image
 
 __all__ = ["integrated_psf", "integrated_psfs", "psf", "render_source", "render_sources",
@@ -397,7 +397,7 @@ def _deposit_source(geom, params, center_uv, rays, K, pitch, *, exact, times, li
         dr.eval(buffer)
         done += n
     dr.sync_thread()
-    return np.asarray(buffer.numpy(), dtype=np.float64)
+    return fold_buffer(buffer, 1, K)[0]
 
 
 def render_sources(setup, sources, *, seeds, times=None, motion: MotionProfile | None = None,
@@ -439,8 +439,9 @@ def render_sources(setup, sources, *, seeds, times=None, motion: MotionProfile |
     if not sources:
         return []
     K, rays = _check_sizes(kernel_size, rays, len(sources))
-    # the stacked float64 buffer and its NumPy copy
-    check_allocation(f"deposit buffer of {len(sources)} IPSFs", len(sources) * (K * K + 2) * 16)
+    # the stacked float64 buffer (its copies, kernel.deposit_copies) and NumPy copies
+    check_allocation(f"deposit buffer of {len(sources)} IPSFs",
+                     len(sources) * (K * K + 2) * 8 * (2 * deposit_copies() + 1))
     t_start = time.perf_counter()
     times, linear, table, cdf = _sweep_arguments(setup, times=times, motion=motion,
                                                  exact=exact, time_samples=time_samples)
@@ -506,7 +507,7 @@ def _deposit_batch(batch, rays, K, pitch, *, exact, times, linear, table, cdf, m
                 progress()
             reported = batch.size * done // rays
     dr.sync_thread()
-    return np.asarray(buffer.numpy(), dtype=np.float64).reshape(batch.size, K * K + 2)
+    return fold_buffer(buffer, batch.size, K)
 
 
 def _kernel_and_info(buf, K, rays, source, box_info, *, seed, double, seconds, pitch):

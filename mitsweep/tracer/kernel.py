@@ -44,6 +44,7 @@ image coordinates (docs/design.md) the hit is ``h(i) = A + B i`` with ``A = −L
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 from dataclasses import dataclass
@@ -53,7 +54,8 @@ import numpy as np
 from ..backend import drjit_module
 
 __all__ = ["Geometry", "TraceParams", "SourceBatch", "trace_arrays", "trace_arrays_batch",
-           "deposit", "deposit_segments", "deposit_batch", "TRACE_REVISION"]
+           "deposit", "deposit_segments", "deposit_batch", "deposit_copies",
+           "deposit_strategy_scope", "fold_buffer", "TRACE_REVISION"]
 
 #: Bumped whenever the rays a seed produces or the way they are deposited change, so that
 #: kernels cached under an unchanged package version are not served stale (2: R2 lattice
@@ -69,10 +71,19 @@ TRACE_REVISION = 3
 # sphere's bank: L1 6e-3 at 2^16 rays with R3's first two generators, 3.5e-4 with R2).
 _PHI3 = 1.2207440846057596
 _PHI2 = 1.3247179572447460
-# Reduction mode of the deposits. Plain atomics (Direct) measured 1.3-1.9x faster than
-# per-thread buffer copies (Expand) and packet-local pre-reduction (Local) on the 2-core
-# LLVM machine, for compact (centre) and spread (periphery) IPSFs alike.
+# Reduction mode of the deposits: plain atomics (Direct) on LLVM, into per-block copies of
+# the buffer (deposit_copies). One shared buffer made the cores fight over its cache lines:
+# on the 2-core LLVM machine, idle, the periphery's deposit then ran at 26-29 M rays per
+# CPU second against ~105 M without contention. Dr.Jit's own per-thread copies (Expand)
+# avoid that too, but resolve each packet's conflicts with a 16-lane reduction per
+# active lane: 78 M rays per CPU second, against ~105 M for the atomics into copies.
 _MODE = None
+#: drjit-core's LLVM work unit (``jit_llvm_block_size``): the lanes a worker thread runs
+#: together. Lanes of one block write one copy of a deposit buffer.
+_LLVM_BLOCK_LOG2 = 14
+#: Upper bound of :func:`deposit_copies` (memory: copies x the buffer).
+_MAX_COPIES = 64
+_copies_setting = None
 
 _R3 = tuple(int(round((1.0 / _PHI3 ** (j + 1)) % 1.0 * 2 ** 32)) & 0xFFFFFFFF for j in range(3))
 _R2 = tuple(int(round((1.0 / _PHI2 ** (j + 1)) % 1.0 * 2 ** 32)) & 0xFFFFFFFF for j in range(2))
@@ -266,7 +277,8 @@ class _Lanes:
         self.batch = batch
         if batch is None:
             self.n = int(n)
-            self.index = dr.arange(UInt32, self.n) + dr.opaque(UInt32, offset & 0xFFFFFFFF)
+            self.lane = dr.arange(UInt32, self.n)
+            self.index = self.lane + dr.opaque(UInt32, offset & 0xFFFFFFFF)
             self.source = None
             self._columns = columns
             self.shifts = [dr.opaque(UInt32, int(x)) for x in _lattice_shifts(seed, offset)]
@@ -276,7 +288,7 @@ class _Lanes:
             if offset + (1 << log2_count) > 2 ** 32:
                 raise ValueError("SourceBatch: at most 2^32 samples per source")
             self.n = batch.size << log2_count
-            lane = dr.arange(UInt32, self.n)
+            lane = self.lane = dr.arange(UInt32, self.n)
             self.source = lane >> dr.opaque(UInt32, log2_count)
             self.index = (lane & dr.opaque(UInt32, (1 << log2_count) - 1)) \
                 + dr.opaque(UInt32, offset)
@@ -309,11 +321,24 @@ class _Lanes:
             self._cache[name] = v
         return v
 
-    def cell_base(self, cells: int):
-        """Index of each lane's first buffer cell: ``source · cells`` (0 for one source)."""
-        if self.source is None:
-            return None
-        return self.source * cells
+    def cell_base(self, cells: int, copies: int = 1):
+        """Index of each lane's first buffer cell, ``copy · S · cells + source · cells``
+        (None where it is 0 for every lane: one source, one copy).
+
+        The buffer holds ``copies`` (a power of two) copies of the ``S`` sources' cells;
+        a lane writes copy ``(lane >> 14) mod copies``, so the lanes of one work unit
+        (a thread's block) share a copy and concurrent blocks write different ones.
+        """
+        import drjit as dr
+
+        sources = 1 if self.batch is None else self.batch.size
+        base = None if self.source is None else self.source * cells
+        if copies > 1:
+            UInt32 = type(self.lane)
+            copy = (self.lane >> _LLVM_BLOCK_LOG2) & dr.opaque(UInt32, copies - 1)
+            offset = copy * (sources * cells)
+            base = offset if base is None else base + offset
+        return base
 
 
 def _single_lanes(geom, params, n, offset, double, center_uv=None) -> _Lanes:
@@ -338,6 +363,64 @@ def _deposit_types(double: bool):
     if _MODE is None:
         _MODE = dr.ReduceMode.Direct if m.__name__.endswith("llvm") else dr.ReduceMode.Auto
     return m, Float, m.UInt32, m.Int32
+
+
+def deposit_copies() -> int:
+    """Copies of a new deposit buffer that the lanes spread their atomic adds over.
+
+    1 off the LLVM backend (the GPU's atomics are resolved in its caches); on LLVM the
+    power of two at least twice Dr.Jit's worker threads (at most 64), so that the blocks
+    the threads run at the same time seldom write the same copy. A buffer keeps its
+    copies across launches; :func:`fold_buffer` sums them.
+    :func:`deposit_strategy_scope` overrides the count (the benchmark's side-by-side).
+    """
+    import drjit as dr
+
+    if _copies_setting is not None:
+        return _copies_setting
+    if not drjit_module().__name__.endswith("llvm"):
+        return 1
+    threads = max(int(dr.thread_count()), 1)
+    return min(1 << (2 * threads - 1).bit_length(), _MAX_COPIES) if threads > 1 else 1
+
+
+@contextlib.contextmanager
+def deposit_strategy_scope(*, copies: int | None = None, mode=None):
+    """Deposit with ``copies`` buffer copies and scatter reduction ``mode`` (a
+    ``drjit.ReduceMode``) inside the block, then restore the defaults; for side-by-side
+    timing. The results agree up to the float64 summation order."""
+    global _copies_setting, _MODE
+    if copies is not None and (copies < 1 or copies & (copies - 1) or copies > _MAX_COPIES):
+        raise ValueError(f"copies: must be a power of two from 1 to {_MAX_COPIES}, "
+                         f"got {copies!r}")
+    _deposit_types(False)  # the default mode, to restore
+    old = _copies_setting, _MODE
+    _copies_setting = copies if copies is not None else _copies_setting
+    _MODE = mode if mode is not None else _MODE
+    try:
+        yield
+    finally:
+        _copies_setting, _MODE = old
+
+
+def fold_buffer(buffer, sources: int, kernel_size: int) -> np.ndarray:
+    """A deposit buffer as NumPy: the ``(sources, K·K + 2)`` float64 sum of its copies."""
+    cells = int(kernel_size) ** 2 + 2
+    arr = np.asarray(buffer.numpy(), dtype=np.float64)
+    return arr.reshape(-1, int(sources), cells).sum(axis=0)
+
+
+def _new_buffer(buffer, Acc, sources: int, cells: int):
+    """``buffer`` (or a zero one of :func:`deposit_copies` copies) and its copy count."""
+    import drjit as dr
+
+    if buffer is None:
+        buffer = dr.zeros(Acc, deposit_copies() * sources * cells)
+    copies, rest = divmod(dr.width(buffer), sources * cells)
+    if rest or copies < 1 or copies & (copies - 1):
+        raise ValueError(f"deposit buffer: {dr.width(buffer)} cells is not a power-of-two "
+                         f"number of copies of {sources} x {cells}")
+    return buffer, copies
 
 
 def _trace(geom: Geometry, lanes: _Lanes, double: bool, time_dim: bool = False):
@@ -555,6 +638,9 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
     Cell ``K·K`` accumulates the landed weight that falls outside the window, cell
     ``K·K+1`` the weight of rays that reach the aperture only without the rim; so the
     landed weight is the pixel sum plus cell K·K, the rim-free one that plus K·K+1.
+
+    The buffer holds :func:`deposit_copies` copies of those cells (a given ``buffer``
+    keeps its own count); ``fold_buffer(buffer, 1, K)`` sums them.
     """
     lanes = _single_lanes(geom, params, n, offset, double, center_uv)
     return _deposit_samples(geom, lanes, kernel_size=kernel_size, pitch=pitch, times=times,
@@ -571,9 +657,8 @@ def _deposit_samples(geom, lanes, *, kernel_size, pitch, times, sensor_table, li
     KK = K * K
     Acc = m.Float64  # float32 sums of millions of rays drift by ~1 %: accumulate in float64
     sources = 1 if lanes.batch is None else lanes.batch.size
-    if buffer is None:
-        buffer = dr.zeros(Acc, sources * (KK + 2))
-    base = lanes.cell_base(KK + 2)
+    buffer, copies = _new_buffer(buffer, Acc, sources, KK + 2)
+    base = lanes.cell_base(KK + 2, copies)
     out = _trace(geom, lanes, double, time_dim=times is None)
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731
     landed, weight = out["landed"], out["weight"]
@@ -661,9 +746,8 @@ def _deposit_sweeps(geom, lanes, *, kernel_size, pitch, span, cdf_table, buffer,
     KK = K * K
     Acc = m.Float64
     sources = 1 if lanes.batch is None else lanes.batch.size
-    if buffer is None:
-        buffer = dr.zeros(Acc, sources * (KK + 2))
-    base = lanes.cell_base(KK + 2)
+    buffer, copies = _new_buffer(buffer, Acc, sources, KK + 2)
+    base = lanes.cell_base(KK + 2, copies)
     out = _trace(geom, lanes, double)
     op = lambda x: dr.opaque(Float, float(x))  # noqa: E731
     landed, weight = out["landed"], out["weight"]
@@ -759,7 +843,8 @@ def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_si
     """Trace samples ``offset … offset + 2^log2_count − 1`` of every source of ``batch``
     and deposit them, in one launch, into a stacked (S·(K·K + 2)) Dr.Jit buffer.
 
-    Source ``j`` owns cells ``j·(K·K+2) …``, laid out as the one-source buffer of
+    Source ``j`` owns cells ``j·(K·K+2) …`` of each of the buffer's copies (as in
+    :func:`deposit`; ``fold_buffer(buffer, S, K)`` sums them), laid out as the one-source buffer of
     :func:`deposit_segments` (``exact``: ``span``, ``cdf_table``) or :func:`deposit`
     (``times``, ``sensor_table``, ``linear``, ``time_samples``); the window of source
     ``j`` is centred on the batch's ``center_uv[j]``.
