@@ -32,11 +32,17 @@ import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
+from typing import Any, Union
 from pathlib import Path
 
 import numpy as np
+from matplotlib.figure import Figure
+from numpy.typing import ArrayLike
 
+from .config import Setup
 from .io.atomic import atomic_path
+from .io.bank import IPSFBank
+from .optics.sweep import SweepRange
 
 __all__ = ["check_figure_path", "new_figure", "save_figure", "plot_focal_surfaces",
            "plot_ipsf", "plot_bank", "plot_table1", "plot_per_radius", "plot_psf_planes",
@@ -53,6 +59,9 @@ KERNEL_CMAP = "inferno"
 GRID_COLOR = "0.88"
 #: Formats whose files carry matplotlib's ``metadata`` (the maker and version).
 _TAGGED = frozenset({"png", "pdf", "svg", "svgz", "ps", "eps"})
+
+#: One output path, or one per format (:func:`plot_psf_planes` and the other paper figures).
+PathOrPaths = Union[str, Path, Sequence[Union[str, Path]]]
 
 
 def _format_of(path: Path) -> str:
@@ -86,7 +95,8 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
     return p
 
 
-def new_figure(*args, figsize=(7.0, 4.5), layout: str | None = "constrained", **kwargs):
+def new_figure(*args: int, figsize: tuple[float, float] = (7.0, 4.5),
+               layout: str | None = "constrained", **kwargs: Any) -> tuple[Figure, Any]:
     """A new figure and its axes: ``Figure(figsize, layout).subplots(*args, **kwargs)``."""
     from matplotlib.figure import Figure
 
@@ -94,7 +104,7 @@ def new_figure(*args, figsize=(7.0, 4.5), layout: str | None = "constrained", **
     return fig, fig.subplots(*args, **kwargs)
 
 
-def save_figure(fig, path: str | Path, dpi: int = DPI) -> Path:
+def save_figure(fig: Figure, path: str | Path, dpi: int = DPI) -> Path:
     """Write ``fig`` to ``path`` atomically (format from the suffix, PNG without one).
 
     PNG, PDF, SVG and PostScript files name their maker (``Creator: mitsweep <version>``)
@@ -117,7 +127,7 @@ def _legend_outside(ax) -> None:
               framealpha=1.0)
 
 
-def plot_focal_surfaces(setup, sweep, path: str | Path,
+def plot_focal_surfaces(setup: Setup, sweep: SweepRange, path: str | Path,
                         depths: Sequence[float] = (0.0, 20.0, math.inf)) -> Path:
     """Meridional and sagittal focal surfaces in the meridional plane (paper Fig. 6).
 
@@ -191,7 +201,7 @@ def _sections_axes(ax, sections, pitch_um: float, labels=("radial", "tangential"
         ax.plot(x * pitch_um, values, "-", color=color, lw=lw, label=name + suffix)
 
 
-def plot_ipsf(kernel, path: str | Path, *, pitch_mm: float,
+def plot_ipsf(kernel: ArrayLike, path: str | Path, *, pitch_mm: float,
               sections: tuple[np.ndarray, np.ndarray, np.ndarray],
               title: str = "IPSF") -> Path:
     """One IPSF: thumbnail (normalised to its maximum, with a colour bar) and its radial
@@ -222,7 +232,7 @@ def plot_ipsf(kernel, path: str | Path, *, pitch_mm: float,
     return save_figure(fig, path)
 
 
-def plot_bank(bank, path: str | Path, *,
+def plot_bank(bank: IPSFBank, path: str | Path, *,
               sections: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]],
               max_thumbs: int = 10) -> Path:
     """An IPSF bank: thumbnails across the field at its first depth, and cross-sections
@@ -496,9 +506,9 @@ def _kernel_grid(fig, kernels, pitch_um: float, col_titles, row_titles, *, supti
     return axes
 
 
-def plot_psf_planes(kernels, path, *, pitch_mm: float, focus_mm: Sequence[float],
-                    sensor_mm: Sequence[float], positions: Sequence[str],
-                    title: str) -> Path:
+def plot_psf_planes(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
+                    focus_mm: Sequence[float], sensor_mm: Sequence[float],
+                    positions: Sequence[str], title: str) -> Path:
     """PSFs across the mirror for several focal planes (paper Fig. 3).
 
     Parameters
@@ -526,8 +536,8 @@ def plot_psf_planes(kernels, path, *, pitch_mm: float, focus_mm: Sequence[float]
     return _save_all(fig, path)
 
 
-def plot_ipsf_depths(kernels, path, *, pitch_mm: float, depths_mm: Sequence[float],
-                     positions: Sequence[str],
+def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
+                     depths_mm: Sequence[float], positions: Sequence[str],
                      sections: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]],
                      title: str) -> Path:
     """IPSFs across the mirror and their cross-sections over depths (paper Fig. 4).
@@ -611,7 +621,8 @@ def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str 
     return axes
 
 
-def plot_sweep_ranges(sections, path, *, pitch_mm: float, ranges_mm: Sequence[tuple],
+def plot_sweep_ranges(sections: Sequence[Mapping[str, Sequence[tuple]]], path: PathOrPaths,
+                      *, pitch_mm: float, ranges_mm: Sequence[tuple],
                       depths_mm: Sequence[float], title: str,
                       optimal: tuple[float, float] | None = None) -> Path:
     """IPSF cross-sections at the mirror's centre and periphery for several sweep ranges
@@ -658,7 +669,8 @@ def plot_sweep_ranges(sections, path, *, pitch_mm: float, ranges_mm: Sequence[tu
     return _save_all(fig, path)
 
 
-def plot_pipeline(steps: Sequence[dict], path, *, bank_kernels, bank_positions: Sequence[str],
+def plot_pipeline(steps: Sequence[dict], path: PathOrPaths, *,
+                  bank_kernels: ArrayLike, bank_positions: Sequence[str],
                   pitch_mm: float, white: float, title: str) -> Path:
     """The processing pipeline step by step (paper Fig. 8): the IPSF bank, then images.
 
@@ -720,7 +732,7 @@ def plot_pipeline(steps: Sequence[dict], path, *, bank_kernels, bank_positions: 
     return _save_all(fig, path)
 
 
-def plot_insets(images: Sequence[tuple[str, np.ndarray]], path, *,
+def plot_insets(images: Sequence[tuple[str, np.ndarray]], path: PathOrPaths, *,
                 regions: Sequence[tuple[int, int, int]], labels: Sequence[str], white: float,
                 crop: tuple[int, int, int, int] | None = None, title: str) -> Path:
     """Images side by side, each with magnified regions below it (paper Figs. 9, 10).

@@ -9,9 +9,9 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Any, Iterable, Union
+from typing import Any, Iterable, NoReturn, Union
 
-from ..config import SetupError, load_setup
+from ..config import Setup, SetupError, load_setup
 
 __all__ = ["depth_mm", "UsageError", "USER_ERRORS", "ArgumentParser", "ArgumentParserError",
            "check_outputs", "load_setup_arg", "print_error_json", "print_json",
@@ -54,7 +54,7 @@ class ArgumentParserError(SystemExit):
     """A command line argparse refused; the line is on stderr, ``message`` keeps it
     without the ``PROG: error:`` prefix."""
 
-    def __init__(self, message: str, code: int = 2):
+    def __init__(self, message: str, code: int = 2) -> None:
         super().__init__(code)
         self.message = message
 
@@ -62,7 +62,7 @@ class ArgumentParserError(SystemExit):
 class ArgumentParser(argparse.ArgumentParser):
     """argparse that exits with status 2 and one line (argparse's own convention)."""
 
-    def error(self, message: str):  # noqa: D401
+    def error(self, message: str) -> NoReturn:  # noqa: D401
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         raise ArgumentParserError(message, 2)
 
@@ -114,7 +114,7 @@ def check_outputs(inputs: Iterable[PathArg], outputs: Iterable[PathArg]) -> None
                                  f"each output its own path")
 
 
-def load_setup_arg(path: str):
+def load_setup_arg(path: str) -> Setup:
     return load_setup(path)
 
 

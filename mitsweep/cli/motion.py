@@ -12,6 +12,10 @@ from __future__ import annotations
 
 import argparse
 
+from ..config import Setup
+from ..optics.motion import MotionProfile
+from ..optics.motion_file import MotionFile
+
 __all__ = ["add_motion_argument", "motion_from_args", "motion_file_from_args"]
 
 
@@ -23,7 +27,7 @@ def add_motion_argument(parser: argparse.ArgumentParser) -> None:
                              "the reference grid is mid-travel of its span")
 
 
-def motion_file_from_args(args, setup):
+def motion_file_from_args(args: argparse.Namespace, setup: Setup) -> MotionFile | None:
     """The ``--motion`` file, read and checked against ``setup``; None when not given.
 
     Returns
@@ -45,7 +49,7 @@ def motion_file_from_args(args, setup):
     return check_motion_file(load_motion_file(path), setup)
 
 
-def motion_from_args(args, setup):
+def motion_from_args(args: argparse.Namespace, setup: Setup) -> MotionProfile | None:
     """The ``--motion`` profile (a tabulated :class:`~mitsweep.optics.motion.MotionProfile`)
     checked against ``setup``; None when the option was not given."""
     mf = motion_file_from_args(args, setup)

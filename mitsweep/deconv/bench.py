@@ -32,10 +32,12 @@ against the sharp image inside the mirror disk.
 
 from __future__ import annotations
 
+import argparse
 import logging
 import time
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["run_bench", "make_problem"]
 
@@ -113,7 +115,7 @@ def _timed(fn, *a, **kw):
     return out, time.perf_counter() - t0, time.process_time() - c0
 
 
-def run_bench(args) -> dict:
+def run_bench(args: argparse.Namespace) -> dict:
     from skimage.restoration import wiener as sk_wiener
 
     from .metrics import psnr

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..optics.pixels import optical_center_px
 
@@ -88,7 +89,7 @@ def disk_mask(shape: tuple[int, ...], radius_px: float, *,
     return np.hypot(yy - cy, xx - cx) <= radius_px
 
 
-def radial_bins(shape: tuple[int, ...], edges_px, *,
+def radial_bins(shape: tuple[int, ...], edges_px: ArrayLike, *,
                 center: tuple[float, float] | None = None) -> np.ndarray:
     """(H, W) int: radial bin ``[edges[i], edges[i+1])`` of each pixel; −1 outside."""
     edges = np.asarray(edges_px, dtype=np.float64)
@@ -114,7 +115,7 @@ def _per_label(image, reference, labels, n, mask, data_range):
     return {"psnr": np.asarray(out_p), "ssim": np.asarray(out_s), "pixels": np.asarray(count)}
 
 
-def per_radius(image: np.ndarray, reference: np.ndarray, edges_px, *,
+def per_radius(image: np.ndarray, reference: np.ndarray, edges_px: ArrayLike, *,
                center: tuple[float, float] | None = None, mask: np.ndarray | None = None,
                data_range: float = 1.0) -> dict:
     """PSNR and SSIM in radial bins around ``center`` (default the optical axis).
@@ -132,8 +133,9 @@ def per_radius(image: np.ndarray, reference: np.ndarray, edges_px, *,
     return {"radius_px": 0.5 * (edges[:-1] + edges[1:]), "edges_px": edges, **res}
 
 
-def per_depth_band(image: np.ndarray, reference: np.ndarray, depth: np.ndarray, edges_mm, *,
-                   mask: np.ndarray | None = None, data_range: float = 1.0) -> dict:
+def per_depth_band(image: np.ndarray, reference: np.ndarray, depth: np.ndarray,
+                   edges_mm: ArrayLike, *, mask: np.ndarray | None = None, data_range: float = 1.0
+                  ) -> dict:
     """PSNR and SSIM per depth band ``[edges[i], edges[i+1])`` of a depth AOV map.
 
     Parameters

@@ -38,6 +38,7 @@ import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = ["SensorNoise", "PHOTONS_PER_LUX_S_M2", "paper_fig10_settings"]
 
@@ -146,7 +147,7 @@ class SensorNoise:
             return math.inf
         return min(self.full_well_e, (2 ** self.bits - 1) / self.gain) / J
 
-    def variance(self, x) -> np.ndarray:
+    def variance(self, x: ArrayLike) -> np.ndarray:
         """Noise variance of relative exposure ``x`` (no saturation), in x units².
 
         ``(x J + σ_r² + (σ_adc² + 1/12) / g²) / J²``: shot, read, ADC and quantisation.

@@ -33,9 +33,10 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
+from numpy.typing import DTypeLike
 import scipy.fft as sfft
 import scipy.sparse as sp
 import scipy.signal as ssig
@@ -75,7 +76,7 @@ class BlurOperator:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         return self.forward(x)
 
-    def as_pylops(self, dtype=np.float64):
+    def as_pylops(self, dtype: DTypeLike = np.float64) -> Any:
         """This operator as a ``pylops.LinearOperator`` with ``dims = dimsd = shape``.
 
         pylops is optional for mitsweep; ImportError (with the install command) when it
@@ -166,7 +167,7 @@ def product_convolution_operator(bank: IPSFBank, image_shape: tuple[int, int], *
 # -- polar (radial banks) ------------------------------------------------------------
 
 def bilinear_matrix(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], *,
-                    wrap_cols: bool = False, dtype=np.float64) -> sp.csr_matrix:
+                    wrap_cols: bool = False, dtype: DTypeLike = np.float64) -> sp.csr_matrix:
     """(n_points, H·W) sparse matrix of bilinear interpolation at fractional (rows, cols).
 
     Row-major (C-order) pixel indices; neighbours outside ``shape`` contribute zero
@@ -220,7 +221,7 @@ class PolarBand:
 
 def polar_bands(kernels: np.ndarray, radii: np.ndarray, grid: PolarGrid, *,
                 band_spacing: float = 0.25, margin_px: float | None = None,
-                r_in: float | None = None, dtype=np.float64) -> list[PolarBand]:
+                r_in: float | None = None, dtype: DTypeLike = np.float64) -> list[PolarBand]:
     """The radial bands of the polar blur on ``grid`` (as :func:`polar_deconvolve`).
 
     Band centres start at ``r_in / 2`` (default ``max(2 K, 8)`` px: inside ``r_in`` a
@@ -297,7 +298,7 @@ def polar_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
                    depth_mm: float | str | None = None,
                    center: tuple[float, float] | None = None, r_max: float | None = None,
                    radial_oversampling: float = 1.5, angular_oversampling: float = 1.25,
-                   band_spacing: float = 0.25, dtype=np.float64) -> BlurOperator:
+                   band_spacing: float = 0.25, dtype: DTypeLike = np.float64) -> BlurOperator:
     r"""The blur of a ``kind="radial"`` bank as a :class:`BlurOperator`.
 
     Parameters
@@ -400,7 +401,7 @@ def dense_matrix(op: BlurOperator) -> np.ndarray:
 
 
 def dot_product_error(op: BlurOperator, rng: np.random.Generator | int = 0,
-                      dtype=np.float64) -> float:
+                      dtype: DTypeLike = np.float64) -> float:
     """Relative error of the dot-product test ``|<A x, y> − <x, Aᵀ y>| / (|A x| |y|)``
     for random x, y."""
     gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(int(rng))

@@ -42,6 +42,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, DTypeLike
 import scipy.fft as sfft
 import scipy.ndimage as ndi
 import scipy.sparse as sp
@@ -104,7 +105,7 @@ class PolarGrid:
         """(n_angles,) polar angle of each column, radians, counter-clockwise from +u."""
         return np.arange(self.n_angles) * self.angle_step
 
-    def row_of(self, r) -> np.ndarray:
+    def row_of(self, r: ArrayLike) -> np.ndarray:
         """Fractional row index of radius ``r`` (pixels)."""
         return np.asarray(r) / self.radial_step + self.n_inner
 
@@ -221,7 +222,8 @@ def _bspline_taps(x: np.ndarray, dtype) -> tuple[np.ndarray, np.ndarray]:
 
 
 def spline_sampling_matrix(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], *,
-                           periodic_cols: bool = False, dtype=np.float64) -> sp.csr_array:
+                           periodic_cols: bool = False, dtype: DTypeLike = np.float64
+                          ) -> sp.csr_array:
     r"""(n_points, H·W) sparse matrix that evaluates a cubic B-spline at (rows, cols).
 
     Applied to the flattened (C order) B-spline coefficients of an (H, W) array
@@ -585,7 +587,7 @@ def _from_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
 
 
 def polar_resampling(grid: PolarGrid, shape: tuple[int, int], *,
-                     dtype=np.float64) -> tuple[sp.csr_array, sp.csr_array]:
+                     dtype: DTypeLike = np.float64) -> tuple[sp.csr_array, sp.csr_array]:
     """The two cubic B-spline resamplings of ``grid`` as sparse matrices.
 
     Returns
@@ -764,7 +766,7 @@ def _from_angle_spectrum(spec, grid, shape, *, upsample, outside, dtype):
     return out
 
 
-def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype) -> float:
+def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype: DTypeLike) -> float:
     """Peak bytes of :func:`polar_deconvolve` on ``grid``.
 
     The cached resampling matrices (16 weights and indices a point; an eighth or a quarter

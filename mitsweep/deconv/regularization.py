@@ -42,6 +42,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from ..io.bank import BankError, IPSFBank
+from .noise import SensorNoise
 from .kernels import interpolate_radial, radii_px, select_depth
 from .wiener import (DEFAULT_NSR_FLOOR, MAX_NSR, estimate_noise_sigma, estimate_nsr,
                      fast_shape, kernel_spectrum, natural_prior_scale)
@@ -65,7 +66,7 @@ PRIOR_WEIGHT_SCALE = {1.0: 0.5, 2.0 / 3.0: 0.5}
 DISCREPANCY_TAU = 1.0
 
 
-def noise_sigma(image: np.ndarray, noise=None) -> float:
+def noise_sigma(image: np.ndarray, noise: SensorNoise | float | None = None) -> float:
     """Noise standard deviation of ``image`` (its units).
 
     Parameters
@@ -272,7 +273,7 @@ def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,
     raise BankError(f"unknown bank kind {bank.kind!r}")
 
 
-def calibrated_nsr(image: np.ndarray, bank: IPSFBank, *, noise=None,
+def calibrated_nsr(image: np.ndarray, bank: IPSFBank, *, noise: SensorNoise | float | None = None,
                    depth_mm: float | str | None = None,
                    center: tuple[float, float] | None = None) -> float:
     """Wiener NSR (natural prior) for ``image`` by the discrepancy principle: the median

@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
+from numpy.typing import DTypeLike
 
 from ..io.bank import BankError, IPSFBank
 from . import METHODS
+from .noise import SensorNoise
 from .operators import BlurOperator, polar_operator, product_convolution_operator
 from .polar import polar_deconvolve
 from .regularization import calibrated_nsr, gcv_noise, noise_sigma, surrogate_kernel
@@ -21,7 +24,7 @@ __all__ = ["deconvolve", "blur_operator"]
 def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
                   depth_mm: float | str | None = None,
                   center: tuple[float, float] | None = None,
-                  dtype=np.float64) -> BlurOperator:
+                  dtype: DTypeLike = np.float64) -> BlurOperator:
     """The bank's blur on (H, W) images: polar for a radial bank, product-convolution
     for a grid bank. ``dtype`` is the polar operator's working precision (the
     product-convolution operator works in its input's)."""
@@ -36,8 +39,9 @@ def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
 
 
 def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
-               weight: float | None = None, iterations: int | None = None, noise=None,
-               progress: bool = False, **kw) -> np.ndarray:
+               weight: float | None = None, iterations: int | None = None,
+               noise: SensorNoise | float | None = None, progress: bool = False, **kw: Any
+              ) -> np.ndarray:
     """Restore a focal-sweep image with ``method`` and the right operator for ``bank``.
 
     Parameters

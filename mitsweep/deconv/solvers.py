@@ -45,6 +45,7 @@ import scipy.fft as sfft
 
 from ..io.bank import BankError, IPSFBank
 from .kernels import check_bank_matches, interpolate_radial, radii_px, select_depth
+from .noise import SensorNoise
 from .operators import BlurOperator, polar_bands
 from .polar import _channels, from_polar, polar_grid, to_polar
 from .regularization import (DISCREPANCY_TAU, _discrepancy, _gcv, _residual_spectrum,
@@ -392,12 +393,12 @@ def _run_hqs(prob, *, beta_wiener, sigma, alpha, weight, steps, time_limit_s, ba
 
 
 def hqs_deconvolve(image: np.ndarray, bank: IPSFBank, *, prior: str = "hyperlaplacian",
-                   weight: float | None = None, iterations: int | None = None, noise=None,
-                   depth_mm: float | str | None = None,
+                   weight: float | None = None, iterations: int | None = None,
+                   noise: SensorNoise | float | None = None, depth_mm: float | str | None = None,
                    center: tuple[float, float] | None = None, band_spacing: float = 0.25,
                    nsr: float | None = None, time_limit_s: float | None = None,
-                   data_term: str = "gaussian", progress: bool = False,
-                   info: dict | None = None) -> np.ndarray:
+                   data_term: str = "gaussian", progress: bool = False, info: dict | None = None
+                  ) -> np.ndarray:
     r"""Restore a focal-sweep image with a TV or hyper-Laplacian gradient prior (HQS).
 
     Parameters
@@ -603,7 +604,7 @@ RL_BOUNDARIES = ("normalized", "zero")
 
 
 def richardson_lucy(image: np.ndarray, op: BlurOperator, *, iterations: int | None = None,
-                    noise=None, damping: float | None = 1.0,
+                    noise: SensorNoise | float | None = None, damping: float | None = 1.0,
                     max_iterations: int = MAX_RL_ITERATIONS, boundary: str = "normalized",
                     time_limit_s: float | None = None, progress: bool = False,
                     info: dict | None = None) -> np.ndarray:

@@ -22,6 +22,7 @@ import logging
 import numpy as np
 import scipy.signal as ssig
 
+from ..config import Setup
 from ..io.bank import BankError, IPSFBank
 from ..optics.pixels import sensor_to_pixel
 from ..resources import check_allocation
@@ -43,7 +44,7 @@ logger = logging.getLogger(__name__)
 MIRROR_GRID_NODES = 8
 
 
-def mirror_grid_shape(setup, *, nodes_across: int = MIRROR_GRID_NODES,
+def mirror_grid_shape(setup: Setup, *, nodes_across: int = MIRROR_GRID_NODES,
                       max_cells: int = 64) -> tuple[int, int]:
     """(rows, cols) of a grid bank's sensor grid fine enough for the mirror's image.
 
@@ -118,7 +119,8 @@ def grid_axes_px(bank: IPSFBank, image_shape: tuple[int, int]) -> tuple[np.ndarr
     return rows, cols
 
 
-def grid_windows(rows: np.ndarray, cols: np.ndarray, image_shape: tuple[int, int]):
+def grid_windows(rows: np.ndarray, cols: np.ndarray, image_shape: tuple[int, int]
+                ) -> tuple[np.ndarray, np.ndarray]:
     """Separable hat windows: (wy (n_rows, H), wx (n_cols, W)); w_ij = wy[i] ⊗ wx[j]."""
     H, W = image_shape[:2]
     return hat_weights(np.arange(H), rows), hat_weights(np.arange(W), cols)

@@ -9,6 +9,7 @@ built exactly (:func:`synthetic_kernel_field`).
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..io.bank import IPSFBank
 from ..optics.pixels import pixel_to_sensor
@@ -17,8 +18,8 @@ __all__ = ["synthetic_ipsf", "synthetic_radial_bank", "synthetic_grid_bank",
            "synthetic_kernel_field"]
 
 
-def synthetic_ipsf(r_px, theta, size: int, r_max_px: float, *, core: float = 0.7,
-                   radial: float = 2.5, tangential: float = 1.5) -> np.ndarray:
+def synthetic_ipsf(r_px: ArrayLike, theta: ArrayLike, size: int, r_max_px: float, *,
+                   core: float = 0.7, radial: float = 2.5, tangential: float = 1.5) -> np.ndarray:
     """Cross-shaped unit-sum kernel(s) at radius ``r_px`` and polar angle ``theta``.
 
     Parameters
@@ -63,7 +64,8 @@ def _bank_meta(shape, **kw):
 
 def synthetic_radial_bank(image_shape: tuple[int, int], *, n_radii: int = 19, size: int = 21,
                           r_max_px: float | None = None, extent_px: float | None = None,
-                          pixel_pitch: float = 0.018, depths_mm=(500.0,), **kw) -> IPSFBank:
+                          pixel_pitch: float = 0.018, depths_mm: ArrayLike = (500.0,),
+                          **kw: float) -> IPSFBank:
     """Radial bank of :func:`synthetic_ipsf` kernels at ``n_radii`` radii from 0 to
     ``extent_px`` (default ``r_max_px``, itself default half the smaller image side)."""
     H, W = image_shape[:2]
@@ -79,7 +81,8 @@ def synthetic_radial_bank(image_shape: tuple[int, int], *, n_radii: int = 19, si
 
 def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int], *,
                         size: int = 21, r_max_px: float | None = None,
-                        pixel_pitch: float = 0.018, depths_mm=(500.0,), **kw) -> IPSFBank:
+                        pixel_pitch: float = 0.018, depths_mm: ArrayLike = (500.0,),
+                        **kw: float) -> IPSFBank:
     """Grid bank of :func:`synthetic_ipsf` kernels at a (rows × cols) grid of pixels.
 
     Points run evenly from the first to the last pixel centre in each direction.
@@ -99,7 +102,7 @@ def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int
 
 
 def synthetic_kernel_field(image_shape: tuple[int, int], size: int = 21,
-                           r_max_px: float | None = None, **kw) -> np.ndarray:
+                           r_max_px: float | None = None, **kw: float) -> np.ndarray:
     """(H, W, K, K) exact per-pixel kernels of the synthetic model (small images only)."""
     H, W = image_shape[:2]
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)

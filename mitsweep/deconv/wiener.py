@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 
 import numpy as np
+from numpy.typing import ArrayLike, DTypeLike
 import scipy.fft as sfft
 
 from ..resources import check_allocation
@@ -49,7 +50,7 @@ def check_image_values(image: np.ndarray) -> None:
                          f"rescale the image")
 
 
-def check_nsr(nsr) -> float:
+def check_nsr(nsr: float) -> float:
     """``nsr`` as a float in [0, :data:`MAX_NSR`]; ValueError otherwise."""
     x = float(nsr)
     if not (np.isfinite(x) and 0 <= x <= MAX_NSR):
@@ -57,7 +58,7 @@ def check_nsr(nsr) -> float:
     return x
 
 
-def wiener_memory_bytes(shape: tuple[int, int], channels: int, dtype) -> float:
+def wiener_memory_bytes(shape: tuple[int, int], channels: int, dtype: DTypeLike) -> float:
     """Peak bytes of one :func:`wiener_deconvolve` on an FFT grid of ``shape``: the padded
     image, its spectrum and the filtered product (complex, half-length), the filter,
     the regulariser's frequency grid and the inverse transform."""
@@ -87,7 +88,8 @@ def fast_shape(shape: tuple[int, int], pad: tuple[int, int]) -> tuple[int, int]:
     return tuple(sfft.next_fast_len(int(n) + 2 * int(p), real=True) for n, p in zip(shape, pad))
 
 
-def kernel_spectrum(psf: np.ndarray, shape: tuple[int, int], dtype=np.float64) -> np.ndarray:
+def kernel_spectrum(psf: np.ndarray, shape: tuple[int, int], dtype: DTypeLike = np.float64
+                   ) -> np.ndarray:
     """Transfer function of ``psf`` on an FFT grid of ``shape`` (rfft2 layout).
 
     Parameters
@@ -118,7 +120,7 @@ def kernel_spectrum(psf: np.ndarray, shape: tuple[int, int], dtype=np.float64) -
     return sfft.rfft2(big, workers=-1)
 
 
-def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64,
+def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype: DTypeLike = np.float64,
                 *, freqs: tuple[np.ndarray, np.ndarray] | None = None,
                 n_px: float | None = None) -> np.ndarray:
     """Noise-to-signal power ratio R(f) on an rfft2 grid of ``shape``.
@@ -154,7 +156,7 @@ def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype=np.float64
     return np.where(f2 == 0, 0.0, nsr).astype(dtype)
 
 
-def wiener_filter(H: np.ndarray, R) -> np.ndarray:
+def wiener_filter(H: np.ndarray, R: ArrayLike) -> np.ndarray:
     """``G = conj(H) / (|H|² + R)``; ``R`` an array broadcastable to ``H`` or a scalar.
 
     Where ``|H|² + R`` is exactly zero (a kernel spectral zero with no regularisation) G is

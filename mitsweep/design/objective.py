@@ -40,8 +40,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import fft as sfft
 
+from ..deconv.noise import SensorNoise
 from ..deconv.wiener import regulariser
 
 __all__ = ["WienerModel", "wiener_model", "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
@@ -95,12 +97,12 @@ class WienerModel:
     def _transfer(self, t):
         return self._combine(t, self.spectra_re), self._combine(t, self.spectra_im)
 
-    def mse(self, tau) -> np.ndarray:
+    def mse(self, tau: ArrayLike) -> np.ndarray:
         """(J,) predicted MSE at exposure fractions ``tau`` (N,), or (B, J) for (B, N)."""
         kr, ki = self._transfer(np.asarray(tau, dtype=float))
         return self.noise_var * (self.weight / (kr * kr + ki * ki + self.reg)).sum(axis=-1)
 
-    def mse_and_grad(self, tau) -> tuple[np.ndarray, np.ndarray]:
+    def mse_and_grad(self, tau: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(J,) MSE and its (J, N) gradient in τ."""
         kr, ki = self._transfer(np.asarray(tau, dtype=float))
         d = kr * kr + ki * ki + self.reg
@@ -111,7 +113,7 @@ class WienerModel:
             + np.matmul(self.spectra_im, (coef * ki)[:, :, None])[..., 0]
         return value, grad
 
-    def bound_and_grad(self, tau) -> tuple[np.ndarray, np.ndarray]:
+    def bound_and_grad(self, tau: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """(J,) convex lower bound ``L(τ) <= MSE(τ)`` and its (J, N) gradient."""
         y = self._combine(np.asarray(tau, dtype=float), self.magnitude)
         sq = np.sqrt(self.reg)
@@ -123,7 +125,7 @@ class WienerModel:
         return value, grad
 
 
-def wiener_model(kernels, noise, *, n_fft: int = DEFAULT_FFT_SIZE,
+def wiener_model(kernels: np.ndarray, noise: SensorNoise, *, n_fft: int = DEFAULT_FFT_SIZE,
                  n_px: float) -> WienerModel:
     """The :class:`WienerModel` of bin-averaged kernels.
 

@@ -40,6 +40,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import linprog, minimize
 
 from .objective import WienerModel
@@ -90,7 +91,7 @@ def _velocity_accel(tau, widths, limits: StageLimits):
     return v, a
 
 
-def stage_feasible(tau, widths, limits: StageLimits, *, rtol: float = 1e-6,
+def stage_feasible(tau: ArrayLike, widths: ArrayLike, limits: StageLimits, *, rtol: float = 1e-6,
                    acceleration: bool = True) -> bool:
     """Whether τ sums to 1 and the stage can follow it (velocity, and acceleration
     unless ``acceleration`` is False)."""
@@ -215,7 +216,7 @@ def _starts(n: int, x_lo: float) -> dict[str, np.ndarray]:
     return out
 
 
-def local_optimum(model: WienerModel, widths, limits: StageLimits, *,
+def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
                   objective: str = "worst", extra_starts: dict | None = None,
                   acceleration: bool = True) -> Solution:
     """The best τ SLSQP finds from the fixed starts (module docstring), stage-feasible.
@@ -260,7 +261,7 @@ def local_optimum(model: WienerModel, widths, limits: StageLimits, *,
                           "seconds": time.perf_counter() - t0})
 
 
-def certified_lower_bound(model: WienerModel, widths, limits: StageLimits, *,
+def certified_lower_bound(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
                           objective: str = "worst") -> tuple[float, dict]:
     """A lower bound on ``min_τ objective(MSE(τ))`` over the feasible set (docstring).
 
@@ -314,8 +315,8 @@ def _compositions(total: int, parts: int):
         yield out
 
 
-def brute_force(model: WienerModel, widths, limits: StageLimits, *, objective: str = "worst",
-                steps: int = 16, batch: int = 64) -> dict:
+def brute_force(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
+                objective: str = "worst", steps: int = 16, batch: int = 64) -> dict:
     """Exhaustive search on a lattice against the local optimiser, on a small problem.
 
     The lattice: ``τ = τ_min + (1 − Σ τ_min) q``, ``q`` every point of the simplex with

@@ -27,9 +27,12 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..config import Setup
 from ..tracer.ipsf import fit_sampling_box
 from ..tracer.kernel import trace_arrays
 from ..tracer.source import source_from_image
@@ -81,7 +84,7 @@ class PlaneBank:
         """``|e_{k+1} − e_k|`` of each bin, mm."""
         return np.abs(np.diff(self.edges_mm))
 
-    def ipsf(self, tau) -> np.ndarray:
+    def ipsf(self, tau: ArrayLike) -> np.ndarray:
         """``Σ_k τ_k P_k`` for exposure fractions ``tau`` (n_bins,): (n_depths, n_points, K, K)."""
         return np.tensordot(self.kernels, np.asarray(tau, dtype=float), axes=([2], [0]))
 
@@ -106,7 +109,7 @@ class PlaneBank:
                          metadata=dict(self.metadata, coarsened_from=n))
 
 
-def plane_psfs(setup, u: float, v: float, depth: float, edges_mm, *,
+def plane_psfs(setup: Setup, u: float, v: float, depth: float, edges_mm: ArrayLike, *,
                reference_sensor_distance: float, rays: int = DEFAULT_PLANE_RAYS,
                kernel_size: int = 31, seed: int = 0,
                sub_planes: int = DEFAULT_SUB_PLANES) -> np.ndarray:
@@ -184,9 +187,10 @@ def plane_psfs(setup, u: float, v: float, depth: float, edges_mm, *,
     return hist.reshape(n_bins, K, K) / (landed_w * S)
 
 
-def plane_bank(setup, points_uv, depths_mm, edges_mm, *, reference_sensor_distance: float,
-               rays: int = DEFAULT_PLANE_RAYS, kernel_size: int = 31, seed: int = 0,
-               sub_planes: int = DEFAULT_SUB_PLANES, progress=None) -> PlaneBank:
+def plane_bank(setup: Setup, points_uv: ArrayLike, depths_mm: ArrayLike, edges_mm: ArrayLike, *,
+               reference_sensor_distance: float, rays: int = DEFAULT_PLANE_RAYS,
+               kernel_size: int = 31, seed: int = 0, sub_planes: int = DEFAULT_SUB_PLANES,
+               progress: Callable[[], object] | None = None) -> PlaneBank:
     """:func:`plane_psfs` over field points × depths (point ``p`` traced with ``seed + p``,
     as :func:`mitsweep.tracer.ipsf_bank` seeds its points)."""
     pts = np.asarray(points_uv, dtype=float).reshape(-1, 2)

@@ -7,13 +7,15 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Callable, Sequence
 
 import numpy as np
 
-from ..config import SetupError
+from ..config import Setup, SetupError
+from ..deconv.noise import SensorNoise
 from ..optics import optimal_sweep_range
 from ..optics.motion import MotionProfile
-from ..optics.reference import reference_geometry
+from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..tracer.bank import field_radius, grid_points
 from ..tracer.metrics import v_avg
 from ..tracer.source import source_from_image
@@ -70,14 +72,15 @@ class SweepDesign:
     bank: PlaneBank | None = field(default=None, repr=False)
 
 
-def design_depths(setup) -> list[float]:
+def design_depths(setup: Setup) -> list[float]:
     """The setup's depth range's ends and the paper's V_avg depths within it, mm."""
     s = setup.sweep
     inner = [d for d in V_DEPTHS_MM if s.depth_min <= d <= s.depth_max]
     return sorted({float(s.depth_min), *inner, float(s.depth_max)})
 
 
-def design_points(setup, i_ref: float, geometry, *, n_radii: int, grid: tuple[int, int]):
+def design_points(setup: Setup, i_ref: float, geometry: ReferenceGeometry, *, n_radii: int,
+                  grid: tuple[int, int]) -> np.ndarray:
     """Field points: ``n_radii`` radii from the centre to the FOV's edge (untilted), or
     the centres of a grid over the sensor that see the mirror (tilted; the 2-D field)."""
     if setup.mirror.is_symmetric:
@@ -116,12 +119,14 @@ def _v_avg(kernels, depths) -> tuple[float, list]:
     return float(v_avg(k)), [float(depths[j]) for j in sel]
 
 
-def design_sweep(setup, *, noise, objective: str = "worst", n_planes: int = 64,
-                 span_mm: tuple[float, float] | None = None, n_radii: int = 9,
-                 grid: tuple[int, int] = (5, 5), depths=None, rays: int = DEFAULT_PLANE_RAYS,
+def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
+                 n_planes: int = 64, span_mm: tuple[float, float] | None = None,
+                 n_radii: int = 9, grid: tuple[int, int] = (5, 5),
+                 depths: Sequence[float] | None = None, rays: int = DEFAULT_PLANE_RAYS,
                  kernel_size: int = 31, seed: int = 0, n_fft: int = DEFAULT_FFT_SIZE,
                  sub_planes: int = DEFAULT_SUB_PLANES, brute_force_steps: int = 16,
-                 bank: PlaneBank | None = None, progress=None) -> SweepDesign:
+                 bank: PlaneBank | None = None,
+                 progress: Callable[[], object] | None = None) -> SweepDesign:
     """Design the time profile of a focal sweep (objective in :mod:`mitsweep.design`).
 
     Parameters

@@ -57,6 +57,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .atomic import atomic_path
 from .exr import _json_default
@@ -134,7 +135,7 @@ class CameraImage:
         return int(self.data.shape[0]), int(self.data.shape[1])
 
 
-def srgb_to_linear(x) -> np.ndarray:
+def srgb_to_linear(x: ArrayLike) -> np.ndarray:
     """The sRGB transfer function inverted (IEC 61966-2-1), float32, on [0, 1]."""
     x = np.asarray(x, dtype=np.float32)
     return np.where(x <= 0.04045, x / np.float32(12.92),
@@ -145,7 +146,7 @@ def srgb_to_linear(x) -> np.ndarray:
 # --------------------------------------------------------------------------- reading
 
 
-def read_camera_image(path, *, pixel_pitch: float | None = None,
+def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
                       white_balance: str = "camera", transfer: str | None = None
                       ) -> CameraImage:
     """Read a camera file as a linear float32 image.
@@ -363,7 +364,7 @@ def _icc_transfer(icc: bytes | None) -> tuple[str, float | None] | None:
         return None
 
 
-def tiff_transfer(page, forced: str | None = None) -> tuple[str, float | None, str]:
+def tiff_transfer(page: Any, forced: str | None = None) -> tuple[str, float | None, str]:
     """The transfer function of a TIFF page by the module's rule.
 
     Returns
@@ -683,7 +684,7 @@ def _png16_bytes(img16: np.ndarray, text: Mapping[str, str]) -> bytes:
 DISPLAY_SUFFIXES = (".tif", ".tiff", ".png")
 
 
-def write_display_image(path, image, *, white: float | None = None,
+def write_display_image(path: str | Path, image: np.ndarray, *, white: float | None = None,
                         metadata: Mapping[str, Any] | None = None) -> Path:
     """Write a linear image as a 16-bit sRGB TIFF or PNG for display (atomic).
 

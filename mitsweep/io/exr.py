@@ -16,7 +16,7 @@ import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -39,7 +39,8 @@ def channel_names_for(n: int) -> list[str]:
         n, [f"C{i}" for i in range(n)])
 
 
-def write_exr(path: str | Path, image=None, *, channels: Mapping[str, np.ndarray] | None = None,
+def write_exr(path: str | Path, image: np.ndarray | None = None,
+              *, channels: Mapping[str, np.ndarray] | None = None,
               metadata: Mapping[str, Any] | None = None) -> Path:
     """Write ``image`` (H, W[, C]) and/or named ``channels`` (each (H, W)) atomically.
 
@@ -208,7 +209,8 @@ def read_exr_header(path: str | Path) -> dict[str, Any]:
         raise ExrError(f"{p}: not a readable EXR file ({_first_cause(said, exc)})") from None
 
 
-def stack_channels(chans: Mapping[str, np.ndarray], names=("R", "G", "B")) -> np.ndarray:
+def stack_channels(chans: Mapping[str, np.ndarray], names: Sequence[str] = ("R", "G", "B")
+                  ) -> np.ndarray:
     """(H, W, C) from named channels, or (H, W) for a single ``Y`` channel."""
     if "Y" in chans and not all(n in chans for n in names):
         return chans["Y"]

@@ -59,6 +59,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..config import Setup
 from .chief_ray import chief_ray, image_point
 from .placement import placement_of
 from .pixels import optical_center_px
@@ -189,7 +190,7 @@ def _resample_closed(points: np.ndarray, n: int) -> np.ndarray:
     return np.stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])], axis=-1)
 
 
-def predicted_outline(setup, *, sensor_distance: float | None = None,
+def predicted_outline(setup: Setup, *, sensor_distance: float | None = None,
                       n_points: int = 1440) -> RimOutline:
     """The outline of the mirror's image predicted by the setup.
 
@@ -766,7 +767,7 @@ class Calibration:
     def radius_ratio(self) -> float:
         return self.rim_radius_px / self.predicted_radius_px
 
-    def calibrated_setup(self, setup):
+    def calibrated_setup(self, setup: Setup) -> Setup:
         """The setup for this camera and photo: resolution, pitch, centre offset."""
         from ..config import Sensor
 
@@ -836,7 +837,7 @@ def _implied_vertex_distance(setup, pitch: float, radius_px: float) -> float | N
     return None
 
 
-def calibrate_photo(image: np.ndarray, setup, *, pixel_pitch: float | None = None,
+def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | None = None,
                     plausible_scale: float = PLAUSIBLE_SCALE,
                     fit_roll: bool = False) -> Calibration:
     """Calibrate a photograph of the setup's mirror: centre, rim size, what it implies.

@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .placement import Placement, SurfacePoints
 
@@ -47,13 +48,15 @@ def chief_ray(placement: Placement, surface: SurfacePoints) -> ChiefRay:
     return ChiefRay(surface, r, w, c, dist)
 
 
-def image_point(ray: ChiefRay, sensor_distance: float):
+def image_point(ray: ChiefRay, sensor_distance: float
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Upright image coordinates (u, v), mm, of the mirror points on a sensor at ``i``."""
     r = ray.to_lens
     return (-sensor_distance * r[..., 0] / r[..., 2], -sensor_distance * r[..., 1] / r[..., 2])
 
 
-def intersect_mirror(placement: Placement, origin, direction, *, newton_iters: int = 8):
+def intersect_mirror(placement: Placement, origin: ArrayLike, direction: ArrayLike, *,
+                     newton_iters: int = 8) -> NDArray[np.float64]:
     """First intersection of rays with the mirror (front side, within the rim).
 
     Solves the conic ``(1+k) z² + 2 R z + x² + y² = 0`` (local frame) with a
@@ -107,7 +110,8 @@ def intersect_mirror(placement: Placement, origin, direction, *, newton_iters: i
     return np.where(inside, best, np.inf)
 
 
-def mirror_point_from_image(placement: Placement, u, v, sensor_distance: float) -> ChiefRay:
+def mirror_point_from_image(placement: Placement, u: ArrayLike, v: ArrayLike,
+                            sensor_distance: float) -> ChiefRay:
     """Chief rays through upright image points (u, v) mm on a sensor at distance ``i``.
 
     Points whose chief ray misses the mirror get NaN positions (check

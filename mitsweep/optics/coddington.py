@@ -26,6 +26,9 @@ References
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..config import Setup
 
 from .chief_ray import chief_ray
 from .placement import placement_of
@@ -33,7 +36,8 @@ from .placement import placement_of
 __all__ = ["coddington_reflection", "focal_distances", "focal_image_axial_distances"]
 
 
-def coddington_reflection(r_m, r_s, cos_incidence, depth):
+def coddington_reflection(r_m: ArrayLike, r_s: ArrayLike, cos_incidence: ArrayLike,
+                          depth: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(d_m, d_s), mm, from principal radii, incidence cosine and depth (inf allowed)."""
     r_m, r_s, c, l = (np.asarray(a, dtype=float) for a in (r_m, r_s, cos_incidence, depth))
     inv_l = np.where(np.isinf(l), 0.0, 1.0 / l)
@@ -50,7 +54,8 @@ def _surface_points(setup, rho):
     return placement, chief_ray(placement, surf)
 
 
-def focal_distances(setup, rho, depth):
+def focal_distances(setup: Setup, rho: ArrayLike, depth: ArrayLike
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Distances (d_m, d_s), mm, from the mirror point at ``rho`` to its focal images.
 
     Parameters
@@ -81,7 +86,8 @@ def focal_distances(setup, rho, depth):
     return coddington_reflection(r_m, r_s, ray.cos_incidence, depth)
 
 
-def focal_image_axial_distances(setup, rho, depth):
+def focal_image_axial_distances(setup: Setup, rho: ArrayLike, depth: ArrayLike
+                               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(D_m, D_s), mm: axial distances from the lens to the focal images (Eq. 6–7)."""
     placement, ray = _surface_points(setup, rho)
     d_m, d_s = focal_distances(setup, rho, depth)

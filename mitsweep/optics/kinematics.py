@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["Trapezoid"]
 
@@ -132,13 +133,13 @@ class Trapezoid:
         return self.ramp_time / self.duration
 
     # -- motion (scalars or arrays: a float in, a float out) ------------------------------
-    def velocity_at(self, t):
+    def velocity_at(self, t: ArrayLike) -> float | NDArray[np.float64]:
         """Speed ``t`` seconds after the start (0 before and after the move)."""
         t = np.asarray(t, dtype=float)
         ramps = self.acceleration * np.minimum(np.minimum(t, self.ramp_time), self.duration - t)
         return _out(np.where((t <= 0.0) | (t >= self.duration), 0.0, ramps))
 
-    def position_at(self, t):
+    def position_at(self, t: ArrayLike) -> float | NDArray[np.float64]:
         """Distance covered ``t`` seconds after the start, in [0, :attr:`distance`]
         (``t`` is clipped to the move)."""
         tau = np.clip(np.asarray(t, dtype=float), 0.0, self.duration)
@@ -150,7 +151,7 @@ class Trapezoid:
                      self.ramp_distance + self.peak_velocity * (tau - t_r),
                      self.distance - 0.5 * a * rest * rest)))
 
-    def time_at(self, position):
+    def time_at(self, position: ArrayLike) -> float | NDArray[np.float64]:
         """When the move has covered ``position`` (clipped to [0, :attr:`distance`]):
         the inverse of :meth:`position_at`, s."""
         d = np.clip(np.asarray(position, dtype=float), 0.0, self.distance)

@@ -27,9 +27,11 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
-from ..config import MOTION_PROFILES, SetupError
+from ..config import MOTION_PROFILES, Setup, SetupError
 from .kinematics import Trapezoid
+from .sweep import SweepRange
 
 __all__ = ["MotionProfile", "motion_for", "MOTION_PROFILES"]
 
@@ -103,7 +105,7 @@ class MotionProfile:
         return cls("trapezoidal", s, e, accel_fraction=a)
 
     @classmethod
-    def tabulated(cls, times, positions) -> "MotionProfile":
+    def tabulated(cls, times: ArrayLike, positions: ArrayLike) -> MotionProfile:
         """Piecewise-linear profile through measured ``(times, positions)``.
 
         Parameters
@@ -138,7 +140,7 @@ class MotionProfile:
                                              self.accel_fraction)
 
     # -- evaluation ---------------------------------------------------------------------
-    def sensor_distance(self, t):
+    def sensor_distance(self, t: ArrayLike) -> float | NDArray[np.float64]:
         """Sensor distance (mm) at normalised time(s) ``t`` ∈ [0, 1] (clipped), vectorised."""
         t = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
         delta = self.end - self.start
@@ -151,7 +153,7 @@ class MotionProfile:
             out = np.interp(t, self.times, self.positions)
         return out if out.ndim else float(out)
 
-    def velocity(self, t):
+    def velocity(self, t: ArrayLike) -> float | NDArray[np.float64]:
         """d i / d t in mm per unit normalised time (multiply by 1/exposure_s for mm/s)."""
         t = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
         delta = self.end - self.start
@@ -226,7 +228,8 @@ class MotionProfile:
         return d
 
 
-def motion_for(setup, sweep_range=None, *, table=None) -> MotionProfile:
+def motion_for(setup: Setup, sweep_range: SweepRange | None = None, *,
+               table: tuple[ArrayLike, ArrayLike] | None = None) -> MotionProfile:
     """The stage motion a setup asks for, over a sweep range.
 
     Parameters

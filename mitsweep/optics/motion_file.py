@@ -60,7 +60,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import SetupError
+from ..config import Setup, SetupError
 from .motion import MotionProfile
 
 __all__ = ["MotionFile", "FORMAT", "VERSION", "save_motion_file", "load_motion_file",
@@ -313,7 +313,8 @@ def stage_kinematics(profile: MotionProfile, exposure_s: float) -> tuple[np.ndar
     return v, a
 
 
-def check_motion_file(mf: MotionFile, setup, *, exposure_s: float | None = None) -> MotionFile:
+def check_motion_file(mf: MotionFile, setup: Setup, *, exposure_s: float | None = None
+                     ) -> MotionFile:
     """Refuse a motion file this setup cannot run, before anything moves or is traced.
 
     Checks that every sensor distance is beyond the lens focal length (a span that

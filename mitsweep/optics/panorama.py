@@ -39,9 +39,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .chief_ray import chief_ray, image_point, mirror_point_from_image
 from .pixels import center_offset_of, optical_center_px, pixel_to_sensor, sensor_to_pixel
+from ..config import Setup
 from .placement import Placement
 
 __all__ = ["PROJECTIONS", "PanoramaMap", "panorama_map", "direction_to_image",
@@ -61,21 +63,22 @@ _NEWTON_TOL = 1e-11
 _SEED_RADII, _SEED_AZIMUTHS = 160, 320
 
 
-def angles_to_directions(azimuth, elevation) -> np.ndarray:
+def angles_to_directions(azimuth: ArrayLike, elevation: ArrayLike) -> np.ndarray:
     """Unit world directions (..., 3) of azimuth φ and elevation ε, radians."""
     az, el = np.broadcast_arrays(np.asarray(azimuth, float), np.asarray(elevation, float))
     ce = np.cos(el)
     return np.stack([ce * np.cos(az), ce * np.sin(az), np.sin(el)], axis=-1)
 
 
-def directions_to_angles(directions):
+def directions_to_angles(directions: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(azimuth φ in (−π, π], elevation ε in [−π/2, π/2]), radians, of directions (..., 3)."""
     d = np.asarray(directions, dtype=float)
     return (np.arctan2(d[..., 1], d[..., 0]),
             np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
 
 
-def image_to_direction(placement: Placement, u, v, sensor_distance: float):
+def image_to_direction(placement: Placement, u: ArrayLike, v: ArrayLike,
+                       sensor_distance: float) -> NDArray[np.float64]:
     """World directions seen at upright image points (u, v), mm, on a sensor at ``i``.
 
     Returns
@@ -112,7 +115,8 @@ def _seed_table(placement: Placement):
     return tree, np.stack([x[ok], y[ok]], axis=-1), reach
 
 
-def direction_to_image(placement: Placement, directions, sensor_distance: float):
+def direction_to_image(placement: Placement, directions: ArrayLike,
+                       sensor_distance: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Upright image points (u, v), mm, where world ``directions`` are seen.
 
     Solves ``ŵ(x, y) = d`` for the mirror point (local ``x, y``) by Newton's method on the
@@ -254,7 +258,7 @@ class PanoramaMap:
     def _elevation(self, height):
         return np.arctan(height) if self.projection == "cylindrical" else height
 
-    def directions(self, prow, pcol) -> np.ndarray:
+    def directions(self, prow: ArrayLike, pcol: ArrayLike) -> np.ndarray:
         """Unit world directions (..., 3) of panorama pixels (row, col), centres at integers."""
         W, H = self.size
         lo, hi = (self._height(e) for e in self.elevation_range)
@@ -262,7 +266,8 @@ class PanoramaMap:
         el = self._elevation(hi - (np.asarray(prow, float) + 0.5) * (hi - lo) / H)
         return angles_to_directions(az, el)
 
-    def panorama_coords(self, directions):
+    def panorama_coords(self, directions: ArrayLike
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Panorama (row, col) of world directions; columns wrap into [−½, W_p − ½)."""
         W, H = self.size
         lo, hi = (self._height(e) for e in self.elevation_range)
@@ -288,7 +293,8 @@ class PanoramaMap:
                                center_offset_px=self.center_offset_px)
 
     # -- the two maps --------------------------------------------------------------------
-    def to_image(self, prow, pcol):
+    def to_image(self, prow: ArrayLike, pcol: ArrayLike
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
         """Forward map: image (row, col) seen at panorama pixels (row, col).
 
         Returns ``(row, col, valid)``; ``valid`` is False (and row, col NaN) where the
@@ -315,7 +321,8 @@ class PanoramaMap:
         r, ok = r[inv].reshape(az.shape), ok[inv].reshape(az.shape)
         return r * np.cos(az), r * np.sin(az), ok
 
-    def from_image(self, row, col):
+    def from_image(self, row: ArrayLike, col: ArrayLike
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
         """Inverse map: panorama (row, col) of image pixels (row, col).
 
         Returns ``(prow, pcol, valid)``; ``valid`` is False where the pixel does not see
@@ -362,8 +369,10 @@ def _seen_elevations(placement, sensor_distance, shape, pitch, center, n: int = 
     return float(el.min()), float(el.max()), pm, d[ok]
 
 
-def panorama_map(setup, image_shape, *, projection: str = "cylindrical", size=None,
-                 elevation_deg=None, pixel_pitch: float | None = None, center_px=None,
+def panorama_map(setup: Setup, image_shape: tuple[int, ...], *, projection: str = "cylindrical",
+                 size: tuple[int, int] | None = None,
+                 elevation_deg: tuple[float, float] | None = None,
+                 pixel_pitch: float | None = None, center_px: tuple[float, float] | None = None,
                  sensor_distance: float | None = None) -> PanoramaMap:
     """The panorama of an image of ``setup``: its maps, elevations and size.
 
@@ -425,7 +434,8 @@ def panorama_map(setup, image_shape, *, projection: str = "cylindrical", size=No
     return PanoramaMap(placement, i, shape, pitch, center, projection, size, (lo, hi))
 
 
-def unwarp(image: np.ndarray, pmap: PanoramaMap, *, order: int = 3):
+def unwarp(image: np.ndarray, pmap: PanoramaMap, *,
+           order: int = 3) -> tuple[np.ndarray, NDArray[np.bool_]]:
     """Resample ``image`` onto the panorama of ``pmap``.
 
     Parameters

@@ -23,23 +23,27 @@ from the image centre in pixels (a setup's ``sensor.center_offset_px``, measured
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..config import Setup
 
 __all__ = ["image_shape", "center_offset_of", "optical_center_px", "pixel_to_sensor",
            "sensor_to_pixel"]
 
 
-def image_shape(setup) -> tuple[int, int]:
+def image_shape(setup: Setup) -> tuple[int, int]:
     """``(H, W)`` of a setup's images (its ``sensor.resolution`` is ``(W, H)``)."""
     W, H = setup.sensor.resolution
     return int(H), int(W)
 
 
-def center_offset_of(setup) -> tuple[float, float] | None:
+def center_offset_of(setup: Setup) -> tuple[float, float] | None:
     """A setup's ``sensor.center_offset_px`` (``(drow, dcol)`` px), or None: the centre."""
     return getattr(setup.sensor, "center_offset_px", None)
 
 
-def optical_center_px(shape, center_offset_px=None) -> tuple[float, float]:
+def optical_center_px(shape: tuple[int, ...],
+                      center_offset_px: tuple[float, float] | None = None) -> tuple[float, float]:
     """``(row, col)`` of the optical axis on an image of ``shape = (H, W[, …])``,
     moved by ``center_offset_px = (drow, dcol)`` pixels when given."""
     H, W = shape[0], shape[1]
@@ -47,21 +51,26 @@ def optical_center_px(shape, center_offset_px=None) -> tuple[float, float]:
     return H / 2.0 - 0.5 + float(drow), W / 2.0 - 0.5 + float(dcol)
 
 
-def sensor_to_pixel(u, v, shape, pitch: float, *, center_offset_px=None):
+def sensor_to_pixel(u: ArrayLike, v: ArrayLike, shape: tuple[int, ...], pitch: float, *,
+                    center_offset_px: tuple[float, float] | None = None
+                   ) -> tuple[float, float] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pitch ``pitch`` mm."""
     r0, c0 = optical_center_px(shape, center_offset_px)
     u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
     return _pair(r0 - v / pitch, c0 + u / pitch)
 
 
-def pixel_to_sensor(row, col, shape, pitch: float, *, center_offset_px=None):
+def pixel_to_sensor(row: ArrayLike, col: ArrayLike, shape: tuple[int, ...], pitch: float, *,
+                    center_offset_px: tuple[float, float] | None = None
+                   ) -> tuple[float, float] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Sensor point ``(u, v)`` mm of pixel ``(row, col)`` (centres at integers)."""
     r0, c0 = optical_center_px(shape, center_offset_px)
     row, col = np.asarray(row, dtype=float), np.asarray(col, dtype=float)
     return _pair((col - c0) * pitch, (r0 - row) * pitch)
 
 
-def _pair(a: np.ndarray, b: np.ndarray):
+def _pair(a: np.ndarray, b: np.ndarray
+         ) -> tuple[float, float] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Two floats for scalar inputs, else two arrays broadcast to one shape."""
     if a.ndim == 0 and b.ndim == 0:
         return float(a), float(b)

@@ -12,7 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..config import Mirror
 from .profiles import Profile, profile_of
 
 __all__ = ["Placement", "placement_of", "SurfacePoints"]
@@ -62,14 +64,14 @@ class Placement:
     def axis(self) -> np.ndarray:
         return self.rotation[:, 2]
 
-    def to_local(self, p) -> np.ndarray:
+    def to_local(self, p: ArrayLike) -> np.ndarray:
         """World points (..., 3) to the mirror's local frame."""
         return np.asarray(p, dtype=float) @ self.rotation
 
-    def to_world(self, p) -> np.ndarray:
+    def to_world(self, p: ArrayLike) -> np.ndarray:
         return np.asarray(p, dtype=float) @ self.rotation.T
 
-    def surface(self, x, y) -> SurfacePoints:
+    def surface(self, x: ArrayLike, y: ArrayLike) -> SurfacePoints:
         """World points and normals at local coordinates (x, y), mm (broadcast)."""
         x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
         rho = np.hypot(x, y)
@@ -85,6 +87,6 @@ class Placement:
                              self.to_world(local_t))
 
 
-def placement_of(mirror) -> Placement:
+def placement_of(mirror: Mirror) -> Placement:
     """The :class:`Placement` of a :class:`mitsweep.config.Mirror`."""
     return Placement(profile_of(mirror), mirror.vertex_distance, mirror.tilt, mirror.rim_radius)

@@ -15,11 +15,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..config import Mirror
 
 __all__ = ["Profile", "conic_sag", "profile_of"]
 
 
-def conic_sag(rho, radius: float, conic: float):
+def conic_sag(rho: ArrayLike, radius: float, conic: float) -> NDArray[np.float64]:
     """Sag of a conic of vertex radius ``radius`` and conic constant ``conic``, mm.
 
     Parameters
@@ -73,28 +76,28 @@ class Profile:
             d2 = d2 + n * (n - 1) * a * r2 ** (n // 2 - 1)
         return sag, g, d2
 
-    def sag(self, rho):
+    def sag(self, rho: ArrayLike) -> NDArray[np.float64]:
         """s(ρ), mm (positive, away from the camera)."""
         rho = np.asarray(rho, dtype=float)
         return rho * rho / (self.radius + self._q(rho)) + self._poly(rho)[0]
 
-    def slope_over_rho(self, rho):
+    def slope_over_rho(self, rho: ArrayLike) -> NDArray[np.float64]:
         """s'(ρ)/ρ, mm⁻¹: finite on the axis, where it equals 1/R (+ 2 a2 if any)."""
         rho = np.asarray(rho, dtype=float)
         return 1.0 / self._q(rho) + self._poly(rho)[1]
 
-    def slope(self, rho):
+    def slope(self, rho: ArrayLike) -> NDArray[np.float64]:
         """s'(ρ), dimensionless."""
         rho = np.asarray(rho, dtype=float)
         return rho * self.slope_over_rho(rho)
 
-    def curvature(self, rho):
+    def curvature(self, rho: ArrayLike) -> NDArray[np.float64]:
         """s''(ρ), mm⁻¹."""
         rho = np.asarray(rho, dtype=float)
         q = self._q(rho)
         return self.radius ** 2 / q ** 3 + self._poly(rho)[2]
 
-    def normal_components(self, rho):
+    def normal_components(self, rho: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Unit outward normal in the meridional half-plane, as (n_ρ, n_z).
 
         ``n ∝ (s', 1)`` written as ``(ρ (1 + q p), q)`` with ``p`` the asphere's
@@ -108,7 +111,7 @@ class Profile:
         norm = np.hypot(nr, nz)
         return nr / norm, nz / norm
 
-    def principal_radii(self, rho):
+    def principal_radii(self, rho: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Principal radii of curvature (R_m, R_s) at ρ, mm.
 
         R_m (meridional, in the plane of the axis) = (1 + s'²)^{3/2} / s'' and
@@ -131,6 +134,6 @@ class Profile:
         return self.radius / np.sqrt(1.0 + self.conic) if 1.0 + self.conic > 0 else np.inf
 
 
-def profile_of(mirror) -> Profile:
+def profile_of(mirror: Mirror) -> Profile:
     """The :class:`Profile` of a :class:`mitsweep.config.Mirror`."""
     return Profile(radius=mirror.radius, conic=mirror.conic, aspheric=tuple(mirror.aspheric))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..config import Setup
 from .motion import MotionProfile, motion_for
 from .sweep import SweepRange, optimal_sweep_range
 
@@ -48,7 +49,7 @@ class ReferenceGeometry:
                 "sweep": self.sweep.as_dict(), "motion": self.motion.as_dict()}
 
 
-def reference_geometry(setup, *, motion: MotionProfile | None = None,
+def reference_geometry(setup: Setup, *, motion: MotionProfile | None = None,
                        sweep: SweepRange | None = None) -> ReferenceGeometry:
     """Resolve the sweep, the motion and the reference sensor distance of a setup.
 

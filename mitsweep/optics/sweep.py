@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..config import SetupError
+from ..config import Setup, SetupError
 from .chief_ray import chief_ray
 from .coddington import focal_image_axial_distances
 from .placement import placement_of
@@ -101,7 +101,7 @@ _MM_FIELDS = ("focus_min", "focus_max", "sensor_start", "sensor_end", "translati
 
 
 def _deprecated_mm_alias(name: str) -> property:
-    def read(self):
+    def read(self) -> float:
         warnings.warn(f"SweepRange.{name}_mm is deprecated: use SweepRange.{name} (mm)",
                       DeprecationWarning, stacklevel=2)
         return getattr(self, name)
@@ -139,12 +139,13 @@ def _visible_limit(placement, x_lo: float, x_hi: float) -> float:
     return bracketed_root(f, xs[j - 1], xs[j], xtol=1e-12)
 
 
-def max_fov_deg(setup) -> float:
+def max_fov_deg(setup: Setup) -> float:
     """The largest FOV (degrees) this mirror gives this camera."""
     return mirror_zone(setup, reach_only=True).max_fov_deg
 
 
-def mirror_zone(setup, fov_deg: float | None = None, *, reach_only: bool = False) -> MirrorZone:
+def mirror_zone(setup: Setup, fov_deg: float | None = None, *, reach_only: bool = False
+               ) -> MirrorZone:
     """The zone of the mirror that covers ``fov_deg`` (default: the setup's).
 
     Raises
@@ -238,7 +239,7 @@ def _extreme(setup, zone: MirrorZone, depths, sign: float):
     return sign * best[0], best[1]
 
 
-def optimal_sweep_range(setup, *, fov_deg: float | None = None,
+def optimal_sweep_range(setup: Setup, *, fov_deg: float | None = None,
                         depth_min: float | None = None,
                         depth_max: float | None = None) -> SweepRange:
     """The optimal focal-sweep range of a setup (paper Eq. 4–9) and its sensor travel.

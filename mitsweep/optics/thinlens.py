@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["image_distance", "object_distance", "magnification"]
 
 
-def image_distance(focal_length: float, object_distance):
+def image_distance(focal_length: float, object_distance: ArrayLike) -> float | NDArray[np.float64]:
     """Lens-to-sensor distance i that focuses an object at distance o (o > f).
 
     ``i = f o / (o − f)``; ``o = inf`` gives ``i = f``.
@@ -27,7 +28,7 @@ def image_distance(focal_length: float, object_distance):
     return i if i.ndim else float(i)
 
 
-def object_distance(focal_length: float, image_distance):
+def object_distance(focal_length: float, image_distance: ArrayLike) -> float | NDArray[np.float64]:
     """Object distance o in focus for a sensor at distance i (i > f): ``o = f i / (i − f)``."""
     i = np.asarray(image_distance, dtype=float)
     if np.any(~(i > focal_length)):
@@ -38,6 +39,6 @@ def object_distance(focal_length: float, image_distance):
     return o if o.ndim else float(o)
 
 
-def magnification(focal_length: float, object_distance):
+def magnification(focal_length: float, object_distance: ArrayLike) -> float | NDArray[np.float64]:
     """Lateral magnification i/o of an object at distance o."""
     return image_distance(focal_length, object_distance) / np.asarray(object_distance, dtype=float)

@@ -19,6 +19,7 @@ machine; the load average is reported with them.
 
 from __future__ import annotations
 
+import argparse
 import os
 import tempfile
 import time
@@ -34,7 +35,7 @@ CONFIGS = (("serial", "serial", 1), ("dask_1", "dask", 1), ("dask_2", "dask", 2)
 PROJECTION_MACHINES = (1, 8, 64)
 
 
-def add_arguments(p) -> None:
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenes", type=int, default=None,
                    help="scenes of the benchmark dataset (default 4; 2 with --quick)")
 
@@ -69,7 +70,7 @@ def _files(root: Path) -> dict:
             if p.is_file() and LOG_DIR not in p.relative_to(root).parts}
 
 
-def run_bench(args) -> dict:
+def run_bench(args: argparse.Namespace) -> dict:
     from . import build_dataset, item_names
     from .executors import open_executor
     from .runner import read_task_log

@@ -14,7 +14,7 @@ import contextlib
 import logging
 from typing import Iterator
 
-from distributed import Client, LocalCluster, WorkerPlugin
+from distributed import Client, LocalCluster, Worker, WorkerPlugin
 
 from .executors import CONNECT_TIMEOUT_S, init_worker
 from .runner import DatasetError
@@ -30,7 +30,7 @@ class MitsweepWorkerPlugin(WorkerPlugin):
 
     name = "mitsweep"
 
-    def setup(self, worker) -> None:
+    def setup(self, worker: Worker) -> None:
         init_worker()
 
 

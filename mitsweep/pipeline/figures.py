@@ -28,11 +28,13 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..config import Setup
+from ..optics.sweep import SweepRange
 
 __all__ = ["PAPER_SETUPS", "FORMATS", "FigureQuality", "QUICK", "FULL", "figure_files",
            "data_dir", "field_points", "make_figures"]
@@ -133,8 +135,8 @@ class FieldPoint:
         return f"x = {self.x_mm:.1f} mm" if self.x_mm else "x = 0 mm"
 
 
-def field_points(setup: Setup, sweep, sensor_distance: float, n: int = N_POINTS,
-                 xs=None) -> list[FieldPoint]:
+def field_points(setup: Setup, sweep: SweepRange, sensor_distance: float, n: int = N_POINTS,
+                 xs: ArrayLike | None = None) -> list[FieldPoint]:
     """``n`` points across the mirror in the meridional plane, from its centre (untilted:
     to the edge of the field of view; tilted: from one edge through the vertex to the
     other), imaged at ``sensor_distance``; or the points at mirror coordinates ``xs``."""
@@ -523,8 +525,8 @@ def _table1_md(result: dict) -> str:
 FIGURES = ("fig6", "fig3", "fig4", "fig5", "table1", "fig8", "fig9", "fig10")
 
 
-def make_figures(setups, out, *, quality: FigureQuality = FULL, seed: int = 0,
-                 step: Callable[[str], None] | None = None) -> dict:
+def make_figures(setups: Sequence[Setup], out: str | Path, *, quality: FigureQuality = FULL,
+                 seed: int = 0, step: Callable[[str], None] | None = None) -> dict:
     """Write every figure of the paper for each setup into ``out``.
 
     Parameters

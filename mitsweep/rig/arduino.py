@@ -273,7 +273,7 @@ class ArduinoSweepController(Stage, Shutter):
         self._query(f"SWEEP {target} {self.rate(velocity_mm_s)} "
                     f"{self.accel(acceleration_mm_s2)} {open_at} {close_at}", n_fields=0)
 
-    def load_table(self, steps, durations_us) -> None:
+    def load_table(self, steps: Iterable[int], durations_us: Iterable[int]) -> None:
         """Upload a step-rate table: ``TABLE <n>``, then ``SEG <i> <steps> <us>`` for each
         segment; the board acknowledges every segment with its running totals of steps
         and µs, which must be the host's (a lost, repeated or altered segment fails here,

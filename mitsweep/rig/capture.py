@@ -61,7 +61,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..config import Setup
 from ..optics.kinematics import Trapezoid
+from ..optics.motion_file import MotionFile
 from .arduino import MAX_WATCHDOG_MS, ArduinoSweepController
 from .errors import (CaptureInterrupted, DeviceFault, HostTooSlow, PlanError, PortLost,
                      ReplyTimeout, RigError)
@@ -421,8 +423,9 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
     return t_rx - t_move
 
 
-def run_capture(setup, ports: RigPorts, *, out: str | Path | None = None,
-                plan: CapturePlan | None = None, motion_file=None) -> CaptureRecord:
+def run_capture(setup: Setup, ports: RigPorts, *, out: str | Path | None = None,
+                plan: CapturePlan | None = None, 
+                motion_file: MotionFile | None = None) -> CaptureRecord:
     """Run one focal-sweep capture on the rig and return its record.
 
     Parameters
@@ -520,8 +523,8 @@ def _stop_and_record(dev: _Devices, record: CaptureRecord, exc: BaseException,
                        ", ".join(guard.during_safety))
 
 
-def capture(setup, *, port: str, zaber_port: str | None = None, out=None,
-            checksums: bool = False) -> CaptureRecord:
+def capture(setup: Setup, *, port: str, zaber_port: str | None = None,
+            out: str | Path | None = None, checksums: bool = False) -> CaptureRecord:
     """Convenience wrapper of :func:`run_capture`."""
     return run_capture(setup, RigPorts(arduino=port, zaber=zaber_port, checksums=checksums),
                        out=out)

@@ -39,8 +39,12 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from ..config import Setup
 from ..optics.kinematics import Trapezoid
+from ..optics.motion import MotionProfile
+from ..optics.sweep import SweepRange
 from .arduino import MAX_SEGMENT_STEPS, MAX_STEP_RATE, MAX_TABLE_SEGMENTS, step_accel, step_rate
 from .errors import PlanError
 from .profile import (TOLERANCE_MM, TOLERANCE_STEPS, ProfileTable, check_followable, max_deviation,
@@ -122,7 +126,7 @@ class CapturePlan:
     def end_mm(self) -> float:
         return self.mm(self.end_steps)
 
-    def sensor_distance(self, position_mm):
+    def sensor_distance(self, position_mm: ArrayLike) -> float | NDArray[np.float64]:
         """Sensor distance (mm) at stage position(s) ``position_mm``."""
         return self.sensor_distance_at_zero_mm + self.sensor_direction * position_mm
 
@@ -209,7 +213,9 @@ def _check_soft_limits(what: str, approach_steps: int, end_steps: int, spm: floa
                             f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
 
 
-def plan_capture(setup, *, stage: str = "arduino", sweep_range=None, motion=None,
+def plan_capture(setup: Setup, *, stage: str = "arduino", 
+                 sweep_range: SweepRange | None = None,
+                 motion: MotionProfile | None = None,
                  exposure_s: float | None = None) -> CapturePlan:
     """Resolve a setup's focal sweep into a stage move.
 

@@ -58,7 +58,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from ..optics.motion import MotionProfile
 from .errors import PlanError
 
 __all__ = ["ProfileTable", "profile_knots", "quantise_table", "check_followable",
@@ -129,7 +131,7 @@ class ProfileTable:
         x = np.concatenate([[0], np.cumsum(self.steps)]).astype(float)
         return t, x
 
-    def travel_at(self, t_s):
+    def travel_at(self, t_s: ArrayLike) -> NDArray[np.float64]:
         """Commanded travel (steps, continuous) ``t_s`` seconds after the shutter opened;
         the stepper stands at its floor."""
         t, x = self.cumulative()
@@ -151,7 +153,7 @@ class ProfileTable:
                 "knot_travel_steps": list(self.knot_travel_steps)}
 
 
-def profile_knots(motion, *, max_segments: int, focal_length_mm: float
+def profile_knots(motion: MotionProfile, *, max_segments: int, focal_length_mm: float
                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """The profile's knots ``(t ∈ [0, 1], sensor distance mm)``, checked: monotonic,
     moving, beyond the focal length; re-knotted at ``max_segments`` evenly spaced times

@@ -47,10 +47,14 @@ import json
 import logging
 import platform
 from pathlib import Path
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from ..config import Setup
 from .errors import RigError
+from .plan import CapturePlan
+from .transport import CommandLog
 
 __all__ = ["FORMAT", "VERSION", "CaptureRecord", "load_capture_record", "measured_motion"]
 
@@ -63,7 +67,8 @@ VERSION = 1
 class CaptureRecord:
     """Accumulates a capture as it happens; :meth:`save` writes it (atomically)."""
 
-    def __init__(self, *, setup, plan, log, ports=None, path=None) -> None:
+    def __init__(self, *, setup: Setup, plan: CapturePlan, log: CommandLog, ports: Any = None,
+                 path: str | Path | None = None) -> None:
         self.setup = setup
         self.plan = plan
         self.log = log
@@ -94,10 +99,10 @@ class CaptureRecord:
                                     "action": action, "confirms": confirms, "ok": ok,
                                     "reason": reason, "detail": detail})
 
-    def set_board_events(self, events) -> None:
+    def set_board_events(self, events: Iterable[Any]) -> None:
         self.board_events = list(events)
 
-    def set_stage_samples(self, samples) -> None:
+    def set_stage_samples(self, samples: Iterable[tuple[float, int, float]]) -> None:
         self.stage_samples = list(samples)
 
     def finish(self, *, complete: bool, status: str, error: str | None = None) -> None:
@@ -296,7 +301,8 @@ def load_capture_record(path: str | Path) -> dict:
     return data
 
 
-def measured_motion(record, *, require_complete: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def measured_motion(record: Mapping[str, Any] | str | Path, *, require_complete: bool = True
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """The measured motion profile of a capture: ``(times_s, sensor_distance_mm)``.
 
     Parameters

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 from .transport import LineTransport
 
@@ -81,7 +81,7 @@ class ScriptedSerial:
 @contextmanager
 def expected_protocol(factory: Callable[[LineTransport], object],
                       exchanges: Iterable[tuple[bytes | None, bytes | None]], *,
-                      timeout_s: float = 0.05, name: str = "device"):
+                      timeout_s: float = 0.05, name: str = "device") -> Iterator[object]:
     """Yield ``factory(transport)`` on a scripted stream; fail on unused exchanges."""
     ser = ScriptedSerial(exchanges)
     transport = LineTransport(ser, name=name, timeout_s=timeout_s)

@@ -24,7 +24,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Any, Callable, Protocol, TypeVar
 
 from .errors import PortLost, PortUnavailable, ProtocolError, ReplyTimeout  # noqa: F401
 
@@ -32,6 +32,9 @@ __all__ = ["LogEntry", "CommandLog", "Checksum", "XorChecksum", "ZaberChecksum",
            "LineTransport", "open_port", "SAFETY_REPLY_TIMEOUT_S"]
 
 logger = logging.getLogger(__name__)
+
+#: What an awaited reply is parsed into (:meth:`LineTransport.send_on_safety_path`).
+T = TypeVar("T")
 
 #: Deadline of a stop command's reply on the safety path, s. Generous: a device that
 #: answers at all answers within milliseconds, but a host whose cores are busy may read
@@ -163,7 +166,7 @@ class ZaberChecksum(_HexSuffixChecksum):
         return (-sum(text[1:].encode("ascii"))) & 0xFF
 
 
-def open_port(port: str, *, baudrate: int = 115200, name: str | None = None):
+def open_port(port: str, *, baudrate: int = 115200, name: str | None = None) -> Any:
     """Open a serial port with pyserial (8N1, no flow control), non-blocking reads.
 
     Raises
@@ -202,7 +205,7 @@ class LineTransport:
         Default deadline of :meth:`read_line`, seconds.
     """
 
-    def __init__(self, serial, *, name: str = "device", log: CommandLog | None = None,
+    def __init__(self, serial: Any, *, name: str = "device", log: CommandLog | None = None,
                  eol: bytes = b"\n", checksum: Checksum | None = None,
                  timeout_s: float = 1.0) -> None:
         self.serial = serial
@@ -273,8 +276,9 @@ class LineTransport:
         self._fill(0.0)
         return self._has_line()
 
-    def send_on_safety_path(self, line: str, until, *, timeout_s: float, on_other=None,
-                            attempts: int = SAFETY_ATTEMPTS):
+    def send_on_safety_path(self, line: str, until: Callable[[str], T | None], *, timeout_s: float, 
+                            on_other: Callable[[str], object] | None = None,
+                            attempts: int = SAFETY_ATTEMPTS) -> T:
         """Send ``line`` after discarding whatever is buffered, then read until
         ``until(reply)`` returns something other than None, and return that.
 

@@ -28,6 +28,7 @@ import logging
 import re
 import time
 from dataclasses import dataclass
+from typing import Iterable
 
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
 from .interfaces import Stage, StageState
@@ -218,7 +219,7 @@ class ZaberStage(Stage):
         self.command(f"move abs {target}")
         return target
 
-    def load_stream(self, lines, *, accel: int) -> None:
+    def load_stream(self, lines: Iterable[tuple[int, int]], *, accel: int) -> None:
         """Store a sequence of moves in stream buffer :data:`STREAM_BUFFER` and set up a
         live stream on this axis, ready for :meth:`start_stream`.
 

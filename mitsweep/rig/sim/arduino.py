@@ -11,12 +11,13 @@ after the shutter was released and the motor stopped).
 from __future__ import annotations
 
 import math
+from typing import Iterable
 
 from ...optics.kinematics import Trapezoid
 from ..arduino import (FIRMWARE_NAME, MAX_SEGMENT_STEPS, MAX_STEP_RATE, MAX_TABLE_SEGMENTS,
                        MAX_WATCHDOG_MS, POS_EVENT_PERIOD_US, PROTOCOL_VERSION)
 from ..transport import XorChecksum
-from .base import Model, Move, PathMove, command, table_pieces
+from .base import Fault, Model, Move, PathMove, command, table_pieces
 
 __all__ = ["ArduinoModel", "FIRMWARE_VERSION"]
 
@@ -39,7 +40,7 @@ class ArduinoModel(Model):
 
     reset_on_open = True
 
-    def __init__(self, faults=(), *, homed: bool = False, position: int = 0,
+    def __init__(self, faults: Iterable[Fault] = (), *, homed: bool = False, position: int = 0,
                  micros_start: int = 0, home_time_s: float = 0.05,
                  boot_time_s: float = 0.1) -> None:
         super().__init__(faults)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
+from typing import Callable, Iterable
 
 from ...optics.kinematics import Trapezoid
 
@@ -85,7 +86,8 @@ class PathMove:
     Velocity changes between pieces are as given: a constant-rate segment follows the
     last at its own rate at once (a stepper's rate jump; the plan bounds them)."""
 
-    def __init__(self, x0: float, sign: float, t0: float, pieces) -> None:
+    def __init__(self, x0: float, sign: float, t0: float,
+                 pieces: Iterable[tuple[float, float, float]]) -> None:
         self.x0, self.sign, self.t0 = float(x0), float(sign), float(t0)
         self.pieces = [(float(d), float(v), float(a)) for d, v, a in pieces]
         self.starts_t = [0.0]
@@ -126,7 +128,8 @@ class PathMove:
 
 
 def table_pieces(rate_in: float, rate_out: float, accel: float, d_open: float,
-                 d_after: float, segments) -> list[tuple[float, float, float]]:
+                 d_after: float, 
+                 segments: Iterable[tuple[float, float]]) -> list[tuple[float, float, float]]:
     """Pieces of a table sweep: ramp from rest to ``rate_in`` at ``accel``, cruise to
     ``d_open``, the ``(steps, seconds)`` segments, cruise at ``rate_out`` and ramp down
     to rest ``d_after`` past the table's end."""
@@ -138,7 +141,8 @@ def table_pieces(rate_in: float, rate_out: float, accel: float, d_open: float,
     return pieces
 
 
-def command(*words: str, nargs: int | None = None):
+def command(*words: str, nargs: int | None = None
+            ) -> Callable[[Callable[..., object]], Callable[..., object]]:
     """Declare a model method as the handler of the command ``words`` (the leading
     words that name it) taking ``nargs`` further arguments (None: any number)."""
     def declare(method):
@@ -167,7 +171,7 @@ class Model:
                 table[words] = (name, nargs)
         cls.commands = table
 
-    def __init__(self, faults=()) -> None:
+    def __init__(self, faults: Iterable[Fault] = ()) -> None:
         self.faults = list(faults)
         self._scheduled: list[tuple[float, bytes, str]] = []
         self.unplug_at: float | None = None
@@ -178,7 +182,8 @@ class Model:
         self._fault_at: float | None = None     # when an armed fault_flag fault strikes
 
     # -- commands -----------------------------------------------------------------------
-    def handler(self, words: list[str]):
+    def handler(self, words: list[str]
+                ) -> tuple[Callable[..., object] | None, list[str] | None]:
         """``(bound method, arguments)`` of the command that ``words`` start with (the
         longest declared match), or ``(None, None)``; arguments is None when their
         number is not the declared one."""

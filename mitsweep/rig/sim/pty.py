@@ -18,6 +18,8 @@ import threading
 import time
 import tty
 
+from .base import Model
+
 __all__ = ["PtyDevice"]
 
 logger = logging.getLogger(__name__)
@@ -35,7 +37,7 @@ class PtyDevice:
         Loop period (s) when nothing is due; bounds the emission latency of events.
     """
 
-    def __init__(self, model, *, poll_s: float = 0.001) -> None:
+    def __init__(self, model: Model, *, poll_s: float = 0.001) -> None:
         self.model = model
         self.poll_s = poll_s
         self.master, self.slave = os.openpty()

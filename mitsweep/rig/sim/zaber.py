@@ -19,10 +19,11 @@ Speeds and accelerations are held as the protocol's data values (``maxspeed``,
 from __future__ import annotations
 
 import re
+from typing import Iterable
 
 from ..transport import ZaberChecksum
 from ..zaber import ACCEL_UNIT, SPEED_UNIT
-from .base import Model, Move, PathMove, command
+from .base import Fault, Model, Move, PathMove, command
 
 __all__ = ["ZaberModel"]
 
@@ -49,7 +50,7 @@ class ZaberModel(Model):
         Homing speed, microsteps/s (homing accelerates at ten times that per second).
     """
 
-    def __init__(self, faults=(), *, device: int = 1, device_id: int = 50081,
+    def __init__(self, faults: Iterable[Fault] = (), *, device: int = 1, device_id: int = 50081,
                  homed: bool = False, position: int = 0, max_position: int = 25 * 20997,
                  home_speed: int = 400_000) -> None:
         super().__init__(faults)
