@@ -404,8 +404,10 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
         SHA-256, or ``"dict"`` and the SHA-256 of its canonical JSON), unit, placement,
         what was replaced and the kept objects; the integrator depth is
         ``scene.max_depth`` if set, else the user's integrator's ``max_depth`` + 1 (the
-        mirror's bounce), else unlimited (-1); the integrator is ``path``, or
-        ``volpath`` where the scene has participating media.
+        mirror's bounce), else unlimited (-1); the integrator is ``mirrorpath`` at a
+        depth of 1 to 8 in ``*_ad_*`` variants (``path``'s image; see
+        :func:`~mitsweep.render.scene.build_scene`), else ``path``, or ``volpath`` where
+        the scene has participating media.
     """
     from .. import __version__
     from ..config import setup_to_dict

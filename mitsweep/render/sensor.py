@@ -97,20 +97,33 @@ Usage::
 The gradient pass draws its samples from ``seed_grad``: a finite-difference check with
 common random numbers renders with ``seed=seed_grad``.
 
-Integrators: mitsweep's ``mirrorview`` (the built-in emissive scenes' integrator)
-differentiates through the mirror's reflections; Mitsuba's ``path``, ``direct`` and
-``direct_projective`` differentiate what the camera sees directly, but ``path`` drops the
-derivative after the first bounce (measured: exactly zero for a scene seen through a
-mirror, with symbolic or evaluated loops); ``prb``, ``prb_basic`` and
-``prb_projective`` detach the camera rays and raise (Mitsuba's "not attached to the AD
-graph"). Light tracing (``ptracer``, through :meth:`FocalSweepSensor.sample_direction`)
+Integrators: mitsweep's ``mirrorview`` (emissive scenes) and ``mirrorpath`` (lit scenes:
+:mod:`mitsweep.render.ad_integrator`, a path tracer with emitter sampling and MIS whose
+image equals ``path``'s) differentiate through the mirror's reflections;
+:func:`mitsweep.render.scene.build_scene` picks one of them in ``*_ad_*`` variants
+(``path`` only beyond ``mirrorpath``'s depth limit of 8, or at an unlimited depth).
+Mitsuba's ``path``, ``volpath``, ``direct`` and ``direct_projective`` differentiate what
+the camera sees directly, but ``path`` detaches the ray at every BSDF sample (measured:
+exactly zero through a mirror, with symbolic or evaluated loops); ``prb``, ``prb_basic``,
+``prb_projective`` and ``prbvolpath`` detach the camera rays. Asking for a sweep gradient
+through :func:`mitsuba.render` with one of these raises :class:`NotDifferentiableError`
+naming the integrator, instead of a zero: the ``prb`` family (and ``ptracer``) always,
+the others when a shape reflects or transmits in a delta or null lobe (the mirror). The
+check runs in the sensor when the derivative pass calls it: it finds the scene and the
+integrator in the frame of ``mitsuba.render``'s custom operation (Mitsuba 3.9; a
+sensor has no other way to see them). A derivative taken outside ``mi.render`` (e.g.
+``Integrator.render_forward`` called directly) is not checked. With ``path`` and no
+mirror, the derivative of a lit view still lacks every term after the first bounce
+(light reflected between surfaces): render lit scenes with ``mirrorpath``.
+Light tracing (``ptracer``, through :meth:`FocalSweepSensor.sample_direction`)
 is not covered: there the sweep moves the pixel a sample lands in, a derivative plain
 AD does not give. The derivative is that of the image's continuous part: as
-for any camera parameter differentiated by plain AD, an edge (silhouette, a texture with
-nearest filtering) that moves across pixels as the sweep changes contributes a boundary
-term that is not included (``tests/test_render_sweep_grad.py`` checks the derivative
-against finite differences on a smoothly textured scene; ``examples/inverse_sweep.py``
-recovers a sweep end from an image).
+for any camera parameter differentiated by plain AD, an edge (silhouette, a shadow
+edge, a texture with nearest filtering) that moves across pixels or samples as the
+sweep changes contributes a boundary term that is not included
+(``tests/test_render_sweep_grad.py`` checks the derivative against finite differences
+on a smoothly textured scene, ``tests/test_render_lit_grad.py`` on a lit one through
+the mirror; ``examples/inverse_sweep.py`` recovers a sweep end from an image).
 """
 
 from __future__ import annotations
