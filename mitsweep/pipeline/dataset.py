@@ -126,11 +126,13 @@ def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
     ``directory`` (not its subfolders), sorted by name, as ``{"path", "sha256"}``
     (:attr:`DatasetOptions.scene_files`).
 
-    With ``setup``, each file is loaded first as the render will load it
-    (:func:`mitsweep.render.user_scene.load_user_scene`, in ``unit``): a file that is
-    not Mitsuba XML, references a missing file or uses an unknown plugin is refused
-    before any work starts, naming the file. Raises :class:`DatasetError` (or the
-    loader's ``UserSceneError``), both ValueErrors: one line at the command line.
+    With ``setup``, each file is loaded first as the render will load it and its view
+    of the mirror probed (:func:`mitsweep.render.user_scene.check_user_scene`, in
+    ``unit``): a file that is not Mitsuba XML, references a missing file, uses an
+    unknown plugin, has no emitter, puts geometry between the lens and the mirror or
+    nothing in the mirror's view is refused before any work starts, naming the file.
+    Raises :class:`DatasetError` (or the loader's ``UserSceneError``), both ValueErrors:
+    one line at the command line.
     """
     from .runner import sha256
 
@@ -144,10 +146,10 @@ def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
     _require(len(paths) <= MAX_SCENES, "scenes-from",
              f"{directory} holds {len(paths)} scenes; at most {MAX_SCENES}")
     if setup is not None:
-        from ..render.user_scene import load_user_scene
+        from ..render.user_scene import check_user_scene
 
         for p in paths:
-            load_user_scene(setup, p, unit=unit)
+            check_user_scene(setup, p, unit=unit)
     return tuple({"path": str(p.resolve()), "sha256": sha256(p)} for p in paths)
 
 

@@ -44,7 +44,7 @@ from typing import Any, Mapping
 import numpy as np
 
 __all__ = ["UserScene", "UserSceneError", "MM_PER_UNIT", "load_user_scene", "user_scene",
-           "scene_transform", "check_view"]
+           "scene_transform", "check_view", "check_user_scene"]
 
 logger = logging.getLogger(__name__)
 
@@ -410,6 +410,33 @@ def user_scene(setup, scene, *, unit: str | None = None, placement=None) -> dict
     (:func:`mitsweep.render.api.camera_dict`).
     """
     return load_user_scene(setup, scene, unit=unit, placement=placement).objects
+
+
+def check_user_scene(setup, scene, *, unit: str | None = None, placement=None) -> dict:
+    """Load a user's scene as :func:`~mitsweep.render.api.render_image` does and probe
+    its view of the setup's mirror, without rendering (e.g. every scene of a dataset
+    before any work starts).
+
+    :func:`load_user_scene`, then :func:`check_view` of the scene with the setup's
+    mirror at the reference sensor distance
+    (:func:`mitsweep.optics.reference.reference_geometry`) and the setup's lens aperture
+    (the ``focused`` and ``sweep`` modes'; the others' smaller apertures see less).
+
+    Raises
+    ------
+    UserSceneError
+        Whatever either refuses, naming the scene. Returns :func:`check_view`'s dict.
+    """
+    import mitsuba as mi
+
+    from ..optics.reference import reference_geometry
+    from .mirror import mirror_shape
+
+    user = load_user_scene(setup, scene, unit=unit, placement=placement)
+    shape, _ = mirror_shape(setup)
+    loaded = mi.load_dict({"type": "scene", "mirror": shape, **user.objects})
+    return check_view(loaded, setup, reference_geometry(setup).sensor_distance,
+                      label=user.label)
 
 
 def check_view(scene, setup, sensor_distance: float, *, label: str = "scene",
