@@ -11,6 +11,10 @@ mitsuba).
   scene=...)`` renders it.
 - :func:`mirror_shape` — the setup's mirror as a Mitsuba shape for any scene (the
   analytic sphere or an in-memory mesh with its error bound).
+- Integrators: ``mirrorview`` (:mod:`mitsweep.render.integrator`, emissive scenes) and
+  ``mirrorpath`` (:mod:`mitsweep.render.ad_integrator`, lit scenes), both differentiable
+  through the mirror; a sweep gradient asked of an integrator that would drop it raises
+  :class:`NotDifferentiableError`.
 
 Mitsuba is imported lazily, after :func:`mitsweep.backend.set_mitsuba_variant`.
 """
@@ -19,12 +23,13 @@ from .api import (AOV_NAMES, FOCUS_REFERENCE_DEPTH_MM, MODES, RenderResult, came
                   focus_distance_mirror_centre, mirror_image_bbox, mode_camera,
                   reference_sensor_distance, render_image, render_point_source, render_to_exr)
 from .mirror import mirror_shape
-from .sensor import PLUGIN_NAME, register
-from .user_scene import UserScene, UserSceneError, check_view, load_user_scene, user_scene
+from .sensor import PLUGIN_NAME, NotDifferentiableError, register
+from .user_scene import (UserScene, UserSceneError, check_user_scene, check_view,
+                         load_user_scene, user_scene)
 
 __all__ = ["register", "PLUGIN_NAME", "render_image", "render_to_exr", "render_point_source",
            "RenderResult", "MODES", "AOV_NAMES", "camera_dict", "mode_camera",
            "reference_sensor_distance",
            "focus_distance_mirror_centre", "mirror_image_bbox", "FOCUS_REFERENCE_DEPTH_MM",
-           "mirror_shape", "user_scene", "load_user_scene", "check_view", "UserScene",
-           "UserSceneError"]
+           "mirror_shape", "user_scene", "load_user_scene", "check_view", "check_user_scene",
+           "UserScene", "UserSceneError", "NotDifferentiableError"]
