@@ -82,7 +82,6 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
     import shutil
 
     import matplotlib
-    from matplotlib.figure import Figure
 
     p = Path(path)
     formats = set(Figure().canvas.get_supported_filetypes())
@@ -98,8 +97,6 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
 def new_figure(*args: int, figsize: tuple[float, float] = (7.0, 4.5),
                layout: str | None = "constrained", **kwargs: Any) -> tuple[Figure, Any]:
     """A new figure and its axes: ``Figure(figsize, layout).subplots(*args, **kwargs)``."""
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=figsize, layout=layout)
     return fig, fig.subplots(*args, **kwargs)
 
@@ -251,8 +248,6 @@ def plot_bank(bank: IPSFBank, path: str | Path, *,
     max_thumbs : int
         At most this many thumbnails, evenly spaced over the points.
     """
-    from matplotlib.figure import Figure
-
     kernels = np.asarray(bank.kernels)
     n_depths, n = kernels.shape[:2]
     for name, per_depth in sections.items():
@@ -299,9 +294,11 @@ def _depth_text(depth_mm: float) -> str:
 TABLE1_UPRIGHT_RANGES = 5
 
 
-def plot_table1(result: dict, path: str | Path) -> Path:
+def plot_table1(result: dict, path: str | Path, *,
+                optimal: tuple[float, float] | None = None) -> Path:
     """The paper's Table 1 as bar charts: V_avg per sweep range and the conventional
-    camera (log scale), and the four mean kurtoses per sweep range.
+    camera (log scale), and the four mean kurtoses per sweep range, the ranges from the
+    shortest sweep to the longest.
 
     Parameters
     ----------
@@ -311,13 +308,17 @@ def plot_table1(result: dict, path: str | Path) -> Path:
         for ``where`` in centre/periphery and ``direction`` in tangential/radial) and
         ``conventional["v_avg"]``.
     path : path
+    optimal : (focus_min, focus_max), optional
+        The optimal range (Eq. 8–9), marked "optimal" under its bars.
     """
-    rows = result["rows"]
+    rows = sorted(result["rows"], key=lambda r: r["focus_max_mm"] - r["focus_min_mm"])
     # Side by side, one-line "339–364 mm" labels run into each other: two lines each for a
     # few ranges, vertical single lines for more (two lines no longer fit then either).
     vertical = len(rows) > TABLE1_UPRIGHT_RANGES
     br = "" if vertical else "\n"
-    labels = [f"{r['focus_min_mm']:.0f}–{br}{r['focus_max_mm']:.0f} mm" for r in rows]
+    labels = [f"{r['focus_min_mm']:.0f}–{br}{r['focus_max_mm']:.0f} mm"
+              + (f"{' ' if vertical else br}(optimal)" if optimal is not None and np.allclose(
+                  (r["focus_min_mm"], r["focus_max_mm"]), optimal) else "") for r in rows]
     conventional = "conventional camera" if vertical else "conventional\ncamera"
     tick_style = dict(fontsize=8, rotation=90 if vertical else 0)
     fig, (a0, a1) = new_figure(1, 2, figsize=(11, 4.5))
@@ -527,8 +528,6 @@ def plot_psf_planes(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
     """
     k = np.asarray(kernels, dtype=np.float64)
     n_rows, n_cols = k.shape[:2]
-    from matplotlib.figure import Figure
-
     fig = Figure(figsize=(1.5 * n_cols + 1.8, 1.4 * n_rows + 1.0), layout="constrained")
     rows = [f"focus {f:.0f} mm\n(sensor {s:.2f} mm)" for f, s in zip(focus_mm, sensor_mm)]
     _kernel_grid(fig, k, pitch_mm * 1e3, list(positions), rows, suptitle=title,
@@ -557,8 +556,6 @@ def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
         depth (``x`` in pixels, as :func:`mitsweep.tracer.metrics.cross_sections`).
     title : str
     """
-    from matplotlib.figure import Figure
-
     k = np.asarray(kernels, dtype=np.float64)
     n_depths, n = k.shape[:2]
     for name, per_depth in sections.items():
@@ -583,6 +580,11 @@ def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
     return _save_all(fig, path)
 
 
+#: Line widths of the two directions: the radial curve wider, drawn first, so that where
+#: the two coincide (the centre of a symmetric mirror) it shows as a rim around the other.
+DIRECTION_WIDTHS = {"radial": 2.4, "tangential": 1.1}
+
+
 def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str | None,
                     half_um: float | None = None, axes=None, legend: bool = True):
     """Radial (blue) and tangential (red) cross-sections, one line style and marker per
@@ -598,7 +600,7 @@ def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str 
             every = max(len(x) // 8, 1)
             for values, direction in ((rad, "radial"), (tan, "tangential")):
                 ax.plot(x * pitch_um, values, linestyle=ls, marker=marker, ms=3.5,
-                        markevery=(d % every, every), lw=1.1,
+                        markevery=(d % every, every), lw=DIRECTION_WIDTHS[direction],
                         color=DIRECTION_COLORS[direction])
         ax.set_title(name, fontsize=9)
         ax.set_xlabel("position along the direction (µm)", fontsize=8)
@@ -609,7 +611,7 @@ def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str 
             ax.set_xlim(-half_um, half_um)
     axes[0].set_ylabel("IPSF (unit sum)", fontsize=8)
     if legend:
-        key = [Line2D([], [], color=c, lw=2, label=f"{d} direction")
+        key = [Line2D([], [], color=c, lw=DIRECTION_WIDTHS[d] + 0.8, label=f"{d} direction")
                for d, c in DIRECTION_COLORS.items()]
         key += [Line2D([], [], color="k", lw=1.1, linestyle=DEPTH_STYLES[d % len(DEPTH_STYLES)][0],
                        marker=DEPTH_STYLES[d % len(DEPTH_STYLES)][1], ms=3.5,
@@ -642,8 +644,6 @@ def plot_sweep_ranges(sections: Sequence[Mapping[str, Sequence[tuple]]], path: P
     optimal : (focus_min, focus_max), optional
         The optimal range (Eq. 8–9), marked "optimal" in its column's titles.
     """
-    from matplotlib.figure import Figure
-
     places = list(sections[0])
     n = len(ranges_mm)
     x_half = max(float(np.max(np.abs(np.asarray(sec[0])[np.maximum(np.asarray(sec[1]),
@@ -679,8 +679,9 @@ def plot_pipeline(steps: Sequence[dict], path: PathOrPaths, *,
     steps : sequence of dict
         Each ``{"title", "image"}`` (linear RGB (H, W, 3), shown as sRGB with ``white``
         → 1) and optionally ``"extent"`` (left, right, bottom, top) with ``"xlabel"`` and
-        ``"ylabel"`` (polar images: angle and radius; drawn on the last rows), else pixel
-        axes, with ``"window"`` (x, y, w, h) the part shown (the mirror's image).
+        ``"ylabel"`` (polar images: angle and radius, drawn to fill their panel), else
+        pixel axes, with ``"window"`` (x, y, w, h) the part shown (the mirror's image).
+        Drawn in order, left to right, at most three a row.
     path : path or sequence of paths
     bank_kernels : (n, K, K) array_like
         The IPSFs the deconvolution uses, shown in a row above the images.
@@ -692,13 +693,9 @@ def plot_pipeline(steps: Sequence[dict], path: PathOrPaths, *,
         Linear value shown as white (the ground truth's white level).
     title : str
     """
-    from matplotlib.figure import Figure
-
-    # Cartesian images on the first row(s), polar ones (wide: 360°) on the next, at
-    # most three a row, each row filling the width.
-    cartesian = [st for st in steps if st.get("extent") is None]
-    polar = [st for st in steps if st.get("extent") is not None]
-    rows = [group[i:i + 3] for group in (cartesian, polar) for i in range(0, len(group), 3)]
+    # In the steps' order (it is the reading order of their letters), at most three a
+    # row, each row filling the width.
+    rows = [list(steps[i:i + 3]) for i in range(0, len(steps), 3)]
     kernels = np.asarray(bank_kernels, dtype=np.float64)
     fig = Figure(figsize=(12.0, 1.9 + 3.9 * len(rows)), layout="constrained")
     top, bottom = fig.subfigures(2, 1, height_ratios=(1.6, 3.9 * len(rows)))
@@ -753,8 +750,8 @@ def plot_insets(images: Sequence[tuple[str, np.ndarray]], path: PathOrPaths, *,
         Show only this window of each image (the mirror's image).
     title : str
     """
-    from matplotlib.figure import Figure
     from matplotlib.patches import Rectangle
+    from matplotlib.patheffects import withStroke
 
     n_img, n_reg = len(images), len(regions)
     fig = Figure(figsize=(5.0 * n_img, 5.0 + 5.0 / n_reg + 0.6), layout="constrained")
@@ -777,8 +774,12 @@ def plot_insets(images: Sequence[tuple[str, np.ndarray]], path: PathOrPaths, *,
             color = INSET_COLORS[k % len(INSET_COLORS)]
             main_ax.add_patch(Rectangle((c - 0.5, r - 0.5), s, s, fill=False, lw=1.5,
                                         edgecolor=color))
-            main_ax.annotate(str(k + 1), (c + s, r - 0.5), color=color, fontsize=8,
-                             fontweight="bold", va="bottom", ha="left")
+            # The number just outside the frame's top-left corner, outlined so that it
+            # reads on light and dark parts of the image alike.
+            main_ax.annotate(str(k + 1), (c - 0.5, r - 0.5), xytext=(-2, 2),
+                             textcoords="offset points", color=color, fontsize=11,
+                             fontweight="bold", va="bottom", ha="right",
+                             path_effects=[withStroke(linewidth=2.5, foreground="black")])
             ax.imshow(shown[r:r + s, c:c + s], interpolation="nearest")
             ax.set_xticks([])
             ax.set_yticks([])

@@ -206,7 +206,7 @@ def test_fig5_and_table1_draw_one_set_of_traced_banks(tmp_path, scenes_dir, monk
     monkeypatch.setattr(t1, "table1_banks", counting)
     monkeypatch.setattr(mitsweep.plots, "plot_sweep_ranges",
                         lambda sections, path, **kw: drawn_sections.append((sections, kw)))
-    monkeypatch.setattr(mitsweep.plots, "plot_table1", lambda result, path: None)
+    monkeypatch.setattr(mitsweep.plots, "plot_table1", lambda result, path, **kw: None)
     tiny = dataclasses.replace(QUICK, table1_rays=2_000, table1_radii=2)
     figs = _SetupFigures(load_setup(scenes_dir / "sphere.toml"), tiny, tmp_path, seed=0,
                          step=lambda msg: None)
@@ -225,3 +225,35 @@ def test_fig5_and_table1_draw_one_set_of_traced_banks(tmp_path, scenes_dir, monk
         x, rad, tan = col["periphery"][0]
         np.testing.assert_array_equal(rad, cross_sections(bank.kernels[0, -1], 0.0)[1])
     assert len(table["rows"]) == len(banks) and list(kw["depths_mm"]) == table["depths_mm"]
+
+
+def test_table1_chart_runs_from_the_shortest_sweep_and_marks_the_optimal(tmp_path, drawn):
+    from test_plots import table1_result
+
+    result = table1_result(3)
+    result["rows"].append({**result["rows"][1], "focus_max_mm": 364.25})   # the optimal, last
+    plots.plot_table1(result, tmp_path / "t1.png", optimal=(339.0, 364.25))
+    (fig, _), = drawn
+    labels = [t.get_text() for t in fig.axes[1].get_xticklabels()]
+    ends = [float(t.split("–")[1].split()[0]) for t in labels]
+    assert ends == sorted(ends) and len(ends) == 4
+    assert [("optimal" in t) for t in labels] == [e == 364.0 for e in ends]
+
+
+def test_pipeline_panels_read_in_the_order_of_the_steps(tmp_path, drawn):
+    """Left to right, top to bottom, in the order given (the letters' order), polar
+    panels included."""
+    rng = np.random.default_rng(1)
+    steps = [{"title": f"({c})", "image": rng.random((16, 16, 3))} for c in "bc"]
+    polar = {"xlabel": "angle (degrees)", "ylabel": "radius (pixels)",
+             "extent": (0.0, 360.0, 8.0, 0.0)}
+    steps += [{"title": f"({c})", "image": rng.random((8, 36, 3)), **polar} for c in "de"]
+    steps += [{"title": "(f)", "image": rng.random((16, 16, 3))}]
+    plots.plot_pipeline(steps, tmp_path / "f8.png", bank_kernels=[gaussian_kernel(1.0)] * 2,
+                        bank_positions=["r = 0", "r = 1"], pitch_mm=0.018, white=1.0,
+                        title="t")
+    (fig, renderer), = drawn
+    panels = [ax for ax in fig.axes if ax.get_title() in {f"({c})" for c in "bcdef"}]
+    boxes = {ax.get_title(): ax.get_window_extent(renderer) for ax in panels}
+    order = sorted(boxes, key=lambda t: (-round(boxes[t].y1), boxes[t].x0))
+    assert order == ["(b)", "(c)", "(d)", "(e)", "(f)"]

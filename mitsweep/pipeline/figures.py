@@ -291,7 +291,7 @@ class _SetupFigures:
             sections = [{place: [cross_sections(b.kernels[j, i], 0.0)
                                  for j in range(len(PAPER_DEPTHS_MM))]
                          for place, i in (("centre", 0), ("periphery", -1))} for b in banks]
-            periphery = f"r = {banks[0].radii_mm[-1]:.2f} mm from the image centre"
+            periphery = f"the field's edge, r = {banks[0].radii_mm[-1]:.2f} mm on the sensor"
         else:
             sections = [{"centre": self.sections(self.centre, PAPER_DEPTHS_MM, r),
                          "periphery": self.sections(self.periphery, PAPER_DEPTHS_MM, r)}
@@ -319,10 +319,11 @@ class _SetupFigures:
                              rays=self.quality.table1_rays, seed=self.seed,
                              banks=self.table1_banks())
         stem = f"table1_{s.name}"
-        plot_table1(result, _paths(self.out, stem))
+        optimal = (self.sweep.focus_min, self.sweep.focus_max)
+        plot_table1(result, _paths(self.out, stem), optimal=optimal)
         write_text_atomic(self.out / f"{stem}.json",
                           json.dumps(result, indent=2, default=str) + "\n")
-        write_text_atomic(self.out / f"{stem}.md", _table1_md(result))
+        write_text_atomic(self.out / f"{stem}.md", _table1_md(result, optimal))
 
     # -- the renders (Figs. 8-10) --
 
@@ -503,7 +504,7 @@ def _distance_label(depth: np.ndarray, mask: np.ndarray, region) -> str:
     return f"≈ {m / 10:.0f} cm from the mirror" if m < 1000 else f"≈ {m / 1000:.1f} m from the mirror"
 
 
-def _table1_md(result: dict) -> str:
+def _table1_md(result: dict, optimal: tuple[float, float] | None = None) -> str:
     lines = [f"# Table 1 — {result['setup']}", "",
              f"V_avg (Eq. 3) and mean kurtosis (Gaussian = 3) over depths "
              f"{', '.join(f'{d / 1000:g}' for d in result['depths_mm'])} m; "
@@ -512,7 +513,10 @@ def _table1_md(result: dict) -> str:
              "periphery tangential | periphery radial |", "|---|---|---|---|---|---|"]
     for r in result["rows"]:
         k = r["kurtosis"]
-        lines.append(f"| {r['focus_min_mm']:.1f}–{r['focus_max_mm']:.1f} | {r['v_avg']:.3g} | "
+        mark = (" (optimal)" if optimal is not None
+                and np.allclose((r["focus_min_mm"], r["focus_max_mm"]), optimal) else "")
+        lines.append(f"| {r['focus_min_mm']:.1f}–{r['focus_max_mm']:.1f}{mark} | "
+                     f"{r['v_avg']:.3g} | "
                      f"{k['center']['tangential']:.2f} | {k['center']['radial']:.2f} | "
                      f"{k['periphery']['tangential']:.2f} | {k['periphery']['radial']:.2f} |")
     c = result["conventional"]
