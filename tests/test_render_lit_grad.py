@@ -220,3 +220,17 @@ def test_the_lit_room_built_by_mitsweep_is_differentiable_through_the_mirror():
     g = ad_derivative(scene, "sensor.sensor_end", 1, np.ones((16, 16, 3), np.float32),
                       mode="reverse")
     assert np.isfinite(g).all() and abs(float(g[0])) > 0
+
+
+def test_inverse_problem_recovers_a_perturbed_sweep_end_through_the_mirror_in_a_lit_scene():
+    """examples/inverse_sweep.py --lit, reduced: a sweep end 240 µm (20 % of the span) off
+    is found by Gauss-Newton steps on the forward-mode Jacobian image through the mirror.
+    Measured over 4 target seeds at 32 px, 32 spp, 20 steps: 2.3-7.8 % of the initial
+    error left (one step's estimate scatters by ±40 µm); a zero gradient (``path``'s)
+    cannot step at all, a wrong one stays off or diverges."""
+    from test_render_sweep_grad import _inverse_sweep_example
+
+    example = _inverse_sweep_example()
+    out = example.recover_sweep_end(method="gauss-newton", width=32, spp=32, steps=20,
+                                    target_spp=4096, perturbation=0.2, lit=True)
+    assert out["error_fraction_of_initial"] < 0.2, out["error_mm"]
