@@ -409,3 +409,37 @@ def test_cli_renders_a_scene_file_quietly(tmp_path):
     assert rc == 0, err
     assert err == "" and (tmp_path / "o.exr").is_file()
     assert '"unit": "m"' in out
+
+
+def test_user_scenes_get_the_integrator_differentiable_through_the_mirror():
+    """With a finite depth (the user's integrator's, plus the mirror's bounce) a user
+    scene is rendered by ``mirrorpath`` (``path``'s image; the *_ad_* variant of the
+    tests), and a sweep gradient of the scene mitsweep builds from it passes through the
+    mirror; an unlimited depth keeps ``path`` (whose sweep gradient through the mirror
+    is refused: tests/test_render_lit_grad.py)."""
+    import drjit as dr
+
+    from mitsweep.render import camera_dict, mode_camera
+    from mitsweep.render.scene import build_scene
+
+    s = small(8)
+    assert render_image(s, "pinhole", spp=1, scene=world(1.0)).metadata["scene"][
+        "integrator"] == "mirrorpath"
+    kw, _ = mode_camera(s, "sweep", None, None)
+    cam = camera_dict(s, spp=4, sampler="independent", **kw)
+    objects = load_user_scene(s, world(1.0)).objects
+    assert build_scene(s, cam, surroundings=False, extra=objects,
+                       max_depth=-1)[1]["integrator"] == "path"
+    d, info = build_scene(s, cam, surroundings=False, extra=objects, max_depth=4)
+    assert info["integrator"] == "mirrorpath"
+    scene = mi.load_dict(d)
+    params = mi.traverse(scene)
+    dr.enable_grad(params["sensor.sensor_end"])
+    params.update()
+    try:
+        img = mi.render(scene, params, seed=1, seed_grad=2)
+        dr.backward(dr.sum(img, axis=None))
+        g = float(dr.grad(params["sensor.sensor_end"])[0])
+    finally:
+        dr.disable_grad(params["sensor.sensor_end"])
+    assert np.isfinite(g) and g != 0.0
