@@ -1,4 +1,4 @@
-"""Memory estimates checked before large arrays are made.
+"""Resources: memory estimates checked before large arrays are made, and the bundled setups.
 
 Every step that allocates in proportion to a user-given size (a render's film, an IPSF
 bank, a kernel, a deconvolution's FFT grids) states what it needs and calls
@@ -9,6 +9,13 @@ a ``MemoryError`` or a Dr.Jit abort halfway through.
 The limit is the smaller of the memory available now (``MemAvailable`` in
 ``/proc/meminfo``, else physical pages × page size from :func:`os.sysconf`) and a hard
 cap: ``$MITSWEEP_MAX_MEMORY_GB`` GiB, default :data:`DEFAULT_MAX_MEMORY_GB`.
+
+The files bundled with the package are found here too: the paper's setups and the other
+examples of the repository's ``scenes/`` folder (:func:`bundled_setup`,
+:func:`bundled_scenes_dir`), which a wheel carries as ``mitsweep/scenes``
+(``pyproject.toml`` maps the folder into the package), so ``mitsweep figures`` and any
+``SETUP`` argument given as a bundled name (``mitsweep sweep-range sphere``) work from an
+installed package as from the source tree.
 """
 
 from __future__ import annotations
@@ -16,9 +23,11 @@ from __future__ import annotations
 import logging
 import math
 import os
+from pathlib import Path
 
 __all__ = ["ResourceError", "check_allocation", "available_memory_bytes", "memory_cap_bytes",
-           "format_bytes", "DEFAULT_MAX_MEMORY_GB", "MAX_MEMORY_ENV"]
+           "format_bytes", "DEFAULT_MAX_MEMORY_GB", "MAX_MEMORY_ENV", "bundled_scenes_dir",
+           "bundled_setup_names", "bundled_setup"]
 
 logger = logging.getLogger(__name__)
 
@@ -104,3 +113,48 @@ def check_allocation(what: str, nbytes: float) -> None:
         raise ResourceError(f"{what}: needs {format_bytes(need)}, {format_bytes(avail)} "
                             f"available; use smaller sizes or free memory")
     logger.debug("%s: %s of %s available", what, format_bytes(need), format_bytes(avail))
+
+
+# -- files bundled with the package ------------------------------------------------------
+
+#: Where an installed package keeps the repository's ``scenes/`` (pyproject.toml maps it).
+_INSTALLED_SCENES = Path(__file__).resolve().parent / "scenes"
+#: The source tree's ``scenes/`` (a checkout, or an editable install of one).
+_SOURCE_SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def bundled_scenes_dir() -> Path:
+    """The folder of the bundled setups: the installed package's ``mitsweep/scenes``,
+    else the source tree's ``scenes/``.
+
+    Raises
+    ------
+    FileNotFoundError
+        Neither holds a setup (a broken installation).
+    """
+    for d in (_INSTALLED_SCENES, _SOURCE_SCENES):
+        if any(d.glob("*.toml")):
+            return d
+    raise FileNotFoundError(f"no bundled setups in {_INSTALLED_SCENES} nor {_SOURCE_SCENES}: "
+                            f"reinstall mitsweep")
+
+
+def bundled_setup_names() -> list[str]:
+    """Names of the bundled setups (their files' stems), sorted: ``paraboloid``,
+    ``sphere``, ..."""
+    return sorted(p.stem for p in bundled_scenes_dir().glob("*.toml"))
+
+
+def bundled_setup(name: str) -> Path:
+    """The setup file of a bundled setup, by name (``"sphere"`` →
+    ``.../scenes/sphere.toml``).
+
+    Raises
+    ------
+    ValueError
+        ``name`` is not one of :func:`bundled_setup_names`.
+    """
+    names = bundled_setup_names()
+    if name not in names:
+        raise ValueError(f"{name!r}: not a bundled setup (bundled: {', '.join(names)})")
+    return bundled_scenes_dir() / f"{name}.toml"

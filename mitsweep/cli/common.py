@@ -115,6 +115,12 @@ def check_outputs(inputs: Iterable[PathArg], outputs: Iterable[PathArg]) -> None
 
 
 def load_setup_arg(path: str) -> Setup:
+    """A ``SETUP`` argument: a setup TOML file, or the name of a bundled setup
+    (:func:`mitsweep.resources.bundled_setup_names`) when no such file exists."""
+    from ..resources import bundled_setup, bundled_setup_names
+
+    if not os.path.exists(path) and path in bundled_setup_names():
+        return load_setup(bundled_setup(path))
     return load_setup(path)
 
 

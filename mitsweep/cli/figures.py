@@ -18,8 +18,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
     p.add_argument("--setup", action="append", metavar="SETUP",
-                   help=f"a paper setup ({', '.join(PAPER_SETUPS)}: scenes/<name>.toml) or a "
-                        f"setup TOML file; repeat for several (default: the three)")
+                   help=f"a paper setup ({', '.join(PAPER_SETUPS)}: the bundled "
+                        f"scenes/<name>.toml) or a setup TOML file; repeat for several "
+                        f"(default: the three)")
     p.add_argument("--quick", action="store_true",
                    help="small renders and few rays: every file in minutes (the full run "
                         "is the gallery's quality)")
@@ -29,21 +30,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of traces and renders (0)")
 
 
-def _scenes_dirs() -> list[Path]:
-    """Where the paper's setups are looked up: ./scenes, then the source tree's."""
-    return [Path("scenes"), Path(__file__).resolve().parents[2] / "scenes"]
-
-
 def resolve_setup(text: str) -> Path:
-    """A ``--setup`` value → its TOML file: a paper setup's name or a path."""
+    """A ``--setup`` value → its TOML file: a paper setup's name (the bundled file,
+    :func:`mitsweep.resources.bundled_setup`) or a path."""
     from ..pipeline.figures import PAPER_SETUPS
+    from ..resources import bundled_setup
 
     if text in PAPER_SETUPS:
-        for d in _scenes_dirs():
-            if (d / f"{text}.toml").is_file():
-                return d / f"{text}.toml"
-        raise UsageError(f"--setup {text}: scenes/{text}.toml not found (looked in "
-                         f"{', '.join(str(d) for d in _scenes_dirs())}); give its path")
+        return bundled_setup(text)
     p = Path(text)
     if p.suffix == ".toml" and p.is_file():
         return p
