@@ -44,7 +44,7 @@ def test_polar_adjoint_is_the_transpose_of_the_dense_forward():
     A = dense_matrix(op)
     At = dense_matrix(type(op)(shape=shape, forward=op.adjoint, adjoint=op.forward,
                                kind=op.kind))
-    np.testing.assert_allclose(At, A.T, atol=1e-12)
+    np.testing.assert_allclose(At, A.T, atol=1e-12)   # exact in exact arithmetic: round-off
 
 
 def test_product_convolution_is_exactly_the_per_pixel_blur():
@@ -52,6 +52,7 @@ def test_product_convolution_is_exactly_the_per_pixel_blur():
     wy, wx = grid_windows(*grid_axes_px(bank, SHAPE), SHAPE)
     field = grid_kernel_field(select_depth(bank), wy, wx)
     x = np.random.default_rng(1).random(SHAPE)
+    # the same sums in another order: round-off on values ~1
     np.testing.assert_allclose(_grid()(x), scatter_blur(x, field), atol=1e-12)
 
 
@@ -108,7 +109,7 @@ def test_pylops_operator_passes_pylops_dottest():
 
     Op = _polar().as_pylops()
     assert Op.shape == (SHAPE[0] * SHAPE[1],) * 2
-    assert dottest(Op, atol=1e-10)
+    assert dottest(Op, atol=1e-10)   # <Ax, y> = <x, A'y> to round-off of sums of 64² terms
 
 
 def test_pylops_absent_is_a_clear_error(monkeypatch):

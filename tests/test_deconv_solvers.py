@@ -139,9 +139,11 @@ def test_gcv_noise_sees_heavy_tailed_noise_that_the_robust_estimate_misses():
 def test_noise_sigma_from_model_number_or_image():
     from mitsweep.deconv.noise import SensorNoise
     img = np.full((64, 64), 0.5) + 0.01 * np.random.default_rng(0).standard_normal((64, 64))
+    # the wavelet estimate on 64² px: measured 0.1-6.9 % off over seeds 0-4
     assert abs(noise_sigma(img) / 0.01 - 1) < 0.1
     assert noise_sigma(img, 0.02) == 0.02
     model = SensorNoise(illuminance_lux=50, exposure_s=0.6, f_number=2.8, pixel_pitch=0.0064)
+    # the model's σ at the image's mean (0.5 ± 1e-4), not at 0.5: measured <= 1.6e-4 off
     assert noise_sigma(img, model) == pytest.approx(np.sqrt(model.variance(0.5)), rel=1e-3)
     with pytest.raises(ValueError, match="noise"):
         noise_sigma(img, "loud")
@@ -153,8 +155,9 @@ def test_hyper_laplacian_shrinkage_is_the_brute_force_minimiser():
     w = np.linspace(-4, 4, 80001)
     brute = w[np.argmin(tau * np.abs(w[None]) ** alpha + 0.5 * (w[None] - v[:, None]) ** 2,
                         axis=1)]
-    # grid step 1e-4; the table is interpolated on a 4096-point geometric grid
-    np.testing.assert_allclose(shrink_hyper_laplacian(v, tau, alpha), brute, atol=2e-3)
+    # grid step 1e-4; the table is interpolated on a 4096-point geometric grid. Measured
+    # 5.1e-5 at most (half the brute force's step, at the jump v = +-1.6): two steps
+    np.testing.assert_allclose(shrink_hyper_laplacian(v, tau, alpha), brute, atol=2e-4)
 
 
 def test_tv_shrinkage_soft_thresholds_the_gradient_magnitude():
@@ -198,7 +201,7 @@ def test_richardson_lucy_restores_and_stops_by_its_rule(problem):
     info = {}
     x = richardson_lucy(y, op, info=info)
     assert info["stopped_by"] in ("discrepancy", "converged", "iterations")
-    assert np.all(x >= 0) and np.all(np.isfinite(x))
+    assert np.all(x >= 0) and np.all(np.isfinite(x))   # multiplicative updates: exact
     # measured +3 dB over the blurred image at 256 px (50 lux); 1.5 dB is the bar
     assert _score(problem, x) > _score(problem, y) + 1.5
 
@@ -253,6 +256,7 @@ def test_deconvolve_rl_time_limit_bounds_the_whole_call(problem):
     T = 1.0
     t0 = time.perf_counter()
     out = deconvolve(y, problem["bank"], method="rl", iterations=10 ** 6, time_limit_s=T)
+    # the margin of test_richardson_lucy_time_limit_holds (iteration costs vary ~2x loaded)
     assert time.perf_counter() - t0 <= 1.25 * T
     assert out.shape == y.shape and out.dtype == np.float32
 

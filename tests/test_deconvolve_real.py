@@ -142,6 +142,7 @@ def test_edof_from_a_tiff_alone_matches_the_pipeline_on_the_render(tmp_path, cap
     report = run_json(capsys, "deconvolve", d / "photo.tif", "--setup",
                       tmp_path / "camera.toml", "--out", tmp_path / "edof.exr")
     assert report["bank_traced"] and report["center_from"].startswith("the setup")
+    # the calibrated centre, through the setup file: round-off only
     assert np.abs(np.array(report["center_rc"]) - np.array(cal["center_px"])).max() < 1e-9
     ours, theirs, sweep_db = edof_psnrs(p, tmp_path / "edof.exr")
     measured = (f"{name}: EDOF from the TIFF {ours:.2f} dB, pipeline {theirs:.2f} dB, "

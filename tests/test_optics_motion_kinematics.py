@@ -80,6 +80,8 @@ def test_time_at_inverts_position_at(move, fraction):
 def test_reaching_gives_a_full_ramp(v, a, cruise):
     move = Trapezoid.reaching(v, a, cruise_distance=cruise)
     assert move.peak_velocity == v
+    # closed forms: a few ulps; the cruise is a difference (D - v²/a) / v, which loses
+    # the digits of v²/a when the cruise is short, hence rel 1e-9 and abs 1e-12 v / a
     assert move.ramp_time == pytest.approx(v / a, rel=1e-12)
     assert move.ramp_distance == pytest.approx(v * v / (2 * a), rel=1e-12)
     assert move.cruise_time == pytest.approx(cruise / v, rel=1e-9, abs=1e-12 * v / a)
@@ -103,8 +105,9 @@ def test_bad_parameters_refused(field, value):
 @given(st.floats(1e-3, 1e2), st.floats(1e-2, 1e2), st.floats(1e-3, 0.5))
 def test_with_accel_fraction_round_trips(distance, duration, fraction):
     move = Trapezoid.with_accel_fraction(distance, duration, fraction)
-    assert move.duration == pytest.approx(duration, rel=1e-9)
-    assert move.accel_fraction == pytest.approx(fraction, rel=1e-6)
+    # round-off: measured <= 5.6e-16 over 2e5 random moves (f = 0.5 and 0.5 - 1e-9 too)
+    assert move.duration == pytest.approx(duration, rel=1e-12)
+    assert move.accel_fraction == pytest.approx(fraction, rel=1e-12)
     assert move.distance == distance
 
 
@@ -114,5 +117,5 @@ def test_arrays_in_arrays_out():
     np.testing.assert_array_equal(move.position_at(t), [move.position_at(x) for x in t])
     np.testing.assert_array_equal(move.velocity_at(t), [move.velocity_at(x) for x in t])
     d = np.linspace(0.0, 10.0, 5)
-    np.testing.assert_allclose(move.position_at(move.time_at(d)), d, rtol=1e-12)
+    np.testing.assert_allclose(move.position_at(move.time_at(d)), d, rtol=1e-12)  # ulps
     assert isinstance(move.position_at(1.0), float)

@@ -69,6 +69,7 @@ def test_image_shape_is_rows_then_columns():
 def test_reference_is_mid_travel_of_the_default_motion():
     sr = optimal_sweep_range(DEFAULT_SETUP)
     ref = reference_geometry(DEFAULT_SETUP)
+    # the same mid-travel, computed twice: round-off
     assert ref.sensor_distance == pytest.approx(sr.reference_sensor_distance, abs=1e-12)
     assert ref.motion.span == pytest.approx((sr.sensor_start, sr.sensor_end)) or \
         ref.motion.span == pytest.approx((sr.sensor_end, sr.sensor_start))
@@ -80,7 +81,7 @@ def test_a_measured_motion_sets_the_reference():
     # a rig log that overshot by 0.1 mm at the far end and started 0.05 mm late
     table = MotionProfile.tabulated([0.0, 0.3, 1.0], [lo + 0.05, 0.5 * (lo + hi), hi + 0.1])
     ref = reference_geometry(DEFAULT_SETUP, motion=table)
-    assert ref.sensor_distance == pytest.approx(0.5 * (lo + 0.05 + hi + 0.1), abs=1e-12)
+    assert ref.sensor_distance == pytest.approx(0.5 * (lo + 0.05 + hi + 0.1), abs=1e-12)  # ulps
     assert ref.sweep == sr and ref.motion is table
 
 

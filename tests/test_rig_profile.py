@@ -115,10 +115,11 @@ def test_linear_profile_plans_the_linear_sweeps_shutter_window(sphere):
                         exposure_s=sr.exposure_s)
     assert len(plan.profile.steps) == 1
     assert (plan.open_steps, plan.close_steps) == (linear.open_steps, linear.close_steps)
+    # the Arduino times the table in whole µs: half of one
     assert plan.planned_exposure_s == pytest.approx(sr.exposure_s, abs=0.5e-6)
     # the default exposure is the linear sweep's: travel at sweep.velocity
     default = plan_capture(sphere, motion=MotionProfile.linear(sr.sensor_start, sr.sensor_end))
-    assert default.exposure_s == pytest.approx(sr.exposure_s, rel=1e-12)
+    assert default.exposure_s == pytest.approx(sr.exposure_s, rel=1e-12)  # round-off
 
 
 def test_profile_with_more_knots_than_the_board_holds_is_reknotted(sphere):
@@ -323,7 +324,9 @@ def test_arduino_capture_runs_the_profile_it_planned(sphere, profile, tmp_path):
         first, last = t <= 0.2, t >= t[-1] - 0.2
         return np.polyfit(t[first], s_mm[first], 1)[0] / np.polyfit(t[last], s_mm[last], 1)[0]
 
-    assert speed_ratio(ideal) > 1.5
+    assert speed_ratio(ideal) > 1.5     # measured 1.59
+    # line fits over 0.2 s of samples within ~1 step (2.5 µm) of the plan: measured 0.64 %
+    # (the simulator's motion is analytic: the same on every run)
     assert speed_ratio(s) == pytest.approx(speed_ratio(ideal), rel=0.03)
     texts = [c["text"].split("*")[0] for c in data["commands"]]
     assert texts.count("OK TSWEEP") == 1 and not any(x.startswith("SWEEP ") for x in texts)

@@ -90,17 +90,21 @@ def test_forward_then_inverse_maps_agree_within_005_px(setup, projection, offset
     Wp, Hp = pmap.size
     pr, pc = rng.uniform(-0.5, Hp - 0.5, 4000), rng.uniform(-0.5, Wp - 0.5, 4000)
     row, col, ok = pmap.to_image(pr, pc)
+    # measured >= 0.97 (sphere), >= 0.55 (tilted paraboloid) of the panorama seen
     assert ok.mean() > 0.3, "most of the panorama should be seen"
     pr2, pc2, ok2 = pmap.from_image(row[ok], col[ok])
     assert ok2.all()
     dc = (pc2 - pc[ok] + Wp / 2) % Wp - Wp / 2   # columns wrap
-    assert np.max(np.abs(pr2 - pr[ok])) < 0.05 and np.max(np.abs(dc)) < 0.05
+    # the promise is 0.05 px; both maps invert to round-off: measured <= 7.2e-8 px (both
+    # setups and projections, both centres, seeds 1-3), so 1e-6 px is the bar
+    assert np.max(np.abs(pr2 - pr[ok])) < 1e-6 and np.max(np.abs(dc)) < 1e-6
     # and the other way: image pixels on the mirror -> panorama -> image
     ir, ic = rng.uniform(-0.5, H - 0.5, 4000), rng.uniform(-0.5, W - 0.5, 4000)
     qr, qc, okq = pmap.from_image(ir, ic)
     back_r, back_c, okb = pmap.to_image(qr[okq], qc[okq])
-    assert okq.mean() > 0.2 and okb.all()
-    assert np.max(np.hypot(back_r - ir[okq], back_c - ic[okq])) < 0.05
+    assert okq.mean() > 0.2 and okb.all()    # the mirror's share of the frame: >= 0.47
+    # measured <= 1.4e-9 px (as above)
+    assert np.max(np.hypot(back_r - ir[okq], back_c - ic[okq])) < 1e-6
 
 
 @pytest.mark.parametrize("projection", PROJECTIONS)
@@ -176,8 +180,9 @@ def test_directions_outside_the_frame_are_marked_not_seen(scenes_dir_module):
     pmap = panorama_map(setup, (N, N), projection="equirectangular",
                         center_px=(N / 2 - 0.5, N - 20.0))
     pano, valid = unwarp(np.ones((N, N)), pmap)
-    assert 0.2 < valid.mean() < 0.95
+    assert 0.2 < valid.mean() < 0.95          # measured 0.70: part seen, part not
     assert np.all(np.isfinite(pano)) and np.all(pano[~valid] == 0)
+    # a constant resamples to itself: measured 8.9e-16 off (round-off)
     np.testing.assert_allclose(pano[valid], 1.0, atol=1e-9)
 
 
