@@ -19,8 +19,8 @@ forward and reverse mode. The lighting is chosen so that the image has no visibi
 edge that moves with the sweep except an area light's rim seen by BSDF samples (whose
 MIS weight is small beside the light's own samples): under a constant environment the
 mirror's silhouette, seen from the board, occludes the sky, and the few samples that
-cross it within the step give the finite difference outliers of 10-15 times the
-derivative (measured), a boundary term plain AD leaves out (see
+cross it within the step give single-seed finite differences of up to 15 times the
+derivative, of either sign (measured), a boundary term plain AD leaves out (see
 :mod:`mitsweep.render.ad_integrator`).
 """
 

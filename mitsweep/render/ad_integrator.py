@@ -38,8 +38,13 @@ estimate at fixed random numbers, the quantity a central finite difference with 
 random numbers measures; its expectation is the derivative of the image's continuous
 part. Left out, as by plain AD anywhere: the boundary terms of visibility
 discontinuities (a silhouette, a shadow edge or an area light's edge that moves
-relative to the samples as the camera changes). The reverse pass keeps the whole
-render's graph in memory: size renders for it (32×32 px at 32 spp is a few MB).
+relative to the samples as the camera changes). As any plain-AD render, the gradient
+pass keeps the whole render's graph in memory: size gradient renders for it.
+
+Cost: the primal render is ``path``'s (measured side by side at 128 px, 64 spp, on
+2 loaded cores: 0.85× on the lit room, 0.96× on a procedural scene of depth 4), so
+:func:`mitsweep.render.scene.build_scene` uses it for every lit scene in ``*_ad_*``
+variants.
 """
 
 from __future__ import annotations
