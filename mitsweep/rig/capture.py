@@ -424,7 +424,7 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
 
 
 def run_capture(setup: Setup, ports: RigPorts, *, out: str | Path | None = None,
-                plan: CapturePlan | None = None, 
+                plan: CapturePlan | None = None,
                 motion_file: MotionFile | None = None) -> CaptureRecord:
     """Run one focal-sweep capture on the rig and return its record.
 

@@ -213,7 +213,7 @@ def _check_soft_limits(what: str, approach_steps: int, end_steps: int, spm: floa
                             f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
 
 
-def plan_capture(setup: Setup, *, stage: str = "arduino", 
+def plan_capture(setup: Setup, *, stage: str = "arduino",
                  sweep_range: SweepRange | None = None,
                  motion: MotionProfile | None = None,
                  exposure_s: float | None = None) -> CapturePlan:

@@ -276,7 +276,7 @@ class LineTransport:
         self._fill(0.0)
         return self._has_line()
 
-    def send_on_safety_path(self, line: str, until: Callable[[str], T | None], *, timeout_s: float, 
+    def send_on_safety_path(self, line: str, until: Callable[[str], T | None], *, timeout_s: float,
                             on_other: Callable[[str], object] | None = None,
                             attempts: int = SAFETY_ATTEMPTS) -> T:
         """Send ``line`` after discarding whatever is buffered, then read until

@@ -128,7 +128,7 @@ class PathMove:
 
 
 def table_pieces(rate_in: float, rate_out: float, accel: float, d_open: float,
-                 d_after: float, 
+                 d_after: float,
                  segments: Iterable[tuple[float, float]]) -> list[tuple[float, float, float]]:
     """Pieces of a table sweep: ramp from rest to ``rate_in`` at ``accel``, cruise to
     ``d_open``, the ``(steps, seconds)`` segments, cruise at ``rate_out`` and ramp down
