@@ -163,13 +163,6 @@ def _make_class():
 
 def register_integrator() -> None:
     """Register ``mirrorpath`` for the current Mitsuba variant (idempotent)."""
-    import mitsuba as mi
+    from .integrator import register_python_integrator
 
-    variant = mi.variant()
-    if variant is None:
-        raise RuntimeError(f"{INTEGRATOR_NAME}: select a Mitsuba variant first")
-    if variant not in _registered_for:
-        cls = _make_class()
-        mi.register_integrator(INTEGRATOR_NAME, lambda props: cls(props))
-        _registered_for.add(variant)
-        logger.debug("registered %s for %s", INTEGRATOR_NAME, variant)
+    register_python_integrator(INTEGRATOR_NAME, _make_class, _registered_for)

@@ -115,13 +115,19 @@ def _make_class():
 
 def register_integrator() -> None:
     """Register ``mirrorview`` for the current Mitsuba variant (idempotent)."""
+    register_python_integrator(INTEGRATOR_NAME, _make_class, _registered_for)
+
+
+def register_python_integrator(name: str, make_class, registered_for: set) -> None:
+    """Register the integrator class ``make_class()`` builds as plugin ``name`` for the
+    current Mitsuba variant, once per variant (``registered_for`` records them)."""
     import mitsuba as mi
 
     variant = mi.variant()
     if variant is None:
-        raise RuntimeError(f"{INTEGRATOR_NAME}: select a Mitsuba variant first")
-    if variant not in _registered_for:
-        cls = _make_class()
-        mi.register_integrator(INTEGRATOR_NAME, lambda props: cls(props))
-        _registered_for.add(variant)
-        logger.debug("registered %s for %s", INTEGRATOR_NAME, variant)
+        raise RuntimeError(f"{name}: select a Mitsuba variant first")
+    if variant not in registered_for:
+        cls = make_class()
+        mi.register_integrator(name, lambda props: cls(props))
+        registered_for.add(variant)
+        logger.debug("registered %s for %s", name, variant)
