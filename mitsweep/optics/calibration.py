@@ -900,6 +900,16 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
             f"{100 * (fit.scale - 1):+.2f}%: the pixel pitch would be {implied_pitch:.5g} mm "
             f"(setup {pitch:g}) or the lens-mirror distance {vd} mm "
             f"(setup {setup.mirror.vertex_distance:g})")
+        if not outline.on_rim.any():
+            # A hemisphere's outline is its limb, seen at grazing incidence, where the
+            # reflection continues what lies behind the mirror: a render shows no edge
+            # there (the sphere at 200 px: the fit found the boards' reflection 14.7%
+            # inside, reflected rays at 114 deg), so the size says nothing of the pitch.
+            warnings.append(
+                "the outline is the mirror's limb (grazing reflection), which shows no "
+                "edge where the reflection continues the background behind the mirror: "
+                "the fitted outline may be an edge inside the reflection, not the limb, "
+                "and its size then says nothing of the pitch or the distance")
     if fit.center_se_px > WARN_CENTRE_SE_PX:
         warnings.append(
             f"the rim is a faint edge: its {fit.points_used} edge points scatter by "
