@@ -18,6 +18,15 @@ def test_bench_tracer_quick_json(capsys):
 
     assert res["llvm_vector_width"] == backend.llvm_vector_width()
     assert [r["width"] for r in res["llvm_widths"]] == _compared_widths()
+    # the deposit strategies side by side: each of the three for both deposits
+    from mitsweep.tracer.bench import DEPOSIT_STRATEGIES
+
+    rows = res["deposit_strategies"]
+    assert sorted((r["strategy"], r["method"]) for r in rows) == sorted(
+        (label, m) for label, _ in DEPOSIT_STRATEGIES
+        for m in ("continuous, 1 time/ray", "exact"))
+    assert all(r["rays_per_s"] > 0 and r["cpu_seconds_per_ray"] > 0 for r in rows)
+    assert res["deposit_copies"] >= 1
     # Error per second: every method judged on the same reference bank; the exact
     # segment deposit reaches L1 <= 1e-3 in every kernel within the ladder (measured at
     # 2^18-2^19 rays per kernel), with no more rays than any other method needs.

@@ -17,6 +17,11 @@ reported, and ``llvm_widths`` times the cheapest deposit at the CPU's register w
 at the default width side by side, interleaved in this process (Dr.Jit compiles a
 kernel per width), with the peer's CPU per ray over each.
 
+``deposit_strategies`` times the cheapest and the exact deposit with the buffer's atomics
+as they were (one shared buffer, lanes in sample order), with Dr.Jit's per-thread copies
+(``ReduceMode.Expand``) and as they are (per-block copies; the segment deposit's lanes in
+a coherent order, pre-reduced per packet), interleaved in this process.
+
 Useful rays are reported for the cheapest deposit (one stratified sweep time per ray),
 the default 4 times and the exact segment deposit; ``ratio_cpu`` compares the CPU
 seconds per ray of the same two runs (all threads), which a loaded machine disturbs
@@ -38,6 +43,7 @@ import numpy as np
 from .. import backend
 from ..config import load_setup, DEFAULT_SETUP
 from ..optics.reference import reference_geometry
+from . import kernel
 from .bank import field_radius, ipsf_bank
 from .kernel import trace_arrays
 from .ipsf import DEFAULT_TIME_SAMPLES, fit_sampling_box, integrated_psf
@@ -155,6 +161,47 @@ def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: 
                 row["cpu_seconds_per_ray"] = min(row["cpu_seconds_per_ray"], cpu / rays)
                 row["rays_per_s"] = max(row["rays_per_s"], info["rays_landed"] / info["seconds"])
     return [rows[w] for w in widths]
+
+
+#: Deposit strategies timed side by side (:func:`_strategy_comparison`): label and
+#: :func:`mitsweep.tracer.kernel.deposit_strategy_scope` keywords (None: Dr.Jit's modes).
+DEPOSIT_STRATEGIES = (
+    ("one shared buffer, direct atomics, lanes in sample order (before)",
+     {"copies": 1, "mode": "Direct", "coherent": False}),
+    ("Dr.Jit's per-thread copies (ReduceMode.Expand)", {"copies": 1, "mode": "Expand"}),
+    ("per-block copies; segment deposit coherent and packet-local (default)", {}),
+)
+
+
+def _strategy_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: int) -> list:
+    """The cheapest deposit (one sweep time per ray) and the exact segment deposit under
+    each of :data:`DEPOSIT_STRATEGIES`, interleaved in this process: per strategy and
+    method, the best of ``repeats`` useful rays per second and CPU seconds per ray. The
+    kernels agree to the float64 summation order (tests/test_tracer_deposit.py)."""
+    import drjit as dr
+
+    methods = (("continuous, 1 time/ray", {"method": "continuous", "time_samples": 1}),
+               ("exact", {"method": "exact"}))
+    rows = {(label, m): {"strategy": label, "method": m, "rays_per_s": 0.0,
+                         "cpu_seconds_per_ray": math.inf}
+            for label, _ in DEPOSIT_STRATEGIES for m, _ in methods}
+    for rep in range(-1, repeats):  # rep -1: each strategy's kernels compiled, not timed
+        for m, kw in methods:
+            for label, strategy in DEPOSIT_STRATEGIES:
+                strategy = dict(strategy)
+                if "mode" in strategy:
+                    strategy["mode"] = getattr(dr.ReduceMode, strategy["mode"])
+                with kernel.deposit_strategy_scope(**strategy):
+                    c0 = time.process_time()
+                    _, info = integrated_psf(setup, u, 0.0, depth, rays=rays, sweep=sweep,
+                                             seed=rep + 1, **kw)
+                    cpu = time.process_time() - c0
+                if rep >= 0:
+                    row = rows[(label, m)]
+                    row["cpu_seconds_per_ray"] = min(row["cpu_seconds_per_ray"], cpu / rays)
+                    row["rays_per_s"] = max(row["rays_per_s"],
+                                            info["rays_landed"] / info["seconds"])
+    return list(rows.values())
 
 
 #: The error-per-second target: L1 of every kernel of the bank against the reference.
@@ -314,7 +361,10 @@ def run_bench(args) -> dict:
     out["llvm_vector_width"] = backend.llvm_vector_width() if llvm else None
     out["llvm_native_vector_width"] = backend.native_llvm_vector_width() if llvm else None
     out["llvm_widths"] = _width_comparison(setup, u, depth, sweep, rays, 2 if quick else 3)
-    for row in out["llvm_widths"]:
+    out["deposit_copies"] = kernel.deposit_copies()
+    out["deposit_strategies"] = _strategy_comparison(setup, u, depth, sweep, rays,
+                                                     2 if quick else 3)
+    for row in out["llvm_widths"] + out["deposit_strategies"]:
         row["ratio_cpu"] = (peer_cpu / row["cpu_seconds_per_ray"]) if peer_cpu else None
         row["ratio"] = (row["rays_per_s"] / peer) if peer else None
     # Error per second: a whole bank at L1 <= 1e-3 per kernel, each method side by side
