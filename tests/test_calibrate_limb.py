@@ -9,22 +9,17 @@ reflected rays at 114 deg from the axis) and by < 0.01 across the limb; the fit 
 59.0 px (sweep) and 59.3 px (pinhole), -14.7 % and -14.4 %.
 """
 
-from dataclasses import replace
-
 import numpy as np
 import pytest
+from test_calibrate import SMALL, small_setup
 
-from mitsweep.config import Sensor, load_setup
 from mitsweep.optics.calibration import calibrate_photo, predicted_outline
 from mitsweep.optics.pixels import optical_center_px
 
-from conftest import SCENES
-
-SMALL = Sensor(resolution=(200, 200), pixel_pitch=0.06)
 LIMB_WARNING = "the outline is the mirror's limb"
 
 
-def disc_photo(setup, radius_px: float, seed: int = 0) -> np.ndarray:
+def disc_photo(radius_px: float, seed: int = 0) -> np.ndarray:
     """Bright inside ``radius_px`` about the axis, the background's level outside (as a
     render, where the reflection near the limb continues the background), with noise."""
     H, W = 200, 200
@@ -38,13 +33,12 @@ def disc_photo(setup, radius_px: float, seed: int = 0) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def sphere():
-    s = load_setup(SCENES / "sphere.toml")
-    return replace(s, sensor=SMALL)
+    return small_setup("sphere")
 
 
 def test_an_edge_inside_the_limb_is_flagged_as_not_the_limb(sphere):
     predicted = predicted_outline(sphere).equivalent_radius_px(SMALL.pixel_pitch)
-    cal = calibrate_photo(disc_photo(sphere, 0.86 * predicted), sphere)
+    cal = calibrate_photo(disc_photo(0.86 * predicted), sphere)
     # the fit finds the edge it was shown (0.5 px: the calibration tests' radius bar)
     assert cal.rim_radius_px == pytest.approx(0.86 * predicted, abs=0.5)
     assert any("pixel pitch would be" in w for w in cal.warnings)
@@ -53,7 +47,7 @@ def test_an_edge_inside_the_limb_is_flagged_as_not_the_limb(sphere):
 
 def test_an_edge_at_the_limb_is_not_flagged(sphere):
     predicted = predicted_outline(sphere).equivalent_radius_px(SMALL.pixel_pitch)
-    cal = calibrate_photo(disc_photo(sphere, predicted), sphere)
+    cal = calibrate_photo(disc_photo(predicted), sphere)
     assert cal.rim_radius_px == pytest.approx(predicted, abs=0.5)
     assert not any(LIMB_WARNING in w for w in cal.warnings)
 
@@ -61,9 +55,9 @@ def test_an_edge_at_the_limb_is_not_flagged(sphere):
 def test_a_rim_outline_is_never_flagged():
     """The paraboloid's outline is its rim (a real edge): a size off by 14 % is the
     setup's pitch or distance, and the warning says only that."""
-    s = replace(load_setup(SCENES / "paraboloid.toml"), sensor=SMALL)
+    s = small_setup("paraboloid")
     assert predicted_outline(s).on_rim.all()
     predicted = predicted_outline(s).equivalent_radius_px(SMALL.pixel_pitch)
-    cal = calibrate_photo(disc_photo(s, 0.86 * predicted), s)
+    cal = calibrate_photo(disc_photo(0.86 * predicted), s)
     assert any("pixel pitch would be" in w for w in cal.warnings)
     assert not any(LIMB_WARNING in w for w in cal.warnings)
