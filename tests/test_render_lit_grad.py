@@ -157,8 +157,13 @@ def grad_cases():
     return out
 
 
-@pytest.mark.parametrize("key", ["sensor.sensor_start", "sensor.sensor_end"])
-@pytest.mark.parametrize("mode", ["forward", "reverse"])
+@pytest.mark.parametrize("key, mode", [
+    # Forward and reverse mode agree to 1e-4 with the same seed (the CRN test below, for
+    # both keys; measured |z| within 1e-5 of each other), so each key needs one here.
+    ("sensor.sensor_start", "forward"), ("sensor.sensor_end", "reverse"),
+    pytest.param("sensor.sensor_start", "reverse", marks=pytest.mark.slow),
+    pytest.param("sensor.sensor_end", "forward", marks=pytest.mark.slow),
+])
 def test_lit_gradient_through_the_mirror_matches_finite_differences_statistically(
         grad_cases, key, mode):
     scene, w = grad_cases[key]
