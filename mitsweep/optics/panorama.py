@@ -77,8 +77,8 @@ def directions_to_angles(directions: ArrayLike) -> tuple[NDArray[np.float64], ND
             np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
 
 
-def image_to_direction(placement: Placement, u: ArrayLike, v: ArrayLike,
-                       sensor_distance: float) -> NDArray[np.float64]:
+def image_to_direction(placement: Placement, u: ArrayLike, v: ArrayLike, sensor_distance: float
+                       ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """World directions seen at upright image points (u, v), mm, on a sensor at ``i``.
 
     Returns
@@ -115,8 +115,8 @@ def _seed_table(placement: Placement):
     return tree, np.stack([x[ok], y[ok]], axis=-1), reach
 
 
-def direction_to_image(placement: Placement, directions: ArrayLike,
-                       sensor_distance: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def direction_to_image(placement: Placement, directions: ArrayLike, sensor_distance: float
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
     """Upright image points (u, v), mm, where world ``directions`` are seen.
 
     Solves ``ŵ(x, y) = d`` for the mirror point (local ``x, y``) by Newton's method on the

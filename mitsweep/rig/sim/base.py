@@ -12,11 +12,14 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable, TypeVar
 
 from ...optics.kinematics import Trapezoid
 
 __all__ = ["Fault", "FAULT_KINDS", "Move", "PathMove", "table_pieces", "Model", "command"]
+
+#: A model's command method (its replies' form is the model's own).
+Handler = TypeVar("Handler", bound=Callable[..., Any])
 
 FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event", "slow_reply")
 
@@ -141,8 +144,7 @@ def table_pieces(rate_in: float, rate_out: float, accel: float, d_open: float,
     return pieces
 
 
-def command(*words: str, nargs: int | None = None
-            ) -> Callable[[Callable[..., object]], Callable[..., object]]:
+def command(*words: str, nargs: int | None = None) -> Callable[[Handler], Handler]:
     """Declare a model method as the handler of the command ``words`` (the leading
     words that name it) taking ``nargs`` further arguments (None: any number)."""
     def declare(method):
@@ -182,8 +184,7 @@ class Model:
         self._fault_at: float | None = None     # when an armed fault_flag fault strikes
 
     # -- commands -----------------------------------------------------------------------
-    def handler(self, words: list[str]
-                ) -> tuple[Callable[..., object] | None, list[str] | None]:
+    def handler(self, words: list[str]) -> tuple[Callable[..., Any] | None, list[str] | None]:
         """``(bound method, arguments)`` of the command that ``words`` start with (the
         longest declared match), or ``(None, None)``; arguments is None when their
         number is not the declared one."""
