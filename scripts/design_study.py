@@ -369,8 +369,8 @@ def deployed_prediction(setup, report: dict, noise, *, nsr_used: float,
     ``Σ_f w_f (|1 − G H_l|² S(f) + |G|² σ²)``, ``S = σ²/R`` (the 1/f² prior),
     ``G = conj(H_b) / (|H_b|² + R nsr_used/nsr)``;
 
-    with ``H_b = H_l`` and the model's NSR it is the design's MSE (checked here, on the
-    plane bank traced again with the design's seeds). Returns worst and mean PSNR (dB)
+    with ``H_b = H_l`` and the model's NSR it is the design's MSE (checked here to 0.1 %,
+    on the plane bank traced again with the design's seeds). Returns worst and mean PSNR (dB)
     of: ``matched`` (the design's), ``one_kernel`` (the 500-mm kernel, the model's NSR)
     and ``deployed`` (that kernel and the used NSR)."""
     from mitsweep.design import plane_bank, wiener_model
@@ -411,7 +411,9 @@ def deployed_prediction(setup, report: dict, noise, *, nsr_used: float,
             G = np.conj(hb) / (np.abs(hb) ** 2 + r)
             mse[kind] = ((np.abs(1 - G * H) ** 2 * S + np.abs(G) ** 2 * sigma2) * w).sum(-1)
         ref = np.asarray(report["per_point"][f"{which}_mse"])
-        if not np.allclose(mse["matched"], ref, rtol=1e-6, atol=0):
+        # same seeds, but the tracer's deposits are atomic adds in thread order: a bank
+        # traced again differs at ~1e-4 (measured 1.2e-4 on the sphere)
+        if not np.allclose(mse["matched"], ref, rtol=1e-3, atol=0):
             raise SystemExit(f"{setup.name}: the plane bank traced again does not give the "
                              f"design's MSE (max rel. diff "
                              f"{np.max(np.abs(mse['matched'] / ref - 1)):.2g})")
@@ -459,7 +461,8 @@ def diagnosis_table(rows: list[dict]) -> str:
             continue
         g = {k: [d["optimized"][m][k] - d["linear"][m][k]
                  for m in ("matched", "one_kernel", "deployed")] for k in ("worst_db", "mean_db")}
-        lines.append(f"| {r['setup']} | {r['lux']:g} | {d['nsr_model']:.3g} / {d['nsr_used']:.3g} | "
+        lines.append(f"| {r['setup']} | {r['lux']:g} | {d['nsr_model']:.3g} / "
+                     f"{d['nsr_used']:.3g} | "
                      + ", ".join(f"{x:+.2f}" for x in g["worst_db"]) + " | "
                      + ", ".join(f"{x:+.2f}" for x in g["mean_db"]) + " | "
                      f"{r['paired_db']['mean']:+.2f} ± {r['paired_db']['se']:.2f} |")
