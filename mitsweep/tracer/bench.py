@@ -168,7 +168,8 @@ def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: 
 DEPOSIT_STRATEGIES = (
     ("one shared buffer, direct atomics, lanes in sample order (before)",
      {"copies": 1, "mode": "Direct", "coherent": False}),
-    ("Dr.Jit's per-thread copies (ReduceMode.Expand)", {"copies": 1, "mode": "Expand"}),
+    ("Dr.Jit's per-thread copies (ReduceMode.Expand), lanes in sample order",
+     {"copies": 1, "mode": "Expand", "coherent": False}),
     ("per-block copies; segment deposit coherent and packet-local (default)", {}),
 )
 
