@@ -22,9 +22,6 @@ import mitsweep
 NOT_YET = {
     "mitsweep.backend",
     "mitsweep.pipeline.tasks",
-    "mitsweep.render.api", "mitsweep.render.bench", "mitsweep.render.mirror",
-    "mitsweep.render.procedural", "mitsweep.render.scene", "mitsweep.render.sensor",
-    "mitsweep.render.user_scene",
     "mitsweep.tracer.bank", "mitsweep.tracer.bench", "mitsweep.tracer.cache",
     "mitsweep.tracer.convergence", "mitsweep.tracer.focus", "mitsweep.tracer.ipsf",
     "mitsweep.tracer.kernel", "mitsweep.tracer.metrics", "mitsweep.tracer.source",

@@ -35,11 +35,13 @@ import math
 import time as _time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Iterable, Mapping
 
 import numpy as np
 
-from ..optics import (chief_ray, focal_image_axial_distances, image_distance, image_point,
-                      mirror_point_from_image, placement_of)
+from ..config import Setup
+from ..optics import (SweepRange, chief_ray, focal_image_axial_distances, image_distance,
+                      image_point, mirror_point_from_image, placement_of)
 from ..optics.motion import MotionProfile
 from ..optics.pixels import image_shape, pixel_to_sensor, sensor_to_pixel
 from ..optics.reference import ReferenceGeometry, reference_geometry
@@ -93,7 +95,8 @@ class RenderResult:
     metadata: dict = field(default_factory=dict)
 
 
-def reference_sensor_distance(setup, sweep=None, *, motion: MotionProfile | None = None) -> float:
+def reference_sensor_distance(setup: Setup, sweep: SweepRange | None = None, *,
+                              motion: MotionProfile | None = None) -> float:
     """Reference sensor distance ``i_ref`` (mm): mid-travel of the motion run.
 
     A thin wrapper of :func:`mitsweep.optics.reference.reference_geometry`.
@@ -101,16 +104,17 @@ def reference_sensor_distance(setup, sweep=None, *, motion: MotionProfile | None
     return reference_geometry(setup, sweep=sweep, motion=motion).sensor_distance
 
 
-def focus_distance_mirror_centre(setup, depth: float = FOCUS_REFERENCE_DEPTH_MM) -> float:
+def focus_distance_mirror_centre(setup: Setup, depth: float = FOCUS_REFERENCE_DEPTH_MM) -> float:
     """Object distance (mm) of the focal image of the mirror vertex for ``depth`` mm."""
     d_m, d_s = focal_image_axial_distances(setup, np.array(0.0), depth)
     return float(0.5 * (np.asarray(d_m) + np.asarray(d_s)))
 
 
-def camera_dict(setup, *, sensor_distance: float | None = None, motion: MotionProfile | None = None,
-                aperture_radius: float = 0.0, pixel_pitch: float | None = None,
-                spp: int = 16, crop: tuple[int, int, int, int] | None = None,
-                exposure_s: float = 1.0, sampler: str = "independent") -> dict:
+def camera_dict(setup: Setup, *, sensor_distance: float | None = None,
+                motion: MotionProfile | None = None, aperture_radius: float = 0.0,
+                pixel_pitch: float | None = None, spp: int = 16,
+                crop: tuple[int, int, int, int] | None = None, exposure_s: float = 1.0,
+                sampler: str = "independent") -> dict[str, Any]:
     """A ``focalsweep`` sensor dict at the lens centre, looking at the mirror.
 
     Give ``sensor_distance`` (fixed) or ``motion`` (a sweep over ``exposure_s``).
@@ -147,7 +151,8 @@ def camera_dict(setup, *, sensor_distance: float | None = None, motion: MotionPr
     return d
 
 
-def mode_camera(setup, mode, geometry: ReferenceGeometry | None = None, f_number=None):
+def mode_camera(setup: Setup, mode: str, geometry: ReferenceGeometry | None = None,
+                f_number: float | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """Camera of a mode on the reference grid: (kwargs of :func:`camera_dict`, description).
 
     ``geometry`` is the setup's :class:`~mitsweep.optics.reference.ReferenceGeometry`
@@ -185,7 +190,8 @@ def mode_camera(setup, mode, geometry: ReferenceGeometry | None = None, f_number
                 pixel_pitch=pitch * i_f / i_ref), desc
 
 
-def mirror_image_bbox(setup, sensor_distance: float, margin_px: int = 8):
+def mirror_image_bbox(setup: Setup, sensor_distance: float,
+                      margin_px: int = 8) -> tuple[int, int, int, int]:
     """Pixel window (x, y, w, h) holding the mirror's image (rim and centre + margin)."""
     placement = placement_of(setup.mirror)
     phi = np.linspace(0.0, 2 * math.pi, 721)
@@ -348,10 +354,12 @@ def _aovs(scene, setup, i_ref: float, wanted) -> dict:
     return out
 
 
-def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=None,
-                 motion: MotionProfile | None = None, f_number: float | None = None, mirror_only: bool = True,
+def render_image(setup: Setup, mode: str, *, spp: int, seed: int = 0, aovs: Iterable[str] = (),
+                 sweep: SweepRange | None = None, motion: MotionProfile | None = None,
+                 f_number: float | None = None, mirror_only: bool = True,
                  progress: bool = False, max_depth: int | None = None,
-                 sampler: str | None = None, scene=None,
+                 sampler: str | None = None,
+                 scene: str | Path | Mapping[str, Any] | None = None,
                  scene_unit: str | None = None) -> RenderResult:
     """Render the setup's scene, or a user's Mitsuba scene, through the mirror in one of
     :data:`MODES`.
@@ -468,7 +476,7 @@ def render_image(setup, mode: str, *, spp: int, seed: int = 0, aovs=(), sweep=No
     return RenderResult(full, layers, meta)
 
 
-def user_scene_depth(setup, user_depth: int | None) -> int:
+def user_scene_depth(setup: Setup, user_depth: int | None) -> int:
     """Integrator depth of a user scene: ``scene.max_depth`` if set, else the user's
     integrator's ``max_depth`` plus the mirror's bounce, else unlimited (-1)."""
     if setup.scene.max_depth > 0:
@@ -478,7 +486,7 @@ def user_scene_depth(setup, user_depth: int | None) -> int:
     return -1
 
 
-def render_to_exr(path, result: RenderResult) -> Path:
+def render_to_exr(path: str | Path, result: RenderResult) -> Path:
     """Write a :class:`RenderResult` as EXR (atomic): RGB plus ``depth.Z`` and ``mask.Y``."""
     from ..io import write_exr
 
@@ -501,8 +509,9 @@ def _world_per_pixel(setup, u, v, depth, i_ref) -> float:
     return float(min(np.linalg.norm(pts[1] - pts[0]), np.linalg.norm(pts[2] - pts[0])))
 
 
-def render_point_source(setup, u: float, v: float, depth: float, *, spp: int, seed: int = 0,
-                        mode: str = "sweep", window: int = 64, sweep=None,
+def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: int,
+                        seed: int = 0, mode: str = "sweep", window: int = 64,
+                        sweep: SweepRange | None = None,
                         motion: MotionProfile | None = None,
                         sensor_distance: float | None = None,
                         f_number: float | None = None, radius_px: float = 0.1,

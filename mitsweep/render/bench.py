@@ -26,6 +26,7 @@ Sections of the result:
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import math
 import time
@@ -245,7 +246,7 @@ def _ground_truth(setup, budgets, modes=("pinhole",)):
     return rows
 
 
-def run_bench(args) -> dict:
+def run_bench(args: argparse.Namespace) -> dict:
     """All render benchmarks; ``args.quick`` shrinks sizes for a smoke run."""
     from .sensor import register
 

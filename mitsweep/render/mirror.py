@@ -27,9 +27,12 @@ import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
+from ..config import Mirror, Setup
 from ..io.cache import cache_enabled, cache_root
 from ..optics import Profile, placement_of, profile_of
 
@@ -123,7 +126,8 @@ def _grid(profile: Profile, rim: float, n_rings: int, n_segments: int):
     return positions, normals, np.concatenate(faces).astype(np.uint32)
 
 
-def mesh_errors(profile: Profile, positions, normals, faces, *,
+def mesh_errors(profile: Profile, positions: NDArray[np.floating],
+                normals: NDArray[np.floating], faces: NDArray[np.integer], *,
                 max_normal_angle_deg: float = GRAZING_LIMIT_DEG) -> tuple[float, float]:
     """Measured (sag error mm, normal error rad) of a mesh against its profile.
 
@@ -199,7 +203,7 @@ def tessellate(profile: Profile, rim_radius: float, *, sag_tol: float = DEFAULT_
         n_segments = math.ceil(n_segments * grow)
 
 
-def uses_analytic_sphere(mirror) -> bool:
+def uses_analytic_sphere(mirror: Mirror) -> bool:
     """True where Mitsuba's exact ``sphere`` is the mirror (a full hemisphere)."""
     return mirror.is_sphere and mirror.rim_radius >= mirror.radius * (1 - 1e-12)
 
@@ -233,7 +237,8 @@ def _write_cached(path: Path, mesh: MirrorMesh, stats: dict) -> None:
                      stats=json.dumps(stats))
 
 
-def mirror_mesh(mirror, *, sag_tol: float = DEFAULT_SAG_TOL, normal_tol: float = DEFAULT_NORMAL_TOL,
+def mirror_mesh(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
+                normal_tol: float = DEFAULT_NORMAL_TOL,
                 cache: bool | None = None) -> tuple[MirrorMesh, dict]:
     """The mirror's mesh within both bounds (:func:`tessellate`) and its statistics.
 
@@ -269,14 +274,14 @@ def mirror_mesh(mirror, *, sag_tol: float = DEFAULT_SAG_TOL, normal_tol: float =
     return mesh, stats
 
 
-def cache_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
+def cache_file(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
                normal_tol: float = DEFAULT_NORMAL_TOL) -> Path:
     """Where :func:`mirror_mesh` caches this mesh (it may not exist)."""
     key = _cache_key(profile_of(mirror), mirror.rim_radius, sag_tol, normal_tol)
     return cache_root() / "meshes" / f"mirror-{key}.npz"
 
 
-def cached_mesh_file(mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
+def cached_mesh_file(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
                      normal_tol: float = DEFAULT_NORMAL_TOL) -> tuple[Path, dict]:
     """The cache file of the mirror's mesh (built and cached on first use) and its stats."""
     _, stats = mirror_mesh(mirror, sag_tol=sag_tol, normal_tol=normal_tol, cache=True)
@@ -303,8 +308,9 @@ def _mitsuba_mesh(mesh: MirrorMesh, rotation, bsdf: dict):
     return out
 
 
-def mirror_shape(mirror, *, force_mesh: bool = False, sag_tol: float | None = None,
-                 normal_tol: float | None = None, cache: bool | None = None) -> tuple[object, dict]:
+def mirror_shape(mirror: Setup | Mirror, *, force_mesh: bool = False,
+                 sag_tol: float | None = None, normal_tol: float | None = None,
+                 cache: bool | None = None) -> tuple[Any, dict]:
     """The setup's mirror as a Mitsuba shape (a perfect conductor), for any scene.
 
     Parameters

@@ -49,9 +49,11 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Any
 
 import numpy as np
 
+from ..config import Setup
 from ..optics import chief_ray, image_distance, image_point, mirror_point_from_image, placement_of
 from .textures import TEXTURE_NAMES, texture
 
@@ -117,7 +119,7 @@ def _choices(value, key: str, allowed: tuple[str, ...]) -> str:
     return ",".join(dict.fromkeys(names))
 
 
-def resolve_params(**params) -> dict:
+def resolve_params(**params: Any) -> dict:
     """The family's parameters: :data:`DEFAULT_PARAMS` updated by ``params``, checked.
 
     Raises ValueError naming the parameter and what it allows. The result is plain
@@ -164,7 +166,7 @@ def resolve_params(**params) -> dict:
     return p
 
 
-def depth_range(setup, params: dict) -> tuple[float, float]:
+def depth_range(setup: Setup, params: dict) -> tuple[float, float]:
     """Depths (mm) objects are drawn over: the parameters' range widened to the setup's
     ``sweep.depth_min``–``depth_max`` (an infinite ``depth_max`` adds nothing)."""
     lo = min(params["depth_min_mm"], setup.sweep.depth_min)
@@ -232,7 +234,7 @@ def _material(rng, params: dict) -> dict:
     return out
 
 
-def procedural_layout(setup, seed: int, **params) -> tuple[dict, dict]:
+def procedural_layout(setup: Setup, seed: int, **params: Any) -> tuple[dict, dict]:
     """The scene of ``seed`` as plain data (mm, mirror frame), and its parameters.
 
     Returns ``(layout, params)``: ``layout["objects"]`` is a list of records (``shape``,
@@ -344,7 +346,7 @@ def procedural_layout(setup, seed: int, **params) -> tuple[dict, dict]:
     return layout, params
 
 
-def procedural_scene(setup, seed: int, **params) -> tuple[dict, dict]:
+def procedural_scene(setup: Setup, seed: int, **params: Any) -> tuple[dict, dict]:
     """The Mitsuba objects of procedural scene ``seed`` (name → dict), and its parameters.
 
     Parameters

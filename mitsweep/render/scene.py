@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import logging
 import math
+from typing import Any
 
 import numpy as np
 
+from ..config import Setup
 from ..optics import placement_of
 from . import ad_integrator
 from .integrator import INTEGRATOR_NAME, integrator_dict, register_integrator
@@ -43,7 +45,7 @@ _WALL_TILE_MM = 1000.0
 _BOARD_HALF_ANGLE_DEG = 14.0
 
 
-def integrator_depth(setup) -> int:
+def integrator_depth(setup: Setup) -> int:
     """Path depth the scene needs (``scene.max_depth`` when set).
 
     Emissive surroundings: camera → mirror → emitter is two path segments
@@ -54,7 +56,7 @@ def integrator_depth(setup) -> int:
     return 2 if setup.scene.lighting == "emissive" else 3
 
 
-def camera_transform(setup):
+def camera_transform(setup: Setup) -> Any:
     """Camera-to-world ``look_at`` for the lens centre (Mitsuba scalar transform)."""
     import mitsuba as mi
 
@@ -114,7 +116,7 @@ def _room(setup) -> dict:
     return out
 
 
-def board_layout(setup) -> list[dict]:
+def board_layout(setup: Setup) -> list[dict]:
     """Centres, normals, half-sizes (mm) and textures of the scene's boards.
 
     Deterministic for ``scene.texture_seed``. Depths log-spaced over 100–1500 mm
@@ -182,7 +184,7 @@ def _boards(setup) -> dict:
     return out
 
 
-def build_scene(setup, sensor: dict, *, surroundings: bool = True, extra: dict | None = None,
+def build_scene(setup: Setup, sensor: dict, *, surroundings: bool = True, extra: dict | None = None,
                 mirror_mesh: bool = False, sag_tol: float | None = None,
                 normal_tol: float | None = None, max_depth: int | None = None) -> tuple[dict, dict]:
     """The Mitsuba scene dict of a setup with ``sensor``, and a description.

@@ -131,10 +131,12 @@ from __future__ import annotations
 import logging
 import math
 import re
+from typing import Any, Iterable
 
 import numpy as np
 
 from ..backend import set_mitsuba_variant
+from ..optics.motion import MotionProfile
 
 __all__ = ["register", "motion_table", "NotDifferentiableError", "PLUGIN_NAME",
            "MOTION_TABLE_SIZE", "refuse_integrators_that_drop_the_sweep"]
@@ -181,8 +183,9 @@ def _integrator_class(integrator) -> str:
     return integrator.class_name() if name in _MITSUBA_BASES else name
 
 
-def refuse_integrators_that_drop_the_sweep(integrator, scene, keys=("sensor_start",
-                                                                    "sensor_end")) -> None:
+def refuse_integrators_that_drop_the_sweep(
+        integrator: Any, scene: Any,
+        keys: Iterable[str] = ("sensor_start", "sensor_end")) -> None:
     """Raise :class:`NotDifferentiableError` where ``integrator`` would return a zero
     (or no) derivative of the sweep ``keys`` for ``scene`` (see the module: the ``prb``
     family and ``ptracer`` always; ``path``, ``volpath``, ``direct`` when a shape
@@ -244,7 +247,7 @@ def _floats(value, name: str) -> np.ndarray:
     return np.asarray(value, dtype=float).ravel()
 
 
-def motion_table(motion, n: int = MOTION_TABLE_SIZE) -> np.ndarray:
+def motion_table(motion: MotionProfile, n: int = MOTION_TABLE_SIZE) -> np.ndarray:
     """Sensor distances (mm) of a :class:`~mitsweep.optics.motion.MotionProfile` at
     ``n + 1`` uniform normalised times ``k / n`` (the kernel interpolates linearly)."""
     return np.asarray(motion.sensor_distance(np.linspace(0.0, 1.0, n + 1)), dtype=float)
@@ -253,8 +256,6 @@ def motion_table(motion, n: int = MOTION_TABLE_SIZE) -> np.ndarray:
 def _make_class():
     import drjit as dr
     import mitsuba as mi
-
-    from ..optics.motion import MotionProfile
 
     class FocalSweepSensor(mi.Sensor):
         """A thin-lens sensor translating along its axis during the exposure."""

@@ -43,6 +43,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..config import Placement, Setup
+
 __all__ = ["UserScene", "UserSceneError", "MM_PER_UNIT", "load_user_scene", "user_scene",
            "scene_transform", "check_view", "check_user_scene"]
 
@@ -95,7 +97,7 @@ class UserScene:
         return self.provenance.get("source", "scene")
 
 
-def scene_transform(unit: str = "mm", placement=None) -> np.ndarray:
+def scene_transform(unit: str = "mm", placement: Placement | None = None) -> np.ndarray:
     """The (4, 4) matrix from a user's scene coordinates to the mirror frame (mm).
 
     ``S(s)`` for the unit, then the placement's rotations about x, y and z (degrees),
@@ -319,7 +321,8 @@ def _prepare(state, label: str, m: np.ndarray, s: float) -> tuple[list[str], int
     return replaced, depth
 
 
-def load_user_scene(setup, scene, *, unit: str | None = None, placement=None) -> UserScene:
+def load_user_scene(setup: Setup, scene: str | Path | Mapping[str, Any], *,
+                    unit: str | None = None, placement: Placement | None = None) -> UserScene:
     """A user's Mitsuba scene in mm in the mirror's frame (see the module docstring).
 
     Parameters
@@ -401,7 +404,8 @@ def load_user_scene(setup, scene, *, unit: str | None = None, placement=None) ->
     return UserScene(objects, prov, depth, media)
 
 
-def user_scene(setup, scene, *, unit: str | None = None, placement=None) -> dict:
+def user_scene(setup: Setup, scene: str | Path | Mapping[str, Any], *,
+               unit: str | None = None, placement: Placement | None = None) -> dict:
     """The objects of a user's scene to add to a scene dict (mm, mirror frame).
 
     ``load_user_scene(...).objects``: a dict of name to instantiated Mitsuba object
@@ -412,7 +416,8 @@ def user_scene(setup, scene, *, unit: str | None = None, placement=None) -> dict
     return load_user_scene(setup, scene, unit=unit, placement=placement).objects
 
 
-def check_user_scene(setup, scene, *, unit: str | None = None, placement=None) -> dict:
+def check_user_scene(setup: Setup, scene: str | Path | Mapping[str, Any], *,
+                     unit: str | None = None, placement: Placement | None = None) -> dict:
     """Load a user's scene as :func:`~mitsweep.render.api.render_image` does and probe
     its view of the setup's mirror, without rendering (e.g. every scene of a dataset
     before any work starts).
@@ -439,7 +444,7 @@ def check_user_scene(setup, scene, *, unit: str | None = None, placement=None) -
                       label=user.label)
 
 
-def check_view(scene, setup, sensor_distance: float, *, label: str = "scene",
+def check_view(scene: Any, setup: Setup, sensor_distance: float, *, label: str = "scene",
                aperture_radius: float | None = None) -> dict:
     """Probe a loaded scene through the mirror; raise where the render would be wrong.
 
