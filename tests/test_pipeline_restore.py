@@ -98,3 +98,22 @@ def test_a_noise_model_the_image_does_not_carry_is_refused(noisy_sweep, calls, t
         tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
                       **params)
     assert calls == [] and not (tmp_path / "edof.exr").exists()
+
+
+def test_noisy_image_is_labelled_in_the_renders_units(noisy_sweep, tmp_path):
+    """add_noise stores the noisy relative exposure times the white level: the renders'
+    units, as its ``units`` says (it said "relative exposure"). In those units the noise
+    is the model's, scaled by the level: the residual against the clean render divided by
+    ``level · sqrt(variance(render / level))`` has unit spread, and the mean is the
+    render's, not the relative exposure's (0.56 here, against 0.16)."""
+    path, model = noisy_sweep
+    noisy, _, meta = tasks.read_rgb(path)
+    render = tasks.read_rgb(tmp_path / "sweep.exr")[0].astype(np.float64)
+    level = meta["white_level"]
+    assert meta["units"] == tasks.NOISY_UNITS
+    residual = noisy - render
+    # unbiased noise: the mean residual within 5 standard errors (3072 values)
+    assert abs(residual.mean()) < 5 * residual.std() / np.sqrt(residual.size)
+    z = residual / (level * np.sqrt(model.variance(render / level)))
+    # the spread of 3072 unit normals is 1 within 5 / sqrt(2 · 3072) = 0.064
+    assert z.std() == pytest.approx(1.0, abs=0.064)

@@ -78,6 +78,11 @@ def read_rgb(path) -> tuple[np.ndarray, dict, dict]:
     return stack_channels(chans), chans, meta
 
 
+#: The ``units`` a noisy image's metadata records: the renders' (its values are the noisy
+#: relative exposure times the recorded ``white_level``).
+NOISY_UNITS = "render radiance (relative exposure times white_level)"
+
+
 def white_level(pinhole: np.ndarray, mask: np.ndarray) -> float:
     """Relative exposure 1.0: the 99th percentile of the ground truth in the mask."""
     values = pinhole[mask > 0] if mask is not None and np.any(mask > 0) else pinhole
@@ -192,7 +197,8 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
               f_number: float, iso: float, exposure_s: float, pixel_pitch: float,
               seed: list) -> dict:
     """The sensor noise of ``lux`` with these camera settings on ``image``, in relative
-    exposure (the ground truth's white level); stored in the renders' units."""
+    exposure (the ground truth's white level); stored in the renders' units (the noisy
+    relative exposure times ``white_level``, as the metadata's ``units`` says)."""
     from ..deconv import SensorNoise
 
     gt, chans, _ = read_rgb(ground_truth)
@@ -204,7 +210,7 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
     noisy = noise.apply(np.maximum(img / level, 0.0).astype(np.float32),
                         np.random.default_rng(list(seed)), info=info)
     meta = dict(meta, noise=noise.as_dict(), noise_seed=list(seed), white_level=level,
-                units="relative exposure", nsr=noise.nsr(0.5), **info)
+                units=NOISY_UNITS, nsr=noise.nsr(0.5), **info)
     write_exr(out, noisy * level, metadata=meta)
     return {}
 
