@@ -257,3 +257,22 @@ def test_pipeline_panels_read_in_the_order_of_the_steps(tmp_path, drawn):
     boxes = {ax.get_title(): ax.get_window_extent(renderer) for ax in panels}
     order = sorted(boxes, key=lambda t: (-round(boxes[t].y1), boxes[t].x0))
     assert order == ["(b)", "(c)", "(d)", "(e)", "(f)"]
+
+
+def test_table1_refuses_banks_that_are_not_its_own(scenes_dir):
+    """Banks passed to Table 1 are checked against its ranges, radii and depths: banks in
+    the wrong order (another range's) or with other radii are refused, naming the range."""
+    from mitsweep.tracer.table1 import default_ranges, table1, table1_banks
+
+    setup = load_setup(scenes_dir / "sphere.toml")
+    ranges = default_ranges(setup)[:2]
+    banks = table1_banks(setup, ranges=ranges, n_radii=2, rays=2_000, kernel_size=15)
+    kw = dict(ranges=ranges, n_radii=2, rays=2_000, kernel_size=15)
+    assert len(table1(setup, banks=banks, **kw)["rows"]) == 2
+    lo, hi = ranges[0]
+    with pytest.raises(ValueError, match=rf"the bank for {lo:g}-{hi:g} mm is not Table 1's"):
+        table1(setup, banks=banks[::-1], **kw)
+    with pytest.raises(ValueError, match="not Table 1's"):
+        table1(setup, banks=banks, **{**kw, "n_radii": 3})
+    with pytest.raises(ValueError, match=r"one per sweep range \(2\), got 1"):
+        table1(setup, banks=banks[:1], **kw)
