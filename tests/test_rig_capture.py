@@ -2,57 +2,37 @@
 
 Timing resolution of the simulator: event timestamps are computed from the analytic
 motion and quantised to the board's 1 µs ``micros()``; the measured exposure is the
-difference of two such stamps, so it must equal the planned one within 2 µs.
+difference of two such stamps, so it must equal the planned one within 2 µs
+(:data:`rig_fixtures.TIMER_RESOLUTION_S`).
 """
 
 from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
+from rig_fixtures import (TIMER_RESOLUTION_S, ZABER_MAX_POSITION, arduino_capture,
+                          assert_board_timed_exposure, complete_exposure, soft_limit_steps,
+                          zaber_capture)
+from rig_fixtures import sphere, sphere_zaber  # noqa: F401 - fixtures
 
-from mitsweep.config import load_setup
 from mitsweep.rig import (DeviceFault, HostTooSlow, RigPorts, load_capture_record, measured_motion,
                           plan_capture, run_capture)
 from mitsweep.rig.capture import SHUTTER_ATTEMPTS
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
-from mitsweep.rig.testing import fast_rig_setup
-
-SCENES = Path(__file__).resolve().parents[1] / "scenes"
-ZABER_STEPS_PER_MM = 1 / 0.047625e-3    # 0.047625 µm microsteps (Zaber X-LSM family)
-TIMER_RESOLUTION_S = 2e-6               # two 1 µs micros() stamps
-
-
-@pytest.fixture(scope="module")
-def sphere():
-    return fast_rig_setup(load_setup(SCENES / "sphere.toml"))
 
 
 @pytest.mark.parametrize("checksums", [False, True])
 def test_arduino_capture_measures_planned_exposure(sphere, tmp_path, checksums):
     plan = plan_capture(sphere)
     out = tmp_path / "capture.json"
-    with PtyDevice(ArduinoModel()) as dev:        # unhomed, like a board after power-up
-        run_capture(sphere, RigPorts(arduino=dev.port, checksums=checksums), out=out)
-        model = dev.model
-        now = time.monotonic()
-        assert not model.moving(now) and not model.shutter_open
-        assert model.position(now) == plan.end_steps
-        history = list(model.shutter_history)
-    data = load_capture_record(out)
-    assert data["complete"] and data["status"] == "complete" and data["error"] is None
+    board = arduino_capture(sphere, out, plan, checksums=checksums)
+    data, exp = complete_exposure(out, plan)
     assert data["homed"], "an unhomed stage must be homed before the sweep"
-    exp = data["measured"]["exposure"]
-    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
-                                                       abs=TIMER_RESOLUTION_S)
     # the shutter was open exactly once, for the planned time, between the planned steps
-    assert [h[0] for h in history] == ["open", "close"]
-    assert history[1][1] - history[0][1] == pytest.approx(plan.planned_exposure_s, abs=1e-9)
-    assert exp["open_position_mm"] == pytest.approx(plan.open_mm, abs=1e-12)
-    assert exp["close_position_mm"] == pytest.approx(plan.close_mm, abs=1e-12)
+    assert_board_timed_exposure(board, exp, plan)
     # every line exchanged is in the record, sent and received
     texts = [c["text"].split("*")[0] for c in data["commands"]]
     assert "ID" in texts and any(t.startswith("SWEEP ") for t in texts)
@@ -66,8 +46,7 @@ def test_arduino_capture_measures_planned_exposure(sphere, tmp_path, checksums):
 def test_arduino_capture_motion_profile_is_constant_velocity(sphere, tmp_path):
     out = tmp_path / "capture.json"
     plan = plan_capture(sphere)
-    with PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps)) as dev:
-        run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+    arduino_capture(sphere, out, plan, at_approach=True)
     t, s = measured_motion(out)
     assert t[0] == 0.0 and t[-1] == pytest.approx(plan.planned_exposure_s, abs=TIMER_RESOLUTION_S)
     assert len(t) >= 10    # EV POS every 50 ms over ~0.7 s
@@ -85,29 +64,18 @@ def test_measured_motion_feeds_tabulated_profile(sphere, tmp_path):
 
     out = tmp_path / "capture.json"
     plan = plan_capture(sphere)
-    with PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps)) as dev:
-        run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+    arduino_capture(sphere, out, plan, at_approach=True)
     profile = motion.MotionProfile.tabulated(*measured_motion(out))
     assert profile.start == pytest.approx(plan.sensor_start_mm, abs=0.5 / plan.steps_per_mm)
     assert profile.end == pytest.approx(plan.sensor_end_mm, abs=1.0 / plan.steps_per_mm)
 
 
-def test_zaber_capture_with_arduino_shutter(tmp_path):
-    setup = fast_rig_setup(load_setup(SCENES / "sphere.toml"), steps_per_mm=ZABER_STEPS_PER_MM)
-    plan = plan_capture(setup, stage="zaber")
+def test_zaber_capture_with_arduino_shutter(sphere_zaber, tmp_path):
+    plan = plan_capture(sphere_zaber, stage="zaber")
     out = tmp_path / "capture.json"
-    with PtyDevice(ArduinoModel()) as board, \
-            PtyDevice(ZaberModel(max_position=int(26 * ZABER_STEPS_PER_MM))) as stage:
-        record = run_capture(setup, RigPorts(arduino=board.port, zaber=stage.port,
-                                             checksums=True), out=out)
-        assert not stage.model.moving(time.monotonic())
-        assert stage.model.position(time.monotonic()) == plan.end_steps
-        assert stage.model.settings["limit.max"] == round(plan.soft_limit_max_mm * plan.steps_per_mm)
-    data = load_capture_record(out)
-    assert data["complete"]
-    exp = data["measured"]["exposure"]
-    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
-                                                       abs=TIMER_RESOLUTION_S)
+    record, stage = zaber_capture(sphere_zaber, out, plan)
+    assert stage.settings["limit.max"] == soft_limit_steps(plan)[1]
+    data, exp = complete_exposure(out, plan)
     # positions come from polls interpolated at the shutter times: the record's timing
     # uncertainty (the SHUTTER round trip's half for the clock mapping, plus half the
     # round trip of the polls used); and the host-timed shutter opens late or early by
@@ -128,19 +96,20 @@ SLOW_SHUTTER_REPLY_S = 0.2
 
 
 @pytest.mark.parametrize("slow_attempts", [1, SHUTTER_ATTEMPTS])
-def test_zaber_capture_host_too_slow_to_time_the_shutter(tmp_path, slow_attempts):
+def test_zaber_capture_host_too_slow_to_time_the_shutter(sphere_zaber, tmp_path,
+                                                         slow_attempts):
     """The board answers SHUTTER late (it acts at once: as if the host read the reply
     late), so the host cannot bound when the shutter opened relative to the move better
     than the settle distance allows. Each such attempt is abandoned with the shutter
     released; a later fast attempt completes, and none fast fails the capture safely."""
-    setup = fast_rig_setup(load_setup(SCENES / "sphere.toml"), steps_per_mm=ZABER_STEPS_PER_MM)
+    setup = sphere_zaber
     plan = plan_capture(setup, stage="zaber")
     allowed_s = plan.settle_mm / plan.velocity_actual_mm_s
     assert SLOW_SHUTTER_REPLY_S > 2 * allowed_s
     out = tmp_path / "capture.json"
     slow = [Fault("slow_reply", command="SHUTTER", delay_s=SLOW_SHUTTER_REPLY_S)] * slow_attempts
     with PtyDevice(ArduinoModel(slow)) as board, \
-            PtyDevice(ZaberModel(max_position=int(26 * ZABER_STEPS_PER_MM))) as stage:
+            PtyDevice(ZaberModel(max_position=ZABER_MAX_POSITION)) as stage:
         ports = RigPorts(arduino=board.port, zaber=stage.port)
         if slow_attempts == SHUTTER_ATTEMPTS:
             with pytest.raises(HostTooSlow, match="host too slow to time the shutter"):
@@ -162,11 +131,8 @@ def test_zaber_capture_host_too_slow_to_time_the_shutter(tmp_path, slow_attempts
         assert data["safety"] and all(a["ok"] for a in data["safety"])
         assert data["measured"] is None, "an abandoned exposure must not be measured"
     else:
-        assert data["complete"] and data["status"] == "complete"
+        complete_exposure(out, plan)
         assert data["clock_map"]["placement_uncertainty_s"] <= allowed_s
-        exp = data["measured"]["exposure"]
-        assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
-                                                           abs=TIMER_RESOLUTION_S)
 
 
 def test_complete_record_holds_the_reference_geometry_of_its_measured_motion(sphere, tmp_path):
@@ -174,8 +140,7 @@ def test_complete_record_holds_the_reference_geometry_of_its_measured_motion(sph
     optics.reference), over the measured samples; an incomplete record has none."""
     out = tmp_path / "capture.json"
     plan = plan_capture(sphere)
-    with PtyDevice(ArduinoModel(homed=True, position=plan.approach_steps)) as dev:
-        run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+    arduino_capture(sphere, out, plan, at_approach=True)
     data = load_capture_record(out)
     ref = data["reference"]
     _, s = measured_motion(data)

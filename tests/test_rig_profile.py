@@ -23,7 +23,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import ROOT, run_cli
-from rig_fixtures import ZABER_MAX_POSITION, assert_safe, bent_profile
+from rig_fixtures import (TIMER_RESOLUTION_S, ZABER_MAX_POSITION, arduino_capture,
+                          assert_board_timed_exposure, assert_safe, bent_profile,
+                          complete_exposure, zaber_capture)
 from rig_fixtures import sphere, sphere_zaber  # noqa: F401 - fixtures
 from test_rig_cli import setup_file
 from test_rig_firmware import HostBoard, host_firmware  # noqa: F401 - fixture
@@ -42,8 +44,6 @@ from mitsweep.rig.sim.base import command
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
 from mitsweep.rig.testing import expected_protocol
 from mitsweep.rig.zaber import SPEED_UNIT, ZaberStage
-
-TIMER_RESOLUTION_S = 2e-6               # two 1 µs micros() stamps
 
 
 @pytest.fixture(scope="module")
@@ -291,22 +291,10 @@ def test_zaber_stream_is_stored_then_started_by_one_command():
 def test_arduino_capture_runs_the_profile_it_planned(sphere, profile, tmp_path):
     plan = plan_capture(sphere, motion=profile, exposure_s=0.7)
     out = tmp_path / "capture.json"
-    with PtyDevice(ArduinoModel()) as dev:
-        run_capture(sphere, RigPorts(arduino=dev.port, checksums=True), out=out, plan=plan)
-        now = time.monotonic()
-        assert not dev.model.moving(now) and not dev.model.shutter_open
-        assert dev.model.position(now) == plan.end_steps
-        history = list(dev.model.shutter_history)
-    data = load_capture_record(out)
-    assert data["complete"]
-    exp = data["measured"]["exposure"]
+    board = arduino_capture(sphere, out, plan, checksums=True)
+    data, exp = complete_exposure(out, plan)
     # shutter window: open once, on the planned steps, for the table's duration
-    assert [h[0] for h in history] == ["open", "close"]
-    assert history[1][1] - history[0][1] == pytest.approx(plan.planned_exposure_s, abs=1e-9)
-    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
-                                                       abs=TIMER_RESOLUTION_S)
-    assert exp["open_position_mm"] == pytest.approx(plan.open_mm, abs=1e-12)
-    assert exp["close_position_mm"] == pytest.approx(plan.close_mm, abs=1e-12)
+    assert_board_timed_exposure(board, exp, plan)
     # measured motion (EV POS every 50 ms) against the plan, within the timing resolution
     cmp = data["measured"]["profile"]
     peak = max(k / d for k, d in zip(plan.profile.steps, plan.profile.durations_s))
@@ -336,16 +324,8 @@ def test_arduino_capture_runs_the_profile_it_planned(sphere, profile, tmp_path):
 def test_zaber_capture_runs_the_profile_as_a_stream(sphere_zaber, profile, tmp_path):
     plan = plan_capture(sphere_zaber, stage="zaber", motion=profile, exposure_s=0.7)
     out = tmp_path / "capture.json"
-    with PtyDevice(ArduinoModel()) as board, \
-            PtyDevice(ZaberModel(max_position=ZABER_MAX_POSITION)) as stage:
-        run_capture(sphere_zaber, RigPorts(arduino=board.port, zaber=stage.port,
-                                           checksums=True), out=out, plan=plan)
-        assert stage.model.position(time.monotonic()) == plan.end_steps
-    data = load_capture_record(out)
-    assert data["complete"]
-    exp = data["measured"]["exposure"]
-    assert exp["measured_exposure_s"] == pytest.approx(plan.planned_exposure_s,
-                                                       abs=TIMER_RESOLUTION_S)
+    zaber_capture(sphere_zaber, out, plan)
+    data, _ = complete_exposure(out, plan)
     # positions from polls: each known to half its round trip, the clock mapping to half
     # the SHUTTER round trip, the shutter placed to the host's latency (the record's
     # tolerance); the stream's lines are the table's

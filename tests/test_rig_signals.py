@@ -10,6 +10,7 @@ signal's number when every safety step was confirmed, 3 when one was not.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import subprocess
 import sys
@@ -17,6 +18,7 @@ import time
 
 import pytest
 from conftest import ROOT
+from rig_fixtures import ZABER_MAX_POSITION, ZABER_STEPS_PER_MM, killed_on_exit
 from test_rig_cli import setup_file
 
 from mitsweep.config import load_setup
@@ -24,7 +26,6 @@ from mitsweep.rig import load_capture_record, plan_capture
 from mitsweep.rig.simulator import ArduinoModel, Fault, PtyDevice, ZaberModel
 from mitsweep.rig.transport import SAFETY_ATTEMPTS
 
-ZABER_STEPS_PER_MM = 1 / 0.047625e-3
 ZABER_RIG = f"steps_per_mm = {ZABER_STEPS_PER_MM!r}\n"
 # Slow enough that the shutter stays open ~3.5 s (0.695 mm at 0.2 mm/s): time to signal.
 SWEEP_VELOCITY = 0.2
@@ -71,7 +72,7 @@ class Rig:
         self.stage = None
         if kind == "zaber":
             self.stage = PtyDevice(ZaberModel(list(zaber_faults), homed=True, position=start,
-                                              max_position=int(26 * ZABER_STEPS_PER_MM)))
+                                              max_position=ZABER_MAX_POSITION))
 
     @property
     def motor(self):
@@ -96,6 +97,19 @@ class Rig:
             argv += ["--stage", f"zaber:{self.stage.port}"]
         return subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE,
                                 stderr=subprocess.PIPE, text=True)
+
+    def capture(self) -> contextlib.AbstractContextManager[subprocess.Popen]:
+        """:meth:`start_capture` as a context manager: the process, killed when the
+        block ends (:func:`rig_fixtures.killed_on_exit`)."""
+        return killed_on_exit(self.start_capture())
+
+    def signal_when(self, condition, what: str, sig: str) -> tuple[int, str]:
+        """Run the capture, send it ``sig`` once ``condition()`` holds (``what`` names it
+        in a failure), and return its (exit status, stderr)."""
+        with self.capture() as proc:
+            wait_for(condition, what, proc)
+            proc.send_signal(getattr(signal, sig))
+            return finish(proc)
 
     def in_approach_move(self) -> bool:
         word = "/1 1 move abs" if self.stage else "MOVE"
@@ -135,17 +149,11 @@ def matrix(cases, fast):
           ("approach", "SIGHUP", "zaber")}))
 def test_signal_stops_the_rig_and_records_interrupted(tmp_path, rig_kind, sig, when):
     with Rig(rig_kind, tmp_path, at_approach=when != "approach") as rig:
-        proc = rig.start_capture()
-        try:
-            if when == "approach":
-                wait_for(rig.in_approach_move, "the approach move", proc)
-            else:
-                wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
-            proc.send_signal(getattr(signal, sig))
-            rc, err = finish(proc)
-        finally:
-            proc.kill()
-            proc.wait()
+        if when == "approach":
+            rc, err = rig.signal_when(rig.in_approach_move, "the approach move", sig)
+        else:
+            rc, err = rig.signal_when(rig.shutter_open_mid_sweep,
+                                      "the shutter to open mid-sweep", sig)
         rig.assert_safe()
         if when == "approach":
             assert rig.board.model.shutter_history == [], "shutter opened before the sweep"
@@ -167,18 +175,12 @@ def test_signal_stops_the_rig_and_records_interrupted(tmp_path, rig_kind, sig, w
 def test_second_signal_does_not_cut_the_safety_path_short(tmp_path, rig_kind, first,
                                                           second):
     slow_stop = Fault("slow_reply", command="STOP", delay_s=SLOW_STOP_S)
-    with Rig(rig_kind, tmp_path, board_faults=[slow_stop]) as rig:
-        proc = rig.start_capture()
-        try:
-            wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
-            proc.send_signal(getattr(signal, first))
-            wait_for(lambda: received(rig.board.model, "STOP"), "the safety path's STOP",
-                     proc)
-            proc.send_signal(getattr(signal, second))
-            rc, err = finish(proc)
-        finally:
-            proc.kill()
-            proc.wait()
+    with Rig(rig_kind, tmp_path, board_faults=[slow_stop]) as rig, rig.capture() as proc:
+        wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
+        proc.send_signal(getattr(signal, first))
+        wait_for(lambda: received(rig.board.model, "STOP"), "the safety path's STOP", proc)
+        proc.send_signal(getattr(signal, second))
+        rc, err = finish(proc)
         rig.assert_safe()
     assert rc == signal_exit_status(first), err
     data = load_capture_record(rig.out)
@@ -200,13 +202,8 @@ def test_second_signal_does_not_cut_the_safety_path_short(tmp_path, rig_kind, fi
 def test_unconfirmed_safety_step_exits_3_and_says_which(tmp_path, rig_kind, board_faults,
                                                         zaber_faults, expected):
     """The false reassurance is gone: after an unplug stderr says what was not confirmed."""
-    with Rig(rig_kind, tmp_path, board_faults, zaber_faults) as rig:
-        proc = rig.start_capture()
-        try:
-            rc, err = finish(proc)
-        finally:
-            proc.kill()
-            proc.wait()
+    with Rig(rig_kind, tmp_path, board_faults, zaber_faults) as rig, rig.capture() as proc:
+        rc, err = finish(proc)
     assert rc == 3, err
     assert "capture incomplete (port lost)" in err
     assert expected in err and "the rig may be unsafe" in err
@@ -218,14 +215,8 @@ def test_unconfirmed_safety_step_exits_3_and_says_which(tmp_path, rig_kind, boar
 
 def sigterm_mid_sweep(rig) -> tuple[int, str]:
     """Start a capture, SIGTERM it once the shutter is open, and return (status, stderr)."""
-    proc = rig.start_capture()
-    try:
-        wait_for(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep", proc)
-        proc.send_signal(signal.SIGTERM)
-        return finish(proc)
-    finally:
-        proc.kill()
-        proc.wait()
+    return rig.signal_when(rig.shutter_open_mid_sweep, "the shutter to open mid-sweep",
+                           "SIGTERM")
 
 
 def test_signal_with_one_lost_stop_retries_and_confirms(tmp_path):
