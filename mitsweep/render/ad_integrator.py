@@ -51,6 +51,8 @@ from __future__ import annotations
 
 import logging
 
+from .integrator import depth_limited_integrator, register_python_integrator
+
 __all__ = ["INTEGRATOR_NAME", "MAX_DEPTH", "register_integrator"]
 
 logger = logging.getLogger(__name__)
@@ -78,16 +80,8 @@ def _make_class():
     # ``path``'s surface-interaction detail (named ``Default`` from Mitsuba 3.10 on).
     _SI_FLAGS = getattr(mi.RayFlags, "Default", mi.RayFlags.All)
 
-    class MirrorPathIntegrator(mi.SamplingIntegrator):
+    class MirrorPathIntegrator(depth_limited_integrator(INTEGRATOR_NAME, MAX_DEPTH, 3)):
         """Path tracing with NEE and MIS, differentiable through delta reflections."""
-
-        def __init__(self, props):
-            super().__init__(props)
-            depth = int(props.get("max_depth", 3))
-            if not 1 <= depth <= MAX_DEPTH:
-                raise ValueError(f"{INTEGRATOR_NAME}: max_depth must be in 1..{MAX_DEPTH}, "
-                                 f"got {depth}")
-            self.max_depth = depth
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
             ctx = mi.BSDFContext()
@@ -152,17 +146,9 @@ def _make_class():
                 pi = scene.ray_intersect_preliminary(ray, coherent=False, active=alive)
             return dr.select(valid_ray, result, 0.0), valid_ray, []
 
-        def aov_names(self):
-            return []
-
-        def to_string(self):
-            return f"MirrorPathIntegrator[max_depth={self.max_depth}]"
-
     return MirrorPathIntegrator
 
 
 def register_integrator() -> None:
     """Register ``mirrorpath`` for the current Mitsuba variant (idempotent)."""
-    from .integrator import register_python_integrator
-
     register_python_integrator(INTEGRATOR_NAME, _make_class, _registered_for)

@@ -31,6 +31,7 @@ mirror) where a gradient can be asked (``differentiable``), else ``path``.
 from __future__ import annotations
 
 import logging
+from typing import Callable
 
 __all__ = ["INTEGRATOR_NAME", "MAX_DEPTH", "integrator_dict", "register_integrator"]
 
@@ -68,16 +69,8 @@ def _make_class():
     import drjit as dr
     import mitsuba as mi
 
-    class MirrorViewIntegrator(mi.SamplingIntegrator):
+    class MirrorViewIntegrator(depth_limited_integrator(INTEGRATOR_NAME, MAX_DEPTH, 2)):
         """Emission seen directly or through delta reflections (see the module)."""
-
-        def __init__(self, props):
-            super().__init__(props)
-            depth = int(props.get("max_depth", 2))
-            if not 1 <= depth <= MAX_DEPTH:
-                raise ValueError(f"{INTEGRATOR_NAME}: max_depth must be in 1..{MAX_DEPTH}, "
-                                 f"got {depth}")
-            self.max_depth = depth
 
         def sample(self, scene, sampler, ray, medium=None, active=True):
             ray = mi.Ray3f(ray)
@@ -104,12 +97,6 @@ def _make_class():
                 ray = si.spawn_ray(si.to_world(bs.wo))
             return result, first_valid, []
 
-        def aov_names(self):
-            return []
-
-        def to_string(self):
-            return f"MirrorViewIntegrator[max_depth={self.max_depth}]"
-
     return MirrorViewIntegrator
 
 
@@ -118,7 +105,33 @@ def register_integrator() -> None:
     register_python_integrator(INTEGRATOR_NAME, _make_class, _registered_for)
 
 
-def register_python_integrator(name: str, make_class, registered_for: set) -> None:
+def depth_limited_integrator(name: str, max_depth: int, default_depth: int) -> type:
+    """The base of mitsweep's Python integrators in the current Mitsuba variant: a
+    ``mi.SamplingIntegrator`` that reads the plugin parameter ``max_depth`` (default
+    ``default_depth``) and refuses one outside ``1..max_depth`` with a ValueError naming
+    plugin ``name``; no AOVs; printed as ``ClassName[max_depth=N]``. A subclass defines
+    ``sample``."""
+    import mitsuba as mi
+
+    class DepthLimitedIntegrator(mi.SamplingIntegrator):
+        def __init__(self, props):
+            super().__init__(props)
+            depth = int(props.get("max_depth", default_depth))
+            if not 1 <= depth <= max_depth:
+                raise ValueError(f"{name}: max_depth must be in 1..{max_depth}, got {depth}")
+            self.max_depth = depth
+
+        def aov_names(self):
+            return []
+
+        def to_string(self):
+            return f"{type(self).__name__}[max_depth={self.max_depth}]"
+
+    return DepthLimitedIntegrator
+
+
+def register_python_integrator(name: str, make_class: Callable[[], type],
+                               registered_for: set[str]) -> None:
     """Register the integrator class ``make_class()`` builds as plugin ``name`` for the
     current Mitsuba variant, once per variant (``registered_for`` records them)."""
     import mitsuba as mi
