@@ -84,19 +84,30 @@ def test_zaber_fault_releases_shutter_and_records_incomplete(sphere_zaber, tmp_p
 
 
 class _InterruptingBoard(ArduinoModel):
-    """Presses Ctrl-C (SIGINT to the main thread) 0.2 s into the sweep."""
+    """Presses Ctrl-C (SIGINT to the main thread) 0.2 s into the sweep.
+
+    The timer is kept so the test can cancel it: a capture that fails before it fires
+    must fail its test, not interrupt the whole pytest session later."""
+
+    timer = None
 
     def _cmd_sweep(self, nums, now):
-        threading.Timer(0.2, _thread.interrupt_main).start()
+        self.timer = threading.Timer(0.2, _thread.interrupt_main)
+        self.timer.start()
         return super()._cmd_sweep(nums, now)
 
 
 def test_ctrl_c_during_sweep_stops_and_records_interrupted(sphere, tmp_path):
     plan = plan_capture(sphere)
     out = tmp_path / "capture.json"
-    with PtyDevice(_InterruptingBoard(homed=True, position=plan.approach_steps)) as dev:
-        with pytest.raises(KeyboardInterrupt):
-            run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+    board = _InterruptingBoard(homed=True, position=plan.approach_steps)
+    with PtyDevice(board) as dev:
+        try:
+            with pytest.raises(KeyboardInterrupt):
+                run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+        finally:
+            if board.timer is not None:
+                board.timer.cancel()
         assert_safe(dev.model, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
         assert dev.model.stopped
     data = assert_incomplete(out, "interrupted")
@@ -123,10 +134,14 @@ def test_record_marked_running_before_motion(sphere, tmp_path):
 
 
 class _TerminatedBoard(ArduinoModel):
-    """Sends SIGTERM to this process (``kill PID``) 0.2 s into the sweep."""
+    """Sends SIGTERM to this process (``kill PID``) 0.2 s into the sweep (the timer kept
+    so that a capture failing before it fires can cancel it, see _InterruptingBoard)."""
+
+    timer = None
 
     def _cmd_sweep(self, nums, now):
-        threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGTERM)).start()
+        self.timer = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGTERM))
+        self.timer.start()
         return super()._cmd_sweep(nums, now)
 
 
@@ -138,9 +153,14 @@ def test_sigterm_during_sweep_runs_the_safety_path_and_restores_handlers(sphere,
     seen = []
     previous = signal.signal(signal.SIGTERM, lambda signum, frame: seen.append(signum))
     try:
-        with PtyDevice(_TerminatedBoard(homed=True, position=plan.approach_steps)) as dev:
-            with pytest.raises(CaptureInterrupted) as info:
-                run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+        board = _TerminatedBoard(homed=True, position=plan.approach_steps)
+        with PtyDevice(board) as dev:
+            try:
+                with pytest.raises(CaptureInterrupted) as info:
+                    run_capture(sphere, RigPorts(arduino=dev.port), out=out)
+            finally:
+                if board.timer is not None:
+                    board.timer.cancel()
             assert_safe(dev.model, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
             assert dev.model.stopped
         assert info.value.signal_name == "SIGTERM"
