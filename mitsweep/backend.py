@@ -36,6 +36,8 @@ import platform
 import shutil
 import subprocess
 import sys
+import types
+from collections.abc import Iterator
 
 __all__ = ["BackendError", "MIN_LLVM", "llvm_version", "select_backend", "mitsuba_variant",
            "set_mitsuba_variant", "drjit_module", "cuda_devices", "describe_machine",
@@ -251,7 +253,7 @@ def _apply_width_setting() -> None:
 
 
 @contextlib.contextmanager
-def llvm_vector_width_scope(width: int | str):
+def llvm_vector_width_scope(width: int | str) -> Iterator[int | None]:
     """Kernels compiled inside the ``with`` block use ``width``; the previous width is
     restored on exit. Safe between kernels: Dr.Jit caches kernels by their IR, which
     names the width, so no kernel compiled at one width is reused at another."""
@@ -297,7 +299,7 @@ def set_mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str
     return variant
 
 
-def drjit_module(prefer: str | None = None):
+def drjit_module(prefer: str | None = None) -> types.ModuleType:
     """``drjit.cuda`` or ``drjit.llvm`` for the tracer (scalar is refused: too slow)."""
     backend = select_backend(prefer)
     if backend == "scalar":

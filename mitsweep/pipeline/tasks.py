@@ -72,7 +72,7 @@ def scene_setup(setup: Setup, index: int) -> Setup:
                                         texture_seed=setup.scene.texture_seed + index))
 
 
-def read_rgb(path) -> tuple[np.ndarray, dict, dict]:
+def read_rgb(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
     """An EXR's RGB image (H, W, 3), all its channels and its metadata."""
     chans, meta = read_exr(path)
     return stack_channels(chans), chans, meta
@@ -83,7 +83,7 @@ def read_rgb(path) -> tuple[np.ndarray, dict, dict]:
 NOISY_UNITS = "render radiance (relative exposure times white_level)"
 
 
-def white_level(pinhole: np.ndarray, mask: np.ndarray) -> float:
+def white_level(pinhole: np.ndarray, mask: np.ndarray | None) -> float:
     """Relative exposure 1.0: the 99th percentile of the ground truth in the mask."""
     values = pinhole[mask > 0] if mask is not None and np.any(mask > 0) else pinhole
     level = float(np.percentile(values, WHITE_PERCENTILE))

@@ -11,13 +11,17 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
 from .. import __version__
-from ..config import setup_to_dict
+from ..config import Setup, setup_to_dict
 from ..io.bank import IPSFBank, optics_sections
-from ..optics import chief_ray, image_point, placement_of
+from ..optics import SweepRange, chief_ray, image_point, placement_of
+from ..optics.motion import MotionProfile
 from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..resources import check_allocation
 from .ipsf import (DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, KERNEL_PIXEL_BYTES,
@@ -32,7 +36,7 @@ logger = logging.getLogger(__name__)
 BANK_RAYS = 1_000_000
 
 
-def field_radius(setup, geometry: ReferenceGeometry | None = None) -> float:
+def field_radius(setup: Setup, geometry: ReferenceGeometry | None = None) -> float:
     """Image radius (mm, at the reference distance) of the FOV's mirror-zone edge.
 
     ``geometry``: the setup's reference geometry (default: resolved from the setup).
@@ -44,7 +48,7 @@ def field_radius(setup, geometry: ReferenceGeometry | None = None) -> float:
     return float(math.hypot(float(u[0]), float(v[0])))
 
 
-def grid_points(setup, grid: tuple[int, int]) -> np.ndarray:
+def grid_points(setup: Setup, grid: tuple[int, int]) -> NDArray[np.float64]:
     """(rows·cols, 2) upright (u, v) mm: cell centres of a grid over the sensor, row-major,
     rows top to bottom."""
     rows, cols = (int(x) for x in grid)
@@ -57,11 +61,13 @@ def grid_points(setup, grid: tuple[int, int]) -> np.ndarray:
     return np.stack([uu.ravel(), vv.ravel()], axis=1)
 
 
-def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
-              grid: tuple[int, int] = (9, 9), depths=(500.0,), rays: int = BANK_RAYS,
-              kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0, motion=None,
-              sweep=None, method: str = "exact", time_samples: int = DEFAULT_TIME_SAMPLES,
-              n_planes: int = 16, progress=None, batched: bool = True) -> IPSFBank:
+def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
+              grid: tuple[int, int] = (9, 9), depths: ArrayLike = (500.0,),
+              rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
+              motion: MotionProfile | None = None, sweep: SweepRange | None = None,
+              method: str = "exact", time_samples: int = DEFAULT_TIME_SAMPLES,
+              n_planes: int = 16, progress: Callable[[], object] | None = None,
+              batched: bool = True) -> IPSFBank:
     """A bank of IPSFs for a setup.
 
     Parameters
@@ -128,14 +134,16 @@ def ipsf_bank(setup, *, kind: str = "radial", n_radii: int = 19,
     outside = np.zeros((len(depths), len(points)))
     valid = np.ones(len(points), bool)
     t0 = time.perf_counter()
-    common = dict(rays=rays, kernel_size=K, motion=motion, sweep=sweep, method=method,
-                  time_samples=time_samples, n_planes=n_planes, reference_sensor_distance=ref)
+    common: dict[str, Any] = dict(rays=rays, kernel_size=K, motion=motion, sweep=sweep,
+                                  method=method, time_samples=time_samples,
+                                  n_planes=n_planes, reference_sensor_distance=ref)
     if batched:
         traced = integrated_psfs(setup, [(u, v, d) for d in depths for u, v in points],
                                  seeds=[seed + pi for _ in depths for pi in range(len(points))],
                                  progress=progress, **common)
     else:
         traced = None
+    res: tuple[NDArray[np.float32], dict[str, Any]] | ValueError
     for di, depth in enumerate(depths):
         for pi, (u, v) in enumerate(points):
             if traced is None:

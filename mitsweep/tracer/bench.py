@@ -32,16 +32,19 @@ its cost per ray, and where a bank's IPSFs are traced together (batched launches
 
 from __future__ import annotations
 
+import argparse
 import logging
 import math
 import os
 import resource
 import time
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from .. import backend
-from ..config import load_setup, DEFAULT_SETUP
+from ..config import DEFAULT_SETUP, Setup, load_setup
 from ..optics.reference import reference_geometry
 from . import kernel
 from .bank import field_radius, ipsf_bank
@@ -218,9 +221,12 @@ BANK_METHODS = (
 )
 
 
-def bank_error_per_second(setup, *, n_radii: int = 19, depths=(500.0, 1000.0, 5000.0, 10000.0),
+def bank_error_per_second(setup: Setup, *, n_radii: int = 19,
+                          depths: Sequence[float] = (500.0, 1000.0, 5000.0, 10000.0),
                           reference_rays: int = 1 << 21, max_rays: int = 1 << 19,
-                          target: float = BANK_L1_TARGET, methods=BANK_METHODS) -> dict:
+                          target: float = BANK_L1_TARGET,
+                          methods: Sequence[tuple[str, Mapping[str, Any]]] = BANK_METHODS
+                          ) -> dict:
     """Time to a radial bank whose every kernel is within ``target`` (L1) of the true IPSF.
 
     The reference bank is the exact method at ``reference_rays`` per kernel with other
@@ -247,8 +253,8 @@ def bank_error_per_second(setup, *, n_radii: int = 19, depths=(500.0, 1000.0, 50
         reaches the target) and ``exact_speedup_vs_planes_own_limit``.
     """
     geometry = reference_geometry(setup)
-    kw = dict(kind="radial", n_radii=n_radii, depths=depths, sweep=geometry.sweep,
-              motion=geometry.motion)
+    kw: dict[str, Any] = dict(kind="radial", n_radii=n_radii, depths=depths,
+                              sweep=geometry.sweep, motion=geometry.motion)
     ref = ipsf_bank(setup, rays=reference_rays, method="exact", seed=1000, **kw).kernels
     ref2 = ipsf_bank(setup, rays=reference_rays, method="exact", seed=2000,
                      **dict(kw, depths=depths[:1])).kernels
@@ -299,7 +305,7 @@ def bank_error_per_second(setup, *, n_radii: int = 19, depths=(500.0, 1000.0, 50
     return out
 
 
-def run_bench(args) -> dict:
+def run_bench(args: argparse.Namespace) -> dict:
     """Run the benchmark; ``args.quick`` shrinks the problem. Returns a flat-ish dict."""
     quick = bool(getattr(args, "quick", False))
     setup = _setup()

@@ -22,17 +22,20 @@ import hashlib
 import json
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import __version__
-from ..config import setup_to_dict
+from ..config import Setup, setup_to_dict
 from ..io.bank import BankError, IPSFBank, load_bank, optics_fingerprint, optics_sections, \
     save_bank
 from ..io.cache import cache_root
 from ..io.lock import DirectoryLock
+from ..optics.motion import MotionProfile
 from ..optics.reference import reference_geometry
 from .bank import BANK_RAYS, ipsf_bank
 from .ipsf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, METHODS
@@ -76,9 +79,10 @@ def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed, method
     return out
 
 
-def bank_cache_key(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
+def bank_cache_key(setup: Setup, *, motion: MotionProfile | None = None,
+                   kind: str | None = None, depths: ArrayLike = (500.0,),
                    rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
-                   n_radii: int = 19, grid=(9, 9), seed: int = 0,
+                   n_radii: int = 19, grid: tuple[int, int] = (9, 9), seed: int = 0,
                    method: str = DEFAULT_METHOD) -> tuple[str, dict, dict]:
     """``(entry name, optics, trace settings)`` of the bank :func:`cached_bank` returns."""
     kind = kind or ("radial" if setup.mirror.is_symmetric else "grid")
@@ -94,10 +98,12 @@ def bank_cache_key(setup, *, motion=None, kind: str | None = None, depths=(500.0
     return f"{kind}-{optics_fingerprint(optics)[:16]}-{digest[:12]}", optics, trace
 
 
-def cached_bank(setup, *, motion=None, kind: str | None = None, depths=(500.0,),
+def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
+                kind: str | None = None, depths: ArrayLike = (500.0,),
                 rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
-                n_radii: int = 19, grid=(9, 9), seed: int = 0, method: str = DEFAULT_METHOD,
-                cache_dir: str | Path | None = None, progress=None) -> CachedBank:
+                n_radii: int = 19, grid: tuple[int, int] = (9, 9), seed: int = 0,
+                method: str = DEFAULT_METHOD, cache_dir: str | Path | None = None,
+                progress: Callable[[], object] | None = None) -> CachedBank:
     """The IPSF bank of ``setup`` and ``motion``, from the cache or traced into it.
 
     Parameters

@@ -14,10 +14,12 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from ..config import load_setup
+from ..config import Setup, load_setup
 from ..optics.reference import reference_geometry
 from .bank import field_radius
 from .ipsf import integrated_psf
@@ -25,11 +27,12 @@ from .ipsf import integrated_psf
 __all__ = ["convergence_table", "main"]
 
 
-def convergence_table(setup, *, u: float | None = None, depth: float = 500.0,
-                      rays=(10_000, 100_000, 1_000_000, 10_000_000),
+def convergence_table(setup: Setup, *, u: float | None = None, depth: float = 500.0,
+                      rays: Sequence[int] = (10_000, 100_000, 1_000_000, 10_000_000),
                       reference_rays: int = 1 << 28, kernel_size: int = 31,
-                      variants=(("exact", None), ("continuous", 1), ("continuous", 4),
-                                ("planes", 16), ("planes", 26), ("planes", 64))) -> dict:
+                      variants: Sequence[tuple[str, int | None]] = (
+                          ("exact", None), ("continuous", 1), ("continuous", 4),
+                          ("planes", 16), ("planes", 26), ("planes", 64))) -> dict:
     """L1 errors and run times of IPSF estimates (see the module docstring).
 
     Returns
@@ -41,7 +44,8 @@ def convergence_table(setup, *, u: float | None = None, depth: float = 500.0,
     geometry = reference_geometry(setup)
     if u is None:
         u = 0.9 * field_radius(setup, geometry)
-    kw = dict(sweep=geometry.sweep, motion=geometry.motion, kernel_size=kernel_size)
+    kw: dict[str, Any] = dict(sweep=geometry.sweep, motion=geometry.motion,
+                              kernel_size=kernel_size)
     integrated_psf(setup, u, 0.0, depth, rays=1 << 16, **kw)  # compile
     ref, _ = integrated_psf(setup, u, 0.0, depth, rays=reference_rays, seed=1001,
                             method="exact", **kw)
@@ -49,8 +53,8 @@ def convergence_table(setup, *, u: float | None = None, depth: float = 500.0,
                              method="exact", **kw)
     rows = []
     for method, samples in variants:
-        extra = ({"time_samples": samples} if method == "continuous" else
-                 {"n_planes": samples} if method == "planes" else {})
+        extra: dict[str, Any] = ({"time_samples": samples} if method == "continuous" else
+                                 {"n_planes": samples} if method == "planes" else {})
         for n in rays:
             best = None
             for rep in range(2):  # best of two timings: the machine is shared
@@ -66,7 +70,7 @@ def convergence_table(setup, *, u: float | None = None, depth: float = 500.0,
             "reference_l1": float(np.abs(ref - ref2).sum()), "rows": rows}
 
 
-def main(argv=None) -> int:
+def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m mitsweep.tracer.convergence")
     p.add_argument("setup", nargs="?", default="scenes/sphere.toml")
     p.add_argument("--quick", action="store_true", help="smaller reference and ray counts")

@@ -39,7 +39,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from ..config import SetupError
+from ..config import Setup, SetupError
 from ..optics import chief_ray, object_distance, optimal_sweep_range, placement_of
 from ..optics.sweep import mirror_zone
 from .kernel import trace_arrays
@@ -120,7 +120,7 @@ def _moments(r: dict):
     return c_ab, c_bb, int(ok.sum())
 
 
-def numeric_focus(setup, source: PointSource, *, rays: int = 1 << 16, seed: int = 0,
+def numeric_focus(setup: Setup, source: PointSource, *, rays: int = 1 << 16, seed: int = 0,
                   aperture_radius: float | None = PROBE_APERTURE_MM,
                   double: bool = True) -> FocusResult:
     """Traced foci of ``source`` (see the module docstring).
@@ -418,7 +418,7 @@ def _fov_field(setup, fov_deg) -> tuple[_StarField, float]:
     return _StarField(setup.mirror.rim_radius, (float(x0), 0.0), angle, half), half
 
 
-def traced_sweep_range(setup, fov_deg: float | None = None, depth_min: float | None = None,
+def traced_sweep_range(setup: Setup, fov_deg: float | None = None, depth_min: float | None = None,
                        depth_max: float | None = None, *, field: str = "plane",
                        n_points: int = 41, n_rings: int = 6, rays: int = 1 << 15,
                        aperture_radius: float | None = PROBE_APERTURE_MM) -> TracedSweepRange:

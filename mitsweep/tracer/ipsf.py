@@ -29,14 +29,19 @@ from __future__ import annotations
 import logging
 import math
 import time
+from collections.abc import Callable, Iterable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from ..config import Setup
 from ..optics.motion import MotionProfile
 from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..optics.reference import reference_geometry
+from ..optics.sweep import SweepRange
 from ..resources import check_allocation
-from .kernel import (SourceBatch, TraceParams, deposit, deposit_batch, deposit_copies,
+from .kernel import (Geometry, SourceBatch, TraceParams, deposit, deposit_batch, deposit_copies,
                      deposit_segments, fold_buffer, trace_arrays, trace_arrays_batch)
 from .source import PointSource, source_from_image
 
@@ -74,7 +79,7 @@ _RAMP_CHORDS = 256
 KERNEL_PIXEL_BYTES = 64
 
 
-def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
+def fit_sampling_box(geom: Geometry, *, seed: int = 0, double: bool = False,
                      max_rounds: int = 40) -> tuple[TraceParams, dict]:
     """Fit the aim-plane sampling box to the rays that reach the lens (rim ignored).
 
@@ -109,7 +114,8 @@ def fit_sampling_box(geom, *, seed: int = 0, double: bool = False,
             return done.value
 
 
-def fit_sampling_boxes(geoms, *, seeds, double: bool = False, max_rounds: int = 40) -> list:
+def fit_sampling_boxes(geoms: Iterable[Geometry], *, seeds: Iterable[int], double: bool = False,
+                       max_rounds: int = 40) -> list[tuple[TraceParams, dict] | ValueError]:
     """:func:`fit_sampling_box` for many sources at once: each pilot round is one launch.
 
     The sources run the same algorithm in lockstep; each round traces the pending pilot
@@ -347,11 +353,13 @@ def _check_sizes(kernel_size, rays, sources: int = 1) -> tuple[int, int]:
     return K, rays
 
 
-def render_source(setup, source: PointSource, *, times=None, motion: MotionProfile | None = None,
+def render_source(setup: Setup, source: PointSource, *, times: ArrayLike | None = None,
+                  motion: MotionProfile | None = None,
                   time_samples: int = DEFAULT_TIME_SAMPLES, exact: bool = False,
                   rays: int = DEFAULT_RAYS,
                   kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
-                  double: bool = False, aperture_radius: float | None = None):
+                  double: bool = False, aperture_radius: float | None = None
+                  ) -> tuple[NDArray[np.float32], dict[str, Any]]:
     """Trace ``rays`` rays from ``source`` and bin them on the reference pixel grid.
 
     Give either fixed sensor distances ``times`` (mm; equal weights) or a ``motion``,
@@ -400,11 +408,13 @@ def _deposit_source(geom, params, center_uv, rays, K, pitch, *, exact, times, li
     return fold_buffer(buffer, 1, K)[0]
 
 
-def render_sources(setup, sources, *, seeds, times=None, motion: MotionProfile | None = None,
+def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Iterable[int],
+                   times: ArrayLike | None = None, motion: MotionProfile | None = None,
                    time_samples: int = DEFAULT_TIME_SAMPLES, exact: bool = False,
                    rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
                    double: bool = False, aperture_radius: float | None = None,
-                   progress=None) -> list:
+                   progress: Callable[[], object] | None = None
+                   ) -> list[tuple[NDArray[np.float32], dict[str, Any]] | ValueError]:
     """:func:`render_source` for many sources of one setup, traced together.
 
     Each pilot round of the sampling-box fits is one launch (:func:`fit_sampling_boxes`),
@@ -550,13 +560,15 @@ def _kernel_and_info(buf, K, rays, source, box_info, *, seed, double, seconds, p
     return kernel, info
 
 
-def integrated_psf(setup, u: float, v: float, depth, *, rays: int = DEFAULT_RAYS,
-                   kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
-                   motion: MotionProfile | None = None, sweep=None,
+def integrated_psf(setup: Setup, u: float, v: float, depth: float, *,
+                   rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
+                   seed: int = 0, motion: MotionProfile | None = None,
+                   sweep: SweepRange | None = None,
                    method: str = "exact", time_samples: int = DEFAULT_TIME_SAMPLES,
                    n_planes: int = 16,
                    reference_sensor_distance: float | None = None,
-                   double: bool = False, aperture_radius: float | None = None):
+                   double: bool = False, aperture_radius: float | None = None
+                   ) -> tuple[NDArray[np.float32], dict[str, Any]]:
     """The IPSF of a point source seen at image point (u, v), over the focal sweep.
 
     Parameters
@@ -623,12 +635,15 @@ def integrated_psf(setup, u: float, v: float, depth, *, rays: int = DEFAULT_RAYS
     return kernel, info
 
 
-def integrated_psfs(setup, points, *, rays: int = DEFAULT_RAYS,
-                    kernel_size: int = DEFAULT_KERNEL_SIZE, seeds=None,
-                    motion: MotionProfile | None = None, sweep=None, method: str = "exact",
+def integrated_psfs(setup: Setup, points: Iterable[tuple[float, float, float]], *,
+                    rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
+                    seeds: Iterable[int] | None = None, motion: MotionProfile | None = None,
+                    sweep: SweepRange | None = None, method: str = "exact",
                     time_samples: int = DEFAULT_TIME_SAMPLES, n_planes: int = 16,
                     reference_sensor_distance: float | None = None, double: bool = False,
-                    aperture_radius: float | None = None, progress=None) -> list:
+                    aperture_radius: float | None = None,
+                    progress: Callable[[], object] | None = None
+                    ) -> list[tuple[NDArray[np.float32], dict[str, Any]] | ValueError]:
     """:func:`integrated_psf` of many points of one setup, traced together.
 
     Parameters
@@ -710,10 +725,10 @@ def _sweep_setup(setup, *, motion, sweep, method, time_samples, n_planes,
     return geometry, ref, kw, extra
 
 
-def psf(setup, u: float, v: float, depth, sensor_distance: float, *,
+def psf(setup: Setup, u: float, v: float, depth: float, sensor_distance: float, *,
         rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
         reference_sensor_distance: float | None = None, double: bool = False,
-        aperture_radius: float | None = None):
+        aperture_radius: float | None = None) -> tuple[NDArray[np.float32], dict[str, Any]]:
     """The PSF at one sensor distance (mm), on the reference grid (default: that distance).
 
     Same conventions and ``info`` as :func:`integrated_psf`.

@@ -47,9 +47,12 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..backend import drjit_module
 
@@ -64,6 +67,10 @@ __all__ = ["Geometry", "TraceParams", "SourceBatch", "trace_arrays", "trace_arra
 #: about the unnormalised normal — the same rays to float32 rounding; 4: fused
 #: multiply-adds, the same rays to float32 rounding).
 TRACE_REVISION = 4
+
+#: A Dr.Jit array of the selected backend (``drjit.llvm.Float64``, ``drjit.cuda.Float64``,
+#: ...): ``Any`` in annotations, so that importing this module does not import drjit.
+DrJitArray = Any
 
 # Golden-ratio generalisations for rank-1 lattices (Roberts' R_d sequences): φ_d is the
 # real root of x^(d+1) = x + 1 and the generators are 1/φ_d, ..., 1/φ_d^d. R3 samples
@@ -244,7 +251,9 @@ class SourceBatch:
         No source, mismatched lengths, or sources that do not share the mirror and lens.
     """
 
-    def __init__(self, geoms, params, *, center_uv=None, double: bool = False):
+    def __init__(self, geoms: Iterable[Geometry], params: Iterable[TraceParams], *,
+                 center_uv: Sequence[tuple[float, float]] | None = None,
+                 double: bool = False) -> None:
         geoms, params = list(geoms), list(params)
         if not geoms or len(geoms) != len(params):
             raise ValueError(f"SourceBatch: give one TraceParams per geometry "
@@ -452,8 +461,8 @@ def deposit_copies() -> int:
 
 
 @contextlib.contextmanager
-def deposit_strategy_scope(*, copies: int | None = None, mode=None,
-                           coherent: bool | None = None):
+def deposit_strategy_scope(*, copies: int | None = None, mode: Any = None,
+                           coherent: bool | None = None) -> Iterator[None]:
     """Deposit with ``copies`` buffer copies, scatter reduction ``mode`` (a
     ``drjit.ReduceMode``, for both deposits) and the segment deposit's lanes ordered
     ``coherent`` ly or not inside the block, then restore the defaults; for side-by-side
@@ -476,7 +485,7 @@ def deposit_strategy_scope(*, copies: int | None = None, mode=None,
         _copies_setting, _MODE, _SWEEP_MODE, _coherent_setting = old
 
 
-def fold_buffer(buffer, sources: int, kernel_size: int) -> np.ndarray:
+def fold_buffer(buffer: DrJitArray, sources: int, kernel_size: int) -> NDArray[np.float64]:
     """A deposit buffer as NumPy: the ``(sources, K·K + 2)`` float64 sum of its copies."""
     cells = int(kernel_size) ** 2 + 2
     arr = np.asarray(buffer.numpy(), dtype=np.float64)
@@ -671,7 +680,8 @@ _ARRAY_KEYS = ("landed", "landed_free", "weight", "Au", "Av", "Bu", "Bv", "a", "
 
 
 def trace_arrays(geom: Geometry, params: TraceParams, n: int, *, offset: int = 0,
-                 double: bool = False, keys=_ARRAY_KEYS) -> dict[str, np.ndarray]:
+                 double: bool = False, keys: Sequence[str] = _ARRAY_KEYS
+                 ) -> dict[str, np.ndarray]:
     """Trace ``n`` rays and return NumPy arrays (pilot passes, focus, tests).
 
     Keys as in the kernel: ``landed``, ``landed_free`` (bool), ``weight``, ``Au``,
@@ -682,7 +692,7 @@ def trace_arrays(geom: Geometry, params: TraceParams, n: int, *, offset: int = 0
 
 
 def trace_arrays_batch(batch: SourceBatch, log2_count: int, *, offset: int = 0,
-                       keys=_ARRAY_KEYS) -> list[dict[str, np.ndarray]]:
+                       keys: Sequence[str] = _ARRAY_KEYS) -> list[dict[str, np.ndarray]]:
     """Trace samples ``offset … offset + 2^log2_count − 1`` of every source of ``batch``
     in one launch; one dict per source, as :func:`trace_arrays` returns."""
     lanes = _Lanes(batch.double, 0, offset, batch=batch, log2_count=int(log2_count))
@@ -711,7 +721,8 @@ def _read_arrays(geom, lanes, double, keys):
 def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_size: int,
             pitch: float, center_uv: tuple[float, float], times: list | None,
             sensor_table: np.ndarray | None, linear: tuple[float, float] | None,
-            time_samples: int, buffer=None, double: bool = False):
+            time_samples: int, buffer: DrJitArray | None = None,
+            double: bool = False) -> DrJitArray:
     """Trace ``n`` rays and add their sensor hits to a (K·K + 2) Dr.Jit buffer.
 
     Each landed ray deposits its weight, split equally over ``M`` time samples: fixed
@@ -798,8 +809,8 @@ def _deposit_samples(geom, lanes, *, kernel_size, pitch, times, sensor_table, li
 
 def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int,
                      kernel_size: int, pitch: float, center_uv: tuple[float, float],
-                     span: tuple[float, float], cdf_table: np.ndarray | None, buffer=None,
-                     double: bool = False):
+                     span: tuple[float, float], cdf_table: np.ndarray | None,
+                     buffer: DrJitArray | None = None, double: bool = False) -> DrJitArray:
     """Trace ``n`` rays and add each ray's *whole sweep* to a (K·K + 2) Dr.Jit buffer.
 
     During the exposure a ray's sensor hit moves along the straight segment
@@ -925,7 +936,8 @@ def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_si
                   sensor_table: np.ndarray | None = None,
                   linear: tuple[float, float] | None = None, time_samples: int = 1,
                   span: tuple[float, float] | None = None,
-                  cdf_table: np.ndarray | None = None, buffer=None):
+                  cdf_table: np.ndarray | None = None,
+                  buffer: DrJitArray | None = None) -> DrJitArray:
     """Trace samples ``offset … offset + 2^log2_count − 1`` of every source of ``batch``
     and deposit them, in one launch, into a stacked (S·(K·K + 2)) Dr.Jit buffer.
 

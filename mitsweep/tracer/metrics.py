@@ -30,8 +30,11 @@ Definitions
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 from scipy import fft, ndimage
 
 __all__ = ["EPSILON", "cross_section", "cross_sections", "kurtosis", "depth_variance",
@@ -42,7 +45,7 @@ __all__ = ["EPSILON", "cross_section", "cross_sections", "kurtosis", "depth_vari
 EPSILON = 1e-3
 
 
-def centroid(kernel) -> tuple[float, float]:
+def centroid(kernel: ArrayLike) -> tuple[float, float]:
     """(row, col) intensity centroid of a (K, K) kernel, pixels."""
     k = np.asarray(kernel, dtype=np.float64)
     s = k.sum()
@@ -52,7 +55,9 @@ def centroid(kernel) -> tuple[float, float]:
     return float((k * r).sum() / s), float((k * c).sum() / s)
 
 
-def cross_section(kernel, direction, *, through=None, half_length: int | None = None):
+def cross_section(kernel: ArrayLike, direction: Iterable[float], *,
+                  through: tuple[float, float] | None = None, half_length: int | None = None
+                  ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Kernel values along a line, at pixel steps (bilinear interpolation).
 
     Parameters
@@ -86,7 +91,8 @@ def cross_section(kernel, direction, *, through=None, half_length: int | None = 
     return x, vals
 
 
-def cross_sections(kernel, angle: float = 0.0, **kw):
+def cross_sections(kernel: ArrayLike, angle: float = 0.0, **kw: Any
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Radial and tangential cross-sections of an IPSF at polar angle ``angle`` (rad).
 
     Returns ``(x, radial, tangential)``; see :func:`cross_section`.
@@ -98,7 +104,7 @@ def cross_sections(kernel, angle: float = 0.0, **kw):
     return x, rad, tan
 
 
-def kurtosis(values, x=None) -> float:
+def kurtosis(values: ArrayLike, x: ArrayLike | None = None) -> float:
     """Intensity-weighted fourth standardised moment of a profile (Gaussian = 3).
 
     Parameters
@@ -131,7 +137,7 @@ def _weight2(K: int) -> np.ndarray:
     return w2
 
 
-def depth_variance(p1, p2, *, epsilon: float = EPSILON) -> float:
+def depth_variance(p1: ArrayLike, p2: ArrayLike, *, epsilon: float = EPSILON) -> float:
     """V(p1, p2) of paper Eq. 2 (see the module docstring for W and ε).
 
     Parameters
@@ -154,7 +160,7 @@ def depth_variance(p1, p2, *, epsilon: float = EPSILON) -> float:
     return float((terms * _weight2(a.shape[0])).sum())
 
 
-def v_avg(kernels, *, epsilon: float = EPSILON) -> float:
+def v_avg(kernels: ArrayLike, *, epsilon: float = EPSILON) -> float:
     """V_avg of paper Eq. 3.
 
     Parameters

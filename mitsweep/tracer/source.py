@@ -12,13 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..config import Setup
 from ..optics import chief_ray, image_point, mirror_point_from_image, placement_of
 from .kernel import Geometry
 
 __all__ = ["PointSource", "source_from_image", "source_from_mirror", "check_depth"]
 
 
-def check_depth(depth) -> float:
+def check_depth(depth: float) -> float:
     """Validate a depth l (mm, > 0, inf allowed) and return it as float."""
     try:
         d = float(depth)
@@ -66,7 +67,7 @@ class PointSource:
     def position(self) -> np.ndarray:
         return self.mirror_point + self.depth * self.world_dir
 
-    def geometry(self, setup, *, rim: bool = True, aperture_radius: float | None = None) -> Geometry:
+    def geometry(self, setup: Setup, *, rim: bool = True, aperture_radius: float | None = None) -> Geometry:
         """The kernel's :class:`Geometry` for this source (local frame, float64)."""
         m = setup.mirror
         pl = placement_of(m)
@@ -100,7 +101,7 @@ def _from_ray(ray, depth: float, reference: float, placement) -> PointSource:
         cos_incidence=float(ray.cos_incidence))
 
 
-def source_from_image(setup, u: float, v: float, depth, *,
+def source_from_image(setup: Setup, u: float, v: float, depth: float, *,
                       reference_sensor_distance: float) -> PointSource:
     """The source seen at upright image point (u, v) mm on a sensor at the reference distance.
 
@@ -126,7 +127,7 @@ def source_from_image(setup, u: float, v: float, depth, *,
     return _from_ray(ray, depth, reference_sensor_distance, pl)
 
 
-def source_from_mirror(setup, x: float, y: float, depth, *,
+def source_from_mirror(setup: Setup, x: float, y: float, depth: float, *,
                        reference_sensor_distance: float) -> PointSource:
     """The source seen at the mirror point of local coordinates (x, y), mm."""
     depth = check_depth(depth)

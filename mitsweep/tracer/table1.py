@@ -11,9 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+from collections.abc import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike, NDArray
 
+from ..config import Setup
+from ..io.bank import IPSFBank
 from ..optics import image_distance, optimal_sweep_range
 from .bank import ipsf_bank
 from .metrics import EPSILON, cross_sections, kurtosis, v_avg
@@ -31,7 +35,7 @@ PAPER_DEPTHS_MM = (500.0, 1000.0, 5000.0, 10000.0)
 PAPER_RANGE_FRACTIONS = (9.0 / 25.25, 18.0 / 25.25, 35.0 / 25.25)
 
 
-def default_ranges(setup) -> list[tuple[float, float]]:
+def default_ranges(setup: Setup) -> list[tuple[float, float]]:
     """The paper's three ranges scaled to the setup, then the optimal range itself."""
     sr = optimal_sweep_range(setup)
     lo, span = sr.focus_min, sr.focus_max - sr.focus_min
@@ -40,8 +44,8 @@ def default_ranges(setup) -> list[tuple[float, float]]:
     return rows
 
 
-def conventional_psf(setup, distance: float, focus_distance: float, *, kernel_size: int,
-                     supersample: int = 16) -> np.ndarray:
+def conventional_psf(setup: Setup, distance: float, focus_distance: float, *, kernel_size: int,
+                     supersample: int = 16) -> NDArray[np.float32]:
     """Geometric defocus PSF of a conventional camera (thin lens, no mirror), unit sum.
 
     A point on the axis at ``distance`` mm from the lens, sensor focused at
@@ -64,7 +68,7 @@ def conventional_psf(setup, distance: float, focus_distance: float, *, kernel_si
     return (k / k.sum()).astype(np.float32)
 
 
-def conventional_v_avg(setup, depths=PAPER_DEPTHS_MM, *, kernel_size: int = 63,
+def conventional_v_avg(setup: Setup, depths: ArrayLike = PAPER_DEPTHS_MM, *, kernel_size: int = 63,
                        epsilon: float = EPSILON) -> tuple[float, float]:
     """V_avg (Eq. 3) of a conventional camera over ``depths`` and its focus distance.
 
@@ -87,9 +91,10 @@ def _range_setup(setup, fmin: float, fmax: float):
     return s, optimal_sweep_range(s)  # the given range; the field is still the setup's FOV
 
 
-def table1_banks(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
+def table1_banks(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None = None,
+                 depths: Sequence[float] = PAPER_DEPTHS_MM, n_radii: int = 19,
                  rays: int = 1_000_000, kernel_size: int = 63, seed: int = 0,
-                 progress=None) -> list:
+                 progress: Callable[[], object] | None = None) -> list[IPSFBank]:
     """The radial IPSF banks Table 1 measures, one per sweep range (parameters as
     :func:`table1`): to reuse them elsewhere (Fig. 5) and pass them back as its
     ``banks``."""
@@ -103,9 +108,11 @@ def table1_banks(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 1
     return banks
 
 
-def table1(setup, *, ranges=None, depths=PAPER_DEPTHS_MM, n_radii: int = 19,
+def table1(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None = None,
+           depths: Sequence[float] = PAPER_DEPTHS_MM, n_radii: int = 19,
            rays: int = 1_000_000, kernel_size: int = 63, seed: int = 0,
-           epsilon: float = EPSILON, progress=None, banks=None) -> dict:
+           epsilon: float = EPSILON, progress: Callable[[], object] | None = None,
+           banks: Sequence[IPSFBank] | None = None) -> dict:
     """Compute Table 1 for a rotationally symmetric setup.
 
     Parameters
