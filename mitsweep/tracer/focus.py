@@ -418,9 +418,10 @@ def _fov_field(setup, fov_deg) -> tuple[_StarField, float]:
     return _StarField(setup.mirror.rim_radius, (float(x0), 0.0), angle, half), half
 
 
-def traced_sweep_range(setup: Setup, fov_deg: float | None = None, depth_min: float | None = None,
-                       depth_max: float | None = None, *, field: str = "plane",
-                       n_points: int = 41, n_rings: int = 6, rays: int = 1 << 15,
+def traced_sweep_range(setup: Setup, fov_deg: float | None = None,
+                       depth_min: float | None = None, depth_max: float | None = None, *,
+                       field: str = "plane", n_points: int = 41, n_rings: int = 6,
+                       rays: int = 1 << 15,
                        aperture_radius: float | None = PROBE_APERTURE_MM) -> TracedSweepRange:
     """The optimal sweep range (paper Eq. 8–9) measured by tracing instead of Coddington.
 

@@ -41,8 +41,9 @@ from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..optics.reference import reference_geometry
 from ..optics.sweep import SweepRange
 from ..resources import check_allocation
-from .kernel import (Geometry, SourceBatch, TraceParams, deposit, deposit_batch, deposit_copies,
-                     deposit_segments, fold_buffer, trace_arrays, trace_arrays_batch)
+from .kernel import (Geometry, SourceBatch, TraceParams, deposit, deposit_batch,
+                     deposit_copies, deposit_segments, fold_buffer, trace_arrays,
+                     trace_arrays_batch)
 from .source import PointSource, source_from_image
 
 __all__ = ["integrated_psf", "integrated_psfs", "psf", "render_source", "render_sources",
@@ -114,8 +115,9 @@ def fit_sampling_box(geom: Geometry, *, seed: int = 0, double: bool = False,
             return done.value
 
 
-def fit_sampling_boxes(geoms: Iterable[Geometry], *, seeds: Iterable[int], double: bool = False,
-                       max_rounds: int = 40) -> list[tuple[TraceParams, dict] | ValueError]:
+def fit_sampling_boxes(geoms: Iterable[Geometry], *, seeds: Iterable[int],
+                       double: bool = False, max_rounds: int = 40
+                       ) -> list[tuple[TraceParams, dict] | ValueError]:
     """:func:`fit_sampling_box` for many sources at once: each pilot round is one launch.
 
     The sources run the same algorithm in lockstep; each round traces the pending pilot

@@ -67,7 +67,8 @@ class PointSource:
     def position(self) -> np.ndarray:
         return self.mirror_point + self.depth * self.world_dir
 
-    def geometry(self, setup: Setup, *, rim: bool = True, aperture_radius: float | None = None) -> Geometry:
+    def geometry(self, setup: Setup, *, rim: bool = True,
+                 aperture_radius: float | None = None) -> Geometry:
         """The kernel's :class:`Geometry` for this source (local frame, float64)."""
         m = setup.mirror
         pl = placement_of(m)

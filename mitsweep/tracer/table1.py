@@ -68,8 +68,8 @@ def conventional_psf(setup: Setup, distance: float, focus_distance: float, *, ke
     return (k / k.sum()).astype(np.float32)
 
 
-def conventional_v_avg(setup: Setup, depths: ArrayLike = PAPER_DEPTHS_MM, *, kernel_size: int = 63,
-                       epsilon: float = EPSILON) -> tuple[float, float]:
+def conventional_v_avg(setup: Setup, depths: ArrayLike = PAPER_DEPTHS_MM, *,
+                       kernel_size: int = 63, epsilon: float = EPSILON) -> tuple[float, float]:
     """V_avg (Eq. 3) of a conventional camera over ``depths`` and its focus distance.
 
     The camera focuses at the dioptric middle ``2 / (1/d_min + 1/d_max)``; its defocus
