@@ -334,7 +334,9 @@ def case_row(name: str, lux: float, ev_lin: dict, ev_opt: dict, report: dict,
     row["per_radius_paired_se"] = (pr_d.std(axis=0, ddof=1) / np.sqrt(len(scenes))).tolist() \
         if len(scenes) > 1 else [float("nan")] * pr_d.shape[1]
     s0 = ev_lin["scenes"][scenes[0]]
-    row["depth_band_edges_mm"] = s0[key]["per_depth_band"]["edges_mm"]
+    # evaluate's stdout writes the open band's end as null, its --out file as Infinity
+    row["depth_band_edges_mm"] = [float("inf") if x is None else float(x)
+                                  for x in s0[key]["per_depth_band"]["edges_mm"]]
     row["depth_band_pixels"] = s0[key]["per_depth_band"]["pixels"]
     edges = np.asarray(s0[key]["per_radius"]["edges_px"], dtype=float)
     row["radius_px_edges"] = edges.tolist()

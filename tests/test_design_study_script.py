@@ -1,6 +1,6 @@
 """``scripts/design_study.py --measured``: the measured study of a designed sweep against
 the linear one, end to end on a tiny problem (64 px, 4 spp, one scene, 8 planes), through
-``mitsweep dataset --motion`` and ``mitsweep evaluate``."""
+``mitsweep dataset --motion`` and ``mitsweep evaluate``, with its ``--diagnose`` model."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def run_script(*args, timeout=600):
 def test_measured_study_runs_both_profiles_on_the_same_scene_and_noise(tmp_path):
     rc, out, err = run_script(tmp_path, "--measured", "sphere", "2", "--resolution", "64",
                               "--spp", 4, 4, 4, 4, "--scenes", 1, "--planes", 8,
-                              "--rays", 4096)
+                              "--rays", 4096, "--diagnose")
     assert rc == 0, err[-3000:]
     data = json.loads((tmp_path / "measured.json").read_text())
     assert data["options"]["light_levels"] == [50.0, 2.0, 0.5]
@@ -57,6 +57,17 @@ def test_measured_study_runs_both_profiles_on_the_same_scene_and_noise(tmp_path)
     # the two profiles differ, so their sweeps do (same seed, same scene)
     assert row["optimized"]["sweep_psnr_mean"] != row["linear"]["sweep_psnr_mean"]
     assert "| sphere | 2 |" in (tmp_path / "measured.md").read_text()
+    # the diagnosis: its matched model is the design's (the plane bank traced again), and
+    # the NSR it deploys is the one the dataset's EDOF images were deconvolved with
+    d, pred = row["diagnosis"], row["predicted"]
+    for which in ("linear", "optimized"):
+        assert d[which]["matched"]["worst_db"] == pytest.approx(
+            pred[f"{which}_worst_psnr_db"], abs=0.01)
+        assert d[which]["matched"]["mean_db"] == pytest.approx(
+            pred[f"{which}_mean_psnr_db"], abs=0.01)
+    used = d["nsr_used_per_scene"]
+    assert d["nsr_used"] == pytest.approx(np.mean(used["linear"] + used["optimized"]))
+    assert d["nsr_used"] >= d["nsr_model"]
 
 
 @pytest.mark.parametrize("args, message", [
