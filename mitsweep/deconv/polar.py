@@ -813,14 +813,26 @@ def _band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
     """
     K0, K1 = k.shape
     rdt = np.float32 if cdt == np.complex64 else np.float64
-    t = -(np.arange(K0) - K0 // 2).astype(rdt)               # tangential offset, px
-    phase = np.outer(t, np.arange(M, dtype=rdt) / rdt(max(r_band, 1e-9)))   # (K0, M)
     kt = k.astype(rdt)
+    h0 = K0 // 2
+    if K0 % 2:
+        # rows h0 ∓ t hold offsets ±t: cos is even and sin odd in t, so the sums run over
+        # t >= 0 on the even and odd parts of the kernel (half the trigonometry)
+        up, down = kt[h0::-1], kt[h0:]                       # offsets +t, -t (t = 0..h0)
+        k_even = up + down
+        k_even[0] = kt[h0]
+        k_odd = (up - down)[1:]
+        t = np.arange(h0 + 1, dtype=rdt)
+    else:
+        k_even = k_odd = kt
+        t = -(np.arange(K0) - h0).astype(rdt)                # tangential offset, px
+    phase = np.outer(t, np.arange(M, dtype=rdt) / rdt(max(r_band, 1e-9)))   # (t, M)
     T = np.empty((K1, M), dtype=cdt)                         # radial offset s × harmonic m
     # einsum, not BLAS: for these thin products a threaded BLAS on a busy machine costs
     # 3-5x more in thread start-up than the arithmetic (measured)
-    T.real = np.einsum("ts,tm->sm", kt, np.cos(phase), optimize=False)
-    T.imag = -np.einsum("ts,tm->sm", kt, np.sin(phase), optimize=False)
+    T.real = np.einsum("ts,tm->sm", k_even, np.cos(phase), optimize=False)
+    odd_phase = phase[1:] if K0 % 2 else phase
+    T.imag = -np.einsum("ts,tm->sm", k_odd, np.sin(odd_phase), optimize=False)
     L_px = int(round(L * step))
     if L_px < K1:
         raise ValueError(f"band of {L} rows is shorter than the kernel ({K1} px)")
@@ -870,6 +882,21 @@ def _band_wiener(Hb: np.ndarray, nu: np.ndarray, ft: np.ndarray, nsr: float, pri
     np.negative(den, out=den)
     im *= den
     return Hb
+
+
+def _symmetric_extension(x: np.ndarray, before: int, after: int) -> np.ndarray:
+    """``np.pad(x, [(before, after), (0, 0), ...], mode="symmetric")`` along axis 0,
+    written into one new array (np.pad's general path costs several extra passes)."""
+    n = x.shape[0]
+    if before > n or after > n:
+        return np.pad(x, [(before, after)] + [(0, 0)] * (x.ndim - 1), mode="symmetric")
+    out = np.empty((before + n + after,) + x.shape[1:], dtype=x.dtype)
+    out[before:before + n] = x
+    if before:
+        out[:before] = x[:before][::-1]
+    if after:
+        out[before + n:] = x[::-1][:after]
+    return out
 
 
 def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
@@ -991,14 +1018,16 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
                           nsr, prior, float(np.sqrt(H * W)))
         # symmetric extension to the FFT length (as in wiener_deconvolve): no step at the
         # slice ends, so smooth content, a constant above all, passes without ringing
-        a = (L - (s1 - s0)) // 2
-        ext = np.pad(spec[s0:s1, :mc], [(a, L - (s1 - s0) - a), (0, 0), (0, 0)],
-                     mode="symmetric")
+        n_s = s1 - s0
+        a = (L - n_s) // 2
+        ext = _symmetric_extension(spec[s0:s1, :mc], a, L - n_s - a)
         band = sfft.fft(ext, axis=0, workers=fft_workers, overwrite_x=True)
         band *= Gb[..., None]
         band = sfft.ifft(band, axis=0, workers=fft_workers, overwrite_x=True)
         w = weights[b, lo:hi, None, None].astype(dt)
-        return lo, hi, mc, w, w * band[lo - s0 + a:hi - s0 + a]
+        blk = band[lo - s0 + a:hi - s0 + a]
+        blk *= w
+        return lo, hi, mc, w, blk
 
     # bands in parallel (NumPy and scipy.fft release the GIL), summed in band order so
     # that the result does not depend on the thread count
