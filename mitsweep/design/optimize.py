@@ -14,7 +14,7 @@ The problem (docs in :mod:`mitsweep.design`): over bins of widths ``Δi_k`` (mm)
   This is not linearised: it is imposed as it stands, non-convex, by the local
   optimiser; the convex bound drops it (a relaxation, so the bound stays a bound).
 
-Local optimiser: SLSQP (deterministic) on ``x = τ / τ_lin`` (``x = 1`` is the uniform
+Local optimiser: SLSQP (deterministic: run on one BLAS thread) on ``x = τ / τ_lin`` (``x = 1`` is the uniform
 sweep), the worst case in epigraph form (``min t`` s.t. ``MSE_j / MSE_0 <= t``), with
 exact gradients, from a fixed set of starts (uniform, the relaxed problem's minimiser,
 and two cosine-shaped ones); the best feasible result is kept and every start's value is
@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import linprog, minimize
+from threadpoolctl import threadpool_limits
 
 from .objective import WienerModel
 
@@ -200,8 +201,13 @@ def _solve(value_grad, tau_lin, widths, limits, objective, x0, *, accel: bool,
 
         z0 = np.asarray(x0, dtype=float)
         bounds = [(lo, None) for lo in x_lo]
-    res = minimize(f, z0, jac=fj, bounds=bounds, constraints=cons, method="SLSQP",
-                   options={"maxiter": maxiter, "ftol": 1e-12})
+    # SLSQP's linear algebra runs in the BLAS, whose threads split its products: with
+    # OPENBLAS_NUM_THREADS 1 and 2 the same problem took 227 and 165 iterations to points
+    # 2e-13 apart, and a start's end point can change (0.024535 / 0.024468 on the sphere at
+    # 2 lux). One BLAS thread makes the result independent of the thread count and load.
+    with threadpool_limits(limits=1, user_api="blas"):
+        res = minimize(f, z0, jac=fj, bounds=bounds, constraints=cons, method="SLSQP",
+                       options={"maxiter": maxiter, "ftol": 1e-12})
     x = np.maximum(res.x[:n], x_lo)
     x = x / (tau_lin @ x)
     return x, res
