@@ -91,7 +91,9 @@ def test_mse_gradient_matches_finite_differences(small):
     for k in (0, 7, 15):
         e = np.zeros(16)
         e[k] = 1e-6
-        # central differences: error O(h²) ~ 1e-12 relative to values ~1e-2
+        # central differences: error O(h²) ~ 1e-12 relative to values ~1e-2, plus float64
+        # cancellation in the difference; measured: at most 1.7e-6 relative for the MSE,
+        # 6.9e-10 for the bound (rtol 1e-5: 6x the first)
         np.testing.assert_allclose((model.mse(tau + e) - model.mse(tau - e)) / 2e-6,
                                    grad[:, k], rtol=1e-5)
         fd = (model.bound_and_grad(tau + e)[0] - model.bound_and_grad(tau - e)[0]) / 2e-6

@@ -185,7 +185,9 @@ def test_lit_gradient_equals_finite_differences_with_common_random_numbers(grad_
     scene, w = grad_cases[key]
     fwd = float(ad_derivative(scene, key, 3, w, mode="forward", tangent=[1.0])[0])
     rev = float(ad_derivative(scene, key, 3, w, mode="reverse")[0])
-    assert fwd == pytest.approx(rev, rel=1e-4)
+    # forward and reverse mode: the same derivative summed in another order (float32);
+    # measured: 0 (start) and 1.9e-7 (end) relative
+    assert fwd == pytest.approx(rev, rel=1e-5)
     assert fwd == pytest.approx(fd_derivative(scene, key, 3, w, [1.0]), rel=RTOL_CRN)
 
 
