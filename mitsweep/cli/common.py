@@ -9,11 +9,11 @@ import math
 import os
 import sys
 from pathlib import Path
-from typing import Any, Iterable, NoReturn, Union
+from typing import Any, Callable, Iterable, NoReturn, TypeVar, Union
 
 from ..config import Setup, SetupError, load_setup
 
-__all__ = ["depth_mm", "UsageError", "USER_ERRORS", "ArgumentParser", "ArgumentParserError",
+__all__ = ["depth_mm", "number_type", "UsageError", "USER_ERRORS", "ArgumentParser", "ArgumentParserError",
            "check_outputs", "load_setup_arg", "print_error_json", "print_json",
            "positive_float", "positive_int", "user_error_message"]
 
@@ -140,36 +140,37 @@ def print_json(obj: Any) -> None:
     sys.stdout.write("\n")
 
 
-def positive_float(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (x > 0) or math.isnan(x):
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return x
+N = TypeVar("N", int, float)
 
 
-def depth_mm(text: str) -> float:
-    """An object depth in mm for argparse: a number > 0, ``inf`` allowed."""
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a depth in mm (or inf), got {text!r}") \
-            from None
-    if not x > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0 mm (inf allowed), got {text}")
-    return x
+def number_type(convert: Callable[[str], N], ok: Callable[[N], bool], expected: str,
+                allowed: str, name: str) -> Callable[[str], N]:
+    """An argparse ``type``: ``convert(text)``, refused unless ``ok`` of it.
+
+    Messages: ``expected <expected>, got 'text'`` (not a number) and ``must be <allowed>,
+    got text`` (out of range); argparse prefixes the option. ``ok`` must be False for NaN
+    where NaN is not allowed (``x > 0`` is).
+    """
+    def parse(text: str) -> N:
+        try:
+            x = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+        if not ok(x):
+            raise argparse.ArgumentTypeError(f"must be {allowed}, got {text}")
+        return x
+
+    parse.__name__ = parse.__qualname__ = name
+    return parse
 
 
-def positive_int(text: str) -> int:
-    try:
-        x = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if x <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return x
+#: A number > 0.
+positive_float = number_type(float, lambda x: x > 0, "a number", "> 0", "positive_float")
+#: An object depth in mm: a number > 0, ``inf`` allowed.
+depth_mm = number_type(float, lambda x: x > 0, "a depth in mm (or inf)",
+                       "> 0 mm (inf allowed)", "depth_mm")
+#: An integer > 0.
+positive_int = number_type(int, lambda x: x > 0, "an integer", "> 0", "positive_int")
 
 
 def add_photo_arguments(p: argparse.ArgumentParser) -> None:

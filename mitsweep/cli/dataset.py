@@ -6,7 +6,7 @@ import argparse
 import math
 from pathlib import Path
 
-from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
+from .common import (number_type, UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
                      print_json)
 from .motion import add_motion_argument, motion_from_args
 
@@ -68,14 +68,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the manifest as JSON")
 
 
-def _seconds(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
-    if not x >= 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0 seconds, got {text}")
-    return x
+_seconds = number_type(float, lambda x: x >= 0, "seconds", ">= 0 seconds", "seconds")
 
 
 def _family_param(text: str) -> tuple[str, object]:
@@ -121,14 +114,8 @@ def _shard(text: str):
         raise argparse.ArgumentTypeError(str(exc).partition(": ")[2]) from None
 
 
-def _non_negative_int(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if n < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {n}")
-    return n
+_non_negative_int = number_type(int, lambda n: n >= 0, "an integer", ">= 0",
+                                "non_negative_int")
 
 
 #: DatasetOptions fields → the options that set them, for messages.

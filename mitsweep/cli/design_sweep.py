@@ -11,23 +11,17 @@ import argparse
 import math
 import sys
 
-from .common import (UsageError, check_outputs, depth_mm, load_setup_arg, positive_float,
-                     positive_int, print_json)
+from .common import (UsageError, check_outputs, depth_mm, load_setup_arg, number_type,
+                     positive_float, positive_int, print_json)
 
 NAME = "design-sweep"
 HELP = ("design the sensor's time profile over the sweep (not only its range) that "
         "minimises the predicted Wiener restoration error, and write it as a motion file")
 
 
-def _distance(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a sensor distance in mm, got {text!r}") \
-            from None
-    if not (math.isfinite(x) and x > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite sensor distance > 0 mm, got {text}")
-    return x
+_distance = number_type(float, lambda x: math.isfinite(x) and x > 0,
+                        "a sensor distance in mm", "a finite sensor distance > 0 mm",
+                        "sensor_distance")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -7,7 +7,7 @@ import math
 import sys
 from pathlib import Path
 
-from .common import (UsageError, check_outputs, depth_mm, load_setup_arg, positive_float,
+from .common import (number_type, UsageError, check_outputs, depth_mm, load_setup_arg, positive_float,
                      positive_int, print_json)
 from .motion import add_motion_argument, motion_from_args
 
@@ -16,14 +16,7 @@ HELP = ("trace the integrated PSF of a point source over the focal sweep (or a P
         "sensor distance, or a radial/grid IPSF bank) with the Dr.Jit tracer")
 
 
-def _finite(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(x):
-        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
-    return x
+_finite = number_type(float, math.isfinite, "a number", "a finite number", "finite")
 
 
 def _radius(text: str) -> float:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .common import (UsageError, add_photo_arguments, check_outputs, load_setup_arg,
+from .common import (number_type, UsageError, add_photo_arguments, check_outputs, load_setup_arg,
                      photo_options, positive_float, positive_int, print_json)
 
 NAME = "unwarp"
@@ -21,14 +21,8 @@ HELP = ("unwarp a catadioptric image (an EDOF image or a photo) into a cylindric
 OUTPUT_SUFFIXES = (".exr", ".tif", ".tiff", ".png")
 
 
-def _elevation(text: str) -> float:
-    try:
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected degrees, got {text!r}") from None
-    if not -90.0 <= x <= 90.0:
-        raise argparse.ArgumentTypeError(f"must be in [-90, 90] degrees, got {text}")
-    return x
+_elevation = number_type(float, lambda x: -90.0 <= x <= 90.0, "degrees",
+                         "in [-90, 90] degrees", "elevation")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
