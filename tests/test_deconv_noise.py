@@ -123,6 +123,11 @@ def test_pixel_pitch_keeps_its_former_name_as_a_deprecated_alias():
     with pytest.warns(DeprecationWarning):
         assert paper_fig10_settings(pixel_size_mm=0.0064) == paper_fig10_settings(0.0064)
     assert new.as_dict()["pixel_size_mm"] == 0.0064 and "pixel_pitch" not in new.as_dict()
+    # the provenance reads back to the same model, without the deprecation warning
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert SensorNoise.from_dict(new.as_dict()) == new
     assert dataclasses.replace(new, iso=200.0).pixel_pitch == 0.0064
     with pytest.raises(ValueError, match="noise.pixel_pitch"):
         model(pixel_pitch=0.0)

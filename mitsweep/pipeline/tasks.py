@@ -215,15 +215,6 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
     return {}
 
 
-def _sensor_noise(d: dict):
-    """The :class:`~mitsweep.deconv.SensorNoise` of its ``as_dict()`` (the pitch under
-    its JSON key ``pixel_size_mm``)."""
-    from ..deconv import SensorNoise
-
-    return SensorNoise(**{("pixel_pitch" if k == "pixel_size_mm" else k): v
-                          for k, v in d.items()})
-
-
 def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
             nsr: float | None, noise: dict | None = None) -> dict:
     """Deconvolve ``image`` with ``method``; Wiener with NSR = max(the noise model's,
@@ -246,7 +237,7 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     the noise the image's metadata records. Wiener's NSR is ``nsr`` (from the same
     model), so it takes none.
     """
-    from ..deconv import deconvolve, estimate_nsr
+    from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..io.bank import load_bank
 
     img, _, meta = read_rgb(image)
@@ -265,7 +256,7 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     x = img.astype(np.float32)
     if noise is not None:
         level = np.float32(meta["white_level"])
-        kw["noise"], x = _sensor_noise(noise), x / level
+        kw["noise"], x = SensorNoise.from_dict(noise), x / level
     t0 = time.perf_counter()
     restored = deconvolve(x, ipsf, method=method, **kw)
     if noise is not None:
