@@ -11,7 +11,8 @@
 #   1. pytest -m gpu             the CUDA selection, a Dr.Jit CUDA kernel, a Mitsuba
 #                                cuda_ad_rgb render (tests/test_backend_selection.py)
 #   2. render and tracer tests   the thin-lens sweep sensor against Mitsuba's thinlens,
-#                                the tracer's PSFs against their references, on CUDA
+#                                the tracer's PSFs against their references, and the
+#                                polar resampling's kernels against scipy, on CUDA
 #   3. mitsweep bench all --quick --json   -> OUT_DIR/bench-all-quick.json
 # Logs go to OUT_DIR; the machine's description is in the JSON ("machine").
 set -euo pipefail
@@ -55,7 +56,8 @@ step() {  # name, command...: run, log, remember a failure, go on with the other
 step gpu-tests timeout 60 "$py" -m pytest -m gpu -q -p no:cacheprovider \
     tests/test_backend_selection.py
 step render-tracer-tests timeout 90 "$py" -m pytest -q -p no:cacheprovider \
-    tests/test_render_sensor.py tests/test_tracer_psf.py tests/test_tracer_independence.py
+    tests/test_render_sensor.py tests/test_tracer_psf.py tests/test_tracer_independence.py \
+    tests/test_jit_spline.py
 step bench-all-quick bash -c "timeout 150 '$py' -m mitsweep bench all --quick --json \
     >'$out/bench-all-quick.json'"
 echo "gpu-check: done in $((SECONDS - start)) s, status $status"

@@ -37,12 +37,15 @@ LAYERS = {
     "io": set(),
     "optics": set(),
     "backend": set(),
+    # Dr.Jit versions of NumPy-level kernels (NumPy in and out), for units that must
+    # also work without Dr.Jit: they import it lazily and keep a NumPy/SciPy reference
+    "jit": {"backend"},
     "plots": {"optics", "io"},
     # The tracer and the renderer are independent implementations (docs/design.md): they
     # share optics, never each other.
     "tracer": {"optics", "io", "backend"},
     "render": {"optics", "io", "backend"},
-    "deconv": {"optics", "io"},
+    "deconv": {"optics", "io", "jit"},
     "rig": {"optics", "io"},
     "design": {"optics", "io", "backend", "tracer", "deconv"},
     "pipeline": {"optics", "io", "backend", "plots", "tracer", "render", "deconv"},
@@ -53,7 +56,7 @@ LAYERS = {
 # External backends → the only units that may import them.
 BACKEND_OWNERS = {
     "mitsuba": {"render", "backend"},
-    "drjit": {"tracer", "render", "backend"},
+    "drjit": {"tracer", "render", "backend", "jit"},
 }
 
 

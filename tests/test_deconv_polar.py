@@ -216,21 +216,31 @@ def test_spline_sampling_matrix_matches_map_coordinates(periodic):
     np.testing.assert_allclose(M @ coef.ravel(), ref, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("rows,center,views", [(128, None, 8), (120, None, 4),
-                                               (120, (60.25, 70.8), 1)])
-def test_polar_resampling_matrices_are_to_polar_and_from_polar(rows, center, views):
-    """The public matrices (all points, no mirror views) agree with the fast paths
-    (an eighth of the points seen through eight mirror views when the pole is the
-    centre of a square image, a quarter through four on another, every point when the
-    pole is elsewhere) to float64 round-off."""
+@pytest.fixture(params=["jit", "ndimage"])
+def resampler(request, monkeypatch):
+    """The polar resampling's two evaluators: the Dr.Jit kernels (where a backend
+    works: here always) and their scipy.ndimage reference (the fallback elsewhere)."""
+    from mitsweep.deconv import polar
+
+    if request.param == "ndimage":
+        monkeypatch.setattr(polar, "_spline_kernels", lambda: None)
+    else:
+        assert polar._spline_kernels() is not None
+    return request.param
+
+
+@pytest.mark.parametrize("rows,center", [(128, None), (120, None), (120, (60.25, 70.8)),
+                                         (128, (3.5, 125.0))])
+def test_polar_resampling_matrices_are_to_polar_and_from_polar(rows, center, resampler):
+    """The public matrices (16 taps a point, written by NumPy) agree with to_polar and
+    from_polar (Dr.Jit kernels or scipy.ndimage) to float64 round-off, on square and
+    other images, for poles at the centre, off it and near a corner (whose grid reaches
+    far beyond the image: mirrored coefficients)."""
     import scipy.ndimage as ndi
 
-    from mitsweep.deconv import polar
     from mitsweep.deconv.polar import polar_resampling, polar_spline_coefficients
 
     img = _gray("camera", 128)[:rows]
-    assert len(polar._to_polar_plan(polar_grid(img.shape, center=center, r_max=55),
-                                    img.shape, "float64", False)[0].flips) == views
     g = polar_grid(img.shape, center=center, r_max=55)
     T, B = polar_resampling(g, img.shape)
     assert T.shape == (g.n_radii * g.n_angles, img.size) and B.shape == T.shape[::-1]
@@ -244,50 +254,66 @@ def test_polar_resampling_matrices_are_to_polar_and_from_polar(rows, center, vie
     cy, cx = g.center
     rr = np.hypot(*np.mgrid[0:rows, 0:128] - np.array([cy, cx])[:, None, None])
     full = (rr <= g.r_max) & (2 * np.pi * (rr + 8) * 0.75 >= g.n_angles / 4 - 8)
-    assert full.sum() > 0.5 * (rr <= g.r_max).sum()
+    assert full.sum() > 0.3 * (rr <= g.r_max).sum()
     np.testing.assert_allclose(back[full], via_b[full], atol=1e-12)
-    assert np.all(via_b[rr > g.r_max] == 0)
+    assert np.all(via_b[rr > g.r_max] == 0) and np.all(back[rr > g.r_max] == 0)
 
 
-def test_polar_deconvolution_does_not_depend_on_threads_or_cache(blurred_scene, monkeypatch):
+@pytest.mark.parametrize("dtype,tol,spec_tol", [(np.float32, 5e-7, 1e-8),
+                                                (np.float64, 2e-13, 1e-16)])
+def test_dr_jit_resampling_matches_its_ndimage_reference(dtype, tol, spec_tol, monkeypatch):
+    """Both resamplings, Dr.Jit against scipy.ndimage, on a 3-channel off-centre image
+    with all three angle levels: the same spline, summed in another order. Tolerances:
+    about 3x what was measured (pixels 1.8e-7 in float32, 5.1e-14 in float64, for values
+    of order 1; the angle spectrum's largest difference over its largest value and
+    sqrt(n_angles) 3.0e-9 and 1.6e-17)."""
+    from mitsweep.deconv import polar
+
+    img = np.stack([_gray(n, 160) for n in ("camera", "astronaut", "coins")], -1)
+    img = img[:150].astype(dtype)
+    g = polar_grid(img.shape, center=(70.3, 84.9))
+    assert len(polar._polar_levels(g, True)) == 3
+    spec_jit = polar._angle_spectrum(img, g, np.complex128)
+    out_jit = polar._from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
+                                         outside=img, dtype=dtype)
+    monkeypatch.setattr(polar, "_spline_kernels", lambda: None)
+    spec_ref = polar._angle_spectrum(img, g, np.complex128)
+    out_ref = polar._from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
+                                         outside=img, dtype=dtype)
+    scale = np.abs(spec_ref).max()
+    assert np.abs(spec_jit - spec_ref).max() <= spec_tol * scale * g.n_angles ** 0.5
+    assert out_jit.dtype == out_ref.dtype == dtype
+    np.testing.assert_allclose(out_jit, out_ref, rtol=0, atol=tol)
+
+
+def test_polar_deconvolution_does_not_depend_on_threads_or_calls(blurred_scene, monkeypatch):
     from mitsweep.deconv import polar
 
     _, y, bank = blurred_scene
     outs = []
     for n in (1, 3):
-        polar._to_polar_plan.cache_clear()
-        polar._from_polar_plan.cache_clear()
         monkeypatch.setattr(polar, "_threads", lambda n=n: n)
         outs.append(polar_deconvolve(y, bank, nsr=1e-3))
-        outs.append(polar_deconvolve(y, bank, nsr=1e-3))       # cached plans
+        outs.append(polar_deconvolve(y, bank, nsr=1e-3))
     for o in outs[1:]:
         np.testing.assert_array_equal(o, outs[0])
 
 
 def test_memory_estimate_bounds_the_measured_peak():
     """polar_memory_bytes (what the allocation check is given) is at least the peak
-    NumPy allocates in a first call, cached matrices included, and not wildly more."""
-    import tracemalloc
+    NumPy and Dr.Jit allocate in a call, and not wildly more."""
+    from memory_peak import traced_peak
 
     from mitsweep.deconv import polar
 
     img = _gray("astronaut", 384).astype(np.float32)
     bank = synthetic_radial_bank(img.shape, size=15, r_max_px=180.0, n_radii=19)
-    polar._to_polar_plan.cache_clear()
-    polar._from_polar_plan.cache_clear()
-    tracemalloc.start()
-    try:
-        polar_deconvolve(img, bank, nsr=1e-3)
-        _, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
+    peak = traced_peak(lambda: polar_deconvolve(img, bank, nsr=1e-3))
     K = 15
     rad = polar.radii_px(bank)
     g = polar_grid(img.shape, r_max=min(float(rad.max()) + K, polar_grid(img.shape).r_max),
                    inner_px=8, outer_px=8)
     est = polar.polar_memory_bytes(g, img.shape, np.float32)
-    # measured at 2048²: estimate 0.7 GiB for a 407 MiB peak; 3x is the bar for "not
-    # wildly more"
     assert peak <= est <= 3 * peak, (peak, est)
 
 

@@ -17,23 +17,21 @@ axis 1) the blur is *circulant in angle*. The pipeline:
 The small disk around the centre, where a polar grid cannot describe a kernel, is
 restored in Cartesian coordinates with the centre IPSF and blended in smoothly.
 
-Speed: both resamplings are sparse matrices (cubic B-spline weights, 16 a point;
-:func:`spline_sampling_matrix`) that depend only on the grid and the image shape. They
-are built at the first call for a grid and kept (the last two grids) for the next
-calls, e.g. every frame of a sequence; when the pole is the image centre they hold an
-eighth of the points (a quarter if the image is not square), applied to eight (four)
-mirror views of the data. Sparse products,
-spline prefilters along contiguous lines and the radial bands run across threads (scipy
-and NumPy release the GIL); along the strided axis the prefilter runs as row-by-row
-recursions, each step one NumPy operation on a whole row. A band's transfer function is
-an FFT of its kernel and its Wiener filter is formed in place. The result does not
-depend on the thread count. :func:`polar_resampling` gives
-the full matrices, whose transposes are the exact adjoints.
+Speed: both resamplings are cubic B-spline evaluations (16 coefficients a point). Where
+a Dr.Jit backend works they run as fused kernels on every core
+(:mod:`mitsweep.jit.spline`) that compute each point's coordinates themselves, so
+nothing is precomputed or kept between calls; elsewhere ``scipy.ndimage`` evaluates
+them (one thread), the reference the kernels are tested against. Spline prefilters
+along contiguous lines and the radial bands run across threads (scipy and NumPy
+release the GIL); along the strided axis the prefilter runs as row-by-row recursions,
+each step one NumPy operation on a whole row. A band's transfer function is an FFT of
+its kernel and its Wiener filter is formed in place. The result does not depend on
+the thread count. :func:`polar_resampling` gives the resamplings as sparse matrices,
+whose transposes are the exact adjoints.
 """
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import os
@@ -175,23 +173,19 @@ def _channels(image: np.ndarray) -> tuple[np.ndarray, bool]:
     raise ValueError(f"image must be (H, W) or (H, W, C), got shape {img.shape}")
 
 
-# -- sparse cubic B-spline resampling --------------------------------------------------
+# -- cubic B-spline resampling ---------------------------------------------------------
 #
-# Both directions of the polar resampling are cubic B-spline evaluations at points that
-# depend only on the grid and the image shape, so they are sparse matrices (16 taps a
-# point) built once per grid and cached; applying one is a sparse product, split over
-# threads (scipy's sparse kernels release the GIL). For a grid centred on the image the
-# mirror images of a quarter of the points are the other three quarters (flip rows:
-# angle -θ; flip columns: π - θ; both: π + θ), and on a square image the transpose
-# (3π/2 - θ) halves that again: the matrices hold an eighth (a quarter) of the points
-# and are applied to eight (four) mirrored copies of the coefficients at once.
+# Both directions of the polar resampling evaluate a cubic B-spline (16 coefficients a
+# point). Where a Dr.Jit backend works they run as fused kernels on every core
+# (:mod:`mitsweep.jit.spline`), the points' coordinates computed in the kernel, so
+# nothing is built, cached or paged in between calls; elsewhere as
+# ``scipy.ndimage.map_coordinates`` (one thread), which is also the reference the
+# kernels are tested against. :func:`spline_sampling_matrix` writes the same
+# evaluation as a sparse matrix, for the explicit operators of :func:`polar_resampling`.
 
 _TAPS = 16                       # a cubic B-spline in 2-D reads 4 x 4 coefficients
 _BUILD_CHUNK = 1 << 13           # points per chunk while a matrix is built (cache-sized)
-# mirror views: (flip rows, flip columns, transpose first)
-_FLIPS_1 = ((False, False, False),)
-_FLIPS_4 = tuple((fr, fc, False) for fr in (False, True) for fc in (False, True))
-_FLIPS_8 = _FLIPS_4 + tuple((fr, fc, True) for fr, fc, _ in _FLIPS_4)
+_ANGLE_PAD = (2, 3)              # periodic columns added around a polar level (taps, θ = 2π)
 
 
 def _mirror_index(i: np.ndarray, n: int) -> np.ndarray:
@@ -292,67 +286,16 @@ def _threads() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-class _RowBlocks:
-    """A sparse matrix kept as row blocks, one per thread, applied in parallel."""
+def _spline_kernels():
+    """:mod:`mitsweep.jit.spline` where a Dr.Jit backend works, else None (then
+    ``scipy.ndimage`` evaluates the splines)."""
+    from .. import jit
 
-    def __init__(self, rows, cols, shape, *, periodic_cols, dtype):
-        n = np.asarray(rows).size
-        edges = np.linspace(0, n, min(_threads(), max(1, n // 4096)) + 1).astype(int)
-        self.edges = edges
-        def build(k):
-            a, b = edges[k], edges[k + 1]
-            return spline_sampling_matrix(rows[a:b], cols[a:b], shape,
-                                          periodic_cols=periodic_cols, dtype=dtype)
+    if jit.available() is None:
+        return None
+    from ..jit import spline
 
-        with ThreadPoolExecutor(len(edges) - 1) as pool:    # NumPy releases the GIL
-            self.blocks = list(pool.map(build, range(len(edges) - 1)))
-        self.shape = (n, int(shape[0]) * int(shape[1]))
-
-    @property
-    def nbytes(self) -> int:
-        return sum(b.data.nbytes + b.indices.nbytes + b.indptr.nbytes for b in self.blocks)
-
-    def __matmul__(self, rhs: np.ndarray) -> np.ndarray:
-        out = np.empty((self.shape[0],) + rhs.shape[1:], dtype=np.result_type(
-            self.blocks[0].dtype, rhs.dtype))
-
-        def apply(k):
-            out[self.edges[k]:self.edges[k + 1]] = self.blocks[k] @ rhs
-
-        if len(self.blocks) == 1:
-            apply(0)
-        else:
-            with ThreadPoolExecutor(len(self.blocks)) as pool:
-                list(pool.map(apply, range(len(self.blocks))))
-        return out
-
-
-def _flips(grid: PolarGrid, shape, n_angles: int) -> tuple[tuple[bool, bool, bool], ...]:
-    """The mirror views that map the grid onto itself: with the pole at the image
-    centre and an angle count that is a multiple of 4, the eight of a square image or
-    the four flips of another; otherwise the identity alone."""
-    centred = tuple(grid.center) == optical_center_px(shape)
-    if not centred or n_angles % 4:
-        return _FLIPS_1
-    return _FLIPS_8 if shape[0] == shape[1] else _FLIPS_4
-
-
-def _canonical_angles(n: int, flips) -> np.ndarray:
-    """Angle indices whose mirror views cover all n: θ in [0, π/4] for eight views,
-    [0, π/2] for four, all otherwise."""
-    return np.arange({8: n // 8 + 1, 4: n // 4 + 1}.get(len(flips), n))
-
-
-def _angle_index(k: np.ndarray, n: int, flip: tuple[bool, bool, bool]) -> np.ndarray:
-    """Angle index reached from canonical index ``k`` (of ``n``) by a mirror view."""
-    fr, fc, tr = flip
-    if fr and fc:
-        k = (n // 2 + k) % n             # π + θ
-    elif fr:
-        k = (-k) % n                     # −θ
-    elif fc:
-        k = (n // 2 - k) % n             # π − θ
-    return (3 * n // 4 - k) % n if tr else k      # transposed: 3π/2 − θ
+    return spline
 
 
 _POLE = math.sqrt(3) - 2          # the cubic B-spline prefilter's pole
@@ -406,81 +349,6 @@ def _spline_filter(a: np.ndarray, axes: tuple[int, ...], dtype) -> np.ndarray:
     return out
 
 
-def _image_views(coef: np.ndarray, lev: "_Level") -> np.ndarray:
-    """(box size, V): the level's box of the coefficient image seen through each
-    mirror view (flipped rows, columns), flattened."""
-    y0, y1, x0, x1 = lev.box
-    out = np.empty((y1 - y0, x1 - x0, len(lev.flips)), dtype=coef.dtype)
-    for v, (fr, fc, tr) in enumerate(lev.flips):
-        a = coef.T if tr else coef
-        out[..., v] = a[::-1 if fr else 1, ::-1 if fc else 1][y0:y1, x0:x1]
-    return out.reshape(-1, len(lev.flips))
-
-
-def _runs(index: np.ndarray) -> list[tuple[slice, slice]]:
-    """``index`` (an angle permutation's values) cut into runs of step +1 or -1, as
-    (slice of ``index``'s positions, slice of the values): copies along such runs are
-    plain strided copies, several times faster than fancy indexing."""
-    index = np.asarray(index)
-    out, a, n = [], 0, index.size
-    while a < n:
-        step = int(index[a + 1] - index[a]) if a + 1 < n else 1
-        if step not in (1, -1):
-            step = 1
-        b = a + 1
-        while b < n and index[b] - index[b - 1] == step:
-            b += 1
-        lo, hi = int(index[a]), int(index[b - 1])
-        vals = slice(lo, hi + 1) if step == 1 else slice(lo, hi - 1 if hi > 0 else None, -1)
-        out.append((slice(a, b), vals))
-        a = b
-    return out
-
-
-def _polar_views(coef: np.ndarray, lev: "_Level") -> np.ndarray:
-    """(rows x window, V): the angle window of the level's polar coefficients seen
-    through each mirror view (angles permuted as :func:`_angle_index`), flattened."""
-    out = np.empty((coef.shape[0], lev.src_index.shape[1], len(lev.flips)), dtype=coef.dtype)
-    for v, runs in enumerate(lev.src_runs):
-        for pos, vals in runs:
-            out[:, pos, v] = coef[:, vals]
-    return out.reshape(-1, len(lev.flips))
-
-
-@dataclass(frozen=True, eq=False)
-class _Level:
-    """One angular decimation level of a resampling: ``matrix`` maps source cells to
-    the canonical points (to-polar: ``rows`` × canonical angles; from-polar: pixels);
-    mirror view v writes them to angles ``angle_index[v]`` of those rows (to-polar) or
-    to the flat pixel indices ``targets[v]`` (from-polar)."""
-
-    q: int
-    n_angles: int
-    matrix: _RowBlocks
-    flips: tuple
-    rows: np.ndarray | None = None        # to-polar: the polar rows of this level,
-    angle_index: np.ndarray | None = None  # the angles each view writes,
-    box: tuple = ()                       # the image box read (y0, y1, x0, x1)
-    targets: np.ndarray | None = None     # from-polar: pixels written,
-    r0: int = 0                           # the polar rows read, r0:r1,
-    r1: int = 0
-    src_index: np.ndarray | None = None   # the angles each view reads
-
-    @functools.cached_property
-    def angle_runs(self) -> list:
-        return [_runs(a) for a in self.angle_index]
-
-    @functools.cached_property
-    def src_runs(self) -> list:
-        return [_runs(a) for a in self.src_index]
-
-    @property
-    def nbytes(self) -> int:
-        extra = sum(a.nbytes for a in (self.rows, self.angle_index, self.targets,
-                                       self.src_index) if a is not None)
-        return self.matrix.nbytes + extra
-
-
 def _decimation(reach: np.ndarray, n: int) -> np.ndarray:
     """Angle decimation per row or pixel: 4 where harmonics up to ``reach`` fit n/4
     angles (8 harmonics to spare), 2 where they fit n/2, else 1."""
@@ -493,97 +361,85 @@ def _level_angles(n: int, q: int) -> int:
     return n if q == 1 else _fast_multiple(-(-n // q), 4)
 
 
-@functools.lru_cache(maxsize=2)
-def _to_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
-                   decimate: bool) -> tuple[_Level, ...]:
-    """Sampling of an (H, W) image's spline on ``grid``, by decimation level (cached)."""
+def _polar_levels(grid: PolarGrid, decimate: bool) -> list[tuple[np.ndarray, int]]:
+    """(rows, angles) of each decimation level of the sampling on ``grid``: rows whose
+    harmonics fit a quarter (a half) of the angles are sampled at that many."""
     n = grid.n_angles
+    if not decimate:
+        return [(np.arange(grid.n_radii), n)]
+    level = _decimation(2 * math.pi * np.abs(grid.radii) * _TANGENTIAL_REACH, n)
+    return [(np.flatnonzero(level == q), _level_angles(n, q)) for q in (4, 2, 1)
+            if np.any(level == q)]
+
+
+def _sample_on_polar(coef: np.ndarray, grid: PolarGrid,
+                     levels: list[tuple[np.ndarray, int]]) -> list[np.ndarray]:
+    """The spline of an image (coefficients ``coef``, mirrored beyond its ends) at the
+    grid's points, level by level: for each (rows, n) of :func:`_polar_levels` an array
+    (rows.size, n), angle k at 2πk/n."""
+    cy, cx = grid.center
     r = grid.radii
-    level = (_decimation(2 * math.pi * np.abs(r) * _TANGENTIAL_REACH, n) if decimate
-             else np.ones(r.size, dtype=int))
-    cy, cx = grid.center
+    kernels = _spline_kernels()
+    if kernels is None:
+        out = []
+        for rows, n in levels:
+            th = np.arange(n) * (2 * math.pi / n)
+            rr = r[rows][:, None]
+            out.append(ndi.map_coordinates(coef, [cy - rr * np.sin(th), cx + rr * np.cos(th)],
+                                           order=3, mode="mirror", prefilter=False,
+                                           output=coef.dtype))
+        return out
+    # mirror the coefficients (scipy's "mirror" is NumPy's "reflect") as far as the
+    # grid's taps reach, so that the kernel reads inside them
+    H, W = coef.shape
+    reach = float(np.abs(r).max())
+    top, left = max(0, 1 - math.floor(cy - reach)), max(0, 1 - math.floor(cx - reach))
+    bottom = max(0, math.floor(cy + reach) - (H - 3))
+    right = max(0, math.floor(cx + reach) - (W - 3))
+    padded = np.pad(coef, ((top, bottom), (left, right)), mode="reflect")
+    return [kernels.polar_samples(padded, (cy + top, cx + left), r[rows], n)
+            for rows, n in levels]
+
+
+def _pixel_levels(grid: PolarGrid, n_up: int) -> list[tuple[int, int, float, float]]:
+    """(q, angles, r_from, r_to) of the decimation levels of the pixels inside
+    ``grid.r_max``: a pixel at radius r reads rows out to r + a spline's reach, whose
+    harmonics must fit the level's angles (:func:`_decimation`)."""
+    # _decimation(2π (r + _SPLINE_PX) 0.75, n) is 4 below e4, 2 below e2, else 1
+    k = 2 * math.pi * _TANGENTIAL_REACH
+    e4, e2 = (n_up / 8 - 8) / k - _SPLINE_PX, (n_up / 4 - 8) / k - _SPLINE_PX
     out = []
-    for q in (4, 2, 1):
-        rows_i = np.flatnonzero(level == q)
-        if rows_i.size == 0:
-            continue
-        nl = _level_angles(n, q)
-        flips = _flips(grid, shape, nl)
-        ks = _canonical_angles(nl, flips)
-        th = ks * (2 * math.pi / nl)
-        rr = r[rows_i][:, None]
-        y = (cy - rr * np.sin(th)[None, :]).ravel()
-        x = (cx + rr * np.cos(th)[None, :]).ravel()
-        # the box of coefficients these points read (mirrored taps stay inside it)
-        H, W = shape
-        y0, y1 = max(0, int(np.floor(y.min())) - 1), min(H, int(np.floor(y.max())) + 3)
-        x0, x1 = max(0, int(np.floor(x.min())) - 1), min(W, int(np.floor(x.max())) + 3)
-        out.append(_Level(q=q, n_angles=nl, rows=rows_i, flips=flips, box=(y0, y1, x0, x1),
-                          angle_index=np.stack([_angle_index(ks, nl, f) for f in flips]),
-                          matrix=_RowBlocks(y - y0, x - x0, (y1 - y0, x1 - x0),
-                                            periodic_cols=False, dtype=dtype)))
-    return tuple(out)
+    for q, lo, hi in ((4, -math.inf, e4), (2, e4, e2), (1, e2, math.inf)):
+        lo, hi = max(lo, 0.0), min(hi, grid.r_max)
+        if lo < hi or (q == 1 and lo <= hi):
+            out.append((q, _level_angles(n_up, q), lo, hi))
+    return out
 
 
-def _view_pixels(y: np.ndarray, x: np.ndarray, shape, flip) -> np.ndarray:
-    """Flat indices of the pixels that mirror view ``flip`` maps pixels (y, x) to: at
-    the angle :func:`_angle_index` gives, at the same radius."""
-    H, W = shape
-    fr, fc, tr = flip
-    y, x = (H - 1 - y if fr else y), (W - 1 - x if fc else x)
-    if tr:
-        y, x = x, y
-    return y * W + x
-
-
-@functools.lru_cache(maxsize=2)
-def _from_polar_plan(grid: PolarGrid, shape: tuple[int, int], dtype: str,
-                     n_up: int) -> tuple[_Level, ...]:
-    """Sampling of the polar spline (``n_up`` angles at level 1) at the pixels inside
-    ``grid.r_max``, by decimation level (cached)."""
-    H, W = shape
+def _pixels_from_polar(levels, grid: PolarGrid, box: tuple[int, int, int, int]):
+    """:func:`mitsweep.jit.spline.pixels_from_polar` on ``grid``'s pole and step, or its
+    reference (``scipy.ndimage``) where no Dr.Jit backend works: (values, inside) over
+    the box's pixels."""
+    kernels = _spline_kernels()
+    if kernels is not None:
+        return kernels.pixels_from_polar(levels, center=grid.center, box=box,
+                                         radial_step=grid.radial_step, r_max=grid.r_max)
+    y0, y1, x0, x1 = box
     cy, cx = grid.center
-    R = grid.r_max
-    by0, by1 = max(0, int(math.floor(cy - R))), min(H, int(math.ceil(cy + R)) + 1)
-    bx0, bx1 = max(0, int(math.floor(cx - R))), min(W, int(math.ceil(cx + R)) + 1)
-    # every level's angle count is a multiple of 4, so a centred grid needs the pixels
-    # of one quadrant (θ in [0, π/2]) or, on a square image, one octant ([0, π/4])
-    flips = _flips(grid, shape, 4)
-    if len(flips) > 1:
-        by1, bx0 = int(math.floor(cy)) + 1, int(math.ceil(cx))
-    y = np.arange(by0, by1)[:, None]
-    x = np.arange(bx0, bx1)[None, :]
-    rr = np.hypot(cy - y, x - cx)
-    ok = rr <= R
-    if len(flips) == 8:
-        ok &= (cy - y) <= (x - cx)
-    y, x = np.broadcast_to(y, ok.shape)[ok], np.broadcast_to(x, ok.shape)[ok]
-    rr = rr[ok]
-    th = np.mod(np.arctan2(cy - y, x - cx), 2 * math.pi)
-    # the rows a pixel reads (to r + a spline's reach) must fit the level's angles
-    level = _decimation(2 * math.pi * (rr + _SPLINE_PX) * _TANGENTIAL_REACH, n_up)
-    out = []
-    for q in (4, 2, 1):
-        sel = np.flatnonzero(level == q)
-        if sel.size == 0:
-            continue
-        nq = _level_angles(n_up, q)
-        r0 = max(0, int(math.floor(grid.row_of(rr[sel].min() - _SPLINE_PX))))
-        r1 = min(grid.n_radii, int(math.ceil(grid.row_of(rr[sel].max() + _SPLINE_PX))) + 1)
-        ys, xs = y[sel], x[sel]
-        targets = np.stack([_view_pixels(ys, xs, (H, W), f) for f in flips])
-        col = th[sel] * (nq / (2 * math.pi))
-        k0, k1 = int(np.floor(col.min())) - 1, int(np.floor(col.max())) + 3
-        if k1 - k0 >= nq:                 # all angles, periodic
-            k0, k1, periodic = 0, nq, True
-        else:                             # the window of angles read, taps inside it
-            periodic = False
-        src = np.stack([_angle_index(np.arange(k0, k1) % nq, nq, f) for f in flips])
-        m = _RowBlocks(grid.row_of(rr[sel]) - r0, col - k0, (r1 - r0, k1 - k0),
-                       periodic_cols=periodic, dtype=dtype)
-        out.append(_Level(q=q, n_angles=nq, matrix=m, targets=targets, flips=flips,
-                          r0=r0, r1=r1, src_index=src))
-    return tuple(out)
+    dy = cy - np.arange(y0, y1, dtype=np.float64)[:, None]
+    dx = np.arange(x0, x1, dtype=np.float64)[None, :] - cx
+    r = np.sqrt(dy * dy + dx * dx)
+    inside = r <= grid.r_max
+    th = np.arctan2(dy, dx)
+    th = np.where(th < 0, th + 2 * math.pi, th)
+    values = np.zeros(r.shape, dtype=levels[0][0].dtype)
+    bounds = [lv[4] for lv in levels[1:]] + [math.inf]
+    for (coef, row_off, n, col_off, r_from), r_to in zip(levels, bounds):
+        sel = inside & (r >= r_from) & (r < r_to) if r_from > 0 else inside & (r < r_to)
+        values[sel] = ndi.map_coordinates(
+            coef, [r[sel] / grid.radial_step + row_off, th[sel] * (n / (2 * math.pi)) + col_off],
+            order=3, mode="mirror", prefilter=False, output=coef.dtype)
+    return values, inside
 
 
 def polar_resampling(grid: PolarGrid, shape: tuple[int, int], *,
@@ -604,7 +460,8 @@ def polar_resampling(grid: PolarGrid, shape: tuple[int, int], *,
 
     Their transposes are the exact adjoints. Each stores 16 entries a point: for a
     2048² image on the default grid about 1.5 GB and 0.4 GB (float32 weights, int32
-    indices), so :func:`polar_deconvolve` keeps an eighth of each (its mirror views).
+    indices), which is why :func:`polar_deconvolve` evaluates the splines point by
+    point instead (:mod:`mitsweep.jit.spline`).
     """
     H, W = int(shape[0]), int(shape[1])
     dt = working_dtype(np.empty(0, dtype=dtype))
@@ -644,15 +501,6 @@ def polar_spline_coefficients(polar: np.ndarray) -> np.ndarray:
     return coef[..., 0] if squeeze else coef
 
 
-def _scatter_angles(lev: _Level, res: np.ndarray, out: np.ndarray) -> None:
-    """Write a to-polar level's canonical samples ``res`` (points, views) into ``out``
-    (rows of the level, angles)."""
-    res = res.reshape(out.shape[0], -1, len(lev.flips))
-    for v, runs in enumerate(lev.angle_runs):
-        for pos, vals in runs:
-            out[:, vals] = res[:, pos, v]
-
-
 def to_polar(image: np.ndarray, grid: PolarGrid) -> np.ndarray:
     """Sample ``image`` on ``grid``: (n_radii, n_angles[, C]), radius on axis 0.
 
@@ -661,13 +509,10 @@ def to_polar(image: np.ndarray, grid: PolarGrid) -> np.ndarray:
     """
     img, squeeze = _channels(image)
     dt = working_dtype(img)
-    shape = img.shape[:2]
-    (lev,) = _to_polar_plan(grid, shape, dt.name, False)
     out = np.empty((grid.n_radii, grid.n_angles, img.shape[2]), dtype=dt)
     for c in range(img.shape[2]):
         coef = _spline_filter(img[..., c], (0, 1), dt)
-        _scatter_angles(lev, lev.matrix @ _image_views(coef, lev),
-                        out[..., c])
+        (out[..., c],) = _sample_on_polar(coef, grid, _polar_levels(grid, False))
     return out[..., 0] if squeeze else out
 
 
@@ -717,16 +562,13 @@ def _angle_spectrum(img: np.ndarray, grid: PolarGrid, cdt) -> np.ndarray:
     dt = working_dtype(img)
     M = grid.n_angles // 2 + 1
     spec = np.zeros((grid.n_radii, M, C), dtype=cdt)
-    levels = _to_polar_plan(grid, img.shape[:2], dt.name, True)
+    levels = _polar_levels(grid, True)
     for c in range(C):
         coef = _spline_filter(img[..., c], (0, 1), dt)
-        for lev in levels:
-            pol = np.empty((lev.rows.size, lev.n_angles), dtype=dt)
-            _scatter_angles(lev, lev.matrix @ _image_views(coef, lev),
-                            pol)
+        for (rows, n), pol in zip(levels, _sample_on_polar(coef, grid, levels)):
             f = sfft.rfft(pol, axis=1, workers=-1)
-            mh = lev.n_angles // 2 if lev.q > 1 else M      # drop a coarse level's Nyquist bin
-            spec[lev.rows, :mh, c] = f[:, :mh] * (grid.n_angles / lev.n_angles)
+            mh = n // 2 if n < grid.n_angles else M      # drop a coarse level's Nyquist bin
+            spec[rows, :mh, c] = f[:, :mh] * (grid.n_angles / n)
     return spec
 
 
@@ -750,41 +592,48 @@ def _from_angle_spectrum(spec, grid, shape, *, upsample, outside, dtype):
         out = (o[..., None] if o.ndim == 2 else o).copy()
         if out.shape != (H, W, C):
             raise ValueError(f"outside must be {(H, W, C)}, got {o.shape}")
-    levels = _from_polar_plan(grid, (H, W), np.dtype(dtype).name, n2)
-    flat = out.reshape(H * W, C)
-    for lev in levels:
-        nq = lev.n_angles
-        mq = min(spec.shape[1], nq // 2 + (1 if lev.q == 1 else 0))
-        scale = (nq / n) / _angle_bspline(np.arange(mq), nq, np.float64)
-        for c in range(C):
-            s = spec[lev.r0:lev.r1, :mq, c] * scale.astype(dtype)[None, :]
+    cy, cx = grid.center
+    R = grid.r_max
+    box = (max(0, int(math.floor(cy - R))), min(H, int(math.ceil(cy + R)) + 1),
+           max(0, int(math.floor(cx - R))), min(W, int(math.ceil(cx + R)) + 1))
+    if box[1] <= box[0] or box[3] <= box[2]:
+        return out
+    plan = _pixel_levels(grid, n2)
+    for c in range(C):
+        levels = []
+        for q, nq, lo, hi in plan:
+            # the rows a level's pixels read, with a spline's reach on either side
+            r0 = max(0, int(math.floor(grid.row_of(lo - _SPLINE_PX))))
+            r1 = min(grid.n_radii, int(math.ceil(grid.row_of(hi + _SPLINE_PX))) + 1)
+            mq = min(spec.shape[1], nq // 2 + (1 if q == 1 else 0))
+            scale = (nq / n) / _angle_bspline(np.arange(mq), nq, np.float64)
+            s = spec[r0:r1, :mq, c] * scale.astype(dtype)[None, :]
             up = sfft.irfft(s, n=nq, axis=1, workers=-1).astype(dtype, copy=False)
-            coef = _spline_filter(up, (0,), dtype)
-            res = lev.matrix @ _polar_views(coef, lev)
-            for v in range(len(lev.flips)):
-                flat[lev.targets[v], c] = res[:, v]
+            coef = np.pad(_spline_filter(up, (0,), dtype), ((0, 0), _ANGLE_PAD), mode="wrap")
+            levels.append((coef, grid.n_inner - r0, nq, float(_ANGLE_PAD[0]),
+                           lo if levels else min(lo, 0.0)))
+        values, inside = _pixels_from_polar(levels, grid, box)
+        np.copyto(out[box[0]:box[1], box[2]:box[3], c], values, where=inside)
     return out
 
 
 def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype: DTypeLike) -> float:
     """Peak bytes of :func:`polar_deconvolve` on ``grid``.
 
-    The cached resampling matrices (16 weights and indices a point; an eighth or a quarter
-    of the points when the pole is the image centre), the angle spectrum, its filtered
-    accumulator and the bands in flight (complex, half-length), the mirror views of
-    the coefficients, the angle-upsampled rows on the way back and three copies of the
-    image. For 2048² float32 with the benchmark's bank this says 0.7 GiB; measured
-    (tracemalloc) 407 MiB at the first call, 211 MiB of it the matrices kept for the
-    next call on the same grid, and 195 MiB above those at a later call.
+    The angle spectrum, its filtered accumulator and the bands in flight (complex,
+    half-length), the polar samples of a channel, the mirrored coefficients and the
+    angle-upsampled rows and pixel values on the way back, and three copies of the
+    image; nothing is kept between calls. For 2048² float32 with the benchmark's bank
+    this says 446 MiB; measured (tracemalloc and Dr.Jit's allocator watermark) 257 MiB
+    at the first call of a process and 191 MiB at a later one.
     """
     it = np.dtype(dtype).itemsize
     C = image_shape[2] if len(image_shape) == 3 else 1
     H, W = image_shape[0], image_shape[1]
     cells = float(grid.n_radii) * float(grid.n_angles)
-    disk = min(float(H) * W, math.pi * grid.r_max ** 2)
-    views = len(_flips(grid, (H, W), 4))
-    matrices = _TAPS * (it + 4) * (cells + disk) / views + 8.0 * disk
-    return (matrices + cells * it * (2 * C + 2 + 3 * C)
+    reach = grid.r_max + _SPLINE_PX + 4
+    mirrored = max(float(H) * W, 4 * reach * reach)
+    return (cells * it * (2 * C + 2 + 3 * C) + mirrored * it
             + float(H) * W * it * (3 * C + 4))
 
 
