@@ -272,7 +272,7 @@ def test_dr_jit_resampling_matches_its_ndimage_reference(dtype, tol, spec_tol, m
     img = np.stack([_gray(n, 160) for n in ("camera", "astronaut", "coins")], -1)
     img = img[:150].astype(dtype)
     g = polar_grid(img.shape, center=(70.3, 84.9))
-    assert len(polar._polar_levels(g, True)) == 3
+    assert len({n for _, n in polar._polar_levels(g, True)}) == 3
     spec_jit = polar._angle_spectrum(img, g, np.complex128)
     out_jit = polar._from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
                                          outside=img, dtype=dtype)
@@ -284,6 +284,19 @@ def test_dr_jit_resampling_matches_its_ndimage_reference(dtype, tol, spec_tol, m
     assert np.abs(spec_jit - spec_ref).max() <= spec_tol * scale * g.n_angles ** 0.5
     assert out_jit.dtype == out_ref.dtype == dtype
     np.testing.assert_allclose(out_jit, out_ref, rtol=0, atol=tol)
+
+
+def test_polar_deconvolution_without_dr_jit_gives_the_same_image(blurred_scene, monkeypatch):
+    """Where no Dr.Jit backend works the resamplings fall back to scipy.ndimage: the
+    restored image is the same to round-off (float64 here: measured 3.6e-14, the
+    resamplings' 1e-15 amplified by the Wiener filter's gain; the bound is 3x that)."""
+    from mitsweep.deconv import polar
+
+    _, y, bank = blurred_scene
+    fast = polar_deconvolve(y, bank, nsr=1e-3)
+    monkeypatch.setattr(polar, "_spline_kernels", lambda: None)
+    ref = polar_deconvolve(y, bank, nsr=1e-3)
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=1.1e-13)
 
 
 def test_polar_deconvolution_does_not_depend_on_threads_or_calls(blurred_scene, monkeypatch):

@@ -75,47 +75,55 @@ def test_bad_arguments_are_refused_with_their_name():
         spline.polar_samples(np.zeros((3, 8)), (1, 4), [0.0], 4)
     with pytest.raises(ValueError, match="at least one radius"):
         spline.polar_samples(np.zeros((8, 8)), (4, 4), [], 4)
-    lv = (np.zeros((30, 20)), 5.0, 8, 2.0, 0.0)
+    flat = np.zeros(30 * 20)
+    lv = spline.PolarLevel(0, 30, 20, 5.0, 8, 2.0, 0.0)
+    box = dict(center=(5, 5), radial_step=1.0, box=(0, 9, 0, 9))
     with pytest.raises(ValueError, match="1 to 3 levels"):
-        spline.pixels_from_polar([lv] * 4, center=(5, 5), radial_step=1.0, box=(0, 9, 0, 9),
-                                 r_max=4.0)
-    with pytest.raises(ValueError, match="one dtype"):
-        spline.pixels_from_polar([lv, (np.zeros((30, 20), np.float32),) + lv[1:4] + (2.0,)],
-                                 center=(5, 5), radial_step=1.0, box=(0, 9, 0, 9), r_max=4.0)
+        spline.pixels_from_polar(flat, [lv] * 4, r_max=4.0, **box)
+    with pytest.raises(ValueError, match="1 to 3 levels"):
+        spline.pixels_from_polar(flat, [], r_max=4.0, **box)
+    with pytest.raises(ValueError, match="lie inside the 600 coefficients"):
+        spline.pixels_from_polar(flat, [lv._replace(offset=1)], r_max=4.0, **box)
     with pytest.raises(ValueError, match="rise from <= 0"):
-        spline.pixels_from_polar([lv[:4] + (1.0,)], center=(5, 5), radial_step=1.0,
-                                 box=(0, 9, 0, 9), r_max=4.0)
+        spline.pixels_from_polar(flat, [lv._replace(r_from=1.0)], r_max=4.0, **box)
     with pytest.raises(ValueError, match="read beyond its rows"):
-        spline.pixels_from_polar([lv], center=(5, 5), radial_step=1.0, box=(0, 9, 0, 9),
-                                 r_max=40.0)
+        spline.pixels_from_polar(flat, [lv], r_max=40.0, **box)
+    with pytest.raises(ValueError, match="read beyond its rows"):       # θ = 2π's taps
+        spline.pixels_from_polar(flat, [lv._replace(n_angles=16)], r_max=4.0, **box)
     with pytest.raises(ValueError, match="non-empty"):
-        spline.pixels_from_polar([lv], center=(5, 5), radial_step=1.0, box=(0, 0, 0, 9),
-                                 r_max=4.0)
+        spline.pixels_from_polar(flat, [lv], r_max=4.0, center=(5, 5), radial_step=1.0,
+                                 box=(0, 0, 0, 9))
+    with pytest.raises(TypeError, match="float32 or float64"):
+        spline.pixels_from_polar(flat.astype(np.float16), [lv], r_max=4.0, **box)
 
 
 def _levels(rng, dtype, step):
-    """Two levels: 32 angles out to radius 6, 64 beyond, columns padded (2, 3)."""
+    """(flat coefficients, levels, arrays): 32 angles out to radius 6, 64 beyond, the
+    columns periodically padded (2, 3)."""
     pad = lambda p: np.pad(p, ((0, 0), (2, 3)), mode="wrap")
     inner = pad(rng.standard_normal((16, 32))).astype(dtype)
     outer = pad(rng.standard_normal((40, 64))).astype(dtype)
+    flat = np.concatenate([inner.ravel(), outer.ravel()])
     # inner rows start 3 steps inside the pole, outer rows at radius 6 - 8 steps
-    return [(inner, 3.0, 32, 2.0, 0.0), (outer, 8.0 - 6.0 / step, 64, 2.0, 6.0)]
+    levels = [spline.PolarLevel(0, 16, 37, 3.0, 32, 2.0, 0.0),
+              spline.PolarLevel(inner.size, 40, 69, 8.0 - 6.0 / step, 64, 2.0, 6.0)]
+    return flat, levels, (inner, outer)
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_pixels_from_polar_match_map_coordinates(dtype):
     rng = np.random.default_rng(7)
     step = 0.8
-    levels = _levels(rng, dtype, step)
+    flat, levels, arrays = _levels(rng, dtype, step)
     cy, cx, r_max = 14.3, 15.6, 17.0
-    vals, inside = spline.pixels_from_polar(levels, center=(cy, cx), radial_step=step,
+    vals, inside = spline.pixels_from_polar(flat, levels, center=(cy, cx), radial_step=step,
                                             box=(0, 30, 0, 32), r_max=r_max)
     yy, xx = np.mgrid[0:30, 0:32].astype(float)
     dy, dx = cy - yy, xx - cx
     r = np.hypot(dy, dx)
     th = np.mod(np.arctan2(dy, dx), 2 * math.pi)
     ref = np.zeros_like(r)
-    for (c, row_off, n, col_off, _), sel in zip(levels, (r < 6, r >= 6)):
+    for c, (_, _, _, row_off, n, col_off, _), sel in zip(arrays, levels, (r < 6, r >= 6)):
         sel = sel & (r <= r_max)
         ref[sel] = ndi.map_coordinates(c.astype(np.float64),
                                        [r[sel] / step + row_off, th[sel] * n / (2 * math.pi)
@@ -130,7 +138,7 @@ def test_results_do_not_depend_on_the_thread_count():
 
     rng = np.random.default_rng(2)
     coef = rng.standard_normal((300, 300)).astype(np.float32)
-    levels = _levels(rng, np.float32, 0.8)
+    flat, levels, _ = _levels(rng, np.float32, 0.8)
     before = dr.thread_count()
     outs = []
     try:
@@ -138,7 +146,7 @@ def test_results_do_not_depend_on_the_thread_count():
             dr.set_thread_count(n)
             outs.append((spline.polar_samples(coef, (150.2, 149.7), np.linspace(-140, 140, 211),
                                               1000),
-                         spline.pixels_from_polar(levels, center=(14.3, 15.6),
+                         spline.pixels_from_polar(flat, levels, center=(14.3, 15.6),
                                                   radial_step=0.8, box=(0, 30, 0, 32),
                                                   r_max=17.0)[0]))
     finally:

@@ -9,9 +9,9 @@ sensor noise) is restored by
   (the paper's Fig. 8 pipeline), resampling included in the time. ``seconds`` is the
   first call of the process, which also imports Dr.Jit (unless an earlier benchmark of
   the run did) and loads (on a machine's very first run, compiles) the resampling
-  kernels; ``warm_seconds`` a second call on the
-  same image (as every later frame of a sequence), with its own ratios to the baseline
-  and its PSNR;
+  kernels; ``warm_seconds`` the median of three later calls on the same image (as
+  every later frame of a sequence; ``warm_runs_seconds`` each), with its own ratios to
+  the baseline and its PSNR;
 
 (the three mitsweep methods use the noise model's NSR with the natural-image prior)
 
@@ -20,7 +20,8 @@ sensor noise) is restored by
 - ``wiener_single``: :func:`~mitsweep.deconv.wiener.wiener_deconvolve` with one IPSF
   (the one at half the mirror radius) — shift-invariant, done right;
 - ``skimage_wiener``: :func:`skimage.restoration.wiener` with that same IPSF applied
-  naively (``balance`` = NSR, its defaults: circular boundary, clipping).
+  naively (``balance`` = NSR, its defaults: circular boundary, clipping); the median of
+  five calls (``runs_seconds`` each), the time every ratio is taken against.
 
 and, one entry per restoration method of :data:`mitsweep.deconv.METHODS` (key = its name),
 :func:`mitsweep.deconv.deconvolve` with the radial bank and everything calibrated from
@@ -52,6 +53,10 @@ POLAR_GOAL_S = 1.5
 SPATIAL_GOAL_S = 5.0
 #: Richardson–Lucy's time bound in the bench (s): it stops after the iteration past it.
 RL_TIME_LIMIT_S = 60.0
+#: Calls of scikit-image's ``wiener`` (the baseline) and later calls of the polar method,
+#: whose median wall and CPU times are reported (the first polar call is one call).
+BASELINE_REPEATS = 5
+WARM_REPEATS = 3
 
 
 MOSAIC = ("camera", "brick", "grass", "gravel", "astronaut", "coffee", "chelsea", "text",
@@ -147,14 +152,26 @@ def run_bench(args: argparse.Namespace) -> dict:
         out, wall, cpu = _timed(fn, *a, **kw)
         runs[name] = {"seconds": wall, "cpu_seconds": cpu, "psnr_db": score(out)}
 
+    def median_of(n, fn, *a, **kw):
+        """(output, median wall s, median CPU s, every wall s) of n calls."""
+        times = [_timed(fn, *a, **kw) for _ in range(n)]
+        walls = [t[1] for t in times]
+        return (times[0][0], float(np.median(walls)), float(np.median([t[2] for t in times])),
+                walls)
+
     record("polar", polar_deconvolve, y, p["radial"], nsr=nsr, prior="natural")
     # the same call again: Dr.Jit imported, its kernels loaded, NumPy's memory warm
-    out, wall, cpu = _timed(polar_deconvolve, y, p["radial"], nsr=nsr, prior="natural")
-    runs["polar"].update(warm_seconds=wall, warm_cpu_seconds=cpu, warm_psnr_db=score(out))
+    out, wall, cpu, walls = median_of(WARM_REPEATS, polar_deconvolve, y, p["radial"],
+                                      nsr=nsr, prior="natural")
+    runs["polar"].update(warm_seconds=wall, warm_cpu_seconds=cpu, warm_psnr_db=score(out),
+                         warm_runs_seconds=walls)
     record("spatial", spatially_varying_deconvolve, y, p["grid"], nsr=nsr, prior="natural")
     runs["spatial"]["grid"] = f"{grid}x{grid}"
     record("wiener_single", wiener_deconvolve, y, p["single"], nsr=nsr, prior="natural")
-    record("skimage_wiener", sk_wiener, y, p["single"], nsr)
+    # the baseline is short (0.1-0.3 s here) and these machines are noisy: its median
+    out, wall, cpu, walls = median_of(BASELINE_REPEATS, sk_wiener, y, p["single"], nsr)
+    runs["skimage_wiener"] = {"seconds": wall, "cpu_seconds": cpu, "psnr_db": score(out),
+                              "runs_seconds": walls}
     for method in METHODS:
         kw = {"time_limit_s": RL_TIME_LIMIT_S} if method == "rl" else {}
         record(method, deconvolve, y, p["radial"], method=method, **kw)

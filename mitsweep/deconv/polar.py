@@ -331,7 +331,14 @@ def _spline_filter(a: np.ndarray, axes: tuple[int, ...], dtype) -> np.ndarray:
     (:func:`_spline_filter_rows`), along axis 1 with ndimage in blocks across threads
     (it releases the GIL): each line is filtered whole, so the result is the same."""
     out = np.array(a, dtype=dtype, copy=True)
-    for axis in axes:
+    _spline_filter_in_place(out, axes)
+    return out
+
+
+def _spline_filter_in_place(out: np.ndarray, axes: int | tuple[int, ...]) -> None:
+    """:func:`_spline_filter` written over the 2-D array (or view) ``out``."""
+    dtype = out.dtype
+    for axis in (axes,) if isinstance(axes, int) else axes:
         if axis == 0 and out.shape[0] > 2 * _POLE_HORIZON:
             _spline_filter_rows(out)
             continue
@@ -346,7 +353,6 @@ def _spline_filter(a: np.ndarray, axes: tuple[int, ...], dtype) -> np.ndarray:
 
         with ThreadPoolExecutor(len(edges) - 1) as pool:
             list(pool.map(run, range(len(edges) - 1)))
-    return out
 
 
 def _decimation(reach: np.ndarray, n: int) -> np.ndarray:
@@ -361,15 +367,18 @@ def _level_angles(n: int, q: int) -> int:
     return n if q == 1 else _fast_multiple(-(-n // q), 4)
 
 
-def _polar_levels(grid: PolarGrid, decimate: bool) -> list[tuple[np.ndarray, int]]:
+def _polar_levels(grid: PolarGrid, decimate: bool) -> list[tuple[slice, int]]:
     """(rows, angles) of each decimation level of the sampling on ``grid``: rows whose
-    harmonics fit a quarter (a half) of the angles are sampled at that many."""
+    harmonics fit a quarter (a half) of the angles are sampled at that many. Each entry
+    is a run of rows (a slice): the level depends on |r|, so a level can be a run on
+    either side of the pole."""
     n = grid.n_angles
     if not decimate:
-        return [(np.arange(grid.n_radii), n)]
+        return [(slice(0, grid.n_radii), n)]
     level = _decimation(2 * math.pi * np.abs(grid.radii) * _TANGENTIAL_REACH, n)
-    return [(np.flatnonzero(level == q), _level_angles(n, q)) for q in (4, 2, 1)
-            if np.any(level == q)]
+    cuts = np.flatnonzero(np.diff(level)) + 1
+    return [(slice(int(a), int(b)), _level_angles(n, int(level[a])))
+            for a, b in zip(np.r_[0, cuts], np.r_[cuts, level.size])]
 
 
 def _sample_on_polar(coef: np.ndarray, grid: PolarGrid,
@@ -396,7 +405,8 @@ def _sample_on_polar(coef: np.ndarray, grid: PolarGrid,
     top, left = max(0, 1 - math.floor(cy - reach)), max(0, 1 - math.floor(cx - reach))
     bottom = max(0, math.floor(cy + reach) - (H - 3))
     right = max(0, math.floor(cx + reach) - (W - 3))
-    padded = np.pad(coef, ((top, bottom), (left, right)), mode="reflect")
+    padded = (np.pad(coef, ((top, bottom), (left, right)), mode="reflect")
+              if top or bottom or left or right else coef)
     return [kernels.polar_samples(padded, (cy + top, cx + left), r[rows], n)
             for rows, n in levels]
 
@@ -416,13 +426,14 @@ def _pixel_levels(grid: PolarGrid, n_up: int) -> list[tuple[int, int, float, flo
     return out
 
 
-def _pixels_from_polar(levels, grid: PolarGrid, box: tuple[int, int, int, int]):
+def _pixels_from_polar(flat: np.ndarray, levels: list, grid: PolarGrid,
+                       box: tuple[int, int, int, int]) -> tuple[np.ndarray, np.ndarray]:
     """:func:`mitsweep.jit.spline.pixels_from_polar` on ``grid``'s pole and step, or its
     reference (``scipy.ndimage``) where no Dr.Jit backend works: (values, inside) over
     the box's pixels."""
     kernels = _spline_kernels()
     if kernels is not None:
-        return kernels.pixels_from_polar(levels, center=grid.center, box=box,
+        return kernels.pixels_from_polar(flat, levels, center=grid.center, box=box,
                                          radial_step=grid.radial_step, r_max=grid.r_max)
     y0, y1, x0, x1 = box
     cy, cx = grid.center
@@ -432,13 +443,14 @@ def _pixels_from_polar(levels, grid: PolarGrid, box: tuple[int, int, int, int]):
     inside = r <= grid.r_max
     th = np.arctan2(dy, dx)
     th = np.where(th < 0, th + 2 * math.pi, th)
-    values = np.zeros(r.shape, dtype=levels[0][0].dtype)
-    bounds = [lv[4] for lv in levels[1:]] + [math.inf]
-    for (coef, row_off, n, col_off, r_from), r_to in zip(levels, bounds):
+    values = np.zeros(r.shape, dtype=flat.dtype)
+    bounds = [lv[6] for lv in levels[1:]] + [math.inf]
+    for (off, rows, cols, row_off, n, col_off, r_from), r_to in zip(levels, bounds):
+        coef = flat[off:off + rows * cols].reshape(rows, cols)
         sel = inside & (r >= r_from) & (r < r_to) if r_from > 0 else inside & (r < r_to)
         values[sel] = ndi.map_coordinates(
             coef, [r[sel] / grid.radial_step + row_off, th[sel] * (n / (2 * math.pi)) + col_off],
-            order=3, mode="mirror", prefilter=False, output=coef.dtype)
+            order=3, mode="mirror", prefilter=False, output=flat.dtype)
     return values, inside
 
 
@@ -567,8 +579,10 @@ def _angle_spectrum(img: np.ndarray, grid: PolarGrid, cdt) -> np.ndarray:
         coef = _spline_filter(img[..., c], (0, 1), dt)
         for (rows, n), pol in zip(levels, _sample_on_polar(coef, grid, levels)):
             f = sfft.rfft(pol, axis=1, workers=-1)
-            mh = n // 2 if n < grid.n_angles else M      # drop a coarse level's Nyquist bin
-            spec[rows, :mh, c] = f[:, :mh] * (grid.n_angles / n)
+            if n == grid.n_angles:
+                spec[rows, :, c] = f
+            else:      # zero-padded spectrum, without the coarse level's Nyquist bin
+                np.multiply(f[:, :n // 2], grid.n_angles / n, out=spec[rows, :n // 2, c])
     return spec
 
 
@@ -598,21 +612,29 @@ def _from_angle_spectrum(spec, grid, shape, *, upsample, outside, dtype):
            max(0, int(math.floor(cx - R))), min(W, int(math.ceil(cx + R)) + 1))
     if box[1] <= box[0] or box[3] <= box[2]:
         return out
-    plan = _pixel_levels(grid, n2)
+    # each level's rows (a spline's reach on either side of its pixels' radii) and its
+    # angles, periodically padded, one after another in one flat array
+    lead, trail = _ANGLE_PAD
+    levels, offset = [], 0
+    for q, nq, lo, hi in _pixel_levels(grid, n2):
+        r0 = max(0, int(math.floor(grid.row_of(lo - _SPLINE_PX))))
+        r1 = min(grid.n_radii, int(math.ceil(grid.row_of(hi + _SPLINE_PX))) + 1)
+        cols = lead + nq + trail
+        levels.append((q, r0, r1, nq, (offset, r1 - r0, cols, float(grid.n_inner - r0), nq,
+                                       float(lead), lo if levels else min(lo, 0.0))))
+        offset += (r1 - r0) * cols
+    flat = np.empty(offset, dtype=dtype)
     for c in range(C):
-        levels = []
-        for q, nq, lo, hi in plan:
-            # the rows a level's pixels read, with a spline's reach on either side
-            r0 = max(0, int(math.floor(grid.row_of(lo - _SPLINE_PX))))
-            r1 = min(grid.n_radii, int(math.ceil(grid.row_of(hi + _SPLINE_PX))) + 1)
+        for q, r0, r1, nq, (off, rows, cols, *_) in levels:
             mq = min(spec.shape[1], nq // 2 + (1 if q == 1 else 0))
             scale = (nq / n) / _angle_bspline(np.arange(mq), nq, np.float64)
             s = spec[r0:r1, :mq, c] * scale.astype(dtype)[None, :]
-            up = sfft.irfft(s, n=nq, axis=1, workers=-1).astype(dtype, copy=False)
-            coef = np.pad(_spline_filter(up, (0,), dtype), ((0, 0), _ANGLE_PAD), mode="wrap")
-            levels.append((coef, grid.n_inner - r0, nq, float(_ANGLE_PAD[0]),
-                           lo if levels else min(lo, 0.0)))
-        values, inside = _pixels_from_polar(levels, grid, box)
+            coef = flat[off:off + rows * cols].reshape(rows, cols)
+            coef[:, lead:lead + nq] = sfft.irfft(s, n=nq, axis=1, workers=-1)
+            _spline_filter_in_place(coef[:, lead:lead + nq], 0)
+            coef[:, :lead] = coef[:, nq:nq + lead]                  # angles -lead..-1
+            coef[:, lead + nq:] = coef[:, lead:lead + trail]        # nq..nq+trail-1
+        values, inside = _pixels_from_polar(flat, [lv[-1] for lv in levels], grid, box)
         np.copyto(out[box[0]:box[1], box[2]:box[3], c], values, where=inside)
     return out
 
@@ -876,19 +898,29 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
         w = weights[b, lo:hi, None, None].astype(dt)
         blk = band[lo - s0 + a:hi - s0 + a]
         blk *= w
-        return lo, hi, mc, w, blk
+        return lo, hi, mc, blk, (w * spec[lo:hi, mc:] if mc < M else None)
 
     # bands in parallel (NumPy and scipy.fft release the GIL), summed in band order so
-    # that the result does not depend on the thread count
-    acc = np.zeros_like(spec)
+    # that the result does not depend on the thread count. Bands come in rising rows,
+    # each overlapping only the one before: rows are written by the first band that
+    # holds them and added to by the next (0 + x = x: the same sum as from zeros)
+    acc = np.empty_like(spec)
+    done = 0                                   # rows [0, done) hold their first terms
     with ThreadPoolExecutor(n_threads) as pool:
         for res in pool.map(restore, range(len(centres))):
             if res is None:
                 continue
-            lo, hi, mc, w, blk = res
-            acc[lo:hi, :mc] += blk
-            if mc < M:
-                acc[lo:hi, mc:] += w * spec[lo:hi, mc:]
+            lo, hi, mc, blk, tail = res
+            if lo > done:
+                acc[done:lo] = 0
+            mid = min(max(lo, done), hi)
+            acc[lo:mid, :mc] += blk[:mid - lo]
+            acc[mid:hi, :mc] = blk[mid - lo:]
+            if tail is not None:
+                acc[lo:mid, mc:] += tail[:mid - lo]
+                acc[mid:hi, mc:] = tail[mid - lo:]
+            done = max(done, hi)
+    acc[done:] = 0
     del spec
     out = _from_angle_spectrum(acc, grid, (H, W), upsample=1.0, outside=img, dtype=dt)
     del acc

@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import drjit as dr
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["polar_samples", "pixels_from_polar", "MAX_ELEMENTS"]
+__all__ = ["polar_samples", "pixels_from_polar", "PolarLevel", "MAX_ELEMENTS"]
 
 #: Largest coefficient array or output (elements): indices are 32-bit in the kernels.
 MAX_ELEMENTS = 2 ** 31 - 1
@@ -159,7 +160,21 @@ def polar_samples(coef: ArrayLike, center: tuple[float, float], radii: ArrayLike
 _LEVELS = 3
 
 
-def pixels_from_polar(levels: Sequence[tuple[np.ndarray, float, int, float, float]], *,
+class PolarLevel(NamedTuple):
+    """One angle level of a polar image's spline coefficients, stored C-order at
+    ``offset`` of a flat array: ``rows`` x ``cols``, the columns being ``n_angles``
+    angles periodically padded by ``col_offset`` in front (and enough behind)."""
+
+    offset: int
+    rows: int
+    cols: int
+    row_offset: float     #: fractional row = r / radial_step + row_offset
+    n_angles: int
+    col_offset: float     #: fractional column = θ n_angles / 2π + col_offset
+    r_from: float         #: pixels at radius >= this (and below the next level's) read it
+
+
+def pixels_from_polar(coefficients: np.ndarray, levels: Sequence[PolarLevel], *,
                       center: tuple[float, float], radial_step: float,
                       box: tuple[int, int, int, int], r_max: float
                       ) -> tuple[np.ndarray, np.ndarray]:
@@ -167,14 +182,14 @@ def pixels_from_polar(levels: Sequence[tuple[np.ndarray, float, int, float, floa
 
     Parameters
     ----------
-    levels : sequence of (coef, row_offset, n_angles, col_offset, r_from)
-        Sorted by ``r_from`` (the first 0 or less): pixels at radius ``r >= r_from`` (and
-        below the next level's) read level ``coef`` (rows, cols), float32 or float64,
-        all of one dtype, at fractional row ``r / radial_step + row_offset`` and column
-        ``θ n_angles / 2π + col_offset`` (θ in [0, 2π), counter-clockwise from +x, upward
-        = toward row 0): a polar grid of ``n_angles`` angles whose columns the caller
-        padded (periodically) by ``col_offset`` in front and whose rows start at
-        ``-row_offset`` radial steps from the pole.
+    coefficients : (N,) float32 or float64 ndarray
+        Every level's coefficients (:class:`PolarLevel` says where each lies); the
+        values have this dtype.
+    levels : sequence of PolarLevel
+        One to three, sorted by ``r_from`` (the first 0 or less): a pixel at radius r
+        and angle θ (in [0, 2π), counter-clockwise from +x, upward = toward row 0)
+        reads the last level with ``r_from <= r`` at fractional row ``r / radial_step +
+        row_offset`` and column ``θ n_angles / 2π + col_offset``.
     center : (row, col)
         The pole, pixels.
     radial_step : float
@@ -194,46 +209,46 @@ def pixels_from_polar(levels: Sequence[tuple[np.ndarray, float, int, float, floa
     Raises
     ------
     ValueError
-        For more than three levels, mixed dtypes, or a level whose rows or columns a
-        pixel inside could read beyond.
+        For no or more than three levels, a level beyond the array, or a level whose
+        rows or columns a pixel inside could read beyond.
     """
+    flat = np.ascontiguousarray(coefficients).ravel()
+    if flat.size > MAX_ELEMENTS:
+        raise ValueError(f"{flat.size} coefficients; at most {MAX_ELEMENTS}")
     if not 1 <= len(levels) <= _LEVELS:
         raise ValueError(f"1 to {_LEVELS} levels, got {len(levels)}")
-    coefs = [_coefficients(lv[0], f"level {j} coefficients") for j, lv in enumerate(levels)]
-    dtypes = {c.dtype for c in coefs}
-    if len(dtypes) != 1:
-        raise ValueError(f"levels of one dtype, got {sorted(map(str, dtypes))}")
     y0, y1, x0, x1 = (int(v) for v in box)
     if not (y1 > y0 and x1 > x0) or (y1 - y0) * (x1 - x0) > MAX_ELEMENTS:
         raise ValueError(f"box {box} must be non-empty and hold at most {MAX_ELEMENTS} pixels")
     cy, cx = float(center[0]), float(center[1])
     step = float(radial_step)
     r_max = float(r_max)
-    froms = [float(lv[4]) for lv in levels] + [math.inf]
+    levels = [PolarLevel(*lv) for lv in levels]
+    froms = [lv.r_from for lv in levels] + [math.inf]
     if froms[0] > 0 or any(b < a for a, b in zip(froms, froms[1:])):
         raise ValueError(f"level radii must rise from <= 0, got {froms[:-1]}")
     params = []
-    offset = 0
-    for j, (c, lv) in enumerate(zip(coefs, levels)):
-        row_off, n_ang, col_off = float(lv[1]), int(lv[2]), float(lv[3])
+    for j, lv in enumerate(levels):
+        if lv.offset < 0 or lv.rows < 4 or lv.cols < 4 \
+                or lv.offset + lv.rows * lv.cols > flat.size:
+            raise ValueError(f"level {j} ({lv.rows}x{lv.cols} at {lv.offset}) must be at "
+                             f"least 4 x 4 and lie inside the {flat.size} coefficients")
         lo, hi = max(froms[j], 0.0), min(froms[j + 1], r_max)
         if lo <= hi:     # pixels read rows of r in [lo, hi], columns of θ in [0, 2π]
-            rows = (lo / step + row_off, hi / step + row_off)
-            if math.floor(rows[0]) < 1 or math.floor(rows[1]) > c.shape[0] - 3 \
-                    or math.floor(col_off) < 1 or math.floor(n_ang + col_off) > c.shape[1] - 3:
-                raise ValueError(f"level {j} ({c.shape[0]}x{c.shape[1]}) is read beyond its "
+            rows = (lo / step + lv.row_offset, hi / step + lv.row_offset)
+            cols = (lv.col_offset, lv.n_angles + lv.col_offset)
+            if math.floor(rows[0]) < 1 or math.floor(rows[1]) > lv.rows - 3 \
+                    or math.floor(cols[0]) < 1 or math.floor(cols[1]) > lv.cols - 3:
+                raise ValueError(f"level {j} ({lv.rows}x{lv.cols}) is read beyond its "
                                  f"rows {rows[0]:.1f}..{rows[1]:.1f} or columns "
-                                 f"{col_off:.1f}..{n_ang + col_off:.1f}")
-        params.append((offset, c.shape[1], c.shape[0] - 3, c.shape[1] - 3, row_off,
-                       n_ang / (2 * math.pi), col_off, froms[j]))
-        offset += c.size
-    if offset > MAX_ELEMENTS:
-        raise ValueError(f"levels hold {offset} coefficients; at most {MAX_ELEMENTS}")
+                                 f"{cols[0]:.1f}..{cols[1]:.1f}")
+        params.append((lv.offset, lv.cols, lv.rows - 3, lv.cols - 3, lv.row_offset,
+                       lv.n_angles / (2 * math.pi), lv.col_offset, lv.r_from))
     while len(params) < _LEVELS:          # empty levels, never selected
         params.append(params[-1][:-1] + (math.inf,))
     m = _dr()
-    Real = _float_type(m, coefs[0].dtype)
-    src = Real(np.concatenate([c.ravel() for c in coefs]))
+    Real = _float_type(m, flat.dtype)
+    src = Real(flat)
     bw = x1 - x0
     i = dr.arange(m.UInt32, (y1 - y0) * bw)
     w = dr.opaque(m.UInt32, bw)
@@ -258,5 +273,5 @@ def pixels_from_polar(levels: Sequence[tuple[np.ndarray, float, int, float, floa
     val = dr.select(inside, val, 0)
     dr.eval(val, inside)
     shape = (y1 - y0, bw)
-    return (np.asarray(val.numpy(), dtype=coefs[0].dtype).reshape(shape),
+    return (np.asarray(val.numpy(), dtype=flat.dtype).reshape(shape),
             np.asarray(inside.numpy(), dtype=bool).reshape(shape))
