@@ -312,6 +312,21 @@ def test_polar_deconvolution_does_not_depend_on_threads_or_calls(blurred_scene, 
         np.testing.assert_array_equal(o, outs[0])
 
 
+def test_concurrent_calls_from_threads_give_the_serial_results():
+    """A user's thread pool (or a threaded executor) may call the polar deconvolution
+    at once from several threads: the Dr.Jit kernels and the band threads must not mix
+    their data."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    imgs = [_gray(n, 128).astype(np.float32) for n in ("camera", "astronaut", "coins")]
+    bank = synthetic_radial_bank((128, 128), size=11, r_max_px=60.0, n_radii=9)
+    serial = [polar_deconvolve(x, bank, nsr=1e-3) for x in imgs]
+    with ThreadPoolExecutor(3) as pool:
+        par = list(pool.map(lambda x: polar_deconvolve(x, bank, nsr=1e-3), imgs * 2))
+    for a, b in zip(serial * 2, par):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_memory_estimate_bounds_the_measured_peak():
     """polar_memory_bytes (what the allocation check is given) is at least the peak
     NumPy and Dr.Jit allocate in a call, and not wildly more."""

@@ -177,6 +177,10 @@ def test_design_sweep_command_writes_a_profile_that_ipsf_runs(tmp_path, capsys, 
     mf = check_motion_file(load_motion_file(out), setup)
     assert mf.exposure_s == pytest.approx(sweep.exposure_s)
     assert mf.provenance["generator"] == "mitsweep design-sweep"
+    # the tracer revision the plane banks were traced with, in the file and the report
+    from mitsweep.tracer.kernel import TRACE_REVISION
+
+    assert mf.provenance["trace_revision"] == rep["trace_revision"] == TRACE_REVISION
     assert mf.profile.span == pytest.approx(
         (min(sweep.sensor_start, sweep.sensor_end), max(sweep.sensor_start, sweep.sensor_end)))
     rc, stdout, err = _cli(["ipsf", str(PARABOLOID), "--radius", "2", "--rays", "20000",

@@ -129,10 +129,18 @@ def test_process_executor_gives_the_same_files(tiny_dataset, tmp_path):
 
 def test_cli_evaluate_json_and_bad_directory(tiny_dataset, tmp_path):
     root, _ = tiny_dataset
-    rc, out, err = run_cli("evaluate", root, "--json", "--plot", tmp_path / "pr.png")
+    rc, out, err = run_cli("evaluate", root, "--json", "--plot", tmp_path / "pr.png",
+                           "--out", tmp_path / "eval.json")
     assert rc == 0, err
     assert "edof" in json.loads(out)["mean"]
     assert (tmp_path / "pr.png").is_file()
+
+    # the file holds what --json printed, as strict JSON (no Infinity/NaN constants)
+    def refuse(name):
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    assert (tmp_path / "eval.json").read_text() == out
+    json.loads(out, parse_constant=refuse)
     rc, _, err = run_cli("evaluate", tmp_path)
     assert rc == 2 and "not a mitsweep dataset" in err and "Traceback" not in err
 

@@ -14,7 +14,7 @@ from typing import Any, Callable, Iterable, NoReturn, TypeVar, Union
 from ..config import Setup, SetupError, load_setup
 
 __all__ = ["depth_mm", "number_type", "UsageError", "USER_ERRORS", "ArgumentParser", "ArgumentParserError",
-           "check_outputs", "load_setup_arg", "print_error_json", "print_json",
+           "check_outputs", "json_text", "load_setup_arg", "print_error_json", "print_json",
            "positive_float", "positive_int", "user_error_message"]
 
 
@@ -134,10 +134,16 @@ def _finite_json(o: Any):
     return o
 
 
+def json_text(obj: Any) -> str:
+    """``obj`` as strict JSON text (what ``--json`` prints and ``--out`` files hold):
+    non-finite floats become null (NaN) or "inf" / "-inf", never the ``Infinity`` that
+    Python writes by default and strict parsers (jq, browsers) refuse."""
+    return json.dumps(_finite_json(obj), indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
 def print_json(obj: Any) -> None:
-    """One JSON object on stdout (non-finite floats become null / "inf")."""
-    json.dump(_finite_json(obj), sys.stdout, indent=2, sort_keys=True)
-    sys.stdout.write("\n")
+    """One JSON object on stdout (:func:`json_text`)."""
+    sys.stdout.write(json_text(obj))
 
 
 N = TypeVar("N", int, float)

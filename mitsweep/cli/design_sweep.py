@@ -124,6 +124,7 @@ def run(args) -> int:
     from ..io.atomic import check_writable
     from ..optics.motion_file import check_motion_file, load_motion_file, save_motion_file
     from ..pipeline import NOISE_PIXEL_MM
+    from ..tracer.kernel import TRACE_REVISION
 
     check_outputs([args.setup], [args.out, args.plot])
     check_writable(args.out)
@@ -144,8 +145,11 @@ def run(args) -> int:
                               n_radii=args.radii, grid=tuple(args.grid), depths=args.depth,
                               rays=args.rays, kernel_size=args.kernel_size, seed=args.seed,
                               brute_force_steps=args.brute_force_steps, progress=bar.update)
-    report = dict(design.report, lux=args.lux, version=__version__)
+    # the plane banks are traced: their tracer revision says which results are comparable
+    report = dict(design.report, lux=args.lux, version=__version__,
+                  trace_revision=TRACE_REVISION)
     provenance = {"generator": "mitsweep design-sweep", "version": __version__,
+                  "trace_revision": TRACE_REVISION,
                   "setup_file": str(args.setup), "setup": setup.name, "lux": args.lux,
                   "objective": args.objective, "planes": args.planes,
                   "span_mm": report["span_mm"], "seed": args.seed, "rays": args.rays,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .common import check_outputs, print_json
+from .common import check_outputs, json_text, print_json
 
 NAME = "evaluate"
 HELP = "score a dataset: PSNR and SSIM inside the mirror's image, per radius and depth band"
@@ -20,8 +20,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    import json
-
     from ..io import write_text_atomic
     from ..io.atomic import check_writable
     from ..pipeline import dataset_inputs, evaluate_dataset
@@ -42,7 +40,7 @@ def run(args) -> int:
 
         plot_per_radius(results, args.plot)
     if args.out:
-        write_text_atomic(args.out, json.dumps(results, indent=1, default=str) + "\n")
+        write_text_atomic(args.out, json_text(results))      # the same text as --json
     if args.json:
         print_json(results)
     else:

@@ -266,7 +266,7 @@ def pixels_from_polar(coefficients: np.ndarray, levels: Sequence[PolarLevel], *,
             v = dr.select(r >= dr.opaque(m.Float64, p[7]), dr.opaque(T, p[k]), v)
         return v
 
-    y = r * (1 / step) + pick(4, m.Float64)
+    y = r / dr.opaque(m.Float64, step) + pick(4, m.Float64)
     x = th * pick(5, m.Float64) + pick(6, m.Float64)
     val = _spline_at(m, Real, src, y, x, pick(1, m.UInt32), pick(2, m.Int32),
                      pick(3, m.Int32), offset=pick(0, m.UInt32), active=inside)
