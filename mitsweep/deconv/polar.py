@@ -382,10 +382,10 @@ def _polar_levels(grid: PolarGrid, decimate: bool) -> list[tuple[slice, int]]:
 
 
 def _sample_on_polar(coef: np.ndarray, grid: PolarGrid,
-                     levels: list[tuple[np.ndarray, int]]) -> list[np.ndarray]:
+                     levels: list[tuple[slice, int]]) -> list[np.ndarray]:
     """The spline of an image (coefficients ``coef``, mirrored beyond its ends) at the
     grid's points, level by level: for each (rows, n) of :func:`_polar_levels` an array
-    (rows.size, n), angle k at 2πk/n."""
+    (rows of the run, n), angle k at 2πk/n."""
     cy, cx = grid.center
     r = grid.radii
     kernels = _spline_kernels()
