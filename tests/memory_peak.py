@@ -18,6 +18,7 @@ def traced_peak(fn) -> int:
     """Bytes: tracemalloc's peak during ``fn()`` plus Dr.Jit's watermark above what it
     held before (every backend with a device)."""
     dr, backends = _jit_backends()
+    before = 0
     if dr is not None:
         dr.sync_thread()
         dr.detail.malloc_clear_statistics()
@@ -32,5 +33,5 @@ def traced_peak(fn) -> int:
     if dr is not None:
         dr.sync_thread()
         after = sum(dr.detail.malloc_watermark(b) for b in backends)
-        peak += max(0, after - (before if "before" in locals() else 0))
+        peak += max(0, after - before)
     return peak

@@ -421,7 +421,7 @@ def _pixel_levels(grid: PolarGrid, n_up: int) -> list[tuple[int, int, float, flo
     out = []
     for q, lo, hi in ((4, -math.inf, e4), (2, e4, e2), (1, e2, math.inf)):
         lo, hi = max(lo, 0.0), min(hi, grid.r_max)
-        if lo < hi or (q == 1 and lo <= hi):
+        if lo < hi:               # the ranges cover [0, r_max], r_max > 1: one at least
             out.append((q, _level_angles(n_up, q), lo, hi))
     return out
 
@@ -447,7 +447,7 @@ def _pixels_from_polar(flat: np.ndarray, levels: list, grid: PolarGrid,
     bounds = [lv[6] for lv in levels[1:]] + [math.inf]
     for (off, rows, cols, row_off, n, col_off, r_from), r_to in zip(levels, bounds):
         coef = flat[off:off + rows * cols].reshape(rows, cols)
-        sel = inside & (r >= r_from) & (r < r_to) if r_from > 0 else inside & (r < r_to)
+        sel = inside & (r >= r_from) & (r < r_to)
         values[sel] = ndi.map_coordinates(
             coef, [r[sel] / grid.radial_step + row_off, th[sel] * (n / (2 * math.pi)) + col_off],
             order=3, mode="mirror", prefilter=False, output=flat.dtype)
