@@ -34,6 +34,7 @@ def assert_incomplete(out, status):
     (Fault("fault_flag", at_fraction=0.5), DeviceFault, "fault", True),
     (Fault("late_event", delay_s=5.0), ReplyTimeout, "timeout", True),
     (Fault("unplug", at_fraction=0.5), PortLost, "port lost", False),
+    (Fault("brownout", at_fraction=0.5), DeviceFault, "fault", True),
 ], ids=lambda x: x.kind if isinstance(x, Fault) else None)
 def test_arduino_fault_stops_and_records_incomplete(sphere, tmp_path, fault, error, status,
                                                     stop_ok):
@@ -49,9 +50,12 @@ def test_arduino_fault_stops_and_records_incomplete(sphere, tmp_path, fault, err
         assert_safe(dev.model, lo, hi)
     data = assert_incomplete(out, status)
     assert data["safety"][0]["ok"] is stop_ok
-    if fault.kind in ("fault_flag", "unplug"):
+    if fault.kind in ("fault_flag", "unplug", "brownout"):
         # stopped part-way: the sweep did not reach its end
         assert dev.model.position(time.monotonic()) != plan.end_steps
+    if fault.kind == "brownout":
+        assert "restarted mid-session" in data["error"]
+        assert not dev.model.homed
 
 
 @pytest.mark.parametrize("fault, error, status", [

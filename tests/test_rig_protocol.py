@@ -63,6 +63,14 @@ def test_arduino_identify_rejects_wrong_device(reply, error):
             a.identify()
 
 
+def test_arduino_ready_mid_session_is_a_board_restart():
+    """A READY line after the handshake means the board restarted (brown-out, another
+    program opening the port): a DeviceFault saying so, not a bare protocol error."""
+    with expected_protocol(arduino, [(b"STATE\n", b"READY mitsweep-sweep 1.2 3\n")]) as a:
+        with pytest.raises(DeviceFault, match="restarted mid-session.*reply to 'STATE'"):
+            a.state()
+
+
 @pytest.mark.parametrize("reply, homed, moving, position", [
     (b"OK STATE 1000 0 0 0 0\n", False, False, None),
     (b"OK STATE 1000 800 1 1 0\n", True, True, 2.0),

@@ -57,3 +57,46 @@ def test_python_m_simulator_serves_a_device(device, query, reply):
         finally:
             if proc.poll() is None:
                 proc.kill()
+
+
+
+class _HostOpensAsReadyFallsDue(ArduinoModel):
+    """Opens the host's end of the port (pyserial: a flush, which resets the board) at the
+    moment the model thread has decided to emit a READY line but not yet written it."""
+
+    port: str = ""
+    host: serial.Serial | None = None
+
+    def due(self, now):
+        out = super().due(now)
+        if self.host is None and any(d.startswith(b"READY ") for d in out):
+            self.host = serial.Serial(self.port, 115200, timeout=0)
+        return out
+
+
+def test_opening_the_port_yields_one_ready_line_whenever_the_host_opens_it():
+    """The race CI hit once: the host opened (and flushed) the port just as the power-on
+    READY fell due, the model thread wrote that READY after the flush, then saw the flush
+    and reset, printing a second READY in the middle of the session. Whenever the host
+    opens the port it must see exactly one READY line, the reset's."""
+    import time
+
+    from mitsweep.rig.sim import PtyDevice
+
+    model = _HostOpensAsReadyFallsDue(homed=True, boot_time_s=0.05)
+    dev = PtyDevice(model)
+    model.port = dev.port
+    with dev:
+        time.sleep(0.2)                       # past the power-on READY's due time
+        if model.host is None:                # no READY at power-on: the host opens now
+            model.host = serial.Serial(dev.port, 115200, timeout=0)
+        ser = model.host
+        try:
+            deadline, data = time.monotonic() + 0.5, b""
+            while time.monotonic() < deadline:
+                data += ser.read(4096)
+                time.sleep(0.01)
+        finally:
+            ser.close()
+    ready = [ln for ln in data.splitlines() if ln.startswith(b"READY ")]
+    assert len(ready) == 1, data

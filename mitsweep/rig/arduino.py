@@ -79,7 +79,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
-from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
+from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout, RigError
 from .interfaces import Shutter, Stage, StageState
 from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, XorChecksum
 
@@ -364,8 +364,7 @@ class ArduinoSweepController(Stage, Shutter):
             if _PING_RE.match(line):
                 continue
             if not self._take_event(line):
-                raise ProtocolError(f"{self.name}: unexpected line while waiting for "
-                                    f"EV {name}: {line!r}")
+                raise self._unexpected(line, f"line while waiting for EV {name}")
 
     def poll_events(self) -> None:
         """Read whatever events are waiting, without blocking (consumed by
@@ -373,7 +372,7 @@ class ArduinoSweepController(Stage, Shutter):
         while self.transport.pending():
             line = self.transport.read_line(timeout_s=0.0)
             if not _PING_RE.match(line) and not self._take_event(line):
-                raise ProtocolError(f"{self.name}: unexpected line {line!r}")
+                raise self._unexpected(line, "line between events")
 
     def safe_stop(self, *, timeout_s: float = SAFETY_REPLY_TIMEOUT_S) -> int | None:
         """Safety path: ``STOP`` (the board releases the shutter first, then stops the
@@ -450,9 +449,20 @@ class ArduinoSweepController(Stage, Shutter):
                               f"{m.group(2) or ''}".rstrip())
         parts = line.split(" ")
         if len(parts) != 2 + n_fields or parts[0] != "OK" or parts[1] != word:
-            raise ProtocolError(f"{self.name}: unexpected reply to {command or word!r}: "
-                                f"{line!r}")
+            raise self._unexpected(line, f"reply to {command or word!r}")
         return parts[2:]
+
+    def _unexpected(self, line: str, what: str) -> RigError:
+        """The error for a line the protocol does not allow here. A ``READY`` line means
+        the board restarted mid-session (a brown-out when the motor starts, a USB glitch,
+        another program opening its port): it has stopped, released the shutter and
+        forgotten its limits, watchdog and (without a home switch) position."""
+        if line.startswith("READY "):
+            return DeviceFault(f"{self.name}: the board restarted mid-session (it sent "
+                               f"{line!r}, expected: {what}); it stopped and forgot its "
+                               f"settings: check its power supply and that no other "
+                               f"program opens its port, then home it again")
+        return ProtocolError(f"{self.name}: unexpected {what}: {line!r}")
 
     def _ints(self, fields: Iterable[str], what: str) -> list[int]:
         try:

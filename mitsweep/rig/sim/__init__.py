@@ -23,7 +23,9 @@ Faults (:class:`Fault`): ``no_reply`` (a command is swallowed), ``garbage`` (ans
 with non-ASCII bytes), ``fault_flag`` (the stage stalls part-way through the next move:
 Arduino ``EV FAULT``, Zaber ``FS``), ``unplug`` (the port vanishes part-way through the
 next move), ``late_event`` (the end-of-exposure events arrive ``delay_s`` late),
-``slow_reply`` (Arduino: a command acts at once but its reply comes ``delay_s`` late).
+``slow_reply`` (Arduino: a command acts at once but its reply comes ``delay_s`` late),
+``brownout`` (Arduino: the board restarts part-way through the next move, shutter released,
+position lost, and prints ``READY`` again).
 
 The Arduino model has the firmware's watchdog (``WATCHDOG <ms>``): while it moves or an
 exposure is pending or open, a host silent for that long gets ``EV FAULT ... WATCHDOG``

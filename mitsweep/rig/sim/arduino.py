@@ -63,6 +63,7 @@ class ArduinoModel(Model):
         self.faults_seen: list[str] = []        # codes of the EV FAULTs sent
         self.table_size = 0                     # TABLE <n>: segments announced
         self.table: list[tuple[int, int]] = []  # (steps, us) received by SEG
+        self._restart_at: float | None = None   # a brown-out fault's time
 
     # -- clock, position ----------------------------------------------------------------
     def micros(self, t: float) -> int:
@@ -103,6 +104,7 @@ class ArduinoModel(Model):
         self.shutter_open = False
         self.checksums = False
         self._fault_at = None
+        self._restart_at = None
         self.watchdog_s = 0.0
         self.table_size, self.table = 0, []
         self.boot(now)
@@ -353,9 +355,24 @@ class ArduinoModel(Model):
         self._fault_at = None
         return [self._line(f"OK STOP {self.micros(now)} {pos}")]
 
+    def arm_motion_faults(self, mv) -> None:
+        super().arm_motion_faults(mv)
+        f = self.take_fault("brownout")
+        if f:
+            self._restart_at = mv.t0 + f.at_fraction * mv.duration
+
     def tick(self, now: float) -> list[bytes]:
         """Advance the shutter and faults to ``now``; scheduled lines are emitted by the
         server."""
+        if self._restart_at is not None and now >= self._restart_at:
+            # a brown-out: the sketch restarts where the motor stopped, its position lost
+            t, self._restart_at = self._restart_at, None
+            out = self.tick(t)
+            pos = self.position(t)
+            self._close_now(t)
+            self.reset(t)
+            self._pos, self.homed = pos, False
+            return out + self.tick(now)
         out = []
         if self._shutter_plan is not None:
             t_open, t_close = self._shutter_plan

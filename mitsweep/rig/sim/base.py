@@ -21,7 +21,8 @@ __all__ = ["Fault", "FAULT_KINDS", "Move", "PathMove", "table_pieces", "Model", 
 #: A model's command method (its replies' form is the model's own).
 Handler = TypeVar("Handler", bound=Callable[..., Any])
 
-FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event", "slow_reply")
+FAULT_KINDS = ("no_reply", "garbage", "fault_flag", "unplug", "late_event", "slow_reply",
+               "brownout")
 
 
 @dataclass(frozen=True)
@@ -34,8 +35,9 @@ class Fault:
         For ``no_reply`` / ``garbage`` / ``slow_reply``: the command word it hits
         (``"SWEEP"``, ``"STATE"``, ``"move"``, ...); the first such command only.
     at_fraction
-        For ``fault_flag`` / ``unplug``: fraction of the next long move (SWEEP, or a
-        Zaber ``move``) at which it happens.
+        For ``fault_flag`` / ``unplug`` / ``brownout``: fraction of the next long move
+        (SWEEP, or a Zaber ``move``) at which it happens. ``brownout`` (Arduino only):
+        the board restarts, as when the motor's current sags its supply.
     delay_s
         For ``late_event``: how late the end-of-exposure events are; for
         ``slow_reply``: how late the reply is.

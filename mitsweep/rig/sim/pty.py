@@ -62,7 +62,15 @@ class PtyDevice:
 
     def start(self) -> None:
         with self._lock:
-            for data in self.model.boot(time.monotonic()):
+            out = self.model.boot(time.monotonic())
+            if self.packet_mode:
+                # The host's open resets the board (a flush, seen below), so what the board
+                # prints at power-on reaches no one. Not emitting it closes a race: a
+                # power-on READY written after the host's flush but before this thread read
+                # the flush would reach the host besides the READY of the reset, mid-session.
+                self.model.cancel_scheduled()
+                out = []
+            for data in out:
                 self._write_all(data)
         self._thread.start()
 
