@@ -355,7 +355,7 @@ class ArduinoModel(Model):
         self._fault_at = None
         return [self._line(f"OK STOP {self.micros(now)} {pos}")]
 
-    def arm_motion_faults(self, mv) -> None:
+    def arm_motion_faults(self, mv: Move) -> None:
         super().arm_motion_faults(mv)
         f = self.take_fault("brownout")
         if f:
