@@ -5,11 +5,12 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 import serial
 
-from mitsweep.rig.sim import ArduinoModel, ZaberModel
+from mitsweep.rig.sim import ArduinoModel, Fault, PtyDevice, ZaberModel
 
 
 def test_both_models_dispatch_through_their_command_table():
@@ -59,7 +60,6 @@ def test_python_m_simulator_serves_a_device(device, query, reply):
                 proc.kill()
 
 
-
 class _HostOpensAsReadyFallsDue(ArduinoModel):
     """Opens the host's end of the port (pyserial: a flush, which resets the board) at the
     moment the model thread has decided to emit a READY line but not yet written it."""
@@ -79,10 +79,6 @@ def test_opening_the_port_yields_one_ready_line_whenever_the_host_opens_it():
     READY fell due, the model thread wrote that READY after the flush, then saw the flush
     and reset, printing a second READY in the middle of the session. Whenever the host
     opens the port it must see exactly one READY line, the reset's."""
-    import time
-
-    from mitsweep.rig.sim import PtyDevice
-
     model = _HostOpensAsReadyFallsDue(homed=True, boot_time_s=0.05)
     dev = PtyDevice(model)
     model.port = dev.port
@@ -100,3 +96,8 @@ def test_opening_the_port_yields_one_ready_line_whenever_the_host_opens_it():
             ser.close()
     ready = [ln for ln in data.splitlines() if ln.startswith(b"READY ")]
     assert len(ready) == 1, data
+
+
+def test_zaber_model_refuses_an_arduino_only_fault():
+    with pytest.raises(ValueError, match="'brownout' is an Arduino fault"):
+        ZaberModel([Fault("brownout")])

@@ -53,6 +53,10 @@ class ZaberModel(Model):
     def __init__(self, faults: Iterable[Fault] = (), *, device: int = 1, device_id: int = 50081,
                  homed: bool = False, position: int = 0, max_position: int = 25 * 20997,
                  home_speed: int = 400_000) -> None:
+        faults = list(faults)
+        if any(f.kind == "brownout" for f in faults):
+            # a fault that could never fire would let a test pass without testing it
+            raise ValueError("fault 'brownout' is an Arduino fault; the Zaber model has none")
         super().__init__(faults)
         self.device, self.device_id = device, device_id
         self.homed = homed
