@@ -26,7 +26,8 @@ import os
 from pathlib import Path
 
 __all__ = ["ResourceError", "check_allocation", "available_memory_bytes", "memory_cap_bytes",
-           "format_bytes", "DEFAULT_MAX_MEMORY_GB", "MAX_MEMORY_ENV", "bundled_scenes_dir",
+           "format_bytes", "DEFAULT_MAX_MEMORY_GB", "MAX_MEMORY_ENV", "MAX_MEMORY_GB_LIMIT",
+           "bundled_scenes_dir",
            "bundled_setup_names", "bundled_setup"]
 
 logger = logging.getLogger(__name__)
@@ -35,6 +36,9 @@ GIB = 1 << 30
 #: Hard cap on one step's memory, GiB, unless ``$MITSWEEP_MAX_MEMORY_GB`` says otherwise.
 DEFAULT_MAX_MEMORY_GB = 64.0
 MAX_MEMORY_ENV = "MITSWEEP_MAX_MEMORY_GB"
+#: Largest cap ``$MITSWEEP_MAX_MEMORY_GB`` may set, GiB (1 PiB): a larger number is a
+#: typo, and ``1e300`` GiB in bytes overflows every integer type.
+MAX_MEMORY_GB_LIMIT = float(1 << 20)
 
 
 class ResourceError(ValueError):
@@ -66,12 +70,14 @@ def available_memory_bytes() -> int:
 
 
 def memory_cap_bytes() -> int:
-    """The hard cap, bytes: ``$MITSWEEP_MAX_MEMORY_GB`` (a positive number of GiB) or 64 GiB.
+    """The hard cap, bytes: ``$MITSWEEP_MAX_MEMORY_GB`` (a number of GiB in
+    (0, :data:`MAX_MEMORY_GB_LIMIT`]) or 64 GiB.
 
     Raises
     ------
     ResourceError
-        If the environment variable is set to something that is not a positive number.
+        If the environment variable is set to something else; the message names it and
+        the allowed range.
     """
     text = os.environ.get(MAX_MEMORY_ENV)
     if text is None or text.strip() == "":
@@ -80,9 +86,10 @@ def memory_cap_bytes() -> int:
         gb = float(text)
     except ValueError:
         gb = math.nan
-    if not (math.isfinite(gb) and gb > 0):
-        raise ResourceError(f"${MAX_MEMORY_ENV}: expected a positive number of GiB, got {text!r}")
-    return int(gb * GIB)
+    if not (math.isfinite(gb) and 0 < gb <= MAX_MEMORY_GB_LIMIT):
+        raise ResourceError(f"${MAX_MEMORY_ENV}: expected a positive number of GiB, at most "
+                            f"{MAX_MEMORY_GB_LIMIT:.0f}, got {text!r}")
+    return max(1, int(gb * GIB))
 
 
 def check_allocation(what: str, nbytes: float) -> None:

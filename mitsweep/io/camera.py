@@ -17,7 +17,7 @@ kind      decoding
 ``tiff``  8/16/32-bit through tifffile. The transfer function is decided by
           :func:`tiff_transfer` (the rule below); integer samples are divided by
           ``2**bits - 1``, float samples are taken as they are.
-``png``   8-bit through Pillow, 16-bit through this module's decoder (Pillow reduces
+``png``   8-bit through Pillow, 16-bit through libpng (imagecodecs: Pillow reduces
           16-bit colour PNGs to 8 bits); sRGB-encoded unless the file says otherwise.
 ``jpeg``  through Pillow; sRGB-encoded unless its ICC profile says otherwise.
 ``exr``   through :mod:`mitsweep.io.exr`: already linear.
@@ -47,10 +47,12 @@ viewing (the linear result belongs in EXR, :func:`mitsweep.io.exr.write_exr`).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
 import struct
+import threading
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,6 +65,7 @@ from .atomic import atomic_path
 from .exr import _json_default
 from .exr import _openexr_chatter as _library_chatter  # collects C libraries' stderr
 from .png import linear_to_srgb
+from ..resources import ResourceError
 
 __all__ = ["CameraFileError", "CameraImage", "RAW_SUFFIXES", "CAMERA_SUFFIXES",
            "WHITE_BALANCES", "TRANSFERS", "read_camera_image", "write_display_image",
@@ -118,8 +121,8 @@ class CameraImage:
         ``path``, ``transfer``, ``white_level``, ``black_level``, ``white_balance`` (RAW),
         ``exif`` (essentials found), ``exr_header`` (EXR), ``pixel_pitch_source``.
     warnings : list of str
-        What limits the result (8-bit input, JPEG, clipping, a pitch mismatch); each was
-        also logged.
+        What limits the result (8-bit input, JPEG, clipping, a pitch mismatch); each is
+        also logged (:meth:`log_warnings`).
     """
 
     data: np.ndarray
@@ -134,6 +137,11 @@ class CameraImage:
         """``(H, W)``."""
         return int(self.data.shape[0]), int(self.data.shape[1])
 
+    def log_warnings(self) -> None:
+        """Log each of :attr:`warnings` (level WARNING), prefixed with the file's path."""
+        for w in self.warnings:
+            logger.warning("%s: %s", self.meta.get("path", "camera file"), w)
+
 
 def srgb_to_linear(x: ArrayLike) -> np.ndarray:
     """The sRGB transfer function inverted (IEC 61966-2-1), float32, on [0, 1]."""
@@ -147,8 +155,8 @@ def srgb_to_linear(x: ArrayLike) -> np.ndarray:
 
 
 def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
-                      white_balance: str = "camera", transfer: str | None = None
-                      ) -> CameraImage:
+                      white_balance: str = "camera", transfer: str | None = None,
+                      log_warnings: bool = True) -> CameraImage:
     """Read a camera file as a linear float32 image.
 
     Parameters
@@ -161,6 +169,10 @@ def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
         RAW only: see :data:`WHITE_BALANCES`.
     transfer : {"linear", "srgb"}, optional
         Force the transfer function of a TIFF, PNG or JPEG (default: the module's rule).
+    log_warnings : bool
+        Log the image's warnings now (default). A command that may still refuse the
+        photo passes False and calls :meth:`CameraImage.log_warnings` once it accepts
+        it, so that a refusal is the only line the user sees.
 
     Returns
     -------
@@ -171,6 +183,9 @@ def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
     CameraFileError
         Unknown suffix, missing, unreadable or truncated file, an image that is not
         (H, W[, 3|4]), or a bad argument; the message is one line naming the file.
+    mitsweep.resources.ResourceError
+        The size the file's header declares would not fit the memory
+        (``$MITSWEEP_MAX_MEMORY_GB``); checked before any pixel is decoded.
     """
     p = Path(path)
     kind = _KIND_OF_SUFFIX.get(p.suffix.lower())
@@ -205,10 +220,11 @@ def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
         warnings.append(f"the file states a pixel pitch of {pitch:.6g} mm, not the "
                         f"{pixel_pitch:.6g} mm given; using the file's")
     meta["pixel_pitch_source"] = source
-    for w in warnings:
-        logger.warning("%s: %s", p, w)
-    return CameraImage(data=data, pixel_pitch=pitch, kind=kind, bit_depth=int(bit_depth),
-                       meta=meta, warnings=warnings)
+    image = CameraImage(data=data, pixel_pitch=pitch, kind=kind, bit_depth=int(bit_depth),
+                        meta=meta, warnings=warnings)
+    if log_warnings:
+        image.log_warnings()
+    return image
 
 
 def _as_image(a: np.ndarray, p: Path, warnings: list[str]) -> np.ndarray:
@@ -225,6 +241,8 @@ def _as_image(a: np.ndarray, p: Path, warnings: list[str]) -> np.ndarray:
 
 
 def _clip_warning(a: np.ndarray, white: float, warnings: list[str]) -> None:
+    if a.size == 0:  # refused by _as_image; no mean of nothing (NumPy would warn)
+        return
     frac = float(np.mean(np.max(a, axis=-1) >= white)) if a.ndim == 3 else \
         float(np.mean(a >= white))
     if frac > CLIPPED_WARN_FRACTION:
@@ -252,6 +270,12 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
     try:
         with _library_chatter() as said:
             with rawpy.imread(str(p)) as raw:
+                sizes = raw.sizes
+                # LibRaw's raw buffer (2 bytes a photosite) and its 4-channel 16-bit image,
+                # the 16-bit RGB it returns; then the float32 RGB and its work
+                _check_decode(p, "RAW", int(sizes.width), int(sizes.height), 3,
+                              2 * float(sizes.raw_width) * float(sizes.raw_height)
+                              / max(1.0, float(sizes.width) * float(sizes.height)) + 8 + 6)
                 rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16,
                                       output_color=rawpy.ColorSpace.sRGB, user_flip=0,
                                       adjust_maximum_thr=0.0, **wb_args)
@@ -261,6 +285,8 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
                                "daylight": list(raw.daylight_whitebalance),
                                "none": [1.0, 1.0, 1.0, 1.0]}.get(white_balance)
                 pattern = raw.color_desc.decode("ascii", "replace")
+    except (CameraFileError, ResourceError):
+        raise
     except (rawpy.LibRawError, OSError, ValueError) as exc:
         raise _raw_error(p, exc, said) from None
     if said:
@@ -268,7 +294,8 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
     if white <= max(black, default=0):
         raise CameraFileError(f"{p}: white level {white} is not above the black level "
                               f"{max(black)}")
-    data = rgb.astype(np.float32) / np.float32(65535.0)
+    data = _scaled(rgb, 65535.0)
+    del rgb
     _clip_warning(data, 1.0, warnings)
     exif, pitch = {}, None
     try:  # DNG, NEF, CR2, ARW, PEF are TIFF inside: their EXIF is readable there
@@ -277,7 +304,7 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
         with _library_chatter():
             with tifffile.TiffFile(str(p)) as tf:
                 exif = _tiff_exif(tf.pages[0])
-        pitch = _pitch_from_exif(exif)
+        pitch = _pitch_from_exif(exif, warnings)
     except Exception as exc:  # noqa: BLE001 - EXIF is optional; the image was read
         logger.debug("%s: no EXIF through tifffile (%s)", p, exc)
     meta = {"transfer": "linear", "white_level": white, "black_level": black,
@@ -321,22 +348,47 @@ def _tiff_exif(page) -> dict:
     return {k: _plain(tags[k]) for k in _EXIF_KEYS if k in tags}
 
 
-def _pitch_from_exif(exif: Mapping[str, Any]) -> float | None:
-    """Pixel pitch, mm, from FocalPlaneXResolution (pixels per unit) and its unit."""
+def _pitch_from_exif(exif: Mapping[str, Any], warnings: list[str] | None = None
+                     ) -> float | None:
+    """Pixel pitch, mm, from FocalPlaneXResolution (pixels per unit) and its unit; None
+    when either is missing or not what EXIF allows (a unit code 1-5, a number > 0). A unit
+    that is not a code is reported in ``warnings``."""
     res = exif.get("FocalPlaneXResolution")
-    unit = _FOCAL_PLANE_UNIT_MM.get(int(exif.get("FocalPlaneResolutionUnit", 2) or 2))
-    if not isinstance(res, (int, float)) or not res > 0 or unit is None:
+    code = exif.get("FocalPlaneResolutionUnit") or 2  # absent or 0: inches (the default)
+    ok_code = isinstance(code, (int, float)) and not isinstance(code, bool) \
+        and float(code).is_integer()
+    unit = _FOCAL_PLANE_UNIT_MM.get(int(code)) if ok_code else None
+    if unit is None:
+        if warnings is not None and res is not None:
+            warnings.append(f"EXIF FocalPlaneResolutionUnit {code!r} is not a unit code "
+                            f"(1-5): the file's pixel pitch is not used")
+        return None
+    if not isinstance(res, (int, float)) or isinstance(res, bool) or not res > 0:
         return None
     pitch = unit / float(res)
     return pitch if 1e-4 < pitch < 1.0 else None  # 0.1 µm .. 1 mm: else not a pitch
 
 
+def _scaled(a: np.ndarray, white: float) -> np.ndarray:
+    """``a / white`` as float32, made in place (one float32 array, no float64 copy)."""
+    data = a.astype(np.float32)
+    data /= np.float32(white)
+    return data
+
+
 def _decode_transfer(a: np.ndarray, rule: str, gamma: float | None) -> np.ndarray:
+    """Undo the transfer function of float32 ``a`` in place, in blocks of rows (the
+    temporaries of the curve stay a few MiB whatever the image's size)."""
     if rule == "linear":
         return a
-    if rule == "gamma":
-        return np.power(np.clip(a, 0.0, None), np.float32(gamma)).astype(np.float32)
-    return srgb_to_linear(np.clip(a, 0.0, 1.0))
+    rows = max(1, _TRANSFER_BLOCK_SAMPLES // max(1, a[:1].size))
+    for r in range(0, a.shape[0], rows):
+        block = a[r:r + rows]
+        if rule == "gamma":
+            np.power(np.clip(block, 0.0, None, out=block), np.float32(gamma), out=block)
+        else:
+            block[...] = srgb_to_linear(np.clip(block, 0.0, 1.0, out=block))
+    return a
 
 
 def _icc_transfer(icc: bytes | None) -> tuple[str, float | None] | None:
@@ -409,13 +461,17 @@ def _read_tiff(p: Path, *, warnings, white_balance, transfer):
                     raise CameraFileError(
                         f"{p}: TIFF photometric {page.photometric!r} is not supported; "
                         f"allowed: grey (min-is-black) or RGB")
+                shape, axes = tuple(int(n) for n in page.shape), page.axes
+                h, w = (shape[axes.index(k)] if k in axes else 1 for k in "YX")
+                samples = int(page.samplesperpixel)
+                _check_decode(p, "TIFF", w, h, samples,
+                              samples * np.dtype(page.dtype).itemsize)
                 a = page.asarray()
-                axes = page.axes
                 bits = int(page.bitspersample)
                 rule, gamma, reason = tiff_transfer(page, transfer)
                 exif = _tiff_exif(page)
                 inverted = int(page.photometric) == 0
-    except CameraFileError:
+    except (CameraFileError, ResourceError):
         raise
     except Exception as exc:  # tifffile raises TiffFileError, ValueError, OSError, ...
         cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
@@ -428,9 +484,9 @@ def _read_tiff(p: Path, *, warnings, white_balance, transfer):
     if np.issubdtype(a.dtype, np.integer):
         white = float(np.iinfo(a.dtype).max) if bits >= 8 * a.dtype.itemsize \
             else float(2 ** bits - 1)
-        data = a.astype(np.float32) / np.float32(white)
+        data = _scaled(a, white)
         if inverted:
-            data = 1.0 - data
+            np.subtract(np.float32(1.0), data, out=data)
         _clip_warning(data, 1.0, warnings)
     elif np.issubdtype(a.dtype, np.floating):
         data, white = a.astype(np.float32), 1.0
@@ -441,49 +497,122 @@ def _read_tiff(p: Path, *, warnings, white_balance, transfer):
     data = _decode_transfer(data, rule, gamma)
     meta = {"transfer": rule if rule != "gamma" else f"gamma {gamma:g}",
             "transfer_reason": reason, "white_level": white, "black_level": 0, "exif": exif}
-    return data, bits, meta, _pitch_from_exif(exif)
+    return data, bits, meta, _pitch_from_exif(exif, warnings)
+
+
+#: Bytes of work per decoded sample beyond what the decoder returns: the float32 image,
+#: one float32 copy (alpha dropped, planes made contiguous), the boolean masks of the
+#: clipping and finiteness checks, and the transfer decoding's bounded row blocks.
+#: Measured peaks (tests/test_memory_gate.py) stay below this estimate.
+_WORK_BYTES_PER_SAMPLE = 10
+#: Rows per block of the transfer decoding: its temporaries stay a few MiB.
+_TRANSFER_BLOCK_SAMPLES = 1 << 20
+
+
+def _check_decode(p: Path, what: str, width: int, height: int, channels: int,
+                  decoded_bytes: float) -> None:
+    """Refuse a photo, from the size its header declares and before any pixel is decoded,
+    when decoding it would not fit the memory (:func:`mitsweep.resources.check_allocation`).
+
+    ``decoded_bytes`` is what the decoder itself holds per pixel (its own buffer and the
+    array it returns); the float32 image and its work come on top.
+    """
+    from ..resources import check_allocation
+
+    if width < 1 or height < 1:
+        raise CameraFileError(f"{p}: the {what} header declares a {width}x{height} image; "
+                              f"expected at least 1x1 pixels")
+    pixels = float(width) * float(height)
+    check_allocation(f"{p}: decoding the {width}x{height} {what} image",
+                     pixels * (decoded_bytes + channels * _WORK_BYTES_PER_SAMPLE))
+
+
+#: Pillow's decompression-bomb limit is one module global; mitsweep replaces it, while it
+#: opens a file, with its own gate (:func:`_check_decode`, from the memory cap), so that
+#: a huge declared size is one refusal naming the file, never Pillow's warning or error.
+_PILLOW_LIMIT_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _pillow_image(p: Path, label: str):
+    """``PIL.Image.open`` of ``p`` (lazy: the header and the chunks before the pixels)
+    with Pillow's own pixel limit lifted for this call, its errors as one
+    :class:`CameraFileError` naming the file."""
+    from PIL import Image
+
+    with _PILLOW_LIMIT_LOCK:
+        saved, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+        try:
+            im = Image.open(p)
+        except Exception as exc:  # noqa: BLE001 - Pillow raises many types on bad files
+            raise _pillow_error(p, label, exc) from None
+        finally:
+            Image.MAX_IMAGE_PIXELS = saved
+    with im:
+        yield im
+
+
+def _pillow_error(p: Path, label: str, exc: BaseException) -> CameraFileError:
+    cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    if type(exc).__name__ == "UnidentifiedImageError":
+        cause = "not recognised as an image"
+    return CameraFileError(f"{p}: not a readable {label} file ({cause})")
+
+
+def _pillow_exif(p: Path, im) -> dict:
+    """The :data:`_EXIF_KEYS` of an open Pillow image (empty when it has none)."""
+    try:
+        from PIL import ExifTags
+
+        raw_exif = im.getexif()
+        merged = {**dict(raw_exif.get_ifd(0x8769)), **dict(raw_exif)}
+        named = {ExifTags.TAGS.get(k, str(k)): v for k, v in merged.items()}
+        return {k: _plain(named[k]) for k in _EXIF_KEYS if k in named}
+    except Exception as exc:  # noqa: BLE001 - EXIF is optional
+        logger.debug("%s: EXIF not read (%s)", p, exc)
+        return {}
+
+
+#: Bytes per pixel Pillow holds for a mode (its own buffer: 1 or 4 bytes a pixel, 4 for
+#: the 32-bit modes), before :func:`numpy.asarray` copies it.
+_PILLOW_PIXEL_BYTES = {"1": 1, "L": 1, "P": 1, "I;16": 2, "I;16B": 2, "I;16L": 2}
 
 
 def _read_pillow(p: Path, label: str):
-    from PIL import Image, UnidentifiedImageError
-
-    try:
-        with Image.open(p) as im:
+    with _pillow_image(p, label) as im:
+        w, h = im.size
+        mode = im.mode
+        # Pillow's buffer, a converted copy (palette → RGB(A), I;16B → I;16) and NumPy's
+        # copy of it: at most three 4-byte pixels
+        _check_decode(p, label, w, h, len(im.getbands()) if mode != "P" else 4,
+                      3 * _PILLOW_PIXEL_BYTES.get(mode, 4))
+        try:
             im.load()
             info = dict(im.info)
-            exif = {}
-            try:
-                raw_exif = im.getexif()
-                from PIL import ExifTags
-
-                merged = {**dict(raw_exif.get_ifd(0x8769)), **dict(raw_exif)}
-                named = {ExifTags.TAGS.get(k, str(k)): v for k, v in merged.items()}
-                exif = {k: _plain(named[k]) for k in _EXIF_KEYS if k in named}
-            except Exception as exc:  # noqa: BLE001 - EXIF is optional
-                logger.debug("%s: EXIF not read (%s)", p, exc)
-            mode = im.mode
+            exif = _pillow_exif(p, im)
             if mode in ("P", "PA", "1", "CMYK", "YCbCr", "LAB", "HSV"):
-                im = im.convert("RGBA" if mode == "PA" or "transparency" in info else "RGB")
+                conv = im.convert("RGBA" if mode == "PA" or "transparency" in info else "RGB")
             elif mode == "I;16B":
-                im = im.convert("I;16")
-            a = np.asarray(im)
-    except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
-        cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise CameraFileError(f"{p}: not a readable {label} file ({cause})") from None
+                conv = im.convert("I;16")
+            else:
+                conv = im
+            a = np.asarray(conv)
+        except Exception as exc:  # noqa: BLE001 - Pillow's decoders raise many types
+            raise _pillow_error(p, label, exc) from None
     return a, mode, info, exif
 
 
 def _read_jpeg(p: Path, *, warnings, white_balance, transfer):
     a, mode, info, exif = _read_pillow(p, "JPEG")
     rule, gamma, reason = _pillow_transfer(info, transfer, default_reason="JPEG (sRGB)")
-    data = a.astype(np.float32) / np.float32(255.0)
+    data = _scaled(a, 255.0)
     _clip_warning(data, 1.0, warnings)
     warnings.append(_EIGHT_BIT_WARNING)
     warnings.append(_JPEG_WARNING)
     meta = {"transfer": rule if rule != "gamma" else f"gamma {gamma:g}",
             "transfer_reason": reason, "white_level": 255, "black_level": 0,
             "source_mode": mode, "exif": exif}
-    return _decode_transfer(data, rule, gamma), 8, meta, _pitch_from_exif(exif)
+    return _decode_transfer(data, rule, gamma), 8, meta, _pitch_from_exif(exif, warnings)
 
 
 def _pillow_transfer(info: Mapping, forced: str | None, *, default_reason: str):
@@ -504,9 +633,8 @@ def _pillow_transfer(info: Mapping, forced: str | None, *, default_reason: str):
 
 def _read_png(p: Path, *, warnings, white_balance, transfer):
     header = _png_header(p)
-    if header is not None and header["bit_depth"] == 16 and header["color_type"] in (2, 6):
-        a, info = _decode_png16(p, header)
-        mode, exif = f"RGB{'A' if header['color_type'] == 6 else ''};16", {}
+    if header is not None and header["bit_depth"] == 16:
+        a, mode, info, exif = _read_png16(p, header)
     else:
         a, mode, info, exif = _read_pillow(p, "PNG")
     rule, gamma, reason = _pillow_transfer(info, transfer, default_reason="PNG (sRGB)")
@@ -519,12 +647,12 @@ def _read_png(p: Path, *, warnings, white_balance, transfer):
         bits, white = 16, 65535.0
     else:
         bits, white = 8 * a.dtype.itemsize, float(np.iinfo(a.dtype).max)
-    data = a.astype(np.float32) / np.float32(white)
+    data = _scaled(a, white)
     _clip_warning(data, 1.0, warnings)
     meta = {"transfer": rule if rule != "gamma" else f"gamma {gamma:g}",
             "transfer_reason": reason, "white_level": white, "black_level": 0,
             "source_mode": mode, "exif": exif}
-    return _decode_transfer(data, rule, gamma), bits, meta, _pitch_from_exif(exif)
+    return _decode_transfer(data, rule, gamma), bits, meta, _pitch_from_exif(exif, warnings)
 
 
 def _read_exr(p: Path, *, warnings, white_balance, transfer):
@@ -552,30 +680,20 @@ def _read_exr(p: Path, *, warnings, white_balance, transfer):
 
 
 # ------------------------------------------------------------- 16-bit PNG, both ways
+#
+# Pillow keeps no 16-bit colour mode: it reduces 16-bit RGB(A) PNGs to 8 bits (and so does
+# imageio, whose PNG reader is Pillow). 16-bit PNGs are therefore decoded by libpng through
+# imagecodecs (the codec library of tifffile's author, with binary wheels), which returns
+# every 16-bit colour type as uint16; Pillow still reads their chunks (gAMA, sRGB, iCCP,
+# text, eXIf) without decoding the pixels, so that both kinds of PNG share one metadata
+# reader. Only the IHDR is parsed here: its width and height gate the decoding.
 
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-
-
-def _png_chunks(blob: bytes, p: Path):
-    pos = len(_PNG_SIGNATURE)
-    while pos + 8 <= len(blob):
-        n, kind = struct.unpack(">I4s", blob[pos:pos + 8])
-        data = blob[pos + 8:pos + 8 + n]
-        if len(data) < n or pos + 12 + n > len(blob):
-            raise CameraFileError(f"{p}: not a readable PNG file (truncated in chunk "
-                                  f"{kind.decode('latin-1')!r})")
-        crc = struct.unpack(">I", blob[pos + 8 + n:pos + 12 + n])[0]
-        if zlib.crc32(kind + data) & 0xFFFFFFFF != crc:
-            raise CameraFileError(f"{p}: not a readable PNG file (bad CRC in chunk "
-                                  f"{kind.decode('latin-1')!r})")
-        yield kind, data
-        pos += 12 + n
-        if kind == b"IEND":
-            return
-    raise CameraFileError(f"{p}: not a readable PNG file (truncated: no IEND chunk)")
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 1, 4: 2, 6: 4}  # by colour type (PNG spec, Table 11.1)
 
 
 def _png_header(p: Path) -> dict | None:
+    """The IHDR of a PNG file (None when the file does not start with one)."""
     with open(p, "rb") as f:
         head = f.read(33)
     if len(head) < 33 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
@@ -585,76 +703,27 @@ def _png_header(p: Path) -> dict | None:
             "interlace": interlace}
 
 
-def _decode_png16(p: Path, header: dict) -> tuple[np.ndarray, dict]:
-    """A 16-bit RGB(A) PNG as uint16 (H, W, C): Pillow would reduce it to 8 bits."""
-    if header["interlace"]:
-        raise CameraFileError(f"{p}: interlaced 16-bit colour PNG is not supported; "
-                              f"save it without interlacing or as a 16-bit TIFF")
-    blob = p.read_bytes()
-    idat, info = [], {}
-    for kind, data in _png_chunks(blob, p):
-        if kind == b"IDAT":
-            idat.append(data)
-        elif kind == b"tEXt" and b"\x00" in data:
-            key, text = data.split(b"\x00", 1)
-            info[key.decode("latin-1")] = text.decode("latin-1")
-        elif kind == b"iCCP":
-            name_end = data.index(b"\x00")
-            info["icc_profile"] = zlib.decompress(data[name_end + 2:])
-        elif kind == b"gAMA":
-            info["gamma"] = struct.unpack(">I", data)[0] / 100000.0
-        elif kind == b"sRGB":
-            info["srgb"] = data[0]
-    channels = 3 if header["color_type"] == 2 else 4
-    w, h = header["width"], header["height"]
-    bpp, stride = 2 * channels, 2 * channels * w
+def _read_png16(p: Path, header: dict) -> tuple[np.ndarray, str, dict, dict]:
+    """A 16-bit PNG as uint16 (H, W[, C]) through libpng, with Pillow's chunk metadata."""
+    import imagecodecs
+
+    channels = _PNG_CHANNELS.get(header["color_type"], 4)
+    with _pillow_image(p, "PNG") as im:  # chunks only: Pillow would reduce the pixels
+        info, exif = dict(im.info), _pillow_exif(p, im)
+    # libpng's row buffers and the uint16 array it fills; inflation stops at the rows
+    # the header declares, so a stream that inflates further costs nothing more
+    _check_decode(p, "PNG", header["width"], header["height"], channels, 4 * channels)
     try:
-        raw = zlib.decompress(b"".join(idat))
-    except zlib.error as exc:
-        raise CameraFileError(f"{p}: not a readable PNG file ({exc})") from None
-    if len(raw) != h * (stride + 1):
-        raise CameraFileError(f"{p}: not a readable PNG file (image data holds {len(raw)} "
-                              f"bytes, {h * (stride + 1)} expected)")
-    rows = _png_unfilter(np.frombuffer(raw, np.uint8).reshape(h, stride + 1), bpp, p)
-    return rows.view(">u2").reshape(h, w, channels).astype(np.uint16), info
-
-
-def _png_unfilter(rows: np.ndarray, bpp: int, p: Path) -> np.ndarray:
-    """Undo PNG's per-row filters (PNG spec, Sec. 9). None, Sub and Up are vectorised;
-    Average and Paeth run per byte (slow for large images)."""
-    h, stride = rows.shape[0], rows.shape[1] - 1
-    out = np.empty((h, stride), np.uint8)
-    prev = np.zeros(stride, np.uint8)
-    for r in range(h):
-        f, x = int(rows[r, 0]), rows[r, 1:]
-        if f == 0:
-            cur = x.copy()
-        elif f == 1:
-            cur = np.cumsum(x.reshape(-1, bpp), axis=0, dtype=np.uint8).ravel()
-        elif f == 2:
-            cur = x + prev
-        elif f in (3, 4):
-            cur = _unfilter_sequential(f, x.tolist(), prev.tolist(), bpp)
-        else:
-            raise CameraFileError(f"{p}: not a readable PNG file (filter type {f} in row {r})")
-        out[r] = cur
-        prev = out[r]
-    return out
-
-
-def _unfilter_sequential(f: int, x: list, up: list, bpp: int) -> np.ndarray:
-    cur = [0] * len(x)
-    for i, xi in enumerate(x):
-        a = cur[i - bpp] if i >= bpp else 0
-        b = up[i]
-        if f == 3:
-            cur[i] = (xi + ((a + b) >> 1)) & 0xFF
-        else:
-            c = up[i - bpp] if i >= bpp else 0
-            pa, pb, pc = abs(b - c), abs(a - c), abs(a + b - 2 * c)
-            pred = a if pa <= pb and pa <= pc else (b if pb <= pc else c)
-            cur[i] = (xi + pred) & 0xFF
-    return np.array(cur, dtype=np.uint8)
+        with _library_chatter() as said:  # libpng prints its warnings on descriptor 2
+            a = imagecodecs.png_decode(p.read_bytes())
+    except Exception as exc:  # noqa: BLE001 - PngError, and whatever libpng's wrapper raises
+        cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CameraFileError(f"{p}: not a readable PNG file ({cause})") from None
+    if said:
+        logger.debug("%s: libpng said: %s", p, " | ".join(said))
+    mode = {1: "I;16", 2: "LA;16", 3: "RGB;16", 4: "RGBA;16"}.get(a.shape[-1] if a.ndim == 3
+                                                               else 1, "I;16")
+    return a, mode, info, exif
 
 
 def _png16_bytes(img16: np.ndarray, text: Mapping[str, str]) -> bytes:
