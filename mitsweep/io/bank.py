@@ -15,8 +15,13 @@ Layout conventions
   by θ counter-clockwise (rotational symmetry of an untilted mirror).
 - ``kind = "grid"``: points on a regular (rows × cols) grid over the field,
   ``grid_shape`` = (rows, cols), points in row-major order (rows top to bottom).
-- ``depths_mm``: (n_depths,) depth l of the point source (inf allowed).
-- ``vignetted``: (n_depths, n_points) fraction of the source's traced energy lost.
+- ``depths_mm``: (n_depths,) depth l of the point source, > 0 (inf allowed).
+- ``radii_mm``: (n_points,) radial banks: finite, >= 0, strictly increasing.
+- ``vignetted``: (n_depths, n_points) fraction in [0, 1] of the source's traced energy lost.
+- Every array is numeric and finite where the above does not allow inf; a bank that is
+  not is refused whole when it is made or loaded (:class:`BankError` naming the array).
+- Loading checks each archive member's declared size against the memory cap
+  (:func:`mitsweep.resources.check_allocation`) before reading it.
 - ``metadata``: provenance (setup dict, sweep range, rays, seed, version, motion profile).
 - ``optics``: the sections of the setup the bank was traced for (``mirror``, ``lens``,
   ``sensor``, ``sweep`` as :func:`mitsweep.config.setup_to_dict` writes them, and the
@@ -40,6 +45,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..resources import ResourceError
 from .atomic import atomic_path
 
 __all__ = ["IPSFBank", "save_bank", "load_bank", "BankError", "optics_sections",
@@ -154,10 +160,43 @@ class IPSFBank:
             raise BankError("a grid bank needs grid_shape with rows*cols == n_points")
         if not np.all(np.isfinite(k)):
             raise BankError("kernels hold NaN or inf values")
+        _check_values(self, k.shape[0], k.shape[1])
 
     @property
     def kernel_size(self) -> int:
         return int(self.kernels.shape[-1])
+
+
+def _numbers(name: str, value: Any) -> np.ndarray:
+    """``value`` as a float64 array, or a :class:`BankError` naming the array."""
+    a = np.asarray(value)
+    if a.dtype.kind not in "fiu":
+        raise BankError(f"{name} must hold numbers, got an array of {a.dtype} "
+                        f"({a.dtype.kind!r} kind)")
+    return a.astype(np.float64, copy=False)
+
+
+def _check_values(bank: "IPSFBank", n_depths: int, n_points: int) -> None:
+    """Every array of a bank holds what its layout allows (the shapes are checked)."""
+    if not np.all(np.isfinite(_numbers("points_uv", bank.points_uv))):
+        raise BankError("points_uv hold NaN or inf values; finite mm expected")
+    depths = _numbers("depths_mm", bank.depths_mm)
+    if not np.all(depths > 0):  # NaN fails too
+        raise BankError(f"depths_mm must be > 0 mm (inf allowed), got "
+                        f"{depths[~(depths > 0)][0]:g}")
+    if bank.radii_mm is not None:
+        radii = _numbers("radii_mm", bank.radii_mm)
+        if radii.ndim != 1 or not np.all(np.isfinite(radii)) or np.any(radii < 0):
+            raise BankError("radii_mm must be finite and >= 0 mm")
+        if np.any(np.diff(radii) <= 0):
+            raise BankError("radii_mm must increase strictly (the points from the centre "
+                            "outwards)")
+    if bank.vignetted is not None:
+        vig = _numbers("vignetted", bank.vignetted)
+        if vig.shape != (n_depths, n_points):
+            raise BankError(f"vignetted must be ({n_depths}, {n_points}), got {vig.shape}")
+        if not np.all((vig >= 0) & (vig <= 1)):  # NaN fails too
+            raise BankError("vignetted must hold fractions in [0, 1] (no NaN)")
 
 
 def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = True) -> Path:
@@ -238,11 +277,7 @@ def load_bank(path: str | Path) -> IPSFBank:
     if magic != b"PK\x03\x04":  # NPZ files are zip archives
         raise BankError(f"{p}: not an IPSF bank (expected a .npz file written by "
                         f"`mitsweep ipsf --bank` or mitsweep.io.bank.save_bank)")
-    try:  # our own handle: np.load leaves its file open when the archive is corrupt
-        with open(p, "rb") as f, np.load(f, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except Exception as exc:  # zipfile, zlib and NumPy format errors alike
-        raise BankError(f"{p}: not an IPSF bank ({exc})") from None
+    data = _read_npz(p)
     header = _header(p, data.pop("header", None))
     fmt = header.get("format")
     if fmt not in READABLE_FORMATS:
@@ -278,6 +313,56 @@ def load_bank(path: str | Path) -> IPSFBank:
                         fingerprinted=fingerprinted)
     except BankError as exc:
         raise BankError(f"{p}: {exc}") from None
+
+
+def _read_npz(p: Path) -> dict[str, np.ndarray]:
+    """The arrays of an NPZ file, each member's declared size checked before it is read.
+
+    An NPZ is a zip of ``.npy`` members; ``np.load`` inflates a member that is not one
+    whole, so a small archive can expand to any size. Here every member must be ``.npy``;
+    its header (shape, dtype) gives the bytes it will take, and their sum passes
+    :func:`mitsweep.resources.check_allocation` before any array is read. A member is
+    then read from its stream for exactly the bytes its header declares.
+    """
+    import zipfile
+
+    from ..resources import check_allocation
+
+    try:
+        with zipfile.ZipFile(p) as zf:
+            members = zf.infolist()
+            declared = {}
+            for info in members:
+                name = info.filename
+                if not name.endswith(".npy") or info.is_dir():
+                    raise BankError(f"{p}: not an IPSF bank (member {name!r} is not a .npy "
+                                    f"array)")
+                with zf.open(info) as f:
+                    version = np.lib.format.read_magic(f)
+                    read_header = {(1, 0): np.lib.format.read_array_header_1_0,
+                                   (2, 0): np.lib.format.read_array_header_2_0}.get(version)
+                    if read_header is None:
+                        raise BankError(f"{p}: not an IPSF bank (member {name!r} is .npy "
+                                        f"format {version[0]}.{version[1]}; 1.0 or 2.0 "
+                                        f"expected)")
+                    shape, _, dtype = read_header(f)
+                if dtype.hasobject:
+                    raise BankError(f"{p}: not an IPSF bank (member {name!r} holds Python "
+                                    f"objects)")
+                declared[name] = (shape, dtype)
+            nbytes = sum(float(np.prod(shape, dtype=float)) * dtype.itemsize
+                         for shape, dtype in declared.values())
+            check_allocation(f"{p}: the bank's {len(declared)} arrays", nbytes)
+            data = {}
+            for info in members:
+                with zf.open(info) as f:
+                    data[info.filename[:-4]] = np.lib.format.read_array(f, allow_pickle=False)
+    except (BankError, ResourceError):
+        raise
+    except Exception as exc:  # zipfile, zlib and NumPy format errors alike
+        cause = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise BankError(f"{p}: not an IPSF bank ({cause})") from None
+    return data
 
 
 def _header(p: Path, raw) -> dict:
