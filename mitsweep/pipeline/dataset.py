@@ -9,6 +9,8 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 from ..config import Setup, setup_to_dict
+from ..io.files import FileTypeError, require_regular_file
+from ..io.scene_files import SceneFileError, scene_digests
 from .options import MAX_SCENES, DatasetOptions, _is_int, _is_real, _require, options_from_dict
 from .runner import (DEFAULT_RETRIES, LOG_DIR, MANIFEST, SHARD_DIR, DatasetError, Shard,
                      run_tasks)
@@ -123,8 +125,10 @@ def dataset_inputs(directory: str | Path) -> list[Path]:
 def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
                      unit: str | None = None) -> tuple[dict, ...]:
     """The scenes of ``mitsweep dataset --scenes-from``: every ``*.xml`` file of
-    ``directory`` (not its subfolders), sorted by name, as ``{"path", "sha256"}``
-    (:attr:`DatasetOptions.scene_files`).
+    ``directory`` (not its subfolders), sorted by name, as ``{"path", "sha256"}``, plus
+    ``"files"``, the SHA-256 of every file the scene loads, when it loads others
+    (:attr:`DatasetOptions.scene_files`). Every ``*.xml`` entry must be a regular file
+    (a named pipe or a folder so named is refused, not read).
 
     With ``setup``, each file is loaded first as the render will load it and its view
     of the mirror probed (:func:`mitsweep.render.user_scene.check_user_scene`, in
@@ -134,13 +138,13 @@ def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
     Raises :class:`DatasetError` (or the loader's ``UserSceneError``), both ValueErrors:
     one line at the command line.
     """
-    from .runner import sha256
-
     root = Path(directory)
     if not root.is_dir():
         raise DatasetError(f"{directory}: not a directory (--scenes-from takes a folder of "
                            f"Mitsuba XML scenes)")
-    paths = sorted(p for p in root.glob("*.xml") if p.is_file())
+    # every *.xml is a scene: a named pipe, device or folder so named is refused, not
+    # skipped (nor read: it would block)
+    paths = sorted(require_regular_file(p, "--scenes-from scene") for p in root.glob("*.xml"))
     if not paths:
         raise DatasetError(f"{directory}: no *.xml scene files")
     _require(len(paths) <= MAX_SCENES, "scenes-from",
@@ -150,7 +154,23 @@ def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
 
         for p in paths:
             check_user_scene(setup, p, unit=unit)
-    return tuple({"path": str(p.resolve()), "sha256": sha256(p)} for p in paths)
+    return tuple(_scene_file(p) for p in paths)
+
+
+def _scene_file(path: Path) -> dict:
+    """A :attr:`DatasetOptions.scene_files` entry: path, SHA-256 and, for a scene that
+    loads other files, ``files``: the SHA-256 of each (:func:`scene_digests`)."""
+    from ..render.user_scene import UserSceneError
+
+    try:
+        files = scene_digests(path)
+    except (FileTypeError, SceneFileError) as exc:
+        raise UserSceneError(str(exc)) from None
+    top = path.resolve()
+    entry = {"path": str(top), "sha256": files[top.name]}
+    if len(files) > 1:
+        entry["files"] = files
+    return entry
 
 
 def written_paths(opts: DatasetOptions, shard: Shard | None = None) -> set[str]:
@@ -165,6 +185,14 @@ def written_paths(opts: DatasetOptions, shard: Shard | None = None) -> set[str]:
     return out
 
 
+def _without_scene_path(setup_dict: dict) -> dict:
+    """A manifest's setup with its ``[scene] file`` path left out (set or not stays)."""
+    scene = setup_dict.get("scene")
+    if not isinstance(scene, dict) or scene.get("file") is None:
+        return setup_dict
+    return {**setup_dict, "scene": {**scene, "file": True}}
+
+
 def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | None = None, *,
                   executor: str | cf.Executor = "serial", jobs: int = 2,
                   scheduler: str | None = None, shard: Shard | str | None = None,
@@ -176,7 +204,11 @@ def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | N
     ----------
     setup : Setup
     out_dir : path
-        Created if needed. A directory holding a manifest for another setup is refused.
+        Created if needed. A directory holding a manifest for another setup is refused
+        (the setup's ``[scene] file`` compares by the content of every file it loads,
+        not by its path: a changed one redoes the renders and what was made from them).
+        Its folders must be its own: a symlinked one is refused, never written
+        through.
     options : DatasetOptions
     executor : {"serial", "process", "dask"} or concurrent.futures.Executor
         Run the tasks in this process; in ``jobs`` local processes; on Dask (a
@@ -222,7 +254,9 @@ def build_dataset(setup: Setup, out_dir: str | Path, options: DatasetOptions | N
               "versions": _versions()}
 
     def same_setup(manifest: dict, path: Path) -> None:
-        if manifest["setup"] != sd:
+        # the setup's own scene file by content, not by the spelling of its path: its
+        # digests are in the render items' parameters (tasks.setup_scene_digests)
+        if _without_scene_path(manifest["setup"]) != _without_scene_path(sd):
             raise DatasetError(f"{Path(out_dir)}: holds a dataset of another setup "
                                f"({manifest['setup'].get('name')!r}); use a new directory")
 

@@ -39,6 +39,23 @@ def _is_real(v: Any) -> bool:
     return isinstance(v, numbers.Real) and not isinstance(v, bool)
 
 
+def _is_sha256(v: Any) -> bool:
+    return isinstance(v, str) and len(v) == 64 and set(v) <= _HEX
+
+
+def _digests(value: Any, key: str) -> dict[str, str]:
+    """A scene's content digests (:func:`mitsweep.io.scene_files.scene_digests`):
+    ``{name: SHA-256}``, at least one, names non-empty strings; sorted."""
+    _require(isinstance(value, dict) and value, key,
+             f"must be an object of file names to SHA-256, got {value!r}")
+    for name, sha in value.items():
+        _require(isinstance(name, str) and name != "", key, f"file names must be non-empty "
+                                                            f"strings, got {name!r}")
+        _require(_is_sha256(sha), f"{key}[{name!r}]",
+                 f"must be 64 lowercase hex digits, got {sha!r}")
+    return dict(sorted(value.items()))
+
+
 def _require(ok: bool, key: str, message: str) -> None:
     if not ok:
         raise DatasetError(f"{key}: {message}")
@@ -84,7 +101,8 @@ class DatasetOptions:
     (the family's parameters, plain JSON, stored resolved:
     :func:`mitsweep.render.procedural.resolve_params`). ``xml`` takes ``scene_files``,
     one ``{"path": absolute path, "sha256": of its bytes}`` per scene (``scenes`` is
-    their number), and ``scene_unit`` (one of :data:`SCENE_UNITS`, or None for the
+    their number), with ``"files"``, the SHA-256 of every file it loads
+    (:func:`mitsweep.io.scene_files.scene_digests`), when it loads more than itself, and ``scene_unit`` (one of :data:`SCENE_UNITS`, or None for the
     setup's). A room dataset's options read and write as before these fields existed.
     """
 
@@ -174,14 +192,17 @@ class DatasetOptions:
         files = []
         for k, f in enumerate(self.scene_files):
             key = f"scene_files[{k}]"
-            _require(isinstance(f, dict) and set(f) == {"path", "sha256"}, key,
-                     f"must be an object with path and sha256, got {f!r}")
+            _require(isinstance(f, dict) and {"path", "sha256"} <= set(f)
+                     <= {"path", "sha256", "files"}, key,
+                     f"must be an object with path, sha256 and optionally files, got {f!r}")
             _require(isinstance(f["path"], str) and f["path"].endswith(".xml"), f"{key}.path",
                      f"must be the path of an .xml file, got {f['path']!r}")
-            sha = f["sha256"]
-            _require(isinstance(sha, str) and len(sha) == 64 and set(sha) <= _HEX,
-                     f"{key}.sha256", f"must be 64 lowercase hex digits, got {sha!r}")
-            files.append({"path": f["path"], "sha256": sha})
+            _require(_is_sha256(f["sha256"]), f"{key}.sha256",
+                     f"must be 64 lowercase hex digits, got {f['sha256']!r}")
+            entry = {"path": f["path"], "sha256": f["sha256"]}
+            if "files" in f:
+                entry["files"] = _digests(f["files"], f"{key}.files")
+            files.append(entry)
         object.__setattr__(self, "scene_files", tuple(files))
 
     def _check_motion(self) -> None:

@@ -30,6 +30,11 @@ directory's manifest under the directory's lock; the merge that finds every item
 complete writes the manifest a single run would have written and removes the shard
 manifests. A run without a shard also adopts the entries of shard manifests, so it
 finishes (or merges) what shards left.
+
+Every write stays inside the directory: a folder below it that is a symbolic link (an
+item's folder, ``logs/``, a shard's folder) is refused before anything is written
+(:func:`refuse_symlinked_folders`), and an item that is itself a link is made again,
+the link replaced by the file.
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from ..io import WriteError, write_text_atomic
@@ -215,6 +220,10 @@ def _write_log(root: Path, name: str, record: dict, records: list, tail: str = "
     text = json.dumps(record, default=str) + "\n" + "".join(
         fmt.format(r) + "\n" for r in records) + tail
     path = task_log_path(root, name)
+    link = symlinked_folder(Path(root), f"{LOG_DIR}/{name}.log")
+    if link is not None:  # the coordinator refuses these; one made since is not followed
+        logger.warning("%s: not written: %s is a symbolic link", path, link)
+        return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text_atomic(path, text)
@@ -282,15 +291,19 @@ def run_tasks(root: str | Path, tasks: Sequence[Task], context: Any, header: Map
     root = Path(root)
     if not (isinstance(retries, int) and retries >= 0):
         raise DatasetError(f"retries: must be an integer >= 0, got {retries!r}")
+    home = root if shard is None else root / SHARD_DIR / shard.dirname
+    if shard is not None:  # its lock and manifest go there
+        refuse_symlinked_folders(root, [f"{SHARD_DIR}/{shard.dirname}/{MANIFEST}"])
     try:
         root.mkdir(parents=True, exist_ok=True)
-        home = root if shard is None else root / SHARD_DIR / shard.dirname
         home.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DatasetError(f"{root}: cannot create the dataset directory "
                            f"({exc.strerror})") from None
     with DirectoryLock(home, wait=wait):  # before anything is written there
         mine = _select(tasks, shard)
+        refuse_symlinked_folders(root, [n for t in mine
+                                        for n in (t.name, f"{LOG_DIR}/{t.name}.log")])
         sources = _sources(root, read_manifest, check_header)
         manifest = {**header, "items": _complete_entries(root, mine, sources)}
         todo = [t for t in mine if t.name not in manifest["items"]]
@@ -311,6 +324,36 @@ def run_tasks(root: str | Path, tasks: Sequence[Task], context: Any, header: Map
     return _merge(root, tasks, header, read_manifest, check_header) or manifest
 
 
+def symlinked_folder(root: Path, name: str) -> Path | None:
+    """The first folder of ``name``'s path below ``root`` that is a symbolic link, or
+    None (``root`` itself may be one: it is the user's choice of where the dataset is)."""
+    parts = PurePosixPath(name).parts[:-1]
+    for k in range(1, len(parts) + 1):
+        p = root.joinpath(*parts[:k])
+        if p.is_symlink():
+            return p
+    return None
+
+
+def refuse_symlinked_folders(root: Path, names: Iterable[str]) -> None:
+    """Refuse to write ``names`` (paths relative to ``root``) if a folder on the way is
+    a symbolic link: written through, the dataset's files would land wherever it
+    points, and a manifest whose items resolve outside the directory is refused when
+    read. Each folder is examined once."""
+    seen: set[str] = set()
+    for name in names:
+        parent = PurePosixPath(name).parent.as_posix()
+        if parent in seen:
+            continue
+        seen.add(parent)
+        link = symlinked_folder(root, name)
+        if link is not None:
+            raise DatasetError(f"{link}: a symbolic link (to {os.readlink(link)}), not a "
+                               f"folder of the dataset; mitsweep never writes through a "
+                               f"link: remove it (and move what it holds back if needed), "
+                               f"then rerun")
+
+
 def _select(tasks: Sequence[Task], shard: Shard | None) -> list[Task]:
     """A shard's tasks and the tasks they need (in declaration order)."""
     if shard is None:
@@ -327,7 +370,12 @@ def _select(tasks: Sequence[Task], shard: Shard | None) -> list[Task]:
 
 
 def _shard_manifests(root: Path) -> list[Path]:
-    return sorted((root / SHARD_DIR).glob(f"*/{MANIFEST}"))
+    """The shards' manifests (none through a symlinked folder: they are not the
+    directory's)."""
+    if (root / SHARD_DIR).is_symlink():
+        return []
+    return sorted(p for p in (root / SHARD_DIR).glob(f"*/{MANIFEST}")
+                  if not p.parent.is_symlink() and not p.is_symlink())
 
 
 def _sources(root: Path, read_manifest, check_header) -> list[dict]:
@@ -359,7 +407,7 @@ def _complete_entries(root: Path, tasks: Iterable[Task], sources: list[dict]) ->
             if item is None or item.get("params") != params:
                 continue
             if digest is None:
-                if not p.is_file():
+                if p.is_symlink() or not p.is_file():  # a link is replaced, not trusted
                     break
                 digest = sha256(p)
             if item.get("sha256") == digest:

@@ -17,9 +17,12 @@ Scenes (``DatasetOptions.family``): scene ``i`` is the built-in room with textur
 they always were), procedural scene ``seed + i`` of :mod:`mitsweep.render.procedural`,
 or the ``i``-th XML file of the user's directory. For the last two, each render task's
 parameters hold ``scene_source`` (:func:`scene_source`): the family, seed and resolved
-parameters, or the file's path, SHA-256 and unit. They are in the manifest, so any item
-can be made again alone (``render(setup, out, **params)``), and a changed XML file
-changes its scene's parameters, so a rerun redoes that scene.
+parameters, or the file's path, SHA-256 and unit, with the SHA-256 of every file it
+includes or loads. They are in the manifest, so any item can be made again alone
+(``render(setup, out, **params)``), and a changed XML file, include, texture or mesh
+changes its scene's parameters, so a rerun redoes that scene. A room dataset whose
+setup names its own ``[scene] file`` holds that scene's digests in its render
+parameters the same way (``setup_scene``).
 
 Radiometry: renders are linear radiance. Relative exposure 1.0 (the noise model's
 reference level, reflectance ``SensorNoise.reflectance`` under the scene illuminance) is
@@ -41,10 +44,13 @@ from ..config import Setup
 from ..io import read_exr, write_exr
 from ..io.exr import stack_channels
 from ..render.api import MODE_SAMPLERS, MODES  # render imports Mitsuba only when rendering
+from ..io.files import FileTypeError
+from ..io.scene_files import SceneFileError, changed_files, scene_digests
 from .options import DatasetOptions
 from .runner import DatasetError, Task, sha256
 
-__all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source", "trace_bank",
+__all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source",
+           "setup_scene_digests", "trace_bank",
            "add_noise", "restore", "edof_name", "NOISE_PIXEL_MM", "DECONV_PRIOR",
            "WHITE_PERCENTILE", "BANK"]
 
@@ -105,9 +111,43 @@ def scene_source(opts: DatasetOptions, index: int) -> dict | None:
                 "params": dict(opts.family_params)}
     if opts.family == "xml":
         f = opts.scene_files[index]
-        return {"family": "xml", "file": f["path"], "sha256": f["sha256"],
-                "unit": opts.scene_unit}
+        source = {"family": "xml", "file": f["path"], "sha256": f["sha256"],
+                  "unit": opts.scene_unit}
+        if "files" in f:   # what it includes and loads: a change there redoes the scene
+            source["files"] = f["files"]
+        return source
     return None
+
+
+def setup_scene_digests(setup: Setup | None) -> dict | None:
+    """The content identity of the setup's own ``[scene] file`` (None without one): the
+    SHA-256 of every file it loads (:func:`mitsweep.io.scene_files.scene_digests`), for
+    the room family's render parameters. A scene changed since its items were made
+    changes them, so a rerun redoes those items; another spelling of its path does not."""
+    if setup is None or setup.scene.file is None:
+        return None
+    from ..render.user_scene import UserSceneError
+
+    try:
+        return scene_digests(setup.scene.file)
+    except FileNotFoundError:
+        raise DatasetError(f"{setup.scene.file}: no such scene file (the setup's [scene] "
+                           f"file)") from None
+    except (FileTypeError, SceneFileError) as exc:
+        raise UserSceneError(str(exc)) from None
+
+
+def _check_unchanged(path: str | Path, recorded: dict[str, str]) -> None:
+    """Refuse to render a scene whose files are not those the task was planned with."""
+    try:
+        changed = changed_files(recorded, path)
+    except FileNotFoundError:
+        changed = [Path(path).name]
+    if changed:
+        more = f" (and {len(changed) - 1} more)" if len(changed) > 1 else ""
+        raise DatasetError(f"{Path(path).parent / changed[0]}: changed since the dataset was "
+                           f"planned{more} (its SHA-256 differs); rerun `mitsweep dataset` "
+                           f"to plan it again")
 
 
 def _user_scene(setup: Setup, source: dict):
@@ -127,6 +167,8 @@ def _user_scene(setup: Setup, source: dict):
         raise DatasetError(f"{path}: changed since the dataset was planned (its SHA-256 "
                            f"differs); rerun `mitsweep dataset --scenes-from` to plan it "
                            f"again")
+    if "files" in source:
+        _check_unchanged(path, source["files"])
     return str(path), source["unit"], None
 
 
@@ -142,15 +184,19 @@ def _motion(motion: dict | None):
 
 def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: int,
            f_number: float | None, diffraction: bool, sampler: str,
-           scene_source: dict | None = None, motion: dict | None = None) -> dict:
+           scene_source: dict | None = None, motion: dict | None = None,
+           setup_scene: dict | None = None) -> dict:
     """Render scene variation ``scene`` in ``mode`` (the pinhole one with the depth and
     mask AOVs) with ``sampler``; ``f_number``: the stopped mode's; ``diffraction``: add
     the lens's; ``scene_source``: the scene, if not the room (:func:`scene_source`);
     ``motion``: the sweep's profile, if not the setup's (every mode is rendered on its
-    reference grid, mid-travel)."""
+    reference grid, mid-travel); ``setup_scene``: the digests of the setup's own
+    ``[scene] file`` (:func:`setup_scene_digests`), refused if its files now differ."""
     from ..optics.diffraction import add_diffraction
     from ..render import render_image, render_to_exr
 
+    if setup_scene is not None and scene_source is None:
+        _check_unchanged(setup.scene.file, setup_scene)
     s = scene_setup(setup, scene)
     aovs = ("depth", "mask") if mode == "pinhole" else ()
     kw: dict[str, Any] = {}
@@ -303,6 +349,7 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
         bank["motion"] = opts.motion
     tasks = [Task(BANK, trace_bank, bank)]
     settings = [paper_fig10_settings(NOISE_PIXEL_MM, lux) for lux in opts.light_levels_lux]
+    own_scene = setup_scene_digests(setup) if opts.family == "room" else None
     for i in range(opts.scenes):
         d = f"scene_{i:03d}"
 
@@ -319,6 +366,8 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
                 params["scene_source"] = source
             if opts.motion is not None:
                 params["motion"] = opts.motion
+            if source is None and own_scene is not None:
+                params["setup_scene"] = own_scene
             add(f"{mode}.exr", render, params)
         for m in opts.methods:
             add(f"{edof_name(m)}.exr", restore, {"method": m, "nsr": None},

@@ -27,6 +27,10 @@ system: the same scene written in metres and in millimetres renders the same ima
 refuses, as a :class:`UserSceneError` (a user error: one line, exit 2 at the CLI), a
 scene whose geometry lies between the lens and the mirror, one with nothing in the
 mirror's view, and one without any emitter.
+
+Before Mitsuba's parser sees a file, :func:`mitsweep.io.scene_files.scene_files` reads
+it for every file it would open (includes, textures, meshes, ...) and refuses a named
+pipe, device, socket or directory among them, on which the parser would block.
 """
 
 from __future__ import annotations
@@ -44,6 +48,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..config import Placement, Setup
+from ..io.files import FileTypeError, require_regular_file
+from ..io.scene_files import SceneFileError, scene_files
 
 __all__ = ["UserScene", "UserSceneError", "MM_PER_UNIT", "load_user_scene", "user_scene",
            "scene_transform", "check_view", "check_user_scene"]
@@ -188,15 +194,21 @@ def _source(scene) -> tuple[str, str, Path | None]:
                              f"got {type(scene).__name__}")
     path = Path(scene).expanduser().resolve()
     try:
-        data = path.read_bytes()
+        data = require_regular_file(path, "scene file").read_bytes()
     except FileNotFoundError:
         raise UserSceneError(f"{scene}: no such scene file") from None
     except OSError as exc:
         raise UserSceneError(f"{scene}: cannot read ({exc.strerror})") from None
+    except FileTypeError as exc:
+        raise UserSceneError(str(exc)) from None
     head = data.lstrip()[:200]
     if not head.startswith(b"<"):
         raise UserSceneError(f"{scene}: not a Mitsuba XML scene (it does not start with an "
                              f"XML tag)")
+    try:  # Mitsuba's parser blocks for ever on a named pipe: it never gets one
+        scene_files(path)
+    except (FileTypeError, SceneFileError) as exc:
+        raise UserSceneError(str(exc)) from None
     return str(path), hashlib.sha256(data).hexdigest(), path.parent
 
 
