@@ -59,9 +59,9 @@ html_static_path: list[str] = []
 # would get the function's page in place of the module's.
 
 #: The public packages and modules (their submodules are found by walking them).
-API_ROOTS = ["mitsweep.config", "mitsweep.optics", "mitsweep.tracer", "mitsweep.render",
-             "mitsweep.deconv", "mitsweep.design", "mitsweep.pipeline", "mitsweep.rig",
-             "mitsweep.io", "mitsweep.backend", "mitsweep.jit", "mitsweep.resources",
+API_ROOTS = ["mitsweep.config", "mitsweep.optics", "mitsweep.photo", "mitsweep.tracer",
+             "mitsweep.render", "mitsweep.deconv", "mitsweep.design", "mitsweep.pipeline",
+             "mitsweep.rig", "mitsweep.io", "mitsweep.backend", "mitsweep.jit", "mitsweep.resources",
              "mitsweep.plots"]
 _ABBREVIATIONS = ("Eq.", "Eqs.", "Fig.", "Figs.", "Sec.", "e.g.", "i.e.", "et al.", "vs.")
 

@@ -8,7 +8,7 @@ a 16-bit TIFF (``photo.tif``). Then, as for a real file:
 
 1. :func:`mitsweep.io.camera.read_camera_image`: decoded to linear values (the TIFF's
    sRGB transfer undone);
-2. :func:`mitsweep.optics.calibration.calibrate_photo`: the mirror's centre and rim
+2. :func:`mitsweep.photo.calibrate_photo`: the mirror's centre and rim
    radius on the photo, and the setup for this camera (``calibrated.toml``:
    resolution, pitch, centre offset);
 3. a radial IPSF bank for the calibrated setup (:func:`mitsweep.tracer.ipsf_bank`) and
@@ -75,7 +75,7 @@ def restore(photo_path: Path, setup, out: Path, *, rays: int) -> dict:
     from mitsweep.io import write_exr
     from mitsweep.io.camera import read_camera_image
     from mitsweep.io.png import write_png
-    from mitsweep.optics.calibration import calibrate_photo
+    from mitsweep.photo import calibrate_photo
     from mitsweep.optics.panorama import panorama_map, unwarp
     from mitsweep.tracer import ipsf_bank
 

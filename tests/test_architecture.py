@@ -47,6 +47,8 @@ LAYERS = {
     "render": {"optics", "io", "backend"},
     "deconv": {"optics", "io", "jit"},
     "rig": {"optics", "io"},
+    # photo analysis (calibration) above the pure optics it predicts the outline with
+    "photo": {"optics", "io"},
     "design": {"optics", "io", "backend", "tracer", "deconv"},
     "pipeline": {"optics", "io", "backend", "plots", "tracer", "render", "deconv"},
     "cli": ANY,

@@ -19,7 +19,8 @@ import pytest
 
 from camera_files import synthetic_mirror_photo, write_dng
 from cli_contract import refused
-from mitsweep.optics.calibration import (CalibrationError, calibrate_photo, predicted_outline)
+from mitsweep.optics.outline import predicted_outline
+from mitsweep.photo import CalibrationError, calibrate_photo
 from mitsweep.cli.main import main
 from mitsweep.config import (Sensor, SetupError, load_setup, setup_from_dict, setup_to_dict,
                              setup_to_toml)
@@ -381,7 +382,7 @@ def test_roll_is_not_fitted_on_a_circle_about_the_axis(photos):
 
 
 def test_photo_void_is_the_exact_zeros_a_renderer_skipped():
-    from mitsweep.optics.calibration import VOID_MARGIN_PX, photo_void
+    from mitsweep.photo.image import VOID_MARGIN_PX, photo_void
 
     rng = np.random.default_rng(0)
     img = rng.uniform(0.1, 1.0, (60, 80, 3))

@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from test_calibrate import SMALL, small_setup
 
-from mitsweep.optics.calibration import calibrate_photo, predicted_outline
+from mitsweep.optics.outline import predicted_outline
+from mitsweep.photo import calibrate_photo
 from mitsweep.optics.pixels import optical_center_px
 
 LIMB_WARNING = "the outline is the mirror's limb"

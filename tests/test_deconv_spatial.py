@@ -157,7 +157,7 @@ def test_mirror_grid_puts_the_asked_nodes_across_the_tilted_mirrors_image(resolu
 
     from mitsweep.config import Sensor, load_setup
     from mitsweep.deconv.spatial import MIRROR_GRID_NODES, mirror_grid_shape
-    from mitsweep.optics.calibration import predicted_outline
+    from mitsweep.optics.outline import predicted_outline
     from mitsweep.tracer.bank import grid_points
 
     from conftest import SCENES

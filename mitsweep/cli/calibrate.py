@@ -2,7 +2,7 @@
 
 Reads the photo (RAW, TIFF, PNG, JPEG or EXR, :mod:`mitsweep.io.camera`), predicts the
 mirror's outline from the setup and fits it to sub-pixel precision
-(:mod:`mitsweep.optics.calibration`). Reports the optical axis's pixel
+(:mod:`mitsweep.photo`). Reports the optical axis's pixel
 (``center_px``), the rim radius measured and predicted, and the pixel pitch or
 lens–mirror distance the difference implies; ``--write`` saves a setup for this camera
 and photo (resolution, pitch, ``sensor.center_offset_px``) that every other command
@@ -54,7 +54,7 @@ def _sha256(path: str) -> str:
 
 def run(args) -> int:
     from .. import __version__
-    from ..optics.calibration import calibrate_photo
+    from ..photo import calibrate_photo
     from ..config import setup_to_toml
     from ..io import write_text_atomic
     from ..io.camera import read_camera_image

@@ -55,7 +55,7 @@ def mirror_grid_shape(setup: Setup, *, nodes_across: int = MIRROR_GRID_NODES,
     the fast-changing kernels of the nodes next to the rim, a whole cell into the mirror.
     This returns the square grid whose cells put ``nodes_across`` nodes across the
     narrower extent of the mirror's predicted outline
-    (:func:`mitsweep.optics.calibration.predicted_outline`), at most ``max_cells`` a side
+    (:func:`mitsweep.optics.outline.predicted_outline`), at most ``max_cells`` a side
     and at most a quarter of the image's smaller side (cells of at least 4 px).
 
     Parameters
@@ -67,7 +67,7 @@ def mirror_grid_shape(setup: Setup, *, nodes_across: int = MIRROR_GRID_NODES,
     max_cells : int
         Upper bound on cells a side (the bank traces rows x cols IPSFs).
     """
-    from ..optics.calibration import predicted_outline
+    from ..optics.outline import predicted_outline
 
     if int(nodes_across) < 2:
         raise ValueError(f"nodes_across: must be >= 2, got {nodes_across!r}")

@@ -1,0 +1,97 @@
+"""Step 1 of the rim search: where the outline is, to a reduced pixel and a scale step.
+
+The gradient's double-angle orientation field (sign-free: a rim may be brighter or darker
+than what surrounds it), of the luminance and of the local energy of fine detail (a
+reflection about as bright as what surrounds the mirror still differs from it in detail:
+the sweep focuses on the reflection, not on the surroundings), correlated by FFT with the
+outline's normals for each scale searched, on a copy reduced so that the outline's radius
+is :data:`COARSE_RADIUS_PX`-64 px. The score is the mean alignment times the square root
+of the outline's length (a mean over ~perimeter samples), so that a small outline on busy
+texture does not outscore the rim. At the best position, of the scale peaks within half
+the best score, the one nearest the predicted size is kept: a holder around the mirror is
+a concentric outline too, and the rim is the one the setup predicts.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .image import reduce_by, smooth, texture_energy
+
+__all__ = ["coarse_search", "search_scales", "COARSE_RADIUS_PX", "COARSE_SCALE_STEP"]
+
+#: Radius (px) of the outline in the reduced copy used for the coarse search (at least).
+COARSE_RADIUS_PX = 32.0
+#: Relative step of the scales searched coarsely (4%: ~1.3 px at 32 px).
+COARSE_SCALE_STEP = 1.04
+
+
+def search_scales(lo: float, hi: float) -> np.ndarray:
+    n = max(2, int(math.ceil(math.log(hi / lo) / math.log(COARSE_SCALE_STEP))) + 1)
+    return np.geomspace(lo, hi, n)
+
+
+def coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
+                  scales: np.ndarray) -> tuple[tuple[float, float], float, float]:
+    """Best ``(center (row, col), scale)`` of the outline in full-resolution pixels."""
+    from scipy.fft import irfft2, next_fast_len, rfft2
+
+    radius = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
+    factor = max(1, int(radius / COARSE_RADIUS_PX))
+    j1 = j2 = 0.0
+    # Two cues, each an orientation field of unit strength at most: the luminance, and
+    # the local texture energy, where a rim of little contrast (a reflection as bright
+    # as what surrounds the mirror, as on the rendered tilted paraboloid) still shows:
+    # the reflection is detailed, what surrounds it far out of focus.
+    for cue in (lum, texture_energy(lum)):
+        small = smooth(reduce_by(cue, factor), 1.0)
+        gy, gx = np.gradient(small)
+        mag = np.hypot(gx, gy)
+        # Sign-free orientation field, magnitude compressed so that a few very bright
+        # edges (a lamp in the reflection) do not outweigh the rim.
+        cap = np.percentile(mag, 99.5) + 1e-30
+        w = np.minimum(mag, cap) / (mag * mag + 1e-300) / cap  # |j| = min(|g|, cap)/cap
+        j1 = j1 + (gx * gx - gy * gy) * w
+        j2 = j2 + (2.0 * gx * gy) * w
+    H, W = small.shape
+    # Template normals as image-axis angles: gradient (gy, gx) along (drow, dcol).
+    c2 = nrm[:, 1] ** 2 - nrm[:, 0] ** 2
+    s2 = 2.0 * nrm[:, 0] * nrm[:, 1]
+    extent = int(np.ceil(np.abs(pts).max() * scales[-1] / factor)) + 2
+    shape = (next_fast_len(H + 2 * extent), next_fast_len(W + 2 * extent))
+    F1, F2 = rfft2(j1, shape), rfft2(j2, shape)
+    best = None
+    per_scale = []
+    for k in scales:
+        p = pts * k / factor
+        flat = (np.round(p[:, 0]).astype(int) % shape[0]) * shape[1] \
+            + np.round(p[:, 1]).astype(int) % shape[1]
+        t1 = np.bincount(flat, weights=c2, minlength=shape[0] * shape[1]).reshape(shape)
+        t2 = np.bincount(flat, weights=s2, minlength=shape[0] * shape[1]).reshape(shape)
+        score = irfft2(F1 * np.conj(rfft2(t1)) + F2 * np.conj(rfft2(t2)), shape)[:H, :W]
+        # Mean alignment along the outline, times the square root of its length: the
+        # significance of a mean over ~perimeter independent samples, so that a small
+        # outline on busy texture does not outscore the rim.
+        score *= math.sqrt(k) / len(p)
+        i = int(np.argmax(score))
+        per_scale.append(score)
+        if best is None or score.flat[i] > best[0]:
+            best = (float(score.flat[i]), i, k)
+    top, idx, _ = best
+    row, col = np.unravel_index(idx, (H, W))
+    # At that position: of the scale peaks within half the best, the nearest to k = 1.
+    local = np.array([s[max(0, row - 1):row + 2, max(0, col - 1):col + 2].max()
+                      for s in per_scale])
+    peaks = [j for j in range(len(local))
+             if local[j] >= 0.5 * top and (j == 0 or local[j] >= local[j - 1])
+             and (j == len(local) - 1 or local[j] >= local[j + 1])]
+    j = min(peaks, key=lambda q: abs(math.log(scales[q]))) if peaks else \
+        int(np.argmax(local))
+    s = per_scale[j]
+    win = s[max(0, row - 2):row + 3, max(0, col - 2):col + 3]
+    dr, dc = np.unravel_index(int(np.argmax(win)), win.shape)
+    row, col = max(0, row - 2) + dr, max(0, col - 2) + dc
+    centre = ((row + 0.5) * factor - 0.5, (col + 0.5) * factor - 0.5)
+    return centre, float(scales[j]), float(local[j])

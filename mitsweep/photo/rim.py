@@ -1,0 +1,283 @@
+"""Find the setup's predicted outline in a photograph: :func:`fit_rim`.
+
+The unknowns are where the axis is (``center_px``, row and column) and a scale ``k`` of
+the outline about it, which absorbs a wrong pixel pitch or lens–mirror distance; the
+camera's roll about its axis can be a fourth where the outline shows it (a tilted
+mirror's; ``fit_roll``). Three steps:
+
+1. *Coarse* (:mod:`mitsweep.photo.coarse`): position and scale by correlating
+   orientation fields with the outline's normals on a reduced copy.
+2. *Refine* (:mod:`mitsweep.photo.edges`): at full resolution, a sub-pixel edge along the
+   outline's normal at each of N points; the normal offsets fitted by iteratively
+   reweighted least squares (Tukey's biweight, :func:`mitsweep.photo.robust.tukey_lstsq`),
+   so that edges of a mount, an arm crossing the rim or a reflection do not pull the fit.
+   Vignetting and smooth illumination changes do not move a gradient's peak.
+3. *Validate*: enough of the outline must show an edge, the outline must stand out
+   from its surroundings (:func:`mitsweep.photo.edges.edge_prominence`) and the edges
+   must lie on it within :data:`MAX_RESIDUAL_RMS_PX`; otherwise :class:`CalibrationError`
+   says which test failed. The centre's standard error is reported.
+
+What the photo does not show is left out: exact zeros (what a renderer skipped,
+:func:`mitsweep.photo.image.photo_void`) are filled from the nearest shown pixel, so the
+border of a render cropped to the mirror's window is no edge, and outline points there
+are not asked for one.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..optics.outline import RimOutline
+from .coarse import COARSE_RADIUS_PX, COARSE_SCALE_STEP, coarse_search, search_scales
+from .edges import edge_offsets, edge_prominence
+from .image import fill_void, luminance, noise_sigma, photo_void, smooth
+from .robust import centre_standard_error, tukey_lstsq
+
+__all__ = ["CalibrationError", "RimFit", "fit_rim", "MIN_INLIER_FRACTION",
+           "MIN_CONSISTENT_FRACTION", "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
+           "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE"]
+
+logger = logging.getLogger(__name__)
+
+#: Largest relative difference between the measured and the predicted outline size
+#: that a calibration accepts (a pitch or lens–mirror distance off by 15%).
+PLAUSIBLE_SCALE = 0.15
+#: Smallest share of the outline points the photo shows that must show an edge.
+MIN_INLIER_FRACTION = 0.4
+#: Smallest share of those edges that the fitted outline must explain (the robust fit's
+#: inliers): on the faint rim of a rendered tilted paraboloid (200 px, 64 spp) 45% of the
+#: outline shows an edge above the noise, and 86% of those edges are inliers.
+MIN_CONSISTENT_FRACTION = 0.6
+#: Smallest ratio of the gradient on the fitted outline to the gradient beside it
+#: (:func:`edge_prominence`): a mirror's rim stands out, texture does not.
+MIN_EDGE_PROMINENCE = 3.0
+#: Gaussian smoothing (px) of the image the edge profiles are sampled on: it lowers
+#: the noise; on a rim of radius R it moves the edge inward by only ~σ²/(2R).
+PROFILE_SMOOTHING_PX = 1.2
+#: Edge contrast-to-noise ratio above which edges count as equally precise (the
+#: limit is then the texture, not the noise).
+MAX_EDGE_SNR = 30.0
+#: Largest RMS normal residual (px) of the inliers of an accepted fit: an outline of
+#: the wrong shape (the square border of a render cropped to the mirror's window, found
+#: at +7..17% of the rim's size) leaves 1.8-2.0 px on the renders, the true rim of the
+#: rendered tilted paraboloid 0.65-0.95 px (its weak edges scatter against the detailed
+#: reflection).
+MAX_RESIDUAL_RMS_PX = 1.5
+#: The roll is fitted when a radian of it moves the outline's points by more than this
+#: share of its radius (RMS along the normals): never for a circle about the axis
+#: (0), for the tilted paraboloid 0.30.
+ROLL_OBSERVABLE = 0.01
+
+
+class CalibrationError(ValueError):
+    """The mirror was not found in the photo, or disagrees with the setup."""
+
+
+@dataclass(frozen=True)
+class RimFit:
+    """Where the outline was found.
+
+    ``center_px`` is the optical axis's pixel ``(row, col)`` (the image of the mirror's
+    vertex; the circle's centre for an untilted mirror), ``scale`` the outline's size
+    relative to the prediction; ``points_used`` of ``points_total`` outline points were
+    inliers with normal residual RMS ``residual_rms_px``, which leaves the centre's row
+    and column uncertain by ``center_se_px`` (standard error, the larger of the two).
+    ``edge_points_px`` (N, 2) are the inliers' sub-pixel edge positions (row, col).
+    ``roll_deg`` is the camera's roll about its axis (degrees, counter-clockwise in the
+    image as displayed), fitted where the outline shows it (a tilted mirror's), else None.
+    """
+
+    center_px: tuple[float, float]
+    scale: float
+    points_used: int
+    points_total: int
+    residual_rms_px: float
+    edge_points_px: np.ndarray = field(repr=False)
+    iterations: int = 0
+    center_se_px: float = math.nan
+    roll_deg: float | None = None
+
+
+def _rotated(v: np.ndarray, angle: float) -> np.ndarray:
+    """(N, 2) ``(drow, dcol)`` vectors turned by ``angle`` rad, counter-clockwise as
+    displayed (rows down)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
+
+
+def _roll_column(pts: np.ndarray, nrm: np.ndarray) -> np.ndarray:
+    """(N,) normal displacement of each outline point per radian of roll about the
+    axis: ``(J p) · n`` with ``J p`` the derivative of :func:`_rotated` at 0."""
+    return -pts[:, 1] * nrm[:, 0] + pts[:, 0] * nrm[:, 1]
+
+
+def _in_void(void: np.ndarray, centre, scale: float, pts: np.ndarray) -> np.ndarray:
+    """(N,) bool: outline points (at ``centre``, ``scale``) on the photo's void; points
+    outside the image are not (they are counted as missing, as before)."""
+    if not void.any():
+        return np.zeros(len(pts), bool)
+    at = np.rint(np.asarray(centre)[None, :] + scale * pts).astype(int)
+    H, W = void.shape
+    inside = (at[:, 0] >= 0) & (at[:, 0] < H) & (at[:, 1] >= 0) & (at[:, 1] < W)
+    out = np.zeros(len(pts), bool)
+    out[inside] = void[at[inside, 0], at[inside, 1]]
+    return out
+
+
+def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
+            scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
+            max_iterations: int = 30, edge_half_width_px: float | None = None,
+            fit_roll: bool = False) -> RimFit:
+    """Find the predicted outline in a photograph (see the module docstring).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        Linear photograph.
+    outline : RimOutline
+        The setup's prediction (:func:`predicted_outline`).
+    pitch : float
+        Pixel pitch of the photograph, mm.
+    scale_range : (float, float)
+        Outline sizes searched, relative to the prediction (default: the plausible
+        ±:data:`PLAUSIBLE_SCALE`).
+    max_iterations : int
+        Refinement passes at most (each resamples the edges at the current fit).
+    edge_half_width_px : float, optional
+        Half-width of the edge search along each normal (default: from the outline size:
+        1.5% of its radius, at least 4 px).
+    fit_roll : bool
+        Also fit the camera's roll about its axis, where the outline shows it (not a
+        circle about the axis). A roll the fit leaves out moves a tilted outline's axis
+        by ~0.5% of its radius per degree; fitted, it is nearly a shift of that outline,
+        so the centre's standard error grows (x2.5 on the rendered tilted paraboloid,
+        whose faint rim then reads as a 0.5-0.75 deg roll and the axis 0.26-0.31 px off,
+        against 0.10-0.13 px without): fit it for a camera that may be turned on its
+        mount.
+
+    Returns
+    -------
+    RimFit
+
+    Raises
+    ------
+    CalibrationError
+        When too few outline points show a consistent edge or the residual is large:
+        the photo does not show the mirror the setup describes.
+    """
+    lum = luminance(image)
+    if lum.ndim != 2 or min(lum.shape) < 8:
+        raise CalibrationError(f"the photo must be an image of at least 8x8 pixels, got "
+                               f"shape {np.shape(image)}")
+    pts, nrm = outline.offsets_px(pitch)
+    radius = outline.equivalent_radius_px(pitch)
+    if radius < 8:
+        raise CalibrationError(f"the setup predicts a mirror image of radius {radius:.3g} px "
+                               f"at pitch {pitch:g} mm: too small to calibrate on")
+    scales = search_scales(*scale_range)
+    void = photo_void(image)
+    shown = ~void
+    if void.any() and shown.any():
+        filled = fill_void(lum, void)
+        centre, scale, coarse_score = coarse_search(filled, pts, nrm, scales)
+        hidden = _in_void(void, centre, scale, pts)
+        if hidden.mean() > 1.0 - MIN_INLIER_FRACTION:
+            # exact zeros around most of the rim: a clipped black background, not a
+            # renderer's skipped pixels; the rim's edge against it is real
+            logger.info("%.0f%% of the outline borders exact zeros: not treated as "
+                        "outside the photo", 100 * hidden.mean())
+            void[:] = False
+            shown[:] = True
+            centre, scale, coarse_score = coarse_search(lum, pts, nrm, scales)
+        else:
+            logger.info("%d px of exact zeros treated as outside the photo (%.0f%% of the "
+                        "outline)", int(void.sum()), 100 * hidden.mean())
+            lum = filled
+    else:
+        centre, scale, coarse_score = coarse_search(lum, pts, nrm, scales)
+    logger.info("coarse rim search: centre (%.1f, %.1f) px, scale %.3f (score %.3g)",
+                *centre, scale, coarse_score)
+    half = edge_half_width_px or max(4.0, 0.015 * radius * scale)
+    lum_s = smooth(lum, PROFILE_SMOOTHING_PX)
+    sigma = noise_sigma(lum, shown)
+    n = len(pts)
+    off = np.full(n, np.nan)
+    used = np.zeros(n, bool)
+    rms = math.inf
+    it = 0
+    # The camera's roll about its axis turns the outline about the axis point: a circle
+    # about the axis does not show it, a tilted mirror's outline does.
+    pts0, nrm0 = pts, nrm
+    roll = 0.0
+    fit_roll = bool(fit_roll) and float(np.sqrt(np.mean(_roll_column(pts, nrm) ** 2))) \
+        > ROLL_OBSERVABLE * radius
+    # The first window covers the coarse search's steps: a reduced pixel and a scale step.
+    factor = max(1, int(radius / COARSE_RADIUS_PX))
+    search = max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
+    for it in range(1, max_iterations + 1):
+        pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
+        off, strength, _ = edge_offsets(lum_s, centre, scale, pts, nrm, search,
+                                         outermost=search <= half)
+        # An edge must rise above the noise (a step of 3 σ of one pixel) to count; only
+        # the outline's points the photo shows (not in its void) are asked for one.
+        seen = ~_in_void(void, centre, scale, pts)
+        n_seen = int(seen.sum())
+        good = np.isfinite(off) & (strength > 3.0 * sigma + 1e-12) & seen
+        if good.sum() < max(8, MIN_INLIER_FRACTION * n_seen):
+            raise CalibrationError(
+                f"no visible mirror: only {int(good.sum())} of {n} points of the predicted "
+                f"outline (radius {radius:.1f} px at pitch {pitch:g} mm) show an edge; "
+                f"check that the photo shows the mirror of this setup")
+        # Normal displacement of point j: n_j · dc + dk (p_j · n_j) [+ dθ k (J p_j · n_j)].
+        cols = [nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)]
+        if fit_roll:
+            cols.append(scale * _roll_column(pts, nrm))
+        A = np.column_stack(cols)[good]
+        b = off[good]
+        # An edge's position is as uncertain as noise / contrast (down to a floor set by
+        # the texture): residuals are standardised by that before the robust weights, so
+        # that a few sharp edges off the rim (content touching it) are rejected rather
+        # than hidden in the spread of the many faint ones.
+        snr = np.minimum(strength[good] / (sigma + 1e-30), MAX_EDGE_SNR)
+        x, wts = tukey_lstsq(A, b, 1.0 / snr)
+        res = b - A @ x
+        centre = (centre[0] + x[0], centre[1] + x[1])
+        scale += x[2]
+        d_roll = float(x[3]) if fit_roll else 0.0
+        roll += d_roll
+        inl = wts > 0
+        used = np.zeros(n, bool)
+        used[np.flatnonzero(good)[inl]] = True
+        rms = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else math.inf
+        search = max(half, min(search, 4.0 * np.abs(x[:2]).max() + 2.0))
+        if np.abs(x[:2]).max() < 1e-3 and max(abs(x[2]), abs(d_roll)) * radius < 1e-3:
+            break
+    pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
+    n_used = int(used.sum())
+    prominence = edge_prominence(lum_s, centre, scale, pts, nrm, half, radius * scale)
+    logger.info("rim fit: %d of %d points, rms %.3f px, edge prominence %.2f after %d "
+                "passes", n_used, n, rms, prominence, it)
+    if prominence < MIN_EDGE_PROMINENCE:
+        raise CalibrationError(
+            f"no visible mirror: the best outline found (radius {radius * scale:.1f} px) is "
+            f"no clearer an edge than its surroundings (prominence {prominence:.2f}, need "
+            f"{MIN_EDGE_PROMINENCE:g}); check that the photo shows the mirror of this setup")
+    centre_se = centre_standard_error(A[inl], res[inl], n_used / n * radius * scale
+                                       * 2.0 * math.pi) if inl.any() else math.inf
+    logger.info("rim fit: centre standard error %.3f px", centre_se)
+    n_edges = int(good.sum())
+    if n_used < MIN_CONSISTENT_FRACTION * n_edges or rms > MAX_RESIDUAL_RMS_PX:
+        raise CalibrationError(
+            f"no visible mirror: the best outline found fits {n_used} of the {n_edges} edge "
+            f"points on its {n} with rms {rms:.2f} px (need {MIN_CONSISTENT_FRACTION:.0%} "
+            f"within {MAX_RESIDUAL_RMS_PX:g} px); check that the photo shows the mirror of "
+            f"this setup")
+    edges = np.asarray(centre)[None, :] + scale * pts + off[:, None] * nrm
+    return RimFit(center_px=(float(centre[0]), float(centre[1])), scale=float(scale),
+                  points_used=n_used, points_total=n, residual_rms_px=rms,
+                  edge_points_px=edges[used], iterations=it, center_se_px=centre_se,
+                  roll_deg=math.degrees(roll) if fit_roll else None)
