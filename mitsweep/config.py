@@ -30,6 +30,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
+from .resources import require_regular_file
+
 try:  # Python >= 3.11
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
@@ -570,7 +572,7 @@ def load_setup(path: str | Path) -> Setup:
         If the file is missing, is not TOML, or holds an unknown, missing or
         out-of-range key. The message names the key and the allowed values.
     """
-    p = Path(path)
+    p = require_regular_file(path, "setup file")
     try:
         text = p.read_bytes()
     except FileNotFoundError as exc:

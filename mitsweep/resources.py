@@ -16,6 +16,14 @@ examples of the repository's ``scenes/`` folder (:func:`bundled_setup`,
 (``pyproject.toml`` maps the folder into the package), so ``mitsweep figures`` and any
 ``SETUP`` argument given as a bundled name (``mitsweep sweep-range sphere``) work from an
 installed package as from the source tree.
+
+Only regular files are read: opening a named pipe (FIFO) blocks until a writer appears,
+a character device may stream for ever, and a socket or a directory fails in a way that
+names neither; inside Mitsuba's XML parser such a block cannot even be interrupted (the
+process ignores SIGTERM there). So every path mitsweep reads or hands to Mitsuba (setups,
+scenes and every file they reference, photos, banks, motion files) passes
+:func:`require_regular_file` first, here at the base so that every layer can call it;
+:func:`os.stat` itself never blocks on any of them.
 """
 
 from __future__ import annotations
@@ -23,12 +31,14 @@ from __future__ import annotations
 import logging
 import math
 import os
+import stat
 from pathlib import Path
 
 __all__ = ["ResourceError", "check_allocation", "available_memory_bytes", "memory_cap_bytes",
            "format_bytes", "DEFAULT_MAX_MEMORY_GB", "MAX_MEMORY_ENV", "MAX_MEMORY_GB_LIMIT",
            "bundled_scenes_dir",
-           "bundled_setup_names", "bundled_setup"]
+           "bundled_setup_names", "bundled_setup", "FileTypeError", "require_regular_file",
+           "file_kind"]
 
 logger = logging.getLogger(__name__)
 
@@ -165,3 +175,58 @@ def bundled_setup(name: str) -> Path:
     if name not in names:
         raise ValueError(f"{name!r}: not a bundled setup (bundled: {', '.join(names)})")
     return bundled_scenes_dir() / f"{name}.toml"
+
+
+class FileTypeError(ValueError):
+    """A path names a named pipe, device, socket or directory where mitsweep reads a
+    regular file (a user error: one line, exit status 2 at the command line)."""
+
+
+_KINDS = ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"),
+          (stat.S_ISDIR, "a directory"))
+
+
+def file_kind(mode: int) -> str:
+    """What an ``st_mode`` names, in words (``"a regular file"``, ``"a named pipe
+    (FIFO)"``, ...)."""
+    if stat.S_ISREG(mode):
+        return "a regular file"
+    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
+
+
+def require_regular_file(path: str | os.PathLike, what: str) -> Path:
+    """``path`` as a :class:`~pathlib.Path`, once it is known not to block a reader.
+
+    The path is followed through symlinks (:func:`os.stat`, which does not open it).
+
+    Parameters
+    ----------
+    path : path-like
+        The file about to be read.
+    what : str
+        What the file is, for the message (``"setup file"``, ``"texture of
+        scene.xml"``, ...).
+
+    Returns
+    -------
+    Path
+        ``Path(path)``. A path that does not exist (or cannot be examined) is returned
+        too: the reader's own open then reports it, each with its own message for a
+        missing file.
+
+    Raises
+    ------
+    FileTypeError
+        The path names a named pipe, a device, a socket or a directory: one line naming
+        the path, what it is and what was expected.
+    """
+    p = Path(path)
+    try:
+        mode = os.stat(p).st_mode
+    except (OSError, ValueError):  # missing, dangling, unreadable folder, NUL byte
+        return p
+    if not stat.S_ISREG(mode):
+        raise FileTypeError(f"{p}: {file_kind(mode)}, not a regular file; the {what} must be "
+                            f"a regular file")
+    return p

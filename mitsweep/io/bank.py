@@ -45,7 +45,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..resources import ResourceError
+from ..resources import ResourceError, require_regular_file
 from .atomic import atomic_path
 
 __all__ = ["IPSFBank", "save_bank", "load_bank", "BankError", "optics_sections",
@@ -269,7 +269,7 @@ def _default(o):
 
 def load_bank(path: str | Path) -> IPSFBank:
     """Read a bank written by :func:`save_bank`; raises :class:`BankError` if malformed."""
-    p = Path(path)
+    p = require_regular_file(path, "IPSF bank")
     if not p.is_file():
         raise BankError(f"{p}: no such bank file")
     with open(p, "rb") as f:

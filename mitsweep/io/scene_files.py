@@ -5,7 +5,7 @@ sees it) and lists every file loading it opens: the file itself, its ``<include>
 (recursively, at most :data:`MAX_INCLUDE_DEPTH` deep, Mitsuba's own limit), every
 ``filename`` string property (bitmap textures, meshes, environment maps, grid volumes,
 measured BSDFs, ...) and every ``<spectrum filename=...>``. Each is checked to be a
-regular file (:func:`mitsweep.io.files.require_regular_file`), so Mitsuba's parser is
+regular file (:func:`mitsweep.resources.require_regular_file`), so Mitsuba's parser is
 never handed a named pipe or a device, on which it would block for ever.
 
 File names resolve as Mitsuba 3's parser and :class:`mitsuba.FileResolver` resolve them
@@ -31,7 +31,7 @@ import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from .files import require_regular_file
+from ..resources import require_regular_file
 
 __all__ = ["SceneFileError", "MAX_INCLUDE_DEPTH", "scene_files", "scene_digests",
            "changed_files", "file_sha256"]
@@ -148,7 +148,7 @@ def scene_files(path: str | os.PathLike) -> list[Path]:
     ------
     FileNotFoundError
         ``path`` itself does not exist.
-    mitsweep.io.files.FileTypeError
+    mitsweep.resources.FileTypeError
         One of them is a named pipe, device, socket or directory (named, with the file
         that references it).
     SceneFileError

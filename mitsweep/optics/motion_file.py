@@ -61,6 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Setup, SetupError
+from ..resources import require_regular_file
 from .motion import MotionProfile
 
 __all__ = ["MotionFile", "FORMAT", "VERSION", "save_motion_file", "load_motion_file",
@@ -245,7 +246,7 @@ def load_motion_file(path: str | os.PathLike) -> MotionFile:
     OSError
         The file cannot be read.
     """
-    p = Path(path)
+    p = require_regular_file(path, "motion-profile file")
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError:

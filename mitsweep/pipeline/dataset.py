@@ -9,7 +9,7 @@ from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
 from ..config import Setup, setup_to_dict
-from ..io.files import FileTypeError, require_regular_file
+from ..resources import FileTypeError, require_regular_file
 from ..io.scene_files import SceneFileError, scene_digests
 from .options import MAX_SCENES, DatasetOptions, _is_int, _is_real, _require, options_from_dict
 from .runner import (DEFAULT_RETRIES, LOG_DIR, MANIFEST, SHARD_DIR, DatasetError, Shard,

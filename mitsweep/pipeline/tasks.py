@@ -44,7 +44,7 @@ from ..config import Setup
 from ..io import read_exr, write_exr
 from ..io.exr import stack_channels
 from ..render.api import MODE_SAMPLERS, MODES  # render imports Mitsuba only when rendering
-from ..io.files import FileTypeError
+from ..resources import FileTypeError
 from ..io.scene_files import SceneFileError, changed_files, scene_digests
 from .options import DatasetOptions
 from .runner import DatasetError, Task, sha256

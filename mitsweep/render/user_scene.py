@@ -48,7 +48,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..config import Placement, Setup
-from ..io.files import FileTypeError, require_regular_file
+from ..resources import FileTypeError, require_regular_file
 from ..io.scene_files import SceneFileError, scene_files
 
 __all__ = ["UserScene", "UserSceneError", "MM_PER_UNIT", "load_user_scene", "user_scene",
