@@ -61,11 +61,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _check_args(args, setup) -> None:
+    from ..design.objective import DEFAULT_FFT_SIZE
+
     K = args.kernel_size
     W, H = setup.sensor.resolution
-    if K % 2 == 0 or not 3 <= K < min(W, H):
-        raise UsageError(f"--kernel-size: must be odd, >= 3 and smaller than the {W}x{H} "
-                         f"sensor, got {K}")
+    # the objective's DFT grid holds the kernels: checked here, before any tracing
+    k_max = min(DEFAULT_FFT_SIZE - (1 - DEFAULT_FFT_SIZE % 2), min(W, H) - 1)
+    if K % 2 == 0 or not 3 <= K <= k_max:
+        raise UsageError(f"--kernel-size: must be odd, in [3, {k_max}] (the design's "
+                         f"{DEFAULT_FFT_SIZE}-point DFT grid and the {W}x{H} sensor), "
+                         f"got {K}")
     from ..design.sweep import MIN_PLANES
 
     if not MIN_PLANES <= args.planes <= 1024:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .common import UsageError, check_outputs, load_setup_arg
+from .common import UsageError, check_outputs, load_setup_arg, number_type
 
 NAME = "figures"
 HELP = ("regenerate the paper's figures (Figs. 3-6, 8-10 and Table 1) for its three setups, "
@@ -27,7 +27,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true",
                    help="overwrite the figures of an earlier run in DIR (its renders under "
                         "DIR/data are reused)")
-    p.add_argument("--seed", type=int, default=0, help="seed of traces and renders (0)")
+    from ..pipeline.options import MAX_SEED
+
+    # checked as the command line is read: a bad seed must fail before the first figure
+    seed = number_type(int, lambda x: 0 <= x <= MAX_SEED, "an integer",
+                       f"in [0, {MAX_SEED}]", "seed")
+    p.add_argument("--seed", type=seed, default=0,
+                   help=f"seed of traces and renders, 0 to {MAX_SEED} (0)")
 
 
 def resolve_setup(text: str) -> Path:
