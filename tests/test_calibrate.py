@@ -56,7 +56,9 @@ def photos():
     def get(name, **kw):
         key = (name, tuple(sorted(kw.items())))
         if key not in cache:
-            cache[key] = synthetic_mirror_photo(small_setup(name), FRAME, OFFSET,
+            far = kw.pop("far", False)
+            cache[key] = synthetic_mirror_photo(small_setup(name), FRAME,
+                                                FAR_OFFSET if far else OFFSET,
                                                 supersample=2, **kw)
         return cache[key]
     return get
@@ -301,7 +303,7 @@ def test_photo_without_a_mirror_is_refused(tmp_path, capsys, photos):
     photo = save_photo(img, tmp_path / "empty.tif", "tif")
     line = refused(capsys, ["calibrate", photo, "--setup",
                             setup_file(tmp_path, small_setup("paraboloid"))])
-    assert "no visible mirror" in line
+    assert "no mirror found" in line
 
 
 def test_noise_is_not_a_mirror(tmp_path, capsys):
@@ -309,15 +311,40 @@ def test_noise_is_not_a_mirror(tmp_path, capsys):
     photo = save_photo(rng.random(FRAME + (3,)), tmp_path / "noise.tif", "tif")
     line = refused(capsys, ["calibrate", photo, "--setup",
                             setup_file(tmp_path, small_setup("paraboloid"))])
-    assert "no visible mirror" in line
+    assert "no mirror found" in line
 
 
-def test_implausible_calibration_is_refused_naming_the_implied_pitch(tmp_path, capsys,
-                                                                     photos):
+def test_a_setup_far_off_is_refused_naming_the_mirror_found_and_the_implied_pitch(
+        tmp_path, capsys, photos):
+    """A prediction twice the mirror's size (beyond the ±35% searched): the mirror is
+    found in the wide search, and the message says so, with the implied pitch."""
     photo = save_photo(photos("paraboloid"), tmp_path / "photo.tif", "tif")
-    wrong = small_setup("paraboloid", pixel_pitch=0.045)  # the rim would be 33% larger
+    wrong = small_setup("paraboloid", pixel_pitch=0.03)  # the rim would be 2x larger
     line = refused(capsys, ["calibrate", photo, "--setup", setup_file(tmp_path, wrong)])
-    assert "implausible calibration" in line and "pixel pitch of 0.06" in line
+    assert "found a mirror +100% off the setup's prediction" in line
+    assert "pixel pitch of 0.06" in line and "no mirror found" not in line
+
+
+#: A photo whose axis is 21% of the rim's radius from the frame's centre (74 px).
+FAR_OFFSET = (10.2, -11.7)
+
+
+@pytest.mark.parametrize("error", [-0.35, -0.29, 0.2, 0.35])
+def test_a_roughly_right_setup_finds_the_mirror_and_says_how_far_off(photos, error):
+    """The setup's predicted outline off by ``error`` of the photo's (a guessed pitch),
+    the mirror decentred by 21% of its radius: found within the issue's bars, with the
+    true pitch implied and a warning saying how far off the setup is."""
+    truth = small_setup("paraboloid")
+    img = photos("paraboloid", far=True)
+    guessed = small_setup("paraboloid", pixel_pitch=SMALL.pixel_pitch / (1 + error))
+    cal = calibrate_photo(img, guessed)
+    assert np.abs(np.asarray(cal.center_px) - true_centre(offset=FAR_OFFSET)).max() \
+        < CENTRE_TOL_PX
+    true_radius = predicted_outline(truth).equivalent_radius_px(SMALL.pixel_pitch)
+    assert abs(cal.rim_radius_px - true_radius) < RADIUS_TOL_PX
+    assert cal.implied_pixel_pitch == pytest.approx(SMALL.pixel_pitch,
+                                                    rel=RADIUS_TOL_PX / true_radius)
+    assert any("pixel pitch would be" in w for w in cal.warnings)
 
 
 @pytest.mark.parametrize("damage", ["truncated", "junk"])
@@ -338,7 +365,7 @@ def test_write_may_not_overwrite_an_input(tmp_path, capsys, photos):
 
 
 def test_calibrate_photo_raises_calibration_error_for_a_blank_image():
-    with pytest.raises(CalibrationError, match="no visible mirror"):
+    with pytest.raises(CalibrationError, match="no mirror found"):
         calibrate_photo(np.full(FRAME, 0.5), small_setup("paraboloid"))
 
 

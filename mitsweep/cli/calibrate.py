@@ -8,8 +8,9 @@ lens–mirror distance the difference implies; ``--write`` saves a setup for thi
 and photo (resolution, pitch, ``sensor.center_offset_px``) that every other command
 accepts.
 
-Exit status 2, one line: an unreadable photo, no visible mirror, or a rim whose size
-disagrees with the setup by more than 15%.
+Exit status 2, one line: an unreadable photo, no mirror found, or a mirror found whose size
+disagrees with the setup's prediction by more than 35% (the message says the pitch or
+distance it implies).
 """
 
 from __future__ import annotations

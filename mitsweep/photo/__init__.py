@@ -15,7 +15,8 @@ never imports the renderer or the tracer.
 
 from .calibrate import WARN_SCALE, Calibration, calibrate_photo
 from .image import luminance, photo_void
-from .rim import PLAUSIBLE_SCALE, CalibrationError, RimFit, fit_rim
+from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit,
+                  SetupMismatchError, fit_rim)
 
-__all__ = ["CalibrationError", "RimFit", "Calibration", "fit_rim", "calibrate_photo",
+__all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "Calibration", "fit_rim", "calibrate_photo",
            "luminance", "photo_void", "PLAUSIBLE_SCALE", "WARN_SCALE"]

@@ -15,7 +15,8 @@ from ..config import Setup
 from ..optics.outline import predicted_outline
 from ..optics.pixels import optical_center_px
 from ..optics.reference import reference_geometry
-from .rim import PLAUSIBLE_SCALE, CalibrationError, RimFit, fit_rim
+from .coarse import COARSE_SCALE_STEP
+from .rim import PLAUSIBLE_SCALE, CalibrationError, RimFit, SetupMismatchError, fit_rim
 
 __all__ = ["Calibration", "calibrate_photo", "WARN_SCALE", "WIDE_SCALES",
            "WARN_CENTRE_SE_PX", "WARN_ROLL_DEG"]
@@ -87,7 +88,7 @@ class Calibration:
 def _implied_vertex_distance(setup, pitch: float, radius_px: float) -> float | None:
     """The lens–vertex distance (mm) at which the setup predicts ``radius_px``, the
     rest of the setup (pitch, lens, sweep settings) kept; None when no distance within
-    20% does. The reference sensor distance follows the mirror: it is computed at the
+    50% of the first guess does. The reference sensor distance follows the mirror: it is computed at the
     setup's distance and at the first guess, and interpolated in between (the sweep
     moves smoothly with the mirror)."""
     from scipy.optimize import brentq
@@ -119,7 +120,7 @@ def _implied_vertex_distance(setup, pitch: float, radius_px: float) -> float | N
         except (SetupError, ValueError):
             return math.nan
 
-    for width in (0.01, 0.05, 0.2):
+    for width in (0.01, 0.05, 0.2, 0.5):
         lo = max(guess * (1 - width), setup.lens.focal_length * 1.05)
         hi = guess * (1 + width)
         flo, fhi = excess(lo), excess(hi)
@@ -141,8 +142,9 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
     pixel_pitch : float, optional
         The photo's pitch, mm (default: the setup's).
     plausible_scale : float
-        Largest accepted relative difference between the measured and predicted
-        outline sizes.
+        Largest relative error of the predicted outline size (against the measured one)
+        that is searched and accepted (default ±35%; beyond
+        :data:`WARN_SCALE` the calibration warns with the pitch or distance it implies).
     fit_roll : bool
         Fit the camera's roll too (tilted mirrors), see :func:`fit_rim`.
 
@@ -152,36 +154,52 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
 
     Raises
     ------
-    CalibrationError
-        No mirror found, or one whose size disagrees with the setup by more than
-        ``plausible_scale`` (the message says the pitch or distance it would imply).
+    mitsweep.photo.NoMirrorError
+        No outline of the mirror's shape stands out in the photo (at any size from a
+        third to three times the prediction).
+    mitsweep.photo.SetupMismatchError
+        A mirror was found whose size disagrees with the setup by more than
+        ``plausible_scale``; the message says the pitch or distance it implies.
+    Both are :class:`mitsweep.photo.CalibrationError`.
     """
     pitch = float(pixel_pitch or setup.sensor.pixel_pitch)
+    if not 0.0 < plausible_scale < 1.0:
+        raise ValueError(f"plausible_scale must be in (0, 1), got {plausible_scale!r}")
+    # A prediction off by up to ±plausible_scale of the true size: the measured outline
+    # is 1/(1 ± plausible_scale) times the predicted one.
+    plausible = (1.0 / (1.0 + plausible_scale), 1.0 / (1.0 - plausible_scale))
+    # accepted: what was searched, to the coarse search's resolution (a fit at the range's
+    # end may land a fraction of a step beyond it)
+    accepted = (plausible[0] / COARSE_SCALE_STEP, plausible[1] * COARSE_SCALE_STEP)
     outline = predicted_outline(setup)
     predicted = outline.equivalent_radius_px(pitch)
     try:
-        fit = fit_rim(image, outline, pitch,
-                      scale_range=(1 - plausible_scale, 1 + plausible_scale),
-                      fit_roll=fit_roll)
+        fit = fit_rim(image, outline, pitch, scale_range=plausible, fit_roll=fit_roll)
     except CalibrationError as within:
-        try:  # a mirror far off the predicted size is a wrong setup, not a missing mirror
+        # a mirror far off the predicted size is a wrong setup, not a missing mirror
+        try:
             fit = fit_rim(image, outline, pitch, scale_range=WIDE_SCALES, fit_roll=fit_roll)
         except CalibrationError:
             raise within from None
-        if abs(fit.scale - 1.0) <= plausible_scale:  # found on the second look after all
+        if accepted[0] <= fit.scale <= accepted[1]:  # found on the second look after all
             logger.info("rim found in the wide search: %s", within)
     measured = predicted * fit.scale
     shape = (int(np.shape(image)[0]), int(np.shape(image)[1]))
     r0, c0 = optical_center_px(shape)
     offset = (fit.center_px[0] - r0, fit.center_px[1] - c0)
     implied_pitch = pitch / fit.scale
-    if abs(fit.scale - 1.0) > plausible_scale:
-        raise CalibrationError(
-            f"implausible calibration: the mirror's rim measures {measured:.1f} px, the setup "
-            f"predicts {predicted:.1f} px ({100 * (fit.scale - 1):+.1f}%, more than "
-            f"{100 * plausible_scale:.0f}%); it implies a pixel pitch of "
-            f"{implied_pitch:.5g} mm (setup {pitch:g} mm): check sensor.pixel_pitch and "
-            f"mirror.vertex_distance")
+    if not accepted[0] <= fit.scale <= accepted[1]:
+        vd = _implied_vertex_distance(setup, pitch, measured)
+        raise SetupMismatchError(
+            f"found a mirror {100 * (1 / fit.scale - 1):+.0f}% off the setup's prediction "
+            f"(more than {100 * plausible_scale:.0f}%): its outline measures "
+            f"{measured:.1f} px, the setup predicts {predicted:.1f} px (centre row "
+            f"{fit.center_px[0]:.1f}, col {fit.center_px[1]:.1f}); it implies a pixel pitch "
+            f"of {implied_pitch:.5g} mm (setup {pitch:g})"
+            + (f" or a lens-mirror distance of {vd:.1f} mm (setup "
+               f"{setup.mirror.vertex_distance:g})" if vd is not None else "")
+            + ": set sensor.pixel_pitch or mirror.vertex_distance to match, or run "
+              "calibrate --free")
     implied_vd = _implied_vertex_distance(setup, pitch, measured)
     warnings = []
     if abs(fit.scale - 1.0) > WARN_SCALE:

@@ -32,7 +32,8 @@ PROMINENCE_TRIM = 0.2
 def edge_offsets(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
                  pts: np.ndarray, nrm: np.ndarray, half: float, *,
                  outermost: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sub-pixel edge offset along each normal (NaN where no edge), and its contrast.
+    """Sub-pixel edge offset along each normal (NaN where no edge), its contrast (the
+    integrated derivative) and its width (the derivative lobe's RMS width, px).
 
     The edge is the top of the lobe of the dominant-sign derivative around its highest
     peak (:func:`gaussian_peak`; the lobe's centroid where its top cannot be fitted), or,
@@ -80,10 +81,14 @@ def edge_offsets(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
     # narrow to fit.
     peak_at = gaussian_peak(ds, t, at[:, 0], above & (k > left) & (k < right))
     off = np.where(np.isfinite(peak_at), peak_at, off)
-    contrast = np.abs(prof[:, -1] - prof[:, 0])
     step_size = total * step  # the integrated derivative: the edge's contrast
     off = np.where(inside & (total > 0), off, np.nan)
-    return off, step_size, contrast
+    # The lobe's RMS width about its centroid: how wide the edge is (blur, defocus,
+    # demosaicking, a limb's soft fall-off), which bounds how well it can be placed.
+    with np.errstate(invalid="ignore", divide="ignore"):
+        centroid = (wgt * t[None, :]).sum(axis=1) / total
+        width = np.sqrt((wgt * (t[None, :] - centroid[:, None]) ** 2).sum(axis=1) / total)
+    return off, step_size, np.where(np.isfinite(off), width, np.nan)
 
 
 def gaussian_peak(ds: np.ndarray, t: np.ndarray, at: np.ndarray,

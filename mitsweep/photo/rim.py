@@ -37,15 +37,18 @@ from .edges import edge_offsets, edge_prominence
 from .image import fill_void, luminance, noise_sigma, photo_void, smooth
 from .robust import centre_standard_error, tukey_lstsq
 
-__all__ = ["CalibrationError", "RimFit", "fit_rim", "MIN_INLIER_FRACTION",
+__all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim", "MIN_INLIER_FRACTION",
            "MIN_CONSISTENT_FRACTION", "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
+           "RESIDUAL_WIDTH_SHARE", "PLAUSIBLE_SCALE",
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE"]
 
 logger = logging.getLogger(__name__)
 
 #: Largest relative difference between the measured and the predicted outline size
-#: that a calibration accepts (a pitch or lens–mirror distance off by 15%).
-PLAUSIBLE_SCALE = 0.15
+#: that the search covers and a calibration accepts (with a warning beyond
+#: :data:`mitsweep.photo.calibrate.WARN_SCALE`): a guessed lens–mirror distance or an
+#: unknown pixel pitch, what a user has before calibrating.
+PLAUSIBLE_SCALE = 0.35
 #: Smallest share of the outline points the photo shows that must show an edge.
 MIN_INLIER_FRACTION = 0.4
 #: Smallest share of those edges that the fitted outline must explain (the robust fit's
@@ -67,6 +70,12 @@ MAX_EDGE_SNR = 30.0
 #: rendered tilted paraboloid 0.65-0.95 px (its weak edges scatter against the detailed
 #: reflection).
 MAX_RESIDUAL_RMS_PX = 1.5
+#: Share of the edges' measured width (the median RMS width of their derivative lobes)
+#: that the residual RMS may reach where that exceeds :data:`MAX_RESIDUAL_RMS_PX`: an
+#: edge is placed to a fraction of its width, so a soft edge (a large photo's
+#: demosaicked, compressed rim, a limb's fall-off) is judged relative to its width, and a
+#: sharp one (a render's) by the absolute floor.
+RESIDUAL_WIDTH_SHARE = 0.5
 #: The roll is fitted when a radian of it moves the outline's points by more than this
 #: share of its radius (RMS along the normals): never for a circle about the axis
 #: (0), for the tilted paraboloid 0.30.
@@ -75,6 +84,14 @@ ROLL_OBSERVABLE = 0.01
 
 class CalibrationError(ValueError):
     """The mirror was not found in the photo, or disagrees with the setup."""
+
+
+class NoMirrorError(CalibrationError):
+    """No outline of the mirror's shape stands out in the photo."""
+
+
+class SetupMismatchError(CalibrationError):
+    """A mirror was found, but its size is far from the setup's prediction."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +106,9 @@ class RimFit:
     ``edge_points_px`` (N, 2) are the inliers' sub-pixel edge positions (row, col).
     ``roll_deg`` is the camera's roll about its axis (degrees, counter-clockwise in the
     image as displayed), fitted where the outline shows it (a tilted mirror's), else None.
+    ``edge_width_px`` is the inliers' median edge width (RMS width of the derivative lobe)
+    and ``residual_tolerance_px`` the residual RMS the fit was allowed (see
+    :data:`RESIDUAL_WIDTH_SHARE`).
     """
 
     center_px: tuple[float, float]
@@ -100,6 +120,8 @@ class RimFit:
     iterations: int = 0
     center_se_px: float = math.nan
     roll_deg: float | None = None
+    edge_width_px: float = math.nan
+    residual_tolerance_px: float = math.nan
 
 
 def _rotated(v: np.ndarray, angle: float) -> np.ndarray:
@@ -220,7 +242,7 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
     search = max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
     for it in range(1, max_iterations + 1):
         pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
-        off, strength, _ = edge_offsets(lum_s, centre, scale, pts, nrm, search,
+        off, strength, width = edge_offsets(lum_s, centre, scale, pts, nrm, search,
                                          outermost=search <= half)
         # An edge must rise above the noise (a step of 3 σ of one pixel) to count; only
         # the outline's points the photo shows (not in its void) are asked for one.
@@ -228,8 +250,8 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         n_seen = int(seen.sum())
         good = np.isfinite(off) & (strength > 3.0 * sigma + 1e-12) & seen
         if good.sum() < max(8, MIN_INLIER_FRACTION * n_seen):
-            raise CalibrationError(
-                f"no visible mirror: only {int(good.sum())} of {n} points of the predicted "
+            raise NoMirrorError(
+                f"no mirror found: only {int(good.sum())} of {n} points of the predicted "
                 f"outline (radius {radius:.1f} px at pitch {pitch:g} mm) show an edge; "
                 f"check that the photo shows the mirror of this setup")
         # Normal displacement of point j: n_j · dc + dk (p_j · n_j) [+ dθ k (J p_j · n_j)].
@@ -262,22 +284,26 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
     logger.info("rim fit: %d of %d points, rms %.3f px, edge prominence %.2f after %d "
                 "passes", n_used, n, rms, prominence, it)
     if prominence < MIN_EDGE_PROMINENCE:
-        raise CalibrationError(
-            f"no visible mirror: the best outline found (radius {radius * scale:.1f} px) is "
+        raise NoMirrorError(
+            f"no mirror found: the best outline found (radius {radius * scale:.1f} px) is "
             f"no clearer an edge than its surroundings (prominence {prominence:.2f}, need "
             f"{MIN_EDGE_PROMINENCE:g}); check that the photo shows the mirror of this setup")
     centre_se = centre_standard_error(A[inl], res[inl], n_used / n * radius * scale
                                        * 2.0 * math.pi) if inl.any() else math.inf
     logger.info("rim fit: centre standard error %.3f px", centre_se)
     n_edges = int(good.sum())
-    if n_used < MIN_CONSISTENT_FRACTION * n_edges or rms > MAX_RESIDUAL_RMS_PX:
-        raise CalibrationError(
-            f"no visible mirror: the best outline found fits {n_used} of the {n_edges} edge "
+    edge_width = float(np.median(width[used])) if n_used else math.nan
+    tolerance = max(MAX_RESIDUAL_RMS_PX, RESIDUAL_WIDTH_SHARE * edge_width) \
+        if math.isfinite(edge_width) else MAX_RESIDUAL_RMS_PX
+    if n_used < MIN_CONSISTENT_FRACTION * n_edges or rms > tolerance:
+        raise NoMirrorError(
+            f"no mirror found: the best outline found fits {n_used} of the {n_edges} edge "
             f"points on its {n} with rms {rms:.2f} px (need {MIN_CONSISTENT_FRACTION:.0%} "
-            f"within {MAX_RESIDUAL_RMS_PX:g} px); check that the photo shows the mirror of "
-            f"this setup")
+            f"within {tolerance:.3g} px, for edges {edge_width:.2f} px wide); check that "
+            f"the photo shows the mirror of this setup")
     edges = np.asarray(centre)[None, :] + scale * pts + off[:, None] * nrm
     return RimFit(center_px=(float(centre[0]), float(centre[1])), scale=float(scale),
                   points_used=n_used, points_total=n, residual_rms_px=rms,
                   edge_points_px=edges[used], iterations=it, center_se_px=centre_se,
-                  roll_deg=math.degrees(roll) if fit_roll else None)
+                  roll_deg=math.degrees(roll) if fit_roll else None,
+                  edge_width_px=edge_width, residual_tolerance_px=tolerance)
