@@ -95,7 +95,7 @@ class _Scan:
             self.found.setdefault(path, None)
 
     def parse(self, path: Path, resolver: list[Path], chain: tuple[Path, ...]) -> None:
-        if len(chain) > MAX_INCLUDE_DEPTH:
+        if len(chain) >= MAX_INCLUDE_DEPTH:  # the top file is depth 0
             raise SceneFileError(f"{chain[0]}: <include>s nested deeper than "
                                  f"{MAX_INCLUDE_DEPTH} levels (Mitsuba's limit), at {path}")
         if not path.exists():
