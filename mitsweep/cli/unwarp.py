@@ -64,12 +64,27 @@ def _number(meta: dict, key: str) -> float | None:
     return None
 
 
+def _unwarp_bytes(pmap, image: np.ndarray, out: Path) -> float:
+    """Peak memory of making the panorama and writing it, bytes: :func:`unwarp`'s, then
+    the panorama kept while the writer makes its copies (EXR: float32 image and mask
+    twice; display files: :data:`~mitsweep.io.camera.DISPLAY_BYTES_PER_SAMPLE`)."""
+    from ..io.camera import DISPLAY_BYTES_PER_SAMPLE
+    from ..optics.panorama import panorama_bytes
+
+    channels = 1 if image.ndim == 2 else int(image.shape[2])
+    pixels = float(pmap.size[0]) * float(pmap.size[1])
+    writer = pixels * (2 * 4 * (channels + 1) if out.suffix.lower() == ".exr"
+                       else DISPLAY_BYTES_PER_SAMPLE * channels)
+    return panorama_bytes(pmap.size, image.shape, channels, image.dtype.itemsize) + writer
+
+
 def run(args) -> int:
     from .. import __version__
     from ..config import setup_from_dict, setup_to_dict
     from ..io import write_exr
     from ..io.camera import read_camera_image, write_display_image
     from ..optics.panorama import panorama_map, unwarp
+    from ..resources import check_allocation
 
     src, out = Path(args.image), Path(args.out)
     if not src.is_file():
@@ -82,7 +97,8 @@ def run(args) -> int:
                          f"be below HIGH")
     if args.size is not None and min(args.size) < 2:
         raise UsageError(f"--size {args.size[0]} {args.size[1]}: at least 2 x 2")
-    photo = read_camera_image(src, **photo_options(args))
+    # its warnings are logged once the photo is accepted: a refusal is the only line
+    photo = read_camera_image(src, **photo_options(args), log_warnings=False)
     meta = photo.meta.get("exr_header") or {}
     if args.setup is not None:
         setup = load_setup_arg(args.setup)
@@ -102,6 +118,9 @@ def run(args) -> int:
     pmap = panorama_map(setup, (H, W), projection=args.projection, size=args.size,
                         elevation_deg=args.elevation, pixel_pitch=pitch, center_px=center,
                         sensor_distance=i)
+    check_allocation(f"panorama {pmap.size[0]}x{pmap.size[1]} written to {out}",
+                     _unwarp_bytes(pmap, photo.data, out))
+    photo.log_warnings()
     pano, valid = unwarp(photo.data, pmap)
     seconds = time.perf_counter() - t0
     lo, hi = (math.degrees(e) for e in pmap.elevation_range)

@@ -751,6 +751,11 @@ def _png16_bytes(img16: np.ndarray, text: Mapping[str, str]) -> bytes:
 # --------------------------------------------------------------------------- writing
 
 DISPLAY_SUFFIXES = (".tif", ".tiff", ".png")
+#: Bytes a sample that :func:`write_display_image` holds beyond the image: the 16-bit
+#: samples, the percentile's copy of the image (float32: 4), and the PNG writer's
+#: big-endian, filtered and compressed copies (or tifffile's). Measured peaks
+#: (tests/test_memory_gate.py) stay below it.
+DISPLAY_BYTES_PER_SAMPLE = 20
 
 
 def write_display_image(path: str | Path, image: np.ndarray, *, white: float | None = None,
@@ -775,13 +780,17 @@ def write_display_image(path: str | Path, image: np.ndarray, *, white: float | N
     Returns
     -------
     Path
+
+    Notes
+    -----
+    Peak memory: about :data:`DISPLAY_BYTES_PER_SAMPLE` bytes a sample beyond ``image``.
     """
     p = Path(path)
     suffix = p.suffix.lower()
     if suffix not in DISPLAY_SUFFIXES:
         raise ValueError(f"{p}: display images are .tif, .tiff or .png, got "
                          f"{p.suffix or '(no suffix)'!r}; linear results go to .exr")
-    img = np.asarray(image, dtype=np.float64)
+    img = np.asarray(image)
     if img.ndim == 3 and img.shape[2] == 1:
         img = img[..., 0]
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
@@ -792,7 +801,12 @@ def write_display_image(path: str | Path, image: np.ndarray, *, white: float | N
         white = float(np.percentile(img, 99.5)) if img.size else 1.0
     if not (math.isfinite(white) and white > 0):
         white = 1.0
-    img16 = np.round(linear_to_srgb(img / white) * 65535.0).astype(np.uint16)
+    # encoded in blocks of rows: the float64 curve's temporaries stay a few MiB
+    img16 = np.empty(img.shape, np.uint16)
+    rows = max(1, _TRANSFER_BLOCK_SAMPLES // max(1, img[:1].size))
+    for r in range(0, img.shape[0], rows):
+        block = np.asarray(img[r:r + rows], dtype=np.float64) / white
+        img16[r:r + rows] = np.round(linear_to_srgb(block) * 65535.0)
     desc = json.dumps({"transfer": "srgb", "white": white, **dict(metadata or {})},
                       default=_json_default)
     with atomic_path(p, suffix=suffix) as tmp:

@@ -434,6 +434,34 @@ def panorama_map(setup: Setup, image_shape: tuple[int, ...], *, projection: str 
     return PanoramaMap(placement, i, shape, pitch, center, projection, size, (lo, hi))
 
 
+#: Panorama pixels mapped and resampled at a time by :func:`unwarp`: the maps' work
+#: arrays (directions, angles, image coordinates, about 200 bytes a pixel) stay ~50 MiB
+#: whatever the panorama's size.
+UNWARP_BLOCK_PIXELS = 1 << 18
+#: Bytes a block's pixel needs while it is mapped and resampled (measured: ~150).
+_BLOCK_BYTES_PER_PIXEL = 256
+
+
+#: Rows of edge values around the image before its spline prefilter, as
+#: ``scipy.ndimage.map_coordinates`` pads for ``mode="nearest"`` (so results match it).
+_SPLINE_PAD = 12
+
+
+def panorama_bytes(size: tuple[int, int], image_shape: tuple[int, ...], channels: int,
+                   itemsize: int) -> float:
+    """Peak memory of :func:`unwarp`, bytes: the panorama (``channels`` samples of
+    ``itemsize`` bytes a pixel) and its validity mask, the image's spline coefficients
+    (float64, padded) and one block's work.
+
+    A float (sizes from the command line can exceed any integer type NumPy uses).
+    """
+    W_p, H_p = (float(n) for n in size)
+    H, W = (float(n) + 2 * _SPLINE_PAD for n in image_shape[:2])
+    block = min(W_p * H_p, float(max(UNWARP_BLOCK_PIXELS, W_p)))
+    return (W_p * H_p * (channels * itemsize + 1) + H * W * 8 * (channels + 1)
+            + block * _BLOCK_BYTES_PER_PIXEL)
+
+
 def unwarp(image: np.ndarray, pmap: PanoramaMap, *,
            order: int = 3) -> tuple[np.ndarray, NDArray[np.bool_]]:
     """Resample ``image`` onto the panorama of ``pmap``.
@@ -451,8 +479,22 @@ def unwarp(image: np.ndarray, pmap: PanoramaMap, *,
     panorama : (H_p, W_p[, C]) ndarray
         0 where the image does not show the direction.
     valid : (H_p, W_p) bool ndarray
+
+    Raises
+    ------
+    mitsweep.resources.ResourceError
+        The panorama would not fit the memory (:func:`panorama_bytes`); checked before
+        it is made.
+
+    Notes
+    -----
+    The panorama is mapped and resampled in blocks of rows
+    (:data:`UNWARP_BLOCK_PIXELS` pixels), so that the maps' work arrays do not grow with
+    the panorama.
     """
-    from scipy.ndimage import map_coordinates
+    from scipy.ndimage import map_coordinates, spline_filter
+
+    from ..resources import check_allocation
 
     img = np.asarray(image)
     if img.shape[:2] != tuple(pmap.image_shape):
@@ -460,13 +502,29 @@ def unwarp(image: np.ndarray, pmap: PanoramaMap, *,
                          f"for {pmap.image_shape[1]}x{pmap.image_shape[0]}")
     dtype = img.dtype if np.issubdtype(img.dtype, np.floating) else np.float64
     W_p, H_p = pmap.size
-    pr, pc = np.meshgrid(np.arange(H_p), np.arange(W_p), indexing="ij")
-    row, col, ok = pmap.to_image(pr, pc)
-    coords = np.stack([np.where(ok, row, 0.0), np.where(ok, col, 0.0)])
     chans = img[..., None] if img.ndim == 2 else img
-    out = np.zeros((H_p, W_p, chans.shape[2]), dtype)
-    for c in range(chans.shape[2]):
-        out[..., c] = map_coordinates(chans[..., c].astype(np.float64), coords, order=order,
-                                      mode="nearest")
-    out[~ok] = 0
-    return (out[..., 0] if img.ndim == 2 else out), ok
+    C = chans.shape[2]
+    check_allocation(f"panorama {W_p}x{H_p}",
+                     panorama_bytes(pmap.size, img.shape, C, np.dtype(dtype).itemsize))
+    # each channel's spline coefficients once (map_coordinates would filter the whole
+    # image again for every block), padded with edge values as map_coordinates pads them
+    planes = []
+    for c in range(C):
+        padded = np.pad(chans[..., c].astype(np.float64), _SPLINE_PAD, mode="edge")
+        planes.append(spline_filter(padded, order, mode="nearest") if order > 1 else padded)
+        del padded
+    out = np.zeros((H_p, W_p, C), dtype)
+    valid = np.zeros((H_p, W_p), bool)
+    rows = max(1, UNWARP_BLOCK_PIXELS // W_p)
+    for r0 in range(0, H_p, rows):
+        pr, pc = np.meshgrid(np.arange(r0, min(H_p, r0 + rows)), np.arange(W_p),
+                             indexing="ij")
+        row, col, ok = pmap.to_image(pr, pc)
+        coords = np.stack([np.where(ok, row, 0.0), np.where(ok, col, 0.0)]) + _SPLINE_PAD
+        del row, col
+        for c in range(C):
+            out[r0:r0 + rows, :, c] = map_coordinates(planes[c], coords, order=order,
+                                                      mode="nearest", prefilter=False)
+        out[r0:r0 + rows][~ok] = 0
+        valid[r0:r0 + rows] = ok
+    return (out[..., 0] if img.ndim == 2 else out), valid
