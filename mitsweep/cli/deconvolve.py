@@ -334,10 +334,10 @@ def run(args) -> int:
             raise UsageError("--force applies to a given --bank only")
         check_operator("radial" if setup.mirror.is_symmetric else "grid")
         got, _ = _traced_bank(args, setup, (H, W), pitch, motion, depth)
-        bank, cache = got.bank, {"path": str(got.path), "traced": got.traced}
+        bank, cache = got.bank, {"path": got.path and str(got.path), "traced": got.traced}
         identity = {"checked_against": "traced for the photo's geometry", "forced": False,
                     "problem": None, "bank_optics_sha256": optics_fingerprint(bank.optics)}
-        bank_source = str(got.path)
+        bank_source = str(got.path) if got.path is not None else "traced (not cached)"
 
     explicit_center = args.center is not None or center_from != "the image centre"
     if deprecated is not None:
@@ -396,8 +396,9 @@ def run(args) -> int:
     if args.json:
         print_json(result)
     else:
-        how = "" if cache is None else (" (bank traced and cached)" if cache["traced"]
-                                        else " (bank from the cache)")
+        how = "" if cache is None else (" (bank from the cache)" if not cache["traced"]
+                                        else " (bank traced and cached)" if cache["path"]
+                                        else " (bank traced, not cached)")
         sys.stdout.write(f"{out}: {method} deconvolution ({used}) of {W}x{H} in "
                          f"{seconds:.2f} s{how}\n")
     return 0

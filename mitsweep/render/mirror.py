@@ -16,7 +16,9 @@ angle between the interpolated shading normal and the true normal ``≤ normal_t
 rad at the same points. The mesh reaches Mitsuba as an in-memory ``mi.Mesh`` built from
 the arrays (:func:`mirror_shape`; no file is written for it). The arrays are cached
 (NumPy ``.npz``) under :func:`mitsweep.io.cache.cache_root`/``meshes``, keyed by the
-profile, the rim and both bounds, unless ``MITSWEEP_CACHE=0`` (or ``cache=False``).
+profile, the rim and both bounds, unless ``MITSWEEP_CACHE=0`` (or ``cache=False``); an
+unusable cache folder costs one warning and the mesh is built in memory
+(:func:`mitsweep.io.cache.cache_dir`).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..config import Mirror, Setup
-from ..io.cache import cache_enabled, cache_root
+from ..io.cache import cache_dir, cache_enabled, cache_root, warn_unusable
 from ..optics import Profile, placement_of, profile_of
 
 __all__ = ["MirrorMesh", "tessellate", "mesh_errors", "mirror_mesh", "mirror_shape",
@@ -255,8 +257,10 @@ def mirror_mesh(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
         (measured, :func:`mesh_errors`), ``sag_tol_mm``, ``normal_tol_rad``.
     """
     profile = profile_of(mirror)
-    path = cache_file(mirror, sag_tol=sag_tol, normal_tol=normal_tol)
     use_cache = cache_enabled() if cache is None else bool(cache)
+    folder = cache_dir("meshes") if use_cache else None  # None: unusable (warned)
+    use_cache = folder is not None
+    path = folder / _cache_name(mirror, sag_tol, normal_tol) if use_cache else None
     if use_cache and path.is_file():
         hit = _read_cached(path)
         if hit is not None:
@@ -270,20 +274,28 @@ def mirror_mesh(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
                 mesh.n_triangles, mesh.sag_error, mesh.normal_error,
                 f", cached as {path}" if use_cache else "")
     if use_cache:
-        _write_cached(path, mesh, stats)
+        try:
+            _write_cached(path, mesh, stats)
+        except OSError as exc:  # a full disk, a folder gone meanwhile: the mesh is here
+            warn_unusable(path.parent, exc)
     return mesh, stats
 
 
 def cache_file(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
                normal_tol: float = DEFAULT_NORMAL_TOL) -> Path:
     """Where :func:`mirror_mesh` caches this mesh (it may not exist)."""
+    return cache_root() / "meshes" / _cache_name(mirror, sag_tol, normal_tol)
+
+
+def _cache_name(mirror: Mirror, sag_tol: float, normal_tol: float) -> str:
     key = _cache_key(profile_of(mirror), mirror.rim_radius, sag_tol, normal_tol)
-    return cache_root() / "meshes" / f"mirror-{key}.npz"
+    return f"mirror-{key}.npz"
 
 
 def cached_mesh_file(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
                      normal_tol: float = DEFAULT_NORMAL_TOL) -> tuple[Path, dict]:
-    """The cache file of the mirror's mesh (built and cached on first use) and its stats."""
+    """The cache file of the mirror's mesh (built and cached on first use; absent where
+    the cache is unusable) and its stats."""
     _, stats = mirror_mesh(mirror, sag_tol=sag_tol, normal_tol=normal_tol, cache=True)
     return cache_file(mirror, sag_tol=sag_tol, normal_tol=normal_tol), stats
 

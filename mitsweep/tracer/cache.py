@@ -13,7 +13,9 @@ directory ``{kind}-{optics16}-{trace12}`` holding ``bank.npz``. Two processes as
 one bank do not both trace it: the entry's directory lock
 (:class:`mitsweep.io.lock.DirectoryLock`) is held while tracing, the second waits and
 then loads what the first wrote (atomically, :func:`mitsweep.io.bank.save_bank`). An
-entry that does not load, or whose optics do not match its key, is traced again.
+entry that does not load, or whose optics do not match its key, is traced again. With
+the cache off (``MITSWEEP_CACHE=0``) or unusable (one warning,
+:func:`mitsweep.io.cache.cache_dir`) the bank is traced in memory and not kept.
 """
 
 from __future__ import annotations
@@ -33,7 +35,8 @@ from .. import __version__
 from ..config import Setup, setup_to_dict
 from ..io.bank import BankError, IPSFBank, load_bank, optics_fingerprint, optics_sections, \
     save_bank
-from ..io.cache import cache_root
+from ..io.cache import cache_dir as _cache_dir
+from ..io.cache import cache_root, warn_unusable
 from ..io.lock import DirectoryLock
 from ..optics.motion import MotionProfile
 from ..optics.reference import reference_geometry
@@ -55,10 +58,11 @@ DEFAULT_METHOD = "exact"
 
 @dataclass(frozen=True)
 class CachedBank:
-    """A bank from the cache: the bank, its file, and whether this call traced it."""
+    """A bank from the cache: the bank, its file (None: traced without the cache), and
+    whether this call traced it."""
 
     bank: IPSFBank
-    path: Path
+    path: Path | None
     traced: bool
 
 
@@ -119,7 +123,7 @@ def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
     depths, rays, kernel_size, n_radii, grid, seed, method, progress
         As :func:`mitsweep.tracer.ipsf_bank`.
     cache_dir : path, optional
-        Default :func:`bank_cache_dir`.
+        Default :func:`bank_cache_dir` (none where the cache is off or unusable).
 
     Returns
     -------
@@ -129,8 +133,29 @@ def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
                                          rays=rays, kernel_size=kernel_size,
                                          n_radii=n_radii, grid=grid, seed=seed,
                                          method=method)
-    entry = bank_cache_dir(cache_dir) / name
-    entry.mkdir(parents=True, exist_ok=True)
+    kw = {"n_radii": n_radii} if trace["kind"] == "radial" else {"grid": tuple(grid)}
+
+    def trace_it() -> IPSFBank:
+        geometry = reference_geometry(setup, motion=motion)
+        bank = ipsf_bank(setup, kind=trace["kind"], depths=depths, rays=rays,
+                         kernel_size=kernel_size, seed=seed, method=method,
+                         motion=geometry.motion, sweep=geometry.sweep, progress=progress,
+                         **kw)
+        bank.metadata["cache"] = {"entry": name, "trace": trace}
+        return bank
+
+    root = Path(cache_dir) if cache_dir is not None else _cache_dir("banks")
+    entry = None if root is None else root / name
+    if entry is not None:
+        try:
+            entry.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            warn_unusable(root, exc)
+            entry = None
+    if entry is None:
+        logger.info("tracing the IPSF bank %s (%s, %d depths) without the cache", name,
+                    trace["kind"], len(trace["depths_mm"]))
+        return CachedBank(trace_it(), None, traced=True)
     path = entry / "bank.npz"
     fingerprint = optics_fingerprint(optics)
     with DirectoryLock(entry, wait=math.inf, command=f"tracing the IPSF bank {name}"):
@@ -144,14 +169,12 @@ def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
                                path)
             except BankError as exc:
                 logger.warning("%s: unreadable cached bank (%s); tracing it again", path, exc)
-        geometry = reference_geometry(setup, motion=motion)
         logger.info("tracing the IPSF bank %s (%s, %d depths) into %s", name,
                     trace["kind"], len(trace["depths_mm"]), entry)
-        kw = {"n_radii": n_radii} if trace["kind"] == "radial" else {"grid": tuple(grid)}
-        bank = ipsf_bank(setup, kind=trace["kind"], depths=depths, rays=rays,
-                         kernel_size=kernel_size, seed=seed, method=method,
-                         motion=geometry.motion,
-                         sweep=geometry.sweep, progress=progress, **kw)
-        bank.metadata["cache"] = {"entry": name, "trace": trace}
-        save_bank(path, bank)
+        bank = trace_it()
+        try:
+            save_bank(path, bank)
+        except OSError as exc:  # a full disk: the bank is traced, keep it in memory
+            warn_unusable(entry, exc)
+            return CachedBank(bank, None, traced=True)
     return CachedBank(bank, path, traced=True)
