@@ -1,7 +1,7 @@
 """The files a Mitsuba XML scene loads, found without Mitsuba, and their SHA-256.
 
-:func:`scene_files` reads a scene's XML (with Python's parser, before Mitsuba's ever
-sees it) and lists every file loading it opens: the file itself, its ``<include>``\\ s
+:func:`scene_files` reads a scene's XML (a lenient scan of its tags, before Mitsuba's
+parser ever sees it) and lists every file loading it opens: the file itself, its ``<include>``\\ s
 (recursively, at most :data:`MAX_INCLUDE_DEPTH` deep, Mitsuba's own limit), every
 ``filename`` string property (bitmap textures, meshes, environment maps, grid volumes,
 measured BSDFs, ...) and every ``<spectrum filename=...>``. Each is checked to be a
@@ -28,8 +28,9 @@ from __future__ import annotations
 import errno
 import hashlib
 import os
-import xml.etree.ElementTree as ET
+import re
 from pathlib import Path
+from xml.sax.saxutils import unescape
 
 from ..resources import require_regular_file
 
@@ -41,8 +42,8 @@ MAX_INCLUDE_DEPTH = 15
 
 
 class SceneFileError(ValueError):
-    """A scene's XML cannot be read (not well-formed, includes nested too deep, an
-    include cycle): one line naming the file."""
+    """A scene's XML cannot be read, or its includes nest too deep or in a cycle: one
+    line naming the file."""
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -63,6 +64,29 @@ def _resolve(name: str, folders: list[Path]) -> Path:
             if (base / p).exists():
                 return base / p
     return p
+
+
+#: What pugixml skips: comments (which may hold ``--``, which Python's XML parser
+#: refuses and pugixml does not), CDATA, processing instructions and the doctype.
+_SKIPPED = re.compile(r"<!--.*?-->|<!\[CDATA\[.*?\]\]>|<\?.*?\?>|<!DOCTYPE[^>]*>", re.S)
+_TAG = re.compile(r"<([A-Za-z_][\w.:-]*)((?:\s+[^\s=/>]+\s*=\s*(?:\"[^\"]*\"|'[^']*'))*)\s*/?>")
+_ATTR = re.compile(r"([^\s=/>]+)\s*=\s*(?:\"([^\"]*)\"|'([^']*)')")
+_ENTITIES = {"&quot;": '"', "&apos;": "'"}
+
+
+def _tags(text: str):
+    """``(tag, attributes)`` of every start tag of an XML text, in document order.
+
+    A tokenizer, not a validating parser: Mitsuba's pugixml accepts what Python's
+    parser refuses (``--`` in a comment, undeclared entities), and a file pugixml
+    refuses is never read further, so a lenient scan finds at least what the parser
+    would open. Values are unescaped as XML.
+    """
+    for m in _TAG.finditer(_SKIPPED.sub("", text)):
+        attr = {a.group(1): unescape(a.group(2) if a.group(2) is not None else a.group(3),
+                                     _ENTITIES)
+                for a in _ATTR.finditer(m.group(2))}
+        yield m.group(1), attr
 
 
 def _substitute(value: str, params: dict[str, str]) -> str:
@@ -107,17 +131,15 @@ class _Scan:
             raise SceneFileError(f"{chain[0]}: <include> cycle: {path} includes itself")
         self.add(path, "scene file" if not chain else f"file included by {chain[-1]}")
         try:
-            root = ET.parse(path).getroot()
-        except ET.ParseError as exc:
-            raise SceneFileError(f"{path}: not well-formed XML ({exc})") from None
+            text = path.read_bytes().decode("utf-8", errors="replace")
         except OSError as exc:
             raise SceneFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
-        self.walk(root, path, resolver, (*chain, path))
+        for tag, attr in _tags(text):
+            self.tag(tag, {k: _substitute(v, self.params) for k, v in attr.items()}, path,
+                     resolver, (*chain, path))
 
-    def walk(self, node: ET.Element, path: Path, resolver: list[Path],
-             chain: tuple[Path, ...]) -> None:
-        attr = {k: _substitute(v, self.params) for k, v in node.attrib.items()}
-        tag = node.tag
+    def tag(self, tag: str, attr: dict[str, str], path: Path, resolver: list[Path],
+            chain: tuple[Path, ...]) -> None:
         if tag == "default" and "name" in attr:
             self.params.setdefault(attr["name"], attr.get("value", ""))
         elif tag == "path" and "value" in attr:
@@ -133,8 +155,6 @@ class _Scan:
             self.add(_resolve(attr["filename"], resolver), f"spectrum file of {path}")
         elif tag == "string" and attr.get("name") == "filename" and "value" in attr:
             self.plugin_files.append((attr["value"], path))
-        for child in node:
-            self.walk(child, path, resolver, chain)
 
 
 def scene_files(path: str | os.PathLike) -> list[Path]:
@@ -152,8 +172,9 @@ def scene_files(path: str | os.PathLike) -> list[Path]:
         One of them is a named pipe, device, socket or directory (named, with the file
         that references it).
     SceneFileError
-        A file is not well-formed XML, or ``<include>``\\ s nest deeper than
-        :data:`MAX_INCLUDE_DEPTH` or in a cycle.
+        ``<include>``\\ s nest deeper than :data:`MAX_INCLUDE_DEPTH` or in a cycle. (A
+        file that is not well-formed XML is scanned all the same, leniently: Mitsuba's
+        parser reports it.)
     """
     top = Path(path)
     scan = _Scan(top)
