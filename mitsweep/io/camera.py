@@ -41,6 +41,11 @@ Pixel pitch (mm) comes from the file's EXIF ``FocalPlaneXResolution`` and
 ``FocalPlaneResolutionUnit`` (RAW, TIFF, JPEG) or a mitsweep EXR's setup, else from the
 ``pixel_pitch`` argument, else it is None.
 
+Memory: the width and height a file's header declares are checked against the memory
+available and ``$MITSWEEP_MAX_MEMORY_GB`` (:func:`mitsweep.resources.check_allocation`)
+before any pixel is decoded; Pillow's own decompression-bomb limit is replaced by that
+check while a file is opened.
+
 :func:`write_display_image` writes a linear image as a 16-bit sRGB TIFF or PNG for
 viewing (the linear result belongs in EXR, :func:`mitsweep.io.exr.write_exr`).
 """
