@@ -33,7 +33,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("photo", help="photo of the mirror: RAW (DNG, CR2, NEF, ARW, ...), TIFF, "
                                  "PNG, JPEG or EXR")
-    p.add_argument("--setup", required=True, help="setup TOML file (see scenes/)")
+    p.add_argument("--setup", help="setup TOML file (see scenes/); without it (or with "
+                                   "--free) the outline is found as a circle from the "
+                                   "photo alone")
+    p.add_argument("--free", action="store_true",
+                   help="find the mirror's outline without a setup (a circle of any centre "
+                        "and radius) and print a [sensor] skeleton to start a setup from")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--write", metavar="CALIBRATED.toml",
                    help="write the setup for this camera and photo: resolution, pixel "
@@ -60,6 +65,8 @@ def run(args) -> int:
     from ..io import write_text_atomic
     from ..io.camera import read_camera_image
 
+    if args.free or args.setup is None:
+        return _run_free(args)
     check_outputs([args.photo, args.setup], [args.write])
     setup = load_setup_arg(args.setup)
     photo = read_camera_image(args.photo, **photo_options(args))
@@ -108,4 +115,46 @@ def run(args) -> int:
     if args.write:
         lines.append(f"written          {args.write}")
     print("\n".join(lines))
+    return 0
+
+
+def _run_free(args) -> int:
+    """``calibrate --free``: the outline as a circle from the photo alone."""
+    from ..io.camera import read_camera_image
+    from ..optics.pixels import optical_center_px
+    from ..photo.free import find_circle
+    from .common import UsageError
+
+    if args.write or args.fit_roll:
+        raise UsageError("--write and --fit-roll need --setup (--free finds a circle only)")
+    check_outputs([args.photo], [])
+    photo = read_camera_image(args.photo, **photo_options(args))
+    fit, radius = find_circle(photo.data)
+    H, W = photo.shape
+    r0, c0 = optical_center_px((H, W))
+    offset = (fit.center_px[0] - r0, fit.center_px[1] - c0)
+    pitch = photo.pixel_pitch
+    skeleton = ["[sensor]", f"resolution = [{W}, {H}]"]
+    skeleton.append(f"pixel_pitch = {pitch:.6g}" if pitch else
+                    "# pixel_pitch = ?  (mm; the file does not say)")
+    skeleton.append(f"center_offset_px = [{offset[0]:.3f}, {offset[1]:.3f}]")
+    out = {"photo": str(args.photo), "kind": photo.kind, "bit_depth": photo.bit_depth,
+           "image_shape": [H, W], "center_px": list(fit.center_px), "radius_px": radius,
+           "center_offset_px": list(offset), "pixel_pitch_mm": pitch,
+           "points_used": fit.points_used, "points_total": fit.points_total,
+           "residual_rms_px": fit.residual_rms_px,
+           "center_standard_error_px": fit.center_se_px,
+           "setup_skeleton": "\n".join(skeleton) + "\n",
+           "warnings": list(photo.warnings)}
+    if args.json:
+        print_json(out)
+        return 0
+    print("\n".join([
+        f"photo            {args.photo} ({photo.kind}, {photo.bit_depth}-bit, {W}x{H} px)",
+        f"centre           row {fit.center_px[0]:.3f}, col {fit.center_px[1]:.3f} px "
+        f"(offset from the image centre {offset[0]:+.3f}, {offset[1]:+.3f} px)",
+        f"radius           {radius:.3f} px (a circle; no setup)",
+        f"fit              {fit.points_used} of {fit.points_total} outline points, rms "
+        f"{fit.residual_rms_px:.3f} px (centre standard error {fit.center_se_px:.3f} px)",
+        "setup skeleton:", *skeleton]))
     return 0

@@ -1,0 +1,114 @@
+"""Find a mirror's outline in a photo without a setup: :func:`find_circle`.
+
+Where no setup exists yet (a new camera, an unknown mirror), the outline is taken to be
+a circle, the image of an untilted mirror's rim or limb, of unknown centre and radius.
+The coarse search (:mod:`mitsweep.photo.coarse`) runs once per octave of radius, from
+:data:`MIN_RADIUS_SHARE` of the photo's shorter side to :data:`MAX_RADIUS_SHARE` of its
+longer one (a rim clipped by the frame is larger than the frame), each on a copy reduced
+for that octave; the strongest candidates are refined and validated as a setup's
+outline is (:func:`mitsweep.photo.rim.fit_rim`), and the validated one whose edge stands
+out most from its surroundings is kept.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+
+from ..optics.outline import RimOutline
+from .coarse import coarse_search, search_scales
+from .image import fill_void, luminance, photo_void
+from .rim import CalibrationError, NoMirrorError, RimFit, fit_rim
+
+__all__ = ["find_circle", "circle_outline", "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE",
+           "CANDIDATES"]
+
+logger = logging.getLogger(__name__)
+
+#: Smallest outline radius searched, as a share of the photo's shorter side.
+MIN_RADIUS_SHARE = 0.08
+#: Largest outline radius searched, as a share of the photo's longer side.
+MAX_RADIUS_SHARE = 0.75
+#: Coarse candidates (the best of each octave, strongest first) refined and validated:
+#: on the real photos of ``tests/data/real`` the mirror's octave was not always among
+#: the three strongest coarse scores (texture in a sky, a building's windows).
+CANDIDATES = 6
+#: Outline points of the circle template.
+N_POINTS = 1440
+
+
+def circle_outline(radius_px: float, n_points: int = N_POINTS) -> RimOutline:
+    """A circle of ``radius_px`` about the axis as a :class:`RimOutline` at pitch 1 mm
+    (so that its millimetres are pixels)."""
+    phi = np.linspace(0.0, 2.0 * math.pi, n_points, endpoint=False)
+    unit = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    return RimOutline(uv=radius_px * unit, normal_uv=unit, sensor_distance=math.nan,
+                      on_rim=np.ones(n_points, bool))
+
+
+def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | None = None
+                ) -> tuple[RimFit, float]:
+    """The mirror's circular outline in a photo, without a setup.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        Linear photograph.
+    radius_range_px : (float, float), optional
+        Radii searched (default :data:`MIN_RADIUS_SHARE` of the shorter side to
+        :data:`MAX_RADIUS_SHARE` of the longer one).
+
+    Returns
+    -------
+    fit : RimFit
+        ``center_px`` the circle's centre (row, col); ``scale`` times the returned
+        radius' template, see ``radius_px``.
+    radius_px : float
+        The circle's radius.
+
+    Raises
+    ------
+    mitsweep.photo.NoMirrorError
+        No circle stands out as a mirror's outline.
+    """
+    lum = luminance(image)
+    if lum.ndim != 2 or min(lum.shape) < 32:
+        raise NoMirrorError(f"the photo must be an image of at least 32x32 pixels, got "
+                            f"shape {np.shape(image)}")
+    H, W = lum.shape
+    lo, hi = radius_range_px or (MIN_RADIUS_SHARE * min(H, W), MAX_RADIUS_SHARE * max(H, W))
+    if not 8.0 <= lo < hi:
+        raise ValueError(f"radius_range_px must satisfy 8 <= min < max, got {(lo, hi)}")
+    void = photo_void(image)
+    if void.any() and not void.all():
+        lum = fill_void(lum, void)
+    candidates = []
+    base = lo * math.sqrt(2.0)
+    while base / math.sqrt(2.0) < hi:
+        template = circle_outline(base, n_points=360)
+        pts, nrm = template.offsets_px(1.0)
+        scales = search_scales(1.0 / math.sqrt(2.0), min(math.sqrt(2.0), hi / base))
+        centre, scale, score = coarse_search(lum, pts, nrm, scales)
+        candidates.append((score, centre, base * scale))
+        base *= 2.0
+    candidates.sort(key=lambda c: -c[0])
+    best, failures = None, []
+    for score, centre, radius in candidates[:CANDIDATES]:
+        logger.info("free search candidate: centre (%.1f, %.1f) px, radius %.1f px "
+                    "(score %.3g)", *centre, radius, score)
+        try:
+            fit = fit_rim(image, circle_outline(radius), 1.0, scale_range=(0.96, 1.04))
+        except CalibrationError as exc:
+            failures.append(str(exc))
+            continue
+        # the outline explained best: most points, least scatter relative to its size
+        key = (fit.points_used / fit.points_total) * radius / max(fit.residual_rms_px, 0.1)
+        if best is None or key > best[0]:
+            best = (key, fit, radius * fit.scale)
+    if best is None:
+        raise NoMirrorError(f"no mirror found: no circle of radius {lo:.0f}-{hi:.0f} px "
+                            f"stands out as a mirror's outline (the strongest candidate: "
+                            f"{failures[0].removeprefix('no mirror found: ')})")
+    return best[1], best[2]
