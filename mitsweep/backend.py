@@ -21,18 +21,26 @@ width that is a multiple of the register width unrolls each kernel's loop body.
 Dr.Jit's kernel cache keys kernels by their IR, which spells the width, so the width
 can change between kernels of one process (:func:`llvm_vector_width_scope`).
 
+Mitsuba's and Dr.Jit's own log lines go through :mod:`logging` (loggers ``mitsuba`` and
+``drjit``), so that stdout stays the command's: Mitsuba writes its warnings to stdout,
+in colour, through its stream appender, which :func:`route_mitsuba_log` replaces;
+drjit-core's stderr log is replaced by a callback (:func:`route_drjit_log`, its C API
+``jit_set_log_level_callback``). Both keep their default level, warnings and errors.
+
 :func:`describe_machine` says what a benchmark ran on (CPU, cores, memory, load, GPU,
 the versions and the backend chosen), without compiling a kernel.
 """
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import ctypes
 import functools
 import logging
 import os
 import platform
+import re
 import shutil
 import subprocess
 import sys
@@ -42,7 +50,8 @@ from collections.abc import Iterator
 __all__ = ["BackendError", "MIN_LLVM", "llvm_version", "select_backend", "mitsuba_variant",
            "set_mitsuba_variant", "drjit_module", "cuda_devices", "describe_machine",
            "llvm_vector_width", "native_llvm_vector_width", "set_llvm_vector_width",
-           "llvm_vector_width_scope", "LLVM_WIDTH_ENV", "MAX_LLVM_VECTOR_WIDTH"]
+           "llvm_vector_width_scope", "LLVM_WIDTH_ENV", "MAX_LLVM_VECTOR_WIDTH",
+           "route_mitsuba_log", "route_drjit_log"]
 
 logger = logging.getLogger(__name__)
 
@@ -86,6 +95,7 @@ def select_backend(prefer: str | None = None) -> str:
     BackendError
         If the requested or any backend is unusable, e.g. libLLVM < 19.
     """
+    route_drjit_log()  # before Dr.Jit initialises a backend (and logs about it)
     choice = prefer or os.environ.get("MITSWEEP_BACKEND") or None
     if choice is not None and choice not in _BACKENDS:
         raise BackendError(f"MITSWEEP_BACKEND: must be one of {', '.join(_BACKENDS)}, "
@@ -134,28 +144,43 @@ _SYMBOLS = {
     "target_features": "_Z24jit_llvm_target_featuresv",
     "vector_width": "_Z21jit_llvm_vector_widthv",
 }
+_LOG_SYMBOLS = {
+    "set_callback": "_Z26jit_set_log_level_callback8LogLevelPFvS_PKcE",
+    "set_stderr": "_Z24jit_set_log_level_stderr8LogLevel",
+    "stderr_level": "_Z20jit_log_level_stderrv",
+}
 _native_width: int | None = None
 
 
 @functools.lru_cache(maxsize=None)
-def _llvm_target_api() -> dict | None:
-    """ctypes functions of drjit-core's LLVM target API, or None (logged) when the
-    library or one of its symbols is missing. Loads the very library the drjit package
-    loaded (same path, so the same process-wide state)."""
-    global _native_width
+def _drjit_core() -> ctypes.CDLL | str:
+    """drjit-core, loaded from the very file the drjit package loaded (same path, so the
+    same process-wide state), or why it cannot be."""
     import drjit as dr
 
     folder = os.path.dirname(dr.__file__)
     names = ("libdrjit-core.so", "libdrjit-core.dylib", "drjit-core.dll")
     paths = [os.path.join(folder, n) for n in names if os.path.exists(os.path.join(folder, n))]
     if not paths:
-        logger.warning("drjit-core library not found in %s: LLVM vector width unchanged",
-                       folder)
+        return f"drjit-core library not found in {folder}"
+    try:
+        return ctypes.CDLL(paths[0])
+    except OSError as exc:
+        return f"drjit-core cannot be loaded ({exc})"
+
+
+@functools.lru_cache(maxsize=None)
+def _llvm_target_api() -> dict | None:
+    """ctypes functions of drjit-core's LLVM target API, or None (logged) when the
+    library or one of its symbols is missing."""
+    global _native_width
+    lib = _drjit_core()
+    if isinstance(lib, str):
+        logger.warning("%s: LLVM vector width unchanged", lib)
         return None
     try:
-        lib = ctypes.CDLL(paths[0])
         api = {key: getattr(lib, sym) for key, sym in _SYMBOLS.items()}
-    except (OSError, AttributeError) as exc:
+    except AttributeError as exc:
         logger.warning("drjit-core's LLVM target API is not available (%s): LLVM vector "
                        "width unchanged", exc)
         return None
@@ -182,7 +207,8 @@ def native_llvm_vector_width() -> int | None:
 
 
 def _check_width(width, source: str) -> int:
-    if isinstance(width, str) and width.strip().isdigit():
+    # ASCII digits only: str.isdigit() accepts "²", which int() then refuses
+    if isinstance(width, str) and re.fullmatch(r"[0-9]+", width.strip()):
         width = int(width)
     if isinstance(width, bool) or not isinstance(width, int):
         raise BackendError(f"{source}: must be an integer, 'auto' or 'native', got {width!r}")
@@ -266,6 +292,108 @@ def llvm_vector_width_scope(width: int | str) -> Iterator[int | None]:
             _set_width(before)
 
 
+# ---------------------------------------------------------------------------------------
+# Mitsuba's and Dr.Jit's log output, through logging
+
+#: drjit-core's LogLevel (Disable = 0 ... Trace = 6) as logging levels.
+_DRJIT_LEVELS = {1: logging.ERROR, 2: logging.WARNING, 3: logging.INFO, 4: logging.INFO,
+                 5: logging.DEBUG, 6: logging.DEBUG}
+_DRJIT_WARN = 2
+_drjit_route: dict = {}
+
+
+def _drjit_log(level: int, text: bytes) -> None:
+    logging.getLogger("drjit").log(_DRJIT_LEVELS.get(level, logging.DEBUG),
+                                   text.decode("utf-8", "replace").rstrip())
+
+
+def route_drjit_log() -> bool:
+    """Send drjit-core's warnings and errors to the ``drjit`` logger instead of stderr.
+
+    Idempotent; undone at exit (:mod:`atexit`), before the interpreter that the
+    callback needs is gone. Returns False (nothing changed, Dr.Jit keeps writing to
+    stderr) where drjit-core's log API is not found.
+    """
+    if _drjit_route:
+        return True
+    lib = _drjit_core()
+    try:
+        api = {key: getattr(lib, sym) for key, sym in _LOG_SYMBOLS.items()}
+    except AttributeError:  # a string (no library) or a missing symbol
+        logger.debug("drjit-core's log API is not available: Dr.Jit logs to stderr")
+        return False
+    callback_type = ctypes.CFUNCTYPE(None, ctypes.c_int, ctypes.c_char_p)
+    api["set_callback"].argtypes = [ctypes.c_int, callback_type]
+    api["set_callback"].restype = None
+    api["set_stderr"].argtypes = [ctypes.c_int]
+    api["set_stderr"].restype = None
+    api["stderr_level"].restype = ctypes.c_int
+    _drjit_route.update(api, callback=callback_type(_drjit_log),
+                        stderr_before=int(api["stderr_level"]()), null=callback_type())
+    api["set_callback"](_DRJIT_WARN, _drjit_route["callback"])
+    api["set_stderr"](0)
+    atexit.register(_unroute_drjit_log)
+    return True
+
+
+def _unroute_drjit_log() -> None:
+    # Dr.Jit may still log while it shuts down, after Python could run the callback.
+    if _drjit_route:
+        _drjit_route["set_callback"](0, _drjit_route["null"])
+        _drjit_route["set_stderr"](_drjit_route["stderr_before"])
+
+
+@functools.lru_cache(maxsize=None)
+def _logging_appender_type():
+    """An ``mi.Appender`` that forwards Mitsuba's lines to the ``mitsuba`` logger
+    (defined once Mitsuba is imported: backend.py must not import it at load time)."""
+    import mitsuba as mi
+
+    levels = {mi.LogLevel.Trace: logging.DEBUG, mi.LogLevel.Debug: logging.DEBUG,
+              mi.LogLevel.Info: logging.INFO, mi.LogLevel.Warn: logging.WARNING,
+              mi.LogLevel.Error: logging.ERROR}
+
+    class LoggingAppender(mi.Appender):
+        def append(self, level, text: str) -> None:
+            logging.getLogger("mitsuba").log(levels.get(level, logging.WARNING),
+                                             text.rstrip())
+
+        def log_progress(self, *args) -> None:  # mitsweep shows its own progress
+            pass
+
+    return LoggingAppender
+
+
+_mitsuba_route: dict = {}
+
+
+def route_mitsuba_log() -> None:
+    """Replace Mitsuba's appenders (its stdout stream) by one that forwards each line
+    to the ``mitsuba`` logger, as ``[Plugin] message`` (no date, thread or level: the
+    logging format has its own). Idempotent; the appender is removed at exit."""
+    if _mitsuba_route:
+        return
+    import mitsuba as mi
+
+    log = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
+    formatter = mi.DefaultFormatter()
+    formatter.set_has_date(False)
+    formatter.set_has_thread(False)
+    formatter.set_has_log_level(False)
+    appender = _logging_appender_type()()
+    log.clear_appenders()
+    log.add_appender(appender)
+    log.set_formatter(formatter)
+    _mitsuba_route.update(log=log, appender=appender)
+    atexit.register(_unroute_mitsuba_log)
+
+
+def _unroute_mitsuba_log() -> None:
+    # Mitsuba must not hold a Python object (nor call one) once the interpreter ends.
+    if _mitsuba_route:
+        _mitsuba_route["log"].remove_appender(_mitsuba_route.pop("appender"))
+
+
 def mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str:
     """The Mitsuba variant for the selected backend, e.g. ``llvm_ad_rgb``."""
     backend = select_backend(prefer)
@@ -278,10 +406,12 @@ def set_mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str
     An automatic CUDA choice that Mitsuba refuses (its CUDA variants also need OptiX,
     which comes with the NVIDIA driver) falls back to the LLVM variant with a warning;
     a requested one (``prefer`` or ``$MITSWEEP_BACKEND``) raises :class:`BackendError`.
+    Mitsuba's log goes to :mod:`logging` from here on (:func:`route_mitsuba_log`).
     """
     import mitsuba as mi
 
     variant = mitsuba_variant(spectrum, prefer)
+    route_mitsuba_log()
     if mi.variant() == variant:
         return variant
     try:
