@@ -6,9 +6,7 @@ textures its ball from an EXR, so that a change in each kind of file it loads is
 Renders are 48 px at 2-4 spp (about 3 s a dataset)."""
 
 import json
-import os
 import shutil
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np

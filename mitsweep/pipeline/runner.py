@@ -40,7 +40,6 @@ the link replaced by the file.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import hashlib
 import heapq
 import json
 import logging
@@ -55,6 +54,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 from ..io import WriteError, write_text_atomic
 from ..io.lock import DirectoryLock, DirectoryLocked
+from ..io.scene_files import file_sha256 as sha256
 
 __all__ = ["Task", "Shard", "DatasetError", "run_tasks", "sha256", "MANIFEST", "LOG_DIR",
            "SHARD_DIR", "DEFAULT_RETRIES", "MAX_SHARDS", "task_log_path", "read_task_log"]
@@ -143,14 +143,6 @@ class Task:
     def entry_params(self) -> dict:
         """The manifest's ``params`` of this item: its parameters and its inputs' names."""
         return _jsonable({**self.params, **self.inputs})
-
-
-def sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _jsonable(obj):
