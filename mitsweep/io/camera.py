@@ -70,7 +70,7 @@ from .atomic import atomic_path
 from .exr import _json_default
 from .exr import _openexr_chatter as _library_chatter  # collects C libraries' stderr
 from .png import linear_to_srgb
-from ..resources import ResourceError
+from ..resources import ResourceError, require_regular_file
 
 __all__ = ["CameraFileError", "CameraImage", "RAW_SUFFIXES", "CAMERA_SUFFIXES",
            "WHITE_BALANCES", "TRANSFERS", "read_camera_image", "write_display_image",
@@ -206,6 +206,7 @@ def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
                               f"got {transfer!r}")
     if pixel_pitch is not None and not (math.isfinite(pixel_pitch) and pixel_pitch > 0):
         raise CameraFileError(f"pixel pitch must be a finite number > 0 mm, got {pixel_pitch!r}")
+    require_regular_file(p, "photo")
     if not p.is_file():
         raise CameraFileError(f"{p}: no such file")
     reader = {"raw": _read_raw, "tiff": _read_tiff, "png": _read_png, "jpeg": _read_jpeg,
