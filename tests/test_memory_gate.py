@@ -174,13 +174,15 @@ def _peak_of(argv: list, code: str = _MEASURED) -> tuple[int, int, str]:
 
 @pytest.mark.parametrize("name", PHOTO_CASES)
 def test_hostile_photo_peak_stays_under_the_cap(name, tmp_path, gib_of_zeros):
-    """The whole process, interpreter and libraries included, stays under the 1 GiB cap
-    (before the gate: 2.1 GiB for the inflating PNG, 17 GB for the 16-bit one)."""
+    """The whole process, interpreter and libraries included (~65 MiB), stays far under
+    the 1 GiB cap: the refusal comes before any decoding (before the gate: 2.1 GiB for
+    the inflating PNG, 17 GB for the 16-bit one; 750 MiB while Pillow's ``getexif``
+    still decoded a PNG's pixels to look for EXIF)."""
     photo = _photo_cases(tmp_path, gib_of_zeros)[name]
     rc, peak, err = _peak_of(["unwarp", photo, "--setup", SPHERE, "--projection",
                               "cylindrical", "--out", tmp_path / "out.exr"])
     assert rc == 2 and err.count("\n") == 1 and photo.name in err, err
-    assert peak < CAP_GB * GIB, f"peak {peak / 2**20:.0f} MiB"
+    assert peak < 300 * 2**20, f"peak {peak / 2**20:.0f} MiB"
 
 
 def test_image_data_inflating_past_the_declared_rows_costs_nothing(tmp_path, gib_of_zeros):

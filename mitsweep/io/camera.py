@@ -714,11 +714,14 @@ def _read_png16(p: Path, header: dict) -> tuple[np.ndarray, str, dict, dict]:
     import imagecodecs
 
     channels = _PNG_CHANNELS.get(header["color_type"], 4)
-    with _pillow_image(p, "PNG") as im:  # chunks only: Pillow would reduce the pixels
-        info, exif = dict(im.info), _pillow_exif(p, im)
     # libpng's row buffers and the uint16 array it fills; inflation stops at the rows
     # the header declares, so a stream that inflates further costs nothing more
     _check_decode(p, "PNG", header["width"], header["height"], channels, 4 * channels)
+    with _pillow_image(p, "PNG") as im:  # chunks only: Pillow would reduce the pixels
+        info = dict(im.info)
+        # Pillow's getexif() of a PNG decodes the pixels to look for a late eXIf chunk:
+        # only an eXIf before the image data is read
+        exif = _pillow_exif(p, im) if "exif" in info else {}
     try:
         with _library_chatter() as said:  # libpng prints its warnings on descriptor 2
             a = imagecodecs.png_decode(p.read_bytes())
