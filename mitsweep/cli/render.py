@@ -62,6 +62,8 @@ def _check_out(path: str, suffix: str) -> None:
 def run(args) -> int:
     from ..render import render_image, render_to_exr
 
+    if args.scene is not None and not args.scene.strip():
+        raise UsageError("--scene: an empty path; give a Mitsuba XML scene file")
     setup = load_setup_arg(args.setup)
     check_outputs([args.setup, args.scene or setup.scene.file, args.motion],
                   [args.out, args.preview])

@@ -108,6 +108,10 @@ def run(args) -> int:
         raise UsageError(f"{src}: no setup in its metadata; give --setup")
     H, W = photo.shape
     pitch = photo.pixel_pitch or _number(meta, "pixel_pitch") or setup.sensor.pixel_pitch
+    if args.sensor_distance is not None and args.sensor_distance <= setup.lens.focal_length:
+        raise UsageError(f"--sensor-distance {args.sensor_distance:g}: must exceed the lens "
+                         f"focal length, {setup.lens.focal_length:g} mm (a camera focused "
+                         f"at any depth has its sensor beyond it)")
     i = args.sensor_distance or _number(meta, "reference_sensor_distance")
     center = args.center
     if center is None and isinstance(meta.get("center_rc"), list):
@@ -115,9 +119,18 @@ def run(args) -> int:
     if center is not None and not (0 <= center[0] < H and 0 <= center[1] < W):
         raise UsageError(f"--center {center[0]:g} {center[1]:g} lies outside the {W}x{H} image")
     t0 = time.perf_counter()
-    pmap = panorama_map(setup, (H, W), projection=args.projection, size=args.size,
-                        elevation_deg=args.elevation, pixel_pitch=pitch, center_px=center,
-                        sensor_distance=i)
+    try:
+        pmap = panorama_map(setup, (H, W), projection=args.projection, size=args.size,
+                            elevation_deg=args.elevation, pixel_pitch=pitch, center_px=center,
+                            sensor_distance=i)
+    except ValueError as exc:  # the elevations seen at this distance make no range
+        if args.sensor_distance is None or args.elevation is not None or \
+                not str(exc).startswith("elevation range"):
+            raise
+        raise UsageError(f"--sensor-distance {args.sensor_distance:g}: the {W}x{H} frame "
+                         f"sees no range of elevations for a {args.projection} panorama at "
+                         f"that distance; give the sensor distance the image was taken "
+                         f"at") from None
     check_allocation(f"panorama {pmap.size[0]}x{pmap.size[1]} written to {out}",
                      _unwarp_bytes(pmap, photo.data, out))
     photo.log_warnings()

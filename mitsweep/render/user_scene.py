@@ -35,6 +35,7 @@ pipe, device, socket or directory among them, on which the parser would block.
 
 from __future__ import annotations
 
+import codecs
 import contextlib
 import hashlib
 import json
@@ -192,6 +193,8 @@ def _source(scene) -> tuple[str, str, Path | None]:
     if not isinstance(scene, (str, Path)):
         raise UserSceneError(f"scene: expected a path to a Mitsuba XML file or a scene dict, "
                              f"got {type(scene).__name__}")
+    if not str(scene).strip():  # Path("") is the working directory
+        raise UserSceneError("scene: an empty path; give a Mitsuba XML scene file")
     path = Path(scene).expanduser().resolve()
     try:
         data = require_regular_file(path, "scene file").read_bytes()
@@ -201,7 +204,7 @@ def _source(scene) -> tuple[str, str, Path | None]:
         raise UserSceneError(f"{scene}: cannot read ({exc.strerror})") from None
     except FileTypeError as exc:
         raise UserSceneError(str(exc)) from None
-    head = data.lstrip()[:200]
+    head = data.removeprefix(codecs.BOM_UTF8).lstrip()[:200]  # Mitsuba reads a BOM
     if not head.startswith(b"<"):
         raise UserSceneError(f"{scene}: not a Mitsuba XML scene (it does not start with an "
                              f"XML tag)")
@@ -526,7 +529,7 @@ def check_view(scene: Any, setup: Setup, sensor_distance: float, *, label: str =
         worst = max(blocked, key=blocked.get)
         share = sum(blocked.values()) / total
         raise UserSceneError(f"{label}: shape {worst!r} lies between the lens and the mirror "
-                             f"(it hides {100 * share:.2g} % of the probed lens-to-mirror rays); move "
+                             f"(it hides {100 * share:.3g} % of the probed lens-to-mirror rays); move "
                              f"the scene (scene.placement) or leave the camera's line of sight free")
     r = mi.Ray3f(mi.Point3f(*(pts + 1e-3 * out_dir).T.astype(np.float32)),
                  mi.Vector3f(*out_dir.T.astype(np.float32)))
