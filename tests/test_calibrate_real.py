@@ -32,7 +32,6 @@ from conftest import SCENES
 FREE_KNOWN_FAILURES = {
     "dome_store_bright_rim.jpg": "finds the dome's second, concentric edge (13 px out)",
     "sphere_pageos_nasa.png": "the draped Mylar hides the limb's top; prominence 2.7 < 3",
-    "paraboloid_mei_2.jpg": "a concentric edge of the mount 9 px inside wins",
     "omni_kaidan.jpg": "the rim departs from a circle by 2.6 px RMS (1.2% of its radius)",
 }
 

@@ -69,10 +69,11 @@ def run(args) -> int:
         return _run_free(args)
     check_outputs([args.photo, args.setup], [args.write])
     setup = load_setup_arg(args.setup)
-    photo = read_camera_image(args.photo, **photo_options(args))
+    photo = read_camera_image(args.photo, log_warnings=False, **photo_options(args))
     pitch = photo.pixel_pitch or setup.sensor.pixel_pitch
     pitch_source = photo.meta.get("pixel_pitch_source") or "setup"
     cal = calibrate_photo(photo.data, setup, pixel_pitch=pitch, fit_roll=args.fit_roll)
+    photo.log_warnings()  # the photo's quality matters once a mirror is found in it
     out = cal.as_dict()
     out.update(photo=str(args.photo), setup=setup.name, kind=photo.kind,
                bit_depth=photo.bit_depth, pixel_pitch_source=pitch_source,
@@ -128,8 +129,9 @@ def _run_free(args) -> int:
     if args.write or args.fit_roll:
         raise UsageError("--write and --fit-roll need --setup (--free finds a circle only)")
     check_outputs([args.photo], [])
-    photo = read_camera_image(args.photo, **photo_options(args))
+    photo = read_camera_image(args.photo, log_warnings=False, **photo_options(args))
     fit, radius = find_circle(photo.data)
+    photo.log_warnings()
     H, W = photo.shape
     r0, c0 = optical_center_px((H, W))
     offset = (fit.center_px[0] - r0, fit.center_px[1] - c0)

@@ -20,10 +20,14 @@ import numpy as np
 
 from .image import reduce_by, smooth, texture_energy
 
-__all__ = ["coarse_search", "search_scales", "COARSE_RADIUS_PX", "COARSE_SCALE_STEP"]
+__all__ = ["coarse_search", "search_scales", "COARSE_RADIUS_PX", "COARSE_SCALE_STEP",
+           "DETAIL_REDUCTION"]
 
 #: Radius (px) of the outline in the reduced copy used for the coarse search (at least).
 COARSE_RADIUS_PX = 32.0
+#: The fine-detail cue is computed on a copy reduced by ``factor // DETAIL_REDUCTION``
+#: (the coarse search's reduction ``factor``): full resolution up to a 128 px outline.
+DETAIL_REDUCTION = 4
 #: Relative step of the scales searched coarsely (4%: ~1.3 px at 32 px).
 COARSE_SCALE_STEP = 1.04
 
@@ -45,8 +49,14 @@ def coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
     # the local texture energy, where a rim of little contrast (a reflection as bright
     # as what surrounds the mirror, as on the rendered tilted paraboloid) still shows:
     # the reflection is detailed, what surrounds it far out of focus.
-    for cue in (lum, texture_energy(lum)):
-        small = smooth(reduce_by(cue, factor), 1.0)
+    # The detail is measured on a copy reduced by a quarter of the search's factor: the
+    # same as at full resolution for outlines up to 128 px, and on a large photo (whose
+    # finest detail is demosaicking and compression) the cost of one reduced pass.
+    pre = max(1, factor // DETAIL_REDUCTION)
+    factor = pre * (factor // pre)  # both cues on one grid
+    fine = reduce_by(lum, pre)
+    for cue, f in ((lum, factor), (texture_energy(fine), factor // pre)):
+        small = smooth(reduce_by(cue, f), 1.0)
         gy, gx = np.gradient(small)
         mag = np.hypot(gx, gy)
         # Sign-free orientation field, magnitude compressed so that a few very bright
