@@ -221,3 +221,66 @@ def test_unwarp_bad_input_gets_one_line_and_status_2(tmp_path, capsys, scenes_di
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("mitsweep: error:") and message in err and "\n" not in err
+
+
+# ------------------------------------------------------------------ which way is up
+
+def test_up_camera_puts_the_camera_side_on_top_and_away_turns_it(setup):
+    """The room's camera is above the mirror looking down (world +z toward the camera):
+    with ``up="camera"`` the top row looks toward +z and the bottom row toward -z (the
+    floor); ``up="away"`` (a camera below the mirror looking up) turns the panorama by
+    180 degrees, so it is world-up for that rig and still not mirror-reversed (the
+    azimuth runs the other way)."""
+    cam = panorama_map(setup, (N, N), projection="equirectangular")
+    away = panorama_map(setup, (N, N), projection="equirectangular", up="away")
+    Wp, Hp = cam.size
+    cols = np.arange(Wp)
+    assert np.all(cam.directions(np.zeros(Wp), cols)[..., 2]
+                  > cam.directions(np.full(Wp, Hp - 1), cols)[..., 2])
+    assert np.all(away.directions(np.zeros(Wp), cols)[..., 2]
+                  < away.directions(np.full(Wp, Hp - 1), cols)[..., 2])
+    prow, pcol = np.mgrid[0:Hp, 0:Wp]
+    np.testing.assert_allclose(away.directions(prow, pcol),
+                               cam.directions(Hp - 1 - prow, Wp - 1 - pcol), atol=1e-12)
+    # turned, not mirrored: going right along a row turns the azimuth the same way
+    # relative to that panorama's up direction (the handedness of (right, up, out))
+    def handedness(pm, top_z):
+        mid = Hp // 2
+        d0, d1 = pm.directions(mid, 10), pm.directions(mid, 11)
+        up = np.array([0.0, 0.0, top_z])
+        return float(np.dot(np.cross(d1 - d0, up), d0))
+    assert np.sign(handedness(cam, 1.0)) == np.sign(handedness(away, -1.0))
+
+
+def test_up_away_maps_agree_both_ways(setup):
+    pmap = panorama_map(setup, (N, N), projection="cylindrical", up="away")
+    rows, cols = np.mgrid[20:140:7, 20:140:7].astype(float)
+    prow, pcol, ok = pmap.from_image(rows, cols)
+    assert ok.mean() > 0.5
+    r2, c2, ok2 = pmap.to_image(prow[ok], pcol[ok])
+    assert ok2.all()
+    np.testing.assert_allclose(r2, rows[ok], atol=0.01)
+    np.testing.assert_allclose(c2, cols[ok], atol=0.01)
+
+
+def test_unwarp_command_up_away_is_the_default_turned(tmp_path, capsys, scenes_dir_module):
+    setup_path = scenes_dir_module / "sphere.toml"
+    pmap = panorama_map(small(load_setup(setup_path)), (N, N), projection="equirectangular")
+    img, _ = seen(pmap, lambda d: 0.5 + 0.3 * d[..., 0] + 0.2 * d[..., 2])
+    src = tmp_path / "img.exr"
+    write_exr(src, np.repeat(img[..., None], 3, axis=-1).astype(np.float32))
+    from mitsweep.config import setup_to_toml
+
+    st = tmp_path / "s.toml"
+    st.write_text(setup_to_toml(small(load_setup(setup_path))))
+    outs = {}
+    for up in ("camera", "away"):
+        out = tmp_path / f"{up}.exr"
+        assert main(["unwarp", str(src), "--setup", str(st), "--projection",
+                     "equirectangular", "--up", up, "--out", str(out)]) == 0
+        outs[up] = read_exr(out)
+    cam, away = outs["camera"][0], outs["away"][0]
+    assert set(cam) == set(away) and "mask.Y" in cam
+    for name in cam:
+        np.testing.assert_array_equal(away[name], cam[name][::-1, ::-1])
+    assert outs["away"][1]["up"] == "away"

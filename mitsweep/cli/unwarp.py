@@ -26,7 +26,7 @@ _elevation = number_type(float, lambda x: -90.0 <= x <= 90.0, "degrees",
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from ..optics.panorama import CYLINDRICAL_TOP_DEG, PROJECTIONS
+    from ..optics.panorama import CYLINDRICAL_TOP_DEG, PROJECTIONS, UP_CHOICES
 
     p.add_argument("image", help="image: EXR (an EDOF image from `mitsweep deconvolve`, or "
                                  "a render), RAW, TIFF, PNG or JPEG")
@@ -35,6 +35,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--projection", choices=PROJECTIONS, required=True,
                    help="cylindrical: rows linear in tan(elevation); equirectangular: "
                         "rows linear in elevation")
+    p.add_argument("--up", choices=UP_CHOICES, default="camera",
+                   help="which way is world-up in the panorama: toward the camera (default: "
+                        "a camera above the mirror, looking down at it) or away from it (a "
+                        "camera below the mirror, looking up: the panorama turned by 180 "
+                        "degrees, still unmirrored)")
     p.add_argument("--size", type=positive_int, nargs=2, metavar=("W", "H"),
                    help="panorama size in pixels (default: one column per pixel of the "
                         "mirror image's outer circumference, rows at the same angular step)")
@@ -122,7 +127,7 @@ def run(args) -> int:
     try:
         pmap = panorama_map(setup, (H, W), projection=args.projection, size=args.size,
                             elevation_deg=args.elevation, pixel_pitch=pitch, center_px=center,
-                            sensor_distance=i)
+                            sensor_distance=i, up=args.up)
     except ValueError as exc:  # the elevations seen at this distance make no range
         if args.sensor_distance is None or args.elevation is not None or \
                 not str(exc).startswith("elevation range"):
@@ -139,13 +144,15 @@ def run(args) -> int:
     lo, hi = (math.degrees(e) for e in pmap.elevation_range)
     provenance = {
         "command": "unwarp", "version": __version__, "input": str(src),
-        "projection": pmap.projection, "size": list(pmap.size),
+        "projection": pmap.projection, "size": list(pmap.size), "up": pmap.up,
         "elevation_deg": [lo, hi], "center_rc": list(pmap.center_px),
         "pixel_pitch": pmap.pixel_pitch, "sensor_distance": pmap.sensor_distance,
         "valid_fraction": float(valid.mean()), "setup": setup_to_dict(setup),
-        "columns": "azimuth = 180 - 360 (col + 0.5) / W deg, from world +x toward +y",
-        "rows": ("elevation linear from top to bottom" if pmap.projection == "equirectangular"
-                 else "tan(elevation) linear from top to bottom"),
+        "columns": ("azimuth = 180 - 360 (col + 0.5) / W deg, from world +x toward +y"
+                    + ("" if pmap.up == "camera" else ", with col -> W - 1 - col")),
+        "rows": ("elevation" if pmap.projection == "equirectangular" else "tan(elevation)")
+        + (" linear from top to bottom" if pmap.up == "camera"
+           else " linear from bottom to top (up = away from the camera)"),
     }
     if out.suffix.lower() == ".exr":
         write_exr(out, pano.astype(np.float32), channels={"mask.Y": valid.astype(np.float32)},

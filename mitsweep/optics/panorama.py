@@ -46,13 +46,18 @@ from .pixels import center_offset_of, optical_center_px, pixel_to_sensor, sensor
 from ..config import Setup
 from .placement import Placement
 
-__all__ = ["PROJECTIONS", "PanoramaMap", "panorama_map", "direction_to_image",
+__all__ = ["PROJECTIONS", "UP_CHOICES", "PanoramaMap", "panorama_map", "direction_to_image",
            "image_to_direction", "directions_to_angles", "angles_to_directions", "unwarp",
            "CYLINDRICAL_TOP_DEG"]
 
 logger = logging.getLogger(__name__)
 
 PROJECTIONS = ("cylindrical", "equirectangular")
+#: Which way is up in the panorama: ``"camera"``, toward the camera (the pole the camera
+#: sees itself at): world-up for a camera above the mirror looking down at it;
+#: ``"away"``, away from the camera: world-up for a camera below the mirror looking up
+#: at it (the panorama turned by 180°, so that it stays unmirrored).
+UP_CHOICES = ("camera", "away")
 #: Default top elevation of a cylindrical panorama, degrees: its height ``tan ε`` grows
 #: without bound toward the pole (tan 75° = 3.7 cylinder radii).
 CYLINDRICAL_TOP_DEG = 75.0
@@ -223,7 +228,12 @@ class PanoramaMap:
     size : (W_p, H_p)
         Panorama columns and rows.
     elevation_range : (ε_lo, ε_hi)
-        Radians, the bottom and top of the panorama.
+        Radians: the bottom and top of the panorama (the top and bottom with
+        ``up="away"``).
+    up : {"camera", "away"}
+        Which way is up (:data:`UP_CHOICES`): toward the camera (default; world-up for
+        a camera looking down at the mirror) or away from it (a camera looking up at
+        it), where the panorama is turned by 180°.
     """
 
     placement: Placement
@@ -234,8 +244,11 @@ class PanoramaMap:
     projection: str
     size: tuple[int, int]
     elevation_range: tuple[float, float]
+    up: str = "camera"
 
     def __post_init__(self) -> None:
+        if self.up not in UP_CHOICES:
+            raise ValueError(f"up: must be one of {', '.join(UP_CHOICES)}, got {self.up!r}")
         if self.projection not in PROJECTIONS:
             raise ValueError(f"projection: must be one of {', '.join(PROJECTIONS)}, got "
                              f"{self.projection!r}")
@@ -262,8 +275,11 @@ class PanoramaMap:
         """Unit world directions (..., 3) of panorama pixels (row, col), centres at integers."""
         W, H = self.size
         lo, hi = (self._height(e) for e in self.elevation_range)
-        az = np.pi - 2.0 * np.pi * (np.asarray(pcol, float) + 0.5) / W
-        el = self._elevation(hi - (np.asarray(prow, float) + 0.5) * (hi - lo) / H)
+        prow, pcol = np.asarray(prow, float), np.asarray(pcol, float)
+        if self.up == "away":  # the panorama turned by 180 degrees
+            prow, pcol = H - 1 - prow, W - 1 - pcol
+        az = np.pi - 2.0 * np.pi * (pcol + 0.5) / W
+        el = self._elevation(hi - (prow + 0.5) * (hi - lo) / H)
         return angles_to_directions(az, el)
 
     def panorama_coords(self, directions: ArrayLike
@@ -275,6 +291,8 @@ class PanoramaMap:
         with np.errstate(invalid="ignore"):
             col = np.mod((np.pi - az) * W / (2 * np.pi), W) - 0.5
             row = (hi - self._height(el)) * H / (hi - lo) - 0.5
+            if self.up == "away":
+                row, col = H - 1 - row, np.mod(W - 1 - col + 0.5, W) - 0.5
         return row, col
 
     # -- image pixels <-> sensor ---------------------------------------------------------
@@ -373,7 +391,7 @@ def panorama_map(setup: Setup, image_shape: tuple[int, ...], *, projection: str 
                  size: tuple[int, int] | None = None,
                  elevation_deg: tuple[float, float] | None = None,
                  pixel_pitch: float | None = None, center_px: tuple[float, float] | None = None,
-                 sensor_distance: float | None = None) -> PanoramaMap:
+                 sensor_distance: float | None = None, up: str = "camera") -> PanoramaMap:
     """The panorama of an image of ``setup``: its maps, elevations and size.
 
     Parameters
@@ -398,6 +416,10 @@ def panorama_map(setup: Setup, image_shape: tuple[int, ...], *, projection: str 
         ``sensor.center_offset_px`` from the image centre, else the centre).
     sensor_distance : float, optional
         mm (default the setup's reference distance, the grid of its EDOF images).
+    up : {"camera", "away"}
+        Which way is up in the panorama (:data:`UP_CHOICES`): toward the camera (a
+        camera above the mirror, looking down at it) or away from it (a camera below
+        the mirror, looking up).
 
     Returns
     -------
@@ -431,7 +453,7 @@ def panorama_map(setup: Setup, image_shape: tuple[int, ...], *, projection: str 
         span = (math.tan(hi) - math.tan(lo)) if projection == "cylindrical" else hi - lo
         size = (W_p, max(2, int(math.ceil(span / step))))
     size = (int(size[0]), int(size[1]))
-    return PanoramaMap(placement, i, shape, pitch, center, projection, size, (lo, hi))
+    return PanoramaMap(placement, i, shape, pitch, center, projection, size, (lo, hi), up=up)
 
 
 #: Panorama pixels mapped and resampled at a time by :func:`unwarp`: the maps' work
