@@ -61,6 +61,7 @@ html_static_path: list[str] = []
 #: The public packages and modules (their submodules are found by walking them).
 API_ROOTS = ["mitsweep.config", "mitsweep.optics", "mitsweep.photo", "mitsweep.tracer",
              "mitsweep.render", "mitsweep.deconv", "mitsweep.design", "mitsweep.pipeline",
+             "mitsweep.datasets",
              "mitsweep.rig", "mitsweep.io", "mitsweep.backend", "mitsweep.jit", "mitsweep.resources",
              "mitsweep.plots"]
 _ABBREVIATIONS = ("Eq.", "Eqs.", "Fig.", "Figs.", "Sec.", "e.g.", "i.e.", "et al.", "vs.")

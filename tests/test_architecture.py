@@ -51,6 +51,8 @@ LAYERS = {
     "photo": {"optics", "io"},
     "design": {"optics", "io", "backend", "tracer", "deconv"},
     "pipeline": {"optics", "io", "backend", "plots", "tracer", "render", "deconv"},
+    # training data read from a dataset directory: the pipeline's reader, never Mitsuba
+    "datasets": {"pipeline", "io", "optics"},
     "cli": ANY,
     "__main__": {"cli"},
 }

@@ -14,15 +14,36 @@ from .dataset import load_manifest
 from .runner import DatasetError, sha256
 from .tasks import read_rgb, white_level
 
-__all__ = ["evaluate_dataset", "DEPTH_BANDS_MM"]
+__all__ = ["evaluate_dataset", "checked_items", "read_finite", "DEPTH_BANDS_MM"]
 
 DEPTH_BANDS_MM = (0.0, 300.0, 1000.0, 3000.0, math.inf)
 #: A scene's entry holding its render tasks' ``scene_source`` (procedural and XML scenes).
 _SOURCE = "source"
 
 
-def _checked_items(root: Path, manifest: dict) -> dict[str, Path]:
-    """The items of a complete dataset, each file present and unchanged since written."""
+def checked_items(root: Path, manifest: dict, *, checksums: bool = True) -> dict[str, Path]:
+    """The items of a complete dataset, each file present and unchanged since written.
+
+    Parameters
+    ----------
+    root : Path
+        The dataset directory.
+    manifest : dict
+        Its manifest, validated (:func:`~mitsweep.pipeline.load_manifest`).
+    checksums : bool
+        Compare every file's SHA-256 with the manifest's (reads every file); ``False``
+        compares sizes only.
+
+    Returns
+    -------
+    dict of str to Path
+        Item name (``scene_000/sweep.exr``) to its file, sorted by name.
+
+    Raises
+    ------
+    DatasetError
+        The dataset is incomplete, or a file is missing or changed (naming it).
+    """
     if manifest.get("complete") is not True:
         raise DatasetError(f"{root}: incomplete dataset (rerun `mitsweep dataset` with the "
                            f"same options to finish it)")
@@ -32,14 +53,17 @@ def _checked_items(root: Path, manifest: dict) -> dict[str, Path]:
         if not p.is_file():
             raise DatasetError(f"{p}: listed in the manifest but missing (rerun `mitsweep "
                                f"dataset` to redo it)")
-        if p.stat().st_size != item["bytes"] or sha256(p) != item["sha256"]:
+        if p.stat().st_size != item["bytes"] or (checksums and sha256(p) != item["sha256"]):
             raise DatasetError(f"{p}: changed since it was written (size or SHA-256 differs "
                                f"from the manifest; rerun `mitsweep dataset` to redo it)")
         files[name] = p
     return files
 
 
-def _read_finite(path: Path) -> tuple[np.ndarray, dict, dict]:
+def read_finite(path: Path) -> tuple[np.ndarray, dict, dict]:
+    """An item's RGB image (H, W, 3), channels and metadata
+    (:func:`mitsweep.pipeline.tasks.read_rgb`); :class:`DatasetError` naming the file
+    and channel if any pixel is NaN or inf."""
     img, chans, meta = read_rgb(path)
     for name, arr in {"image": img, **chans}.items():
         if not np.all(np.isfinite(arr)):
@@ -66,12 +90,12 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
 
     root = Path(directory)
     manifest = load_manifest(root)
-    files = _checked_items(root, manifest)
+    files = checked_items(root, manifest)
     n_scenes = manifest["options"]["scenes"]
     results: dict[str, Any] = {"dataset": str(root), "scenes": {}}
     for i in range(n_scenes):
         d = root / f"scene_{i:03d}"
-        gt, chans, _ = _read_finite(d / "pinhole.exr")
+        gt, chans, _ = read_finite(d / "pinhole.exr")
         mask = chans.get("mask.Y")
         if mask is None:
             raise DatasetError(f"{d}/pinhole.exr: no mask.Y channel (mirror mask AOV)")
@@ -94,7 +118,7 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
             if not name.startswith(f"{d.name}/") or path.suffix != ".exr" \
                     or path.stem == "pinhole":
                 continue
-            img = _read_finite(path)[0] / level
+            img = read_finite(path)[0] / level
             if img.shape != ref.shape:
                 raise DatasetError(f"{path}: shape {img.shape} differs from the ground "
                                    f"truth's {ref.shape}")
