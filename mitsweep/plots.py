@@ -15,6 +15,7 @@ importing this module keeps its own matplotlib state.
 - :func:`plot_bank` — an IPSF bank across the field and over depths (Fig. 4–5).
 - :func:`plot_table1` — the paper's Table 1 as bar charts.
 - :func:`plot_per_radius` — PSNR per radius of an evaluated dataset.
+- :func:`plot_error_budget` — an EDOF image's error budget per radius and depth band.
 
 The paper's figures as ``mitsweep figures`` draws them (:mod:`mitsweep.pipeline.figures`
 computes their data); each takes one path or a sequence of paths (one per format):
@@ -421,6 +422,82 @@ def plot_per_radius(results: dict, path: str | Path) -> Path:
     ax.legend(handles=key, title="colour: image; line: light", title_fontsize=7, fontsize=7,
               ncols=math.ceil(len(key) / LEGEND_ROWS), loc="upper left",
               bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, framealpha=1.0)
+    return save_figure(fig, path)
+
+
+#: Colour of each error-budget term (:mod:`mitsweep.deconv.budget`), in its order.
+BUDGET_COLORS = {"information": "tab:gray", "depth": "tab:brown", "mismatch": "tab:orange",
+                 "monte_carlo": "tab:purple", "sensor": "tab:blue", "weight": "tab:red"}
+
+
+def plot_error_budget(budget: dict, path: str | Path, *, title: str | None = None) -> Path:
+    """An error budget as stacked bars: each term's MSE per radial bin (left) and per
+    depth band and region (right), positive terms stacked up from 0 and negative ones
+    down, the measured MSE of the restoration as a black tick and its PSNR above.
+
+    Parameters
+    ----------
+    budget : dict
+        :meth:`mitsweep.deconv.budget.ErrorBudget.as_dict` (``order``, ``per_radius``,
+        ``per_depth_band``, ``regions``, ``total``).
+    path : path
+    title : str, optional
+    """
+    order = budget["order"]
+    r = budget["per_radius"]
+    edges = r["edges_px"]
+    groups = [([f"{edges[i]:.0f}-{edges[i + 1]:.0f}" for i in range(len(edges) - 1)],
+               r, "radius from the optical axis (px)")]
+    right_labels, right = ["all"], [budget["total"]]
+    d = budget.get("per_depth_band")
+    if d:
+        e = d["edges_mm"]
+        n = len(e) - 1
+        right_labels += [f"{e[i] / 1000:g}-{'inf' if e[i + 1] == 'inf' else f'{e[i + 1] / 1000:g}'} m"
+                         for i in range(n)]
+        right += [{"terms": {t: d["terms"][t][i] for t in order},
+                   "mse_after": {t: d["mse_after"][t][i] for t in order}} for i in range(n)]
+    for name, reg in budget.get("regions", {}).items():
+        right_labels.append(name.replace("_", " "))
+        right.append(reg)
+
+    def columns(entries):
+        return ([[e["terms"][t] for e in entries] for t in order],
+                [e["mse_after"][order[-1]] for e in entries])
+
+    fig, axes = new_figure(1, 2, figsize=(11.0, 4.6), width_ratios=[1.2, 1.0])
+    left_terms = [[r["terms"][t][i] for i in range(len(edges) - 1)] for t in order]
+    left_total = list(r["mse_after"][order[-1]])
+    panels = [(axes[0], groups[0][0], left_terms, left_total, groups[0][2]),
+              (axes[1], right_labels, *columns(right), "depth band and region")]
+    for ax, labels, terms, totals, xlabel in panels:
+        x = np.arange(len(labels))
+        up, down = np.zeros(len(x)), np.zeros(len(x))
+        for t, vals in zip(order, terms):
+            v = 1e4 * np.array([np.nan if a is None else float(a) for a in vals])
+            v = np.nan_to_num(v)
+            pos, neg = np.clip(v, 0, None), np.clip(v, None, 0)
+            ax.bar(x, pos, bottom=up, color=BUDGET_COLORS.get(t, "k"), width=0.7,
+                   label=t.replace("_", " "))
+            ax.bar(x, neg, bottom=down, color=BUDGET_COLORS.get(t, "k"), width=0.7)
+            up += pos
+            down += neg
+        tot = 1e4 * np.array([np.nan if a is None else float(a) for a in totals])
+        ax.plot(x, tot, linestyle="none", marker="_", ms=18, mew=2, color="k",
+                label="measured")
+        for xi, v in zip(x, tot):
+            if np.isfinite(v) and v > 0:
+                ax.annotate(f"{-10 * math.log10(v * 1e-4):.1f} dB", (xi, max(v, up[xi])),
+                            xytext=(0, 3), textcoords="offset points", ha="center",
+                            fontsize=6)
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xticks(x, labels, rotation=45, ha="right", fontsize=7)
+        ax.set_xlabel(xlabel)
+        ax.grid(axis="y", color=GRID_COLOR)
+        ax.set_axisbelow(True)
+    axes[0].set_ylabel("MSE x 1e4 (data range 1)")
+    _legend_outside(axes[1])
+    fig.suptitle(title or "error budget", fontsize=10)
     return save_figure(fig, path)
 
 

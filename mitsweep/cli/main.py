@@ -28,6 +28,7 @@ COMMANDS = [
     "dataset",
     "deconvolve",
     "evaluate",
+    "budget",
     "bench",
     "capture",
     "unwarp",
