@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, DTypeLike
 
 from ..io.bank import IPSFBank
 from ..optics.pixels import optical_center_px
@@ -179,7 +179,7 @@ def _layer_index(depth: np.ndarray, depths_mm: np.ndarray, default: int) -> np.n
 
 
 def layered_blur(truth: np.ndarray, bank: IPSFBank, depth: np.ndarray, *,
-                 depth_mm: float | None = None, dtype=np.float64) -> np.ndarray:
+                 depth_mm: float | None = None, dtype: DTypeLike = np.float64) -> np.ndarray:
     r"""The truth blurred layer by layer: :math:`\sum_d A_d (t \cdot 1[\text{layer}=d])`.
 
     Each pixel belongs to the bank depth nearest its depth (``depth``, mm, the depth
