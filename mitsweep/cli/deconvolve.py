@@ -273,9 +273,10 @@ def run(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise UsageError(f"--out must be an {', '.join(OUTPUT_SUFFIXES)} file, got {out}")
-    check_outputs([src, args.bank, args.setup, args.record], [out])
+    check_outputs([src, args.bank, args.setup, args.record], {"--out": out})
+    # its warnings are logged once the photo is accepted: a refusal is the only line
     try:
-        photo = read_camera_image(src, **photo_options(args))
+        photo = read_camera_image(src, log_warnings=False, **photo_options(args))
     except CameraFileError as exc:
         if src.suffix.lower() == ".exr" and "missing channels" in str(exc):
             raise UsageError(f"{src}: needs a Y channel or R, G, B channels ({exc})") from None
@@ -339,6 +340,7 @@ def run(args) -> int:
                     "problem": None, "bank_optics_sha256": optics_fingerprint(bank.optics)}
         bank_source = str(got.path) if got.path is not None else "traced (not cached)"
 
+    photo.log_warnings()  # the setup, bank and geometry took it: it will be restored
     explicit_center = args.center is not None or center_from != "the image centre"
     if deprecated is not None:
         logger.warning("--method %s is deprecated: --method now names the restoration method "
