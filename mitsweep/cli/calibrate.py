@@ -67,7 +67,7 @@ def run(args) -> int:
 
     if args.free or args.setup is None:
         return _run_free(args)
-    check_outputs([args.photo, args.setup], [args.write])
+    check_outputs([args.photo, args.setup], {"--write": args.write})
     setup = load_setup_arg(args.setup)
     photo = read_camera_image(args.photo, log_warnings=False, **photo_options(args))
     pitch = photo.pixel_pitch or setup.sensor.pixel_pitch

@@ -93,7 +93,7 @@ def _parse_stage(text: str) -> str | None:
 
 
 def _check_out(out: str, setup_path: str, force: bool) -> None:
-    check_outputs([setup_path], [out])          # never the setup, even with --force
+    check_outputs([setup_path], {"--out": out})          # never the setup, even with --force
     if os.path.lexists(out) and not force:
         raise UsageError(f"--out {out} exists: pass --force to replace it, or choose "
                          f"another path")

@@ -154,7 +154,7 @@ def check_dataset_outputs(inputs: list, out: Path, opts, shard=None) -> None:
     of the files a run with ``opts`` writes in it (manifest, lock, items, logs)."""
     from ..pipeline.dataset import written_paths
 
-    check_outputs(inputs, [out])
+    check_outputs(inputs, {"--out": out})
     written = None
     root = out.resolve()
     for inp in inputs:

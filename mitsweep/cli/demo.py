@@ -67,9 +67,9 @@ def run(args) -> int:
     out = Path(args.out)
     spp = {k: max(1, int(round(v * args.spp_scale))) for k, v in DEMO_SPP.items()}
     opts = DatasetOptions(scenes=args.scenes, seed=0, spp=spp)
-    check_outputs([args.setup], [out / name for name in _OUTPUTS]
-                  + [out / f"{Path(n).stem}.png" for n in item_names(opts)
-                     if n.startswith("scene_000/")])
+    check_outputs([args.setup], {"--out": [out / name for name in _OUTPUTS]
+                                 + [out / f"{Path(n).stem}.png" for n in item_names(opts)
+                                    if n.startswith("scene_000/")]})
     check_dataset_outputs([args.setup], out / "dataset", opts)
     try:
         out.mkdir(parents=True, exist_ok=True)

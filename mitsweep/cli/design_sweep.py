@@ -133,7 +133,7 @@ def run(args) -> int:
     from ..pipeline import NOISE_PIXEL_MM
     from ..tracer.kernel import TRACE_REVISION
 
-    check_outputs([args.setup], [args.out, args.plot])
+    check_outputs([args.setup], {"--out": args.out, "--plot": args.plot})
     check_writable(args.out)
     if args.plot:
         from ..plots import check_figure_path

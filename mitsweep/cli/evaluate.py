@@ -26,7 +26,7 @@ def run(args) -> int:
 
     # Before the (long) evaluation: the outputs overwrite none of the dataset's files,
     # and can be written.
-    check_outputs(dataset_inputs(args.dataset), [args.plot, args.out])
+    check_outputs(dataset_inputs(args.dataset), {"--plot": args.plot, "--out": args.out})
     for path in (args.plot, args.out):
         if path:
             check_writable(path)

@@ -68,7 +68,7 @@ def run(args) -> int:
                          f"files' suffix)")
     quality = QUICK if args.quick else FULL
     files = [out / name for s in setups for name in figure_files(s)] + [out / "figures.json"]
-    check_outputs([str(p) for p in paths], files)
+    check_outputs([str(p) for p in paths], {"--out": files})
     if not args.force:
         existing = [f for f in files if f.exists()]
         existing += [d for d in (data_dir(out, s, quality) for s in setups) if d.exists()]

@@ -120,12 +120,13 @@ def per_depth_path(path: str, depth: float) -> str:
     return str(p.with_name(f"{p.stem}_{depth_tag(depth)}{p.suffix}"))
 
 
-def _outputs(args) -> list[str | None]:
-    """Every file the run writes: with several depths for one point, one of each per
-    depth (a bank holds its depths in one file)."""
+def _outputs(args) -> dict[str, list[str | None]]:
+    """Every file the run writes, by option: with several depths for one point, one of
+    each per depth (a bank holds its depths in one file)."""
     if args.bank or len(args.depth) == 1:
-        return [args.output, args.plot]
-    return [per_depth_path(f, d) for f in (args.output, args.plot) if f for d in args.depth]
+        return {"--output": [args.output], "--plot": [args.plot]}
+    return {opt: [per_depth_path(f, d) for d in args.depth] if f else []
+            for opt, f in (("--output", args.output), ("--plot", args.plot))}
 
 
 def _check_output(path: str | None, allowed: tuple[str, ...], what: str) -> None:

@@ -66,7 +66,7 @@ def run(args) -> int:
         raise UsageError("--scene: an empty path; give a Mitsuba XML scene file")
     setup = load_setup_arg(args.setup)
     check_outputs([args.setup, args.scene or setup.scene.file, args.motion],
-                  [args.out, args.preview])
+                  {"--out": args.out, "--preview": args.preview})
     _check_out(args.out, ".exr")
     if args.preview:
         _check_out(args.preview, ".png")

@@ -79,7 +79,7 @@ def run(args) -> int:
         raise UsageError("--field: chooses the field of the traced range; give it with "
                          "--verify")
     if args.plot:
-        check_outputs([args.setup], [args.plot])
+        check_outputs([args.setup], {"--plot": args.plot})
         from ..plots import check_figure_path
 
         check_figure_path(args.plot, "--plot")  # before --verify's traces, not after

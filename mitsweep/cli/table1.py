@@ -44,7 +44,7 @@ def run(args) -> int:
     from ..io.atomic import check_writable
 
     setup = load_setup_arg(args.setup)
-    check_outputs([args.setup], [args.plot])
+    check_outputs([args.setup], {"--plot": args.plot})
     if args.plot:  # before the traces, not after
         from ..plots import check_figure_path
 

@@ -96,7 +96,7 @@ def run(args) -> int:
         raise FileNotFoundError(f"{src}: no such image file")
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise UsageError(f"--out must be an {', '.join(OUTPUT_SUFFIXES)} file, got {out}")
-    check_outputs([src, args.setup], [out])
+    check_outputs([src, args.setup], {"--out": out})
     if args.elevation is not None and not args.elevation[0] < args.elevation[1]:
         raise UsageError(f"--elevation {args.elevation[0]:g} {args.elevation[1]:g}: LOW must "
                          f"be below HIGH")
