@@ -16,8 +16,8 @@ per scene, ``len()`` and index access, each item a dict
 
 Images are in relative exposure, the dataset's own normalisation
 (:func:`mitsweep.pipeline.white_level`): every image of a scene is divided by the 99th
-percentile of its ground truth inside the mirror's image, so 1.0 is a bright diffuse
-surface and the data range of its metrics is 1. The EXR files store channels in
+percentile of its ground truth inside the mirror's image, so 1.0 is the noise model's
+reference level and the data range of its metrics is 1. The EXR files store channels in
 alphabetical order (B, G, R); items are always RGB.
 
 The dataset and :class:`PatchSampler` follow the protocols of PyTorch and JAX input
