@@ -18,7 +18,7 @@ import pytest
 
 from conftest import ROOT, run_cli
 from mitsweep.deconv import SensorNoise, blur_operator, deconvolve, psnr
-from mitsweep.deconv.budget import (TERMS, error_budget, layered_blur, oracle_weight)
+from mitsweep.deconv.budget import TERMS, error_budget, layered_blur, oracle_weight
 from mitsweep.deconv.synthetic import synthetic_radial_bank
 
 SHAPE = (64, 64)
@@ -93,7 +93,7 @@ def test_depth_term_and_mismatch_cancel_on_the_layered_model(case):
 
 
 def test_noise_free_render_has_zero_sensor_term_and_noisy_one_a_positive_one(case):
-    truth, bank, mask, depth = case
+    truth, bank, mask, _ = case
     gen = np.random.default_rng(3)
     render = _model(truth, bank) + 0.004 * gen.standard_normal(truth.shape)  # "Monte Carlo"
     b = error_budget(truth, render, bank, clean_observed=render, mask=mask, weight=1e-2)
@@ -158,7 +158,7 @@ def test_oracle_weight_beats_every_weight_of_a_grid(case):
 
 
 def test_a_method_without_a_scalar_weight_is_refused(case):
-    truth, bank, mask, _ = case
+    truth, bank, _, _ = case
     with pytest.raises(ValueError, match="no scalar weight"):
         error_budget(truth, truth, bank, method="rl")
 

@@ -331,8 +331,8 @@ class ErrorBudget:
         after the last step (the measured one)."""
         short = {"information": "info", "monte_carlo": "MC"}
         heads = [short.get(t, t) for t in self.terms]
-        lines = [f"terms: MSE x 1e4 (data range 1), in order {' -> '.join(self.terms)}; "
-                 f"PSNR: the restoration's",
+        lines = [(f"terms: MSE x 1e4 (data range 1), in order {' -> '.join(self.terms)}; "
+                  f"PSNR: the restoration's"),
                  f"{'region':<18s} {'pixels':>7s} " + " ".join(f"{h:>9s}" for h in heads)
                  + f" {'total':>9s} {'PSNR dB':>8s}"]
         tm = self.term_mse
