@@ -41,8 +41,8 @@ Where each probe class of the issue ("Why", 1-11) is tested
                                         warning, then a refusal after 30 s of tracing that
                                         names nsr, not --lux)
 9   late refusals                       test_memory_gate (figures --seed, design-sweep
-                                        --kernel-size); here: non-UTF-8 output names for every writing
-                                        command, and non-ASCII ones under LC_ALL=C with
+                                        --kernel-size); here: non-UTF-8 output names for every
+                                        writing command, and non-ASCII ones under LC_ALL=C with
                                         PYTHONUTF8=0, refused before any work naming the option
 10  corrupt banks accepted              test_bank_validation (NaN depths, points, vignetting,
                                         reversed radii, string depths, with deconvolve)
