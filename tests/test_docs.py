@@ -13,9 +13,9 @@ ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 
 #: The public packages and modules the API reference must document.
-PUBLIC = ["mitsweep.config", "mitsweep.optics", "mitsweep.tracer", "mitsweep.render",
-          "mitsweep.deconv", "mitsweep.design", "mitsweep.pipeline", "mitsweep.rig",
-          "mitsweep.io", "mitsweep.backend"]
+PUBLIC = ["mitsweep.config", "mitsweep.optics", "mitsweep.photo", "mitsweep.tracer",
+          "mitsweep.render", "mitsweep.deconv", "mitsweep.design", "mitsweep.pipeline",
+          "mitsweep.rig", "mitsweep.io", "mitsweep.backend", "mitsweep.datasets"]
 
 
 def test_api_reference_lists_every_public_package():
@@ -55,7 +55,7 @@ def test_site_builds_without_warnings(tmp_path):
     assert "build succeeded" in log, log[-6000:]
     for page in ["index", "getting-started", "design", "benchmarks", "gallery", "api/index",
                  *(f"guide/{g}" for g in ("design", "analyse", "render", "datasets", "restore",
-                                          "capture"))]:
+                                          "capture", "real-photo", "train", "budget"))]:
         assert (out / f"{page}.html").is_file(), page
     # The API reference: a page per public package, and one per module under it, with
     # the numpydoc sections rendered (a Parameters field list, not raw text).

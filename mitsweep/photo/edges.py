@@ -24,7 +24,7 @@ __all__ = ["edge_offsets", "gaussian_peak", "edge_prominence", "EDGE_PEAK_HALF_W
 #: 0.20-0.33 px off, a Gaussian over the lobe above half its peak 0.18-0.27, above 0.7
 #: of it 0.13-0.23, over +-0.25 px 0.06-0.20, over +-0.5 px 0.05-0.18.
 EDGE_PEAK_HALF_WIDTH_PX = 0.5
-#: Share of the outline's points cut at each end of the mean |derivative| of
+#: Share of the outline's points cut at each end of the mean absolute derivative of
 #: :func:`edge_prominence`.
 PROMINENCE_TRIM = 0.2
 
@@ -134,7 +134,7 @@ def gaussian_peak(ds: np.ndarray, t: np.ndarray, at: np.ndarray,
 def edge_prominence(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
                     pts: np.ndarray, nrm: np.ndarray, half: float, radius: float) -> float:
     """How much stronger the image's gradient is on the fitted outline than beside it:
-    the |derivative| across the outline, averaged over the outline's points, within
+    the absolute derivative across the outline, averaged over the outline's points, within
     ``half``/2 of it, over its median from 2 ``half`` to 4 ``half`` on both sides (a
     rim: several; texture: about 1).
 
