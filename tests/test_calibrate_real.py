@@ -71,25 +71,42 @@ def _rough_setup(entry, shape, error: float):
 SETUP_KNOWN_FAILURES = {
     "sphere_pageos_nasa.png": "the draped Mylar hides the limb's top; prominence < 3",
     "dome_store_bright_rim.jpg": "the dome's second, concentric edge",
-    "paraboloid_mei_2.jpg": "an edge of the mount inside the rim wins: centre 9 px off",
     "omni_kaidan.jpg": "the mount's edge wins: centre 24 px off (the rim is no circle)",
 }
 
 
-@pytest.mark.parametrize("entry", [
-    pytest.param(e, id=e["name"], marks=[pytest.mark.xfail(
-        reason=SETUP_KNOWN_FAILURES[e["name"]], strict=True)]
-        if e["name"] in SETUP_KNOWN_FAILURES else []) for e in PHOTOS])
-def test_a_rough_setup_calibrates_the_real_photo(entry):
+#: Misses at some guesses only (the photo calibrates at the others): the coarse search
+#: keeps, of the outlines scoring within half the best, the one nearest the prediction
+#: (a holder around the mirror is a concentric outline too), so a guess nearer the
+#: mount's inner edge than the rim picks that edge (paraboloid_mei at -35%: scale 1.07
+#: where the rim is at 1.54; paraboloid_mei_2 at +9% and +35%: 9 px off).
+GUESS_FAILURES = {("paraboloid_mei.jpg", -0.35): "the mount's inner edge is nearer",
+                  ("paraboloid_mei_2.jpg", 0.09): "the mount's inner edge is nearer",
+                  ("paraboloid_mei_2.jpg", 0.35): "the mount's inner edge is nearer"}
+
+
+def _rough_cases():
+    for e in PHOTOS:
+        for error in (0.09, -0.35, 0.35):
+            marks = [] if error == 0.09 else [pytest.mark.slow]
+            why = SETUP_KNOWN_FAILURES.get(e["name"]) or GUESS_FAILURES.get((e["name"], error))
+            if why:
+                marks.append(pytest.mark.xfail(reason=why, strict=True))
+            yield pytest.param(e, error, id=f"{e['name']}{error:+.2f}", marks=marks)
+
+
+@pytest.mark.parametrize("entry, error", list(_rough_cases()))
+def test_a_rough_setup_calibrates_the_real_photo(entry, error):
+    """A 9% guess in the default run; the ±35% ends of the range the search covers in CI."""
     img = _read(entry)
-    setup = _rough_setup(entry, img.shape[:2], error=0.09)
+    setup = _rough_setup(entry, img.shape[:2], error=error)
     cal = calibrate_photo(img, setup)
     tol = entry["tolerance_px"]
     assert np.abs(np.asarray(cal.center_px) - entry["centre"]).max() < tol
     assert abs(cal.rim_radius_px - entry["radius"]) < tol
-    # the 9% guess is reported, with the pitch that would make the prediction right
+    # the guess is reported, with the pitch that would make the prediction right
     assert any("pixel pitch would be" in w for w in cal.warnings)
-    assert cal.implied_pixel_pitch == pytest.approx(setup.sensor.pixel_pitch * 1.09,
+    assert cal.implied_pixel_pitch == pytest.approx(setup.sensor.pixel_pitch * (1 + error),
                                                     rel=tol / entry["radius"])
 
 
