@@ -116,3 +116,22 @@ def test_real_bench_all_quick(capsys):
     assert d["polar"]["time_ratio_vs_skimage"] > 0
     ds = res["targets"]["dataset"]
     assert "result" in ds or "skipped" in ds
+
+
+def test_calibrate_target_is_registered():
+    assert cli_bench.TARGETS["calibrate"] == "mitsweep.photo.bench"
+
+
+@pytest.mark.slow
+def test_bench_calibrate_quick_finds_the_synthetic_disc(capsys):
+    """The 4 MP run: both mitsweep paths and the scikit-image baseline place the disc's
+    centre and radius within the calibration bars (0.25 / 0.5 px)."""
+    import json
+
+    from mitsweep.cli.main import main
+
+    assert main(["bench", "calibrate", "--quick", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for k in ("setup", "free", "skimage"):
+        assert out[k]["centre_error_px"] < 0.25 and out[k]["radius_error_px"] < 0.5, k
+        assert out[k]["seconds"] > 0

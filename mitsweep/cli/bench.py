@@ -34,6 +34,7 @@ TARGETS = {
     "render": "mitsweep.render.bench",
     "deconv": "mitsweep.deconv.bench",
     "dataset": "mitsweep.pipeline.bench",
+    "calibrate": "mitsweep.photo.bench",
 }
 ALL = "all"
 

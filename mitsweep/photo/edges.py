@@ -13,6 +13,8 @@ and on Mitsuba renders of the tilted paraboloid its centroid moved the axis by
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["edge_offsets", "gaussian_peak", "edge_prominence", "EDGE_PEAK_HALF_WIDTH_PX",
@@ -105,8 +107,15 @@ def gaussian_peak(ds: np.ndarray, t: np.ndarray, at: np.ndarray,
     takes from the lobe, which moves a centroid over the whole lobe but not its top."""
     n = len(ds)
     pk = ds[np.arange(n), at]
-    x = t[None, :] - t[at][:, None]  # about the peak sample: well conditioned
-    use = lobe & (np.abs(x) <= EDGE_PEAK_HALF_WIDTH_PX + 1e-9) & (ds > 0)
+    # Only the samples within the half-width of the peak take part: gather that window
+    # (the whole profile is hundreds of samples on a large photo's rim).
+    step = float(t[1] - t[0]) if len(t) > 1 else 1.0
+    m = int(math.ceil(EDGE_PEAK_HALF_WIDTH_PX / step + 1e-9))
+    cols = np.clip(at[:, None] + np.arange(-m, m + 1)[None, :], 0, ds.shape[1] - 1)
+    inside = (at[:, None] + np.arange(-m, m + 1)[None, :] == cols)
+    ds, lobe, tt = np.take_along_axis(ds, cols, 1), np.take_along_axis(lobe, cols, 1), t[cols]
+    x = tt - t[at][:, None]  # about the peak sample: well conditioned
+    use = inside & lobe & (np.abs(x) <= EDGE_PEAK_HALF_WIDTH_PX + 1e-9) & (ds > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
         y = np.where(use, np.log(np.where(use, ds, 1.0) / pk[:, None]), 0.0)
     w = use.astype(np.float64)

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..optics.outline import RimOutline
 from .coarse import coarse_search, search_scales
-from .image import fill_void, luminance, photo_void
+from .image import fill_void, luminance, photo_void, reduce_by
 from .rim import CalibrationError, NoMirrorError, RimFit, fit_rim
 
 __all__ = ["find_circle", "circle_outline", "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE",
@@ -35,6 +35,9 @@ MAX_RADIUS_SHARE = 0.75
 #: on the real photos of ``tests/data/real`` the mirror's octave was not always among
 #: the three strongest coarse scores (texture in a sky, a building's windows).
 CANDIDATES = 6
+#: Shorter side (px) of the copy the candidates are compared on (larger photos are
+#: reduced by an integer factor; the winner is refined at full resolution).
+FREE_WORKING_SIDE_PX = 1024
 #: Outline points of the circle template.
 N_POINTS = 1440
 
@@ -84,6 +87,25 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
     void = photo_void(image)
     if void.any() and not void.all():
         lum = fill_void(lum, void)
+    # The candidates are found and compared on a copy at most ~FREE_WORKING_SIDE_PX on its
+    # shorter side; only the winner is refined at full resolution.
+    f = max(1, min(H, W) // FREE_WORKING_SIDE_PX)
+    if f == 1:
+        return _best_circle(lum, image, lo, hi)
+    small = reduce_by(lum, f)
+    fit, radius = _best_circle(small, small, lo / f, hi / f)
+    logger.info("free search at 1/%d: centre (%.1f, %.1f) px, radius %.1f px", f,
+                fit.center_px[0] * f + (f - 1) / 2, fit.center_px[1] * f + (f - 1) / 2,
+                radius * f)
+    step = 1.0 + 2.0 / radius  # two reduced pixels' worth of scale
+    fit = fit_rim(image, circle_outline(radius * f), 1.0, scale_range=(1.0 / step, step))
+    return fit, radius * f * fit.scale
+
+
+def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
+                 ) -> tuple[RimFit, float]:
+    """Coarse candidates per octave of radius in ``[lo, hi]`` (searched on ``lum``), each
+    refined and validated on ``image``; the best explained one."""
     candidates = []
     base = lo * math.sqrt(2.0)
     while base / math.sqrt(2.0) < hi:

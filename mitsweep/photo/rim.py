@@ -35,7 +35,7 @@ from ..optics.outline import RimOutline
 from .coarse import COARSE_RADIUS_PX, COARSE_SCALE_STEP, coarse_search, search_scales
 from .edges import edge_offsets, edge_prominence
 from .image import fill_void, luminance, noise_sigma, photo_void, smooth
-from .robust import centre_standard_error, tukey_lstsq
+from .robust import EDGE_CORRELATION_PX, centre_standard_error, tukey_lstsq
 
 __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim", "MIN_INLIER_FRACTION",
            "MIN_CONSISTENT_FRACTION", "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
@@ -82,6 +82,9 @@ RESIDUAL_WIDTH_SHARE = 0.5
 #: photos of ``tests/data/real`` with circles: 0.1-1.2% of the radius. The square border
 #: of a cropped render (the wrong shape, 1.8-2.0 px at 80 px) stays refused.
 RESIDUAL_RADIUS_SHARE = 0.012
+#: The refinement stops once a pass moves the outline by less than this share of the
+#: centre's standard error (or by less than 1e-3 px).
+STEP_SHARE_OF_SE = 0.05
 #: The roll is fitted when a radian of it moves the outline's points by more than this
 #: share of its radius (RMS along the normals): never for a circle about the axis
 #: (0), for the tilted paraboloid 0.30.
@@ -282,7 +285,14 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         used[np.flatnonzero(good)[inl]] = True
         rms = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else math.inf
         search = max(half, min(search, 4.0 * np.abs(x[:2]).max() + 2.0))
-        if np.abs(x[:2]).max() < 1e-3 and max(abs(x[2]), abs(d_roll)) * radius < 1e-3:
+        # Converged: the step is below 1e-3 px, or (a large, soft rim whose reweighting
+        # keeps shifting it by more) below a twentieth of the centre's statistical
+        # uncertainty, rms / sqrt(independent points / 2).
+        indep = max(2.0, min(float(inl.sum()),
+                             2.0 * math.pi * radius * scale / EDGE_CORRELATION_PX))
+        resolution = max(1e-3, STEP_SHARE_OF_SE * rms * math.sqrt(2.0 / indep))
+        if np.abs(x[:2]).max() < resolution and \
+                max(abs(x[2]), abs(d_roll)) * radius < resolution:
             break
     pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
     n_used = int(used.sum())
