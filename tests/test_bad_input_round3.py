@@ -20,7 +20,7 @@ Where each probe class of the issue ("Why", 1-11) is tested
                                         test_bank_validation (radii <= 0, deep header),
                                         test_network_waits (HTTP scheduler); here: motion files
                                         with a 400-digit number or a provenance nested 100 000
-                                        deep (xfail: still a traceback, see below)
+                                        deep
 3   hangs (FIFO, silent scheduler)      test_regular_files (FIFO as setup, --scene, --motion,
                                         include, texture, under --scenes-from; timeout),
                                         test_network_waits (silent listener, HTTP; bounded time)
@@ -35,11 +35,9 @@ Where each probe class of the issue ("Why", 1-11) is tested
 8   warning noise, multi-line refusals  test_memory_gate (95 MP truncated header), test_png_fuzz;
                                         here: deconvolve, calibrate and unwarp refuse an 8-bit,
                                         clipped PNG or JPEG in one line (its quality warnings only
-                                        once it is used); a motion interval of 1e-300 (xfail:
-                                        NumPy's overflow warning before the refusal). Not yet
-                                        tested: design-sweep --lux 1e-300 / 1e300 (a NumPy
-                                        warning, then a refusal after 30 s of tracing that
-                                        names nsr, not --lux)
+                                        once it is used); a motion interval of 1e-300;
+                                        test_messages: design-sweep / dataset --lux 1e-300 and
+                                        1e300 refused when read
 9   late refusals                       test_memory_gate (figures --seed, design-sweep
                                         --kernel-size); here: non-UTF-8 output names for every
                                         writing command, and non-ASCII ones under LC_ALL=C with
@@ -291,9 +289,6 @@ def _motion_text(kind: str) -> str:
                            sensor_distances_mm=[57.0, 57.5, 58.0]))
 
 
-@pytest.mark.xfail(strict=True, reason="mitsweep/optics/motion_file.py: OverflowError / "
-                   "RecursionError escape parse_motion_file, and stage_kinematics divides "
-                   "by a 1e-300 interval with NumPy warnings on (issue 28, items 2 and 8)")
 @pytest.mark.parametrize("kind", ["400-digit-number", "provenance-nested-100000",
                                   "interval-1e-300"])
 @pytest.mark.parametrize("command", ["ipsf", "render"])

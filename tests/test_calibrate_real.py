@@ -133,3 +133,15 @@ def test_free_cli_refuses_a_photo_without_a_mirror(capsys):
     raw = corpus(with_outline=False)[0]["path"]  # buildings, no mirror
     line = refused(capsys, ["calibrate", str(raw), "--free"])
     assert line.startswith("mitsweep: error: no mirror found")
+
+
+@pytest.mark.parametrize("side", [20, 48])
+def test_free_cli_refuses_a_tiny_photo_in_one_line(tmp_path, capsys, side):
+    from PIL import Image
+    from cli_contract import refused
+
+    photo = tmp_path / "tiny.png"
+    noise = np.random.default_rng(side).random((side, side, 3))
+    Image.fromarray((noise * 255).astype(np.uint8)).save(photo)
+    line = refused(capsys, ["calibrate", str(photo), "--free"])
+    assert "radius_range_px" not in line and ("no mirror found" in line or "32x32" in line)

@@ -55,12 +55,15 @@ def test_unwarp_sensor_distance_is_named(capsys, tmp_path, tiny, photo, value, m
     assert "elevation range" not in line
 
 
-@pytest.mark.parametrize("value", ["inf", "nan", "-1", "0"])
-def test_design_sweep_lux_must_be_finite_and_positive(capsys, tmp_path, tiny, value):
-    line = refused(capsys, ["design-sweep", tiny, "--lux", value, "--out",
-                            tmp_path / "d.json"])
-    assert line == (f"mitsweep design-sweep: error: argument --lux: must be a finite "
-                    f"illuminance > 0 lux, got {value}")
+@pytest.mark.parametrize("value", ["inf", "nan", "-1", "0", "1e-300", "1e300"])
+@pytest.mark.parametrize("command", ["design-sweep", "dataset"])
+def test_lux_must_be_an_illuminance_the_noise_model_takes(capsys, tmp_path, tiny, value,
+                                                          command):
+    """Refused when read, before any tracing: 1e-300 lux used to warn (NumPy) and fail
+    after 30 s of tracing naming ``nsr``; 1e300 overflowed."""
+    line = refused(capsys, [command, tiny, "--lux", value, "--out", tmp_path / "d.json"])
+    assert line == (f"mitsweep {command}: error: argument --lux: must be an illuminance "
+                    f"in [0.0001, 1e+06] lux, got {value}")
 
 
 @pytest.mark.parametrize("json_flag", [[], ["--json"]])

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, NoReturn, TypeVar, Union
 
 from ..config import Setup, SetupError, load_setup
+from ..deconv.noise import ILLUMINANCE_RANGE_LUX
 
 __all__ = ["depth_mm", "number_type", "UsageError", "USER_ERRORS", "ArgumentParser",
            "ArgumentParserError", "check_output_name", "check_outputs", "json_text",
@@ -248,6 +249,13 @@ def number_type(convert: Callable[[str], N], ok: Callable[[N], bool], expected: 
 
 #: A number > 0.
 positive_float = number_type(float, lambda x: x > 0, "a number", "> 0", "positive_float")
+#: A scene illuminance of a noise model, lux, in
+#: :data:`mitsweep.deconv.noise.ILLUMINANCE_RANGE_LUX`.
+illuminance_lux = number_type(
+    float, lambda x: ILLUMINANCE_RANGE_LUX[0] <= x <= ILLUMINANCE_RANGE_LUX[1],
+    "an illuminance in lux",
+    f"an illuminance in [{ILLUMINANCE_RANGE_LUX[0]:g}, {ILLUMINANCE_RANGE_LUX[1]:g}] lux",
+    "illuminance_lux")
 #: An object depth in mm: a number > 0, ``inf`` allowed.
 depth_mm = number_type(float, lambda x: x > 0, "a depth in mm (or inf)",
                        "> 0 mm (inf allowed)", "depth_mm")

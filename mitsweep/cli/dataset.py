@@ -6,8 +6,8 @@ import argparse
 import math
 from pathlib import Path
 
-from .common import (number_type, UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
-                     print_json)
+from .common import (number_type, UsageError, check_outputs, illuminance_lux, load_setup_arg,
+                     positive_int, print_json)
 from .motion import add_motion_argument, motion_from_args
 
 NAME = "dataset"
@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     p.add_argument("--spp", type=positive_int, nargs=4, metavar=("PINHOLE", "FOCUSED", "SWEEP", "STOPPED"),
                    default=[16, 64, 128, 64], help="samples per pixel per mode (default 16 64 128 64)")
-    p.add_argument("--lux", type=positive_float, nargs="*", default=[50.0, 2.0, 0.5],
+    p.add_argument("--lux", type=illuminance_lux, nargs="*", default=[50.0, 2.0, 0.5],
                    help="light levels for the noisy images, lux (default 50 2 0.5)")
     p.add_argument("--bank-rays", type=positive_int, default=None, metavar="N",
                    help="rays traced per IPSF of the bank (default: the tracer's)")

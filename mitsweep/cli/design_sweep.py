@@ -11,8 +11,8 @@ import argparse
 import math
 import sys
 
-from .common import (UsageError, check_outputs, depth_mm, load_setup_arg, number_type,
-                     positive_int, print_json)
+from .common import (UsageError, check_outputs, depth_mm, illuminance_lux, load_setup_arg,
+                     number_type, positive_int, print_json)
 
 NAME = "design-sweep"
 HELP = ("design the sensor's time profile over the sweep (not only its range) that "
@@ -22,13 +22,12 @@ HELP = ("design the sensor's time profile over the sweep (not only its range) th
 _distance = number_type(float, lambda x: math.isfinite(x) and x > 0,
                         "a sensor distance in mm", "a finite sensor distance > 0 mm",
                         "sensor_distance")
-_lux = number_type(float, lambda x: math.isfinite(x) and x > 0, "an illuminance in lux",
-                   "a finite illuminance > 0 lux", "lux")
+
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("setup", help="setup TOML file (see scenes/)")
-    p.add_argument("--lux", type=_lux, default=50.0,
+    p.add_argument("--lux", type=illuminance_lux, default=50.0,
                    help="scene illuminance of the noise model, lux (50); the sensor is the "
                         "dataset's (paper Fig. 10 sweep settings: F2.8, 0.6 s, ISO 100, "
                         "6.4 um pixels)")

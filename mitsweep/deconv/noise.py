@@ -57,6 +57,12 @@ def _check(name, value, lo=0.0, lo_open=True, hi=math.inf):
     return v
 
 
+#: Illuminances (lux) the command line accepts for a noise model: from a moonless night
+#: sky to beyond direct sunlight. Outside it the model's signal underflows or overflows
+#: (1e-300 lux: no electron; 1e300 lux: inf), and the NSR a design or dataset uses with it.
+ILLUMINANCE_RANGE_LUX = (1e-4, 1e6)
+
+
 @dataclass(frozen=True, kw_only=True)
 class SensorNoise:
     """Sensor and exposure settings that fix the noise of an image.

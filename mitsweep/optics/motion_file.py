@@ -112,6 +112,11 @@ def _fail(source: str | None, message: str) -> SetupError:
     return SetupError(f"motion file {source}: {message}" if source else f"motion file: {message}")
 
 
+#: Smallest step between knot times (normalised exposure time): closer knots would give
+#: velocities beyond any stage's (a 1e-300 step overflows them to inf).
+MIN_TIME_STEP = 1e-9
+
+
 def _check_table(times: np.ndarray, positions: np.ndarray, source: str | None) -> None:
     """The format's rules on the knots (module docstring)."""
     if times.size == 0 or positions.size == 0:
@@ -130,6 +135,11 @@ def _check_table(times: np.ndarray, positions: np.ndarray, source: str | None) -
         k = int(np.argmax(np.diff(times) <= 0))
         raise _fail(source, f"times must be strictly increasing (knot {k + 1}: "
                             f"{times[k + 1]:g} after {times[k]:g})")
+    if np.min(np.diff(times)) < MIN_TIME_STEP:
+        k = int(np.argmin(np.diff(times)))
+        raise _fail(source, f"times {times[k]:g} and {times[k + 1]:g} (knots {k} and {k + 1}) "
+                            f"are closer than {MIN_TIME_STEP:g} of the exposure: the stage's "
+                            f"velocity between them is not a number a sweep can have")
     if np.any(positions <= 0):
         raise _fail(source, f"sensor distances must be > 0 mm, got min {positions.min():g}")
     steps = np.diff(positions)
@@ -203,6 +213,9 @@ def parse_motion_file(text: str, *, source: str | None = None) -> MotionFile:
         doc = json.loads(text, parse_constant=_reject_constant)
     except ValueError as exc:
         raise _fail(source, f"not valid JSON ({str(exc).splitlines()[0]})") from None
+    except RecursionError:
+        raise _fail(source, "not a motion file: JSON nested deeper than Python's parser "
+                            "goes") from None
     if not isinstance(doc, dict):
         raise _fail(source, f"expected a JSON object, got {type(doc).__name__}")
     if doc.get("format") != FORMAT:
@@ -223,7 +236,11 @@ def parse_motion_file(text: str, *, source: str | None = None) -> MotionFile:
         if not isinstance(value, list) or not all(
                 isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
             raise _fail(source, f"{key} must be a list of numbers")
-        arrays.append(np.asarray(value, dtype=float))
+        try:
+            arrays.append(np.asarray(value, dtype=float))
+        except OverflowError:
+            raise _fail(source, f"{key}: a number too large for a float (at most "
+                                f"{np.finfo(float).max:.3g})") from None
     times, positions = arrays
     _check_table(times, positions, source)
     exposure = _check_exposure(doc.get("exposure_s"), source)

@@ -81,9 +81,16 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
         raise NoMirrorError(f"the photo must be an image of at least 32x32 pixels, got "
                             f"shape {np.shape(image)}")
     H, W = lum.shape
-    lo, hi = radius_range_px or (MIN_RADIUS_SHARE * min(H, W), MAX_RADIUS_SHARE * max(H, W))
-    if not 8.0 <= lo < hi:
-        raise ValueError(f"radius_range_px must satisfy 8 <= min < max, got {(lo, hi)}")
+    if radius_range_px is None:
+        lo, hi = max(8.0, MIN_RADIUS_SHARE * min(H, W)), MAX_RADIUS_SHARE * max(H, W)
+        if hi <= 2.0 * lo:
+            raise NoMirrorError(f"no mirror found: the {W}x{H} px photo is too small to look "
+                                f"for one (an outline of 8 px radius or more, at most "
+                                f"{MAX_RADIUS_SHARE:.0%} of the longer side)")
+    else:
+        lo, hi = radius_range_px
+        if not 8.0 <= lo < hi:
+            raise ValueError(f"radius_range_px must satisfy 8 <= min < max, got {(lo, hi)}")
     void = photo_void(image)
     if void.any() and not void.all():
         lum = fill_void(lum, void)
