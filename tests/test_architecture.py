@@ -285,3 +285,136 @@ def test_backend_override_is_validated(monkeypatch):
     with pytest.raises(backend.BackendError, match="must be one of cuda, llvm, scalar"):
         backend.select_backend()
     backend.select_backend.cache_clear()
+
+
+# -- import cycles -----------------------------------------------------------------------
+# Every first-party import counts, at module level or inside a function (a deferred import
+# hides a cycle, it does not remove it). ``from pkg import name`` depends on the
+# submodule ``pkg.name`` where there is one, else on ``pkg`` itself (``from . import
+# METHODS`` reads the package's namespace); the implicit import of a module's parent
+# package by Python is not an edge.
+
+def _modules(root: Path) -> dict[str, tuple[Path, bool]]:
+    """Dotted name → (path, is_package) of every module of the package under ``root``."""
+    return {name: (path, pkg) for path in sorted((root / TOP).rglob("*.py"))
+            for name, pkg in [_module_name(path, root)]}
+
+
+def _owner(dotted: str, modules) -> str | None:
+    """The module ``dotted`` names, or the module holding it (``pkg.mod.attr`` → ``pkg.mod``)."""
+    while dotted and dotted not in modules:
+        dotted = dotted.rpartition(".")[0]
+    return dotted or None
+
+
+def import_graph(root: Path) -> dict[str, set[str]]:
+    """First-party module → the first-party modules it imports, deferred imports included."""
+    modules = _modules(root)
+    graph: dict[str, set[str]] = {}
+    for name, (path, is_package) in modules.items():
+        edges = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                base = _resolve(node.module, node.level, name, is_package)
+                subs = [f"{base}.{a.name}" for a in node.names]
+                targets = subs if all(s in modules for s in subs) else [base] + \
+                    [s for s in subs if s in modules]
+            elif isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            else:
+                continue
+            edges |= {t for t in map(lambda d: _owner(d, modules), targets) if t}
+        for imp in imports_of(path.read_text(), name, is_package):
+            if imp.how in ("import_module", "__import__") and imp.target:
+                edges.add(_owner(imp.target, modules))
+        edges.discard(None)
+        edges.discard(name)
+        graph[name] = edges
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan, iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles = []
+    for start in sorted(graph):
+        if start in index:
+            continue
+        work = [(start, iter(sorted(graph[start])))]
+        index[start] = low[start] = len(index)
+        stack.append(start)
+        on_stack.add(start)
+        while work:
+            v, children = work[-1]
+            w = next(children, None)
+            if w is not None:
+                if w not in index:
+                    index[w] = low[w] = len(index)
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph.get(w, ())))))
+                elif w in on_stack:
+                    low[v] = min(low[v], index[w])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[v])
+            if low[v] == index[v]:
+                component = []
+                while True:
+                    w = stack.pop()
+                    on_stack.discard(w)
+                    component.append(w)
+                    if w == v:
+                        break
+                if len(component) > 1:
+                    cycles.append(sorted(component))
+    return cycles
+
+
+def test_no_import_cycle_among_first_party_modules():
+    cycles = import_cycles(import_graph(PKG.parent))
+    assert not cycles, "import cycles (deferred imports included):\n" + "\n".join(
+        " <-> ".join(c) for c in cycles)
+
+
+@pytest.mark.parametrize("files, cycle", [
+    # a deferred import hides a cycle; it is still one
+    ({"pipeline/_a.py": "from . import _b\n",
+      "pipeline/_b.py": "def f():\n    from ._a import x\n"},
+     ["mitsweep.pipeline._a", "mitsweep.pipeline._b"]),
+    # a submodule taking a name from the package that imports it
+    ({"deconv/_pkg/__init__.py": "def f():\n    from . import _mod\n",
+      "deconv/_pkg/_mod.py": "from . import NAME\n"},
+     ["mitsweep.deconv._pkg", "mitsweep.deconv._pkg._mod"]),
+    # three modules in a ring, one through importlib
+    ({"io/_x.py": "import importlib\nimportlib.import_module('mitsweep.io._y')\n",
+      "io/_y.py": "from mitsweep.io._z import f\n", "io/_z.py": "from ._x import g\n"},
+     ["mitsweep.io._x", "mitsweep.io._y", "mitsweep.io._z"]),
+])
+def test_cycle_checker_finds_planted_cycles(tree_copy, tmp_path, files, cycle):
+    root = tmp_path / "t"
+    shutil.copytree(tree_copy, root)
+    for rel, source in files.items():
+        (root / TOP / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / TOP / rel).write_text(source)
+    assert cycle in import_cycles(import_graph(root))
+
+
+def test_cycle_checker_accepts_a_submodule_imported_from_its_package():
+    """``from . import sub`` in a package's module is an edge to ``sub``, not a cycle
+    through the package."""
+    graph = {"p": {"p.a"}, "p.a": {"p.b"}, "p.b": set()}
+    assert import_cycles(graph) == []
+
+
+def test_render_reaches_into_no_private_mitsuba_frame():
+    """STYLE.md: never reach into Mitsuba's private frames or names (the zero-gradient
+    guard reads public state, in mitsweep's own entry point)."""
+    for path in sorted((PKG / "render").rglob("*.py")):
+        text = path.read_text()
+        for banned in ("_getframe", "f_back", "_RenderOp", "inspect.stack"):
+            assert banned not in text, f"{path.name}: {banned}"

@@ -140,7 +140,7 @@ def test_sensor_distance_follows_motion_profile(kind):
     sensor = mi.load_dict(_focalsweep(sensor_start=start, sensor_end=end, profile=kind,
                                       shutter_open=0.5, shutter_close=2.5, **extra))
     t = np.linspace(0, 1, 101)
-    got = np.array(sensor._sensor_distance(mi.Float(0.5 + 2.0 * t)))
+    got = np.array(sensor.sensor_distance(mi.Float(0.5 + 2.0 * t)))
     # float32 holds ~58 mm to ~4e-6 mm; the 65536-interval table adds <= 5e-6 mm at the kinks.
     np.testing.assert_allclose(got, mp.sensor_distance(t), atol=2e-5)
 
@@ -287,7 +287,7 @@ def test_plugin_loads_from_mitsuba_xml_with_a_tabulated_motion():
     </scene>"""
     scene = mi.load_string(xml)
     sensor = scene.sensors()[0]
-    got = np.array(sensor._sensor_distance(mi.Float([0.0, 0.25, 1.0])))
+    got = np.array(sensor.sensor_distance(mi.Float([0.0, 0.25, 1.0])))
     np.testing.assert_allclose(got, [58.9, 58.8, 58.2], atol=1e-5)
 
 

@@ -29,6 +29,7 @@ import pytest
 import drjit as dr
 import mitsuba as mi
 
+from mitsweep.render import differentiable_render
 from mitsweep.render.sensor import NotDifferentiableError, register
 
 W = H = 32
@@ -127,7 +128,7 @@ def ad_derivative(scene, key: str, seed: int, weights, *, mode: str,
     dr.enable_grad(value)
     params.update()
     try:
-        img = mi.render(scene, params, seed=seed + 10_000, seed_grad=seed, spp=SPP)
+        img = differentiable_render(scene, params, seed=seed + 10_000, seed_grad=seed, spp=SPP)
         if mode == "forward":
             dr.set_grad(value, mi.Float(tangent) if tangent is not None else 1.0)
             dr.forward_to(img)

@@ -20,6 +20,8 @@ median of the finest diagonal Haar wavelet band), not by scikit-image.
 
 from __future__ import annotations
 
+from .methods import METHODS
+
 __all__ = ["deconvolve", "METHODS", "wiener_deconvolve", "polar_deconvolve",
            "spatially_varying_deconvolve", "spatially_varying_blur", "scatter_blur",
            "estimate_nsr", "SensorNoise", "paper_fig10_settings", "psnr", "ssim",
@@ -29,9 +31,6 @@ __all__ = ["deconvolve", "METHODS", "wiener_deconvolve", "polar_deconvolve",
            "product_convolution_operator", "blur_operator", "richardson_lucy",
            "hqs_deconvolve", "calibrated_nsr", "noise_sigma"]
 
-#: Restoration methods :func:`deconvolve` accepts (``method=``); every command that makes
-#: an EDOF image offers these names.
-METHODS: tuple[str, ...] = ("wiener", "rl", "tv", "hyperlaplacian")
 
 #: Where each public name lives. The submodules are imported on first use (PEP 562), so
 #: that ``import mitsweep.deconv`` — and every command line, which reads :data:`METHODS`

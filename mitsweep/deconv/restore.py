@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import DTypeLike
 
 from ..io.bank import BankError, IPSFBank
-from . import METHODS
+from .methods import METHODS
 from .noise import SensorNoise
 from .operators import BlurOperator, polar_operator, product_convolution_operator
 from .polar import polar_deconvolve

@@ -4,12 +4,12 @@ Imported only for ``executor="dask"`` (``dask.distributed`` is a dependency). Th
 embedded cluster runs ``jobs`` worker processes of one thread each (Dr.Jit and the FFTs
 use the cores of a process; one task per process keeps them from competing), on the
 loopback interface, with no dashboard, and downloads nothing. Every worker runs
-:func:`~mitsweep.pipeline.executors.init_worker` when it starts (also when its nanny
+:func:`~mitsweep.pipeline.worker_setup.init_worker` when it starts (also when its nanny
 restarts it after it died), through :class:`MitsweepWorkerPlugin`.
 
 A scheduler given by address is checked first by :func:`check_scheduler`: the TCP
 connection, Dask's handshake and one ``identity`` request and its answer, all within
-:data:`~mitsweep.pipeline.executors.CONNECT_TIMEOUT_S` in all. Dask bounds only the
+:data:`~mitsweep.pipeline.worker_setup.CONNECT_TIMEOUT_S` in all. Dask bounds only the
 connection (its handshake read has no timeout: a server that accepts and never speaks
 holds the client for ever), and it reads an HTTP server's answer as the length of a
 frame (an allocation of exabytes); both become one :class:`DatasetError` naming the
@@ -26,8 +26,8 @@ from typing import Iterator
 
 from distributed import Client, LocalCluster, Worker, WorkerPlugin
 
-from .executors import CONNECT_TIMEOUT_S, init_worker
 from .runner import DatasetError
+from .worker_setup import CONNECT_TIMEOUT_S, init_worker
 
 __all__ = ["MitsweepWorkerPlugin", "check_scheduler", "dask_executor", "local_cluster"]
 

@@ -5,7 +5,8 @@
 :func:`~mitsweep.pipeline.runner.run_tasks` takes. Mitsuba has no distributed rendering
 of its own, and a worker process inherits nothing from the submitting one: it must
 select the Dr.Jit backend, set the Mitsuba variant and register the ``focalsweep``
-sensor itself, or a render fails with "Plugin not found". :func:`init_worker` does that
+sensor itself, or a render fails with "Plugin not found". :func:`init_worker`
+(:mod:`~mitsweep.pipeline.worker_setup`, shared with :mod:`~mitsweep.pipeline.cluster`) does that
 when a pool process or a Dask worker starts (a process-pool initializer, a Dask worker
 plugin), and the render and tracing tasks do it again themselves
 (:func:`mitsweep.render.sensor.register`, idempotent), so a task also runs on an
@@ -22,6 +23,7 @@ import re
 from typing import Iterator
 
 from .runner import DatasetError
+from .worker_setup import CONNECT_TIMEOUT_S, init_worker
 
 __all__ = ["EXECUTORS", "open_executor", "init_worker", "check_scheduler_address",
            "CONNECT_TIMEOUT_S"]
@@ -29,8 +31,6 @@ __all__ = ["EXECUTORS", "open_executor", "init_worker", "check_scheduler_address
 logger = logging.getLogger(__name__)
 
 EXECUTORS = ("serial", "process", "dask")
-#: Seconds to reach a Dask scheduler given by address before giving up.
-CONNECT_TIMEOUT_S = 10
 _ADDRESS = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9][A-Za-z0-9.-]*):"
                       r"([0-9]{1,5})$")
 
@@ -42,24 +42,6 @@ def check_scheduler_address(address: str) -> str:
         raise DatasetError(f"scheduler: must be a Dask scheduler address tcp://HOST:PORT "
                            f"(port 1-65535), got {address!r}")
     return str(address).strip()
-
-
-def init_worker() -> None:
-    """Prepare a fresh worker process for renders: backend, variant, sensor plugin.
-
-    The backend is chosen on the worker (``MITSWEEP_BACKEND`` as the worker sees it),
-    never copied from the submitting process. A failure is logged, not raised: the
-    task that needs the backend raises it with its own message.
-    """
-    logging.getLogger("mitsweep").setLevel(logging.INFO)  # for the per-task logs
-    try:
-        from ..render.sensor import register
-
-        variant = register()  # selects the backend and the variant first
-        logger.info("worker ready: mitsuba variant %s, focalsweep sensor registered",
-                    variant)
-    except Exception as exc:  # BackendError, a missing library: the tasks will say
-        logger.warning("worker set-up failed (%s); its render tasks will fail", exc)
 
 
 class _ProcessPool(cf.Executor):

@@ -13,8 +13,10 @@ mitsuba).
   analytic sphere or an in-memory mesh with its error bound).
 - Integrators: ``mirrorview`` (:mod:`mitsweep.render.integrator`, emissive scenes) and
   ``mirrorpath`` (:mod:`mitsweep.render.ad_integrator`, lit scenes), both differentiable
-  through the mirror; a sweep gradient asked of an integrator that would drop it raises
-  :class:`NotDifferentiableError`.
+  through the mirror; :func:`differentiable_render` (``mi.render`` checked first) raises
+  :class:`NotDifferentiableError` for a sweep gradient asked of an integrator that would
+  drop it. Each plugin is a class at module scope, registered per variant
+  (:mod:`mitsweep.render.registry`).
 
 Mitsuba is imported lazily, after :func:`mitsweep.backend.set_mitsuba_variant`.
 """
@@ -22,6 +24,7 @@ Mitsuba is imported lazily, after :func:`mitsweep.backend.set_mitsuba_variant`.
 from .api import (AOV_NAMES, FOCUS_REFERENCE_DEPTH_MM, MODES, RenderResult, camera_dict,
                   focus_distance_mirror_centre, mirror_image_bbox, mode_camera,
                   reference_sensor_distance, render_image, render_point_source, render_to_exr)
+from .gradient import differentiable_render
 from .mirror import mirror_shape
 from .sensor import PLUGIN_NAME, NotDifferentiableError, register
 from .user_scene import (UserScene, UserSceneError, check_user_scene, check_view,
@@ -32,4 +35,4 @@ __all__ = ["register", "PLUGIN_NAME", "render_image", "render_to_exr", "render_p
            "reference_sensor_distance",
            "focus_distance_mirror_centre", "mirror_image_bbox", "FOCUS_REFERENCE_DEPTH_MM",
            "mirror_shape", "user_scene", "load_user_scene", "check_view", "check_user_scene",
-           "UserScene", "UserSceneError", "NotDifferentiableError"]
+           "UserScene", "UserSceneError", "NotDifferentiableError", "differentiable_render"]
