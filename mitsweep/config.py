@@ -255,6 +255,38 @@ class Sensor:
     def size_mm(self) -> tuple[float, float]:
         return (self.width * self.pixel_pitch, self.height * self.pixel_pitch)
 
+    def at_resolution(self, width: int, height: int) -> "Sensor":
+        """This sensor's frame sampled at ``width`` × ``height`` pixels.
+
+        The pitch is scaled by ``s = max(W / width, H / height)`` (``W``, ``H`` this
+        sensor's resolution), so the new frame covers at least this frame's area in both
+        directions: whatever this frame shows (the mirror's whole image, for the bundled
+        setups) stays in frame, only sampled more coarsely (``s`` > 1) or finely. A
+        ``center_offset_px`` keeps its place in mm (its pixels divided by ``s``).
+
+        Parameters
+        ----------
+        width, height : int
+            The new resolution, pixels, each in [1, :data:`MAX_RESOLUTION`].
+
+        Returns
+        -------
+        Sensor
+            With ``resolution = (width, height)`` and ``pixel_pitch`` × ``s``.
+
+        Raises
+        ------
+        SetupError
+            For a resolution outside that range (naming ``sensor.resolution``).
+        """
+        w, h = (_integer(v, f"sensor.resolution {name}", 1, MAX_RESOLUTION)
+                for name, v in zip(("width", "height"), (width, height)))
+        scale = max(self.width / w, self.height / h)
+        off = self.center_offset_px
+        return dataclasses.replace(
+            self, resolution=(w, h), pixel_pitch=self.pixel_pitch * scale,
+            center_offset_px=None if off is None else (off[0] / scale, off[1] / scale))
+
 
 @dataclass(frozen=True, kw_only=True)
 class Sweep:

@@ -13,6 +13,8 @@ from typing import Any, Callable, Iterable, Mapping, NoReturn, TypeVar, Union
 
 from ..config import Setup, SetupError, load_setup
 from ..deconv.noise import ILLUMINANCE_RANGE_LUX
+from ..optics.sweep import mirror_zone
+from ..resources import bundled_setup, bundled_setup_names
 
 __all__ = ["depth_mm", "number_type", "UsageError", "USER_ERRORS", "ArgumentParser",
            "ArgumentParserError", "check_output_name", "check_outputs", "json_text",
@@ -193,12 +195,30 @@ def check_outputs(inputs: Iterable[PathArg],
 
 def load_setup_arg(path: str) -> Setup:
     """A ``SETUP`` argument: a setup TOML file, or the name of a bundled setup
-    (:func:`mitsweep.resources.bundled_setup_names`) when no such file exists."""
-    from ..resources import bundled_setup, bundled_setup_names
+    (:func:`mitsweep.resources.bundled_setup_names`) when no such file exists.
 
-    if not os.path.exists(path) and path in bundled_setup_names():
-        return load_setup(bundled_setup(path))
-    return load_setup(path)
+    Besides the field checks of :func:`mitsweep.config.load_setup`, the setup's
+    ``sweep.fov_deg`` must lie within the mirror's reach from the camera
+    (:func:`mitsweep.optics.mirror_zone`, the check :func:`mitsweep.optics.optimal_sweep_range`
+    makes): every command refuses such a setup when it reads it, not halfway through.
+
+    Raises
+    ------
+    SetupError
+        One line: a path that is neither a file nor a bundled name (listing the bundled
+        names), a bad key, or an FOV beyond the mirror's reach (naming ``sweep.fov_deg``
+        and the largest FOV the mirror gives).
+    """
+    if os.path.lexists(path):
+        setup = load_setup(path)
+    elif path in bundled_setup_names():
+        setup = load_setup(bundled_setup(path))
+    else:
+        raise SetupError(f"{shown_path(path)}: no such setup file, nor a bundled setup name "
+                         f"(bundled: {', '.join(bundled_setup_names())})")
+    # The reach needs the optics, which config (the base layer) may not import.
+    mirror_zone(setup)
+    return setup
 
 
 def _finite_json(o: Any):

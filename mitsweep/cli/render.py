@@ -6,6 +6,7 @@ import argparse
 import math
 import sys
 
+from ..config import MAX_RESOLUTION
 from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
                      print_json)
 from .motion import add_motion_argument, motion_from_args
@@ -21,6 +22,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="pinhole: all-in-focus ground truth; focused: normal camera focused "
                         "at the mirror centre; sweep: the sensor moves over the optimal "
                         "range; stopped: focused at a smaller aperture (--f-number)")
+    p.add_argument("--resolution", type=positive_int, nargs=2, metavar=("W", "H"),
+                   help="render W x H pixels over the setup's frame: the pixel pitch is "
+                        "scaled so the mirror's image stays in frame (default: the "
+                        "setup's sensor.resolution)")
     p.add_argument("--spp", type=positive_int, default=64, help="samples per pixel (64)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")
     p.add_argument("--out", required=True, metavar="FILE.exr", help="output EXR (atomic)")
@@ -78,11 +83,15 @@ def run(args) -> int:
     if args.scene_unit is not None and args.scene is None and setup.scene.file is None:
         raise UsageError("--scene-unit applies to a scene file (--scene, or [scene] file in "
                          "the setup)")
+    if args.resolution is not None and max(args.resolution) > MAX_RESOLUTION:
+        raise UsageError(f"--resolution: each side must be at most {MAX_RESOLUTION} px, "
+                         f"got {args.resolution[0]} {args.resolution[1]}")
     motion = motion_from_args(args, setup)
     result = render_image(setup, args.mode, spp=args.spp, seed=args.seed, motion=motion,
                           aovs=tuple(dict.fromkeys(args.aov)), f_number=args.f_number,
                           mirror_only=not args.full_frame, progress=sys.stderr.isatty(),
-                          sampler=args.sampler, scene=args.scene, scene_unit=args.scene_unit)
+                          sampler=args.sampler, scene=args.scene, scene_unit=args.scene_unit,
+                          resolution=args.resolution)
     render_to_exr(args.out, result)
     if args.preview:
         from ..io.png import write_png
@@ -96,6 +105,8 @@ def run(args) -> int:
                "mean": float(result.image.mean())}
     if args.preview:
         summary["preview"] = args.preview
+    if "resolution" in m:
+        summary["resolution"] = m["resolution"]
     if args.motion:
         summary["motion"] = args.motion
     if "user_scene" in m:
@@ -103,6 +114,9 @@ def run(args) -> int:
     if args.json:
         print_json(summary)
     else:
-        sys.stdout.write(f"{args.out}: {args.mode}, {args.spp} spp, seed {args.seed}, "
+        r = m.get("resolution")
+        size = "" if r is None else ("{}x{} px at {:.4g} mm pitch, ".format(
+            *r["resolution_px"], r["pixel_pitch_mm"]))
+        sys.stdout.write(f"{args.out}: {args.mode}, {size}{args.spp} spp, seed {args.seed}, "
                          f"{m['render_s']:.2f} s\n")
     return 0 if math.isfinite(summary["mean"]) else 1

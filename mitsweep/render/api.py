@@ -33,7 +33,7 @@ from __future__ import annotations
 import logging
 import math
 import time as _time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -360,7 +360,8 @@ def render_image(setup: Setup, mode: str, *, spp: int, seed: int = 0, aovs: Iter
                  progress: bool = False, max_depth: int | None = None,
                  sampler: str | None = None,
                  scene: str | Path | Mapping[str, Any] | None = None,
-                 scene_unit: str | None = None) -> RenderResult:
+                 scene_unit: str | None = None,
+                 resolution: tuple[int, int] | None = None) -> RenderResult:
     """Render the setup's scene, or a user's Mitsuba scene, through the mirror in one of
     :data:`MODES`.
 
@@ -404,6 +405,13 @@ def render_image(setup: Setup, mode: str, *, spp: int, seed: int = 0, aovs: Iter
         :class:`~mitsweep.render.user_scene.UserSceneError` before rendering.
     scene_unit : {"mm", "cm", "m"}, optional
         The user scene's length unit (default: the setup's ``scene.unit``, else mm).
+    resolution : (int, int), optional
+        Render at ``(width, height)`` pixels instead of the setup's resolution, over the
+        same frame: the pixel pitch is scaled
+        (:meth:`mitsweep.config.Sensor.at_resolution`), so the mirror's image stays in
+        frame; ``metadata["setup"]`` holds the scaled sensor and
+        ``metadata["resolution"]`` the setup's resolution and pitch, the new ones and
+        the scale.
 
     Returns
     -------
@@ -427,6 +435,15 @@ def render_image(setup: Setup, mode: str, *, spp: int, seed: int = 0, aovs: Iter
     unknown = sorted(set(aovs) - set(AOV_NAMES))
     if unknown:
         raise ValueError(f"aovs: unknown {unknown[0]!r}; allowed: {', '.join(AOV_NAMES)}")
+    rescaled = None
+    if resolution is not None:
+        given = setup.sensor
+        setup = replace(setup, sensor=given.at_resolution(*resolution))
+        rescaled = {"setup_resolution_px": list(given.resolution),
+                    "setup_pixel_pitch_mm": given.pixel_pitch,
+                    "resolution_px": list(setup.sensor.resolution),
+                    "pixel_pitch_mm": setup.sensor.pixel_pitch,
+                    "pitch_scale": setup.sensor.pixel_pitch / given.pixel_pitch}
     geometry = reference_geometry(setup, sweep=sweep, motion=motion)
     kwargs, desc = mode_camera(setup, mode, geometry, f_number)
     sampler = MODE_SAMPLERS[mode] if sampler is None else sampler
@@ -473,6 +490,8 @@ def render_image(setup: Setup, mode: str, *, spp: int, seed: int = 0, aovs: Iter
             "render_s": t_render, "load_and_render_s": t_total, "aov_s": t_aov, **desc, **{"scene": info}}
     if user is not None:
         meta["user_scene"] = user.provenance
+    if rescaled is not None:
+        meta["resolution"] = rescaled
     return RenderResult(full, layers, meta)
 
 
