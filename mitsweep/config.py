@@ -255,7 +255,7 @@ class Sensor:
     def size_mm(self) -> tuple[float, float]:
         return (self.width * self.pixel_pitch, self.height * self.pixel_pitch)
 
-    def at_resolution(self, width: int, height: int) -> "Sensor":
+    def at_resolution(self, width: int, height: int) -> Sensor:
         """This sensor's frame sampled at ``width`` × ``height`` pixels.
 
         The pitch is scaled by ``s = max(W / width, H / height)`` (``W``, ``H`` this
