@@ -282,3 +282,39 @@ def test_design_sweep_kernel_size_is_refused_before_tracing(k, tmp_path, capsys,
                             "--out", tmp_path / "p.json"])
     assert "--kernel-size" in line and "[3, 31]" in line
     assert list(tmp_path.iterdir()) == []
+
+
+def test_calibration_work_arrays_are_gated(monkeypatch):
+    """The calibration's working memory (~40 bytes a photo pixel) is checked against the
+    cap before any is allocated: a photo that fits as read but not worked on is refused
+    by name."""
+    from mitsweep.photo import calibrate_photo
+    from mitsweep.photo.free import find_circle
+    from mitsweep.resources import ResourceError
+    from mitsweep.config import load_setup
+    from conftest import SCENES
+
+    photo = np.zeros((3000, 3000, 3), np.float32)  # 108 MB as read; ~360 MB to work on
+    monkeypatch.setenv("MITSWEEP_MAX_MEMORY_GB", "0.25")
+    with pytest.raises(ResourceError, match="calibration of a 3000x3000 photo"):
+        find_circle(photo)
+    with pytest.raises(ResourceError, match="calibration of a 3000x3000 photo"):
+        calibrate_photo(photo, load_setup(SCENES / "sphere.toml"))
+
+
+def test_a_hostile_exr_is_gated_before_decoding(tmp_path, monkeypatch):
+    """A 4x4 EXR whose header declares a 60001² data window: refused from the header."""
+    from mitsweep.io.exr import read_exr, write_exr
+    from mitsweep.resources import ResourceError
+
+    small = tmp_path / "small.exr"
+    write_exr(small, np.ones((4, 4, 3), np.float32))
+    data = bytearray(small.read_bytes())
+    at = data.find(b"dataWindow\x00box2i\x00") + len(b"dataWindow\x00box2i\x00") + 4
+    assert struct.unpack("<4i", data[at:at + 16]) == (0, 0, 3, 3)
+    data[at:at + 16] = struct.pack("<4i", 0, 0, 60000, 60000)
+    huge = tmp_path / "huge.exr"
+    huge.write_bytes(bytes(data))
+    monkeypatch.setenv("MITSWEEP_MAX_MEMORY_GB", "1")
+    with pytest.raises(ResourceError, match="huge.exr: decoding the EXR image"):
+        read_exr(huge)

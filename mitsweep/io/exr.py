@@ -20,6 +20,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..resources import ResourceError, check_allocation
 from .atomic import atomic_path
 
 __all__ = ["ExrError", "write_exr", "read_exr", "read_exr_header", "channel_names_for",
@@ -182,16 +183,31 @@ def read_exr(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise ExrError(f"{p}: no such file")
     try:
         with _openexr_chatter() as said:
+            with OpenEXR.File(str(p), header_only=True) as f:
+                declared = _declared_bytes(f.header())
+            # the header's size, gated before a pixel is decoded (a small file may declare
+            # a huge data window)
+            check_allocation(f"{p}: decoding the EXR image", declared)
             with OpenEXR.File(str(p), separate_channels=True) as f:
                 chans = {name: np.array(c.pixels) for name, c in f.channels().items()}
                 meta = _metadata(f.header())
-    except ExrError:
+    except (ExrError, ResourceError):
         raise
     except Exception as exc:  # OpenEXR raises plain RuntimeError/IOError
         raise ExrError(f"{p}: not a readable EXR file ({_first_cause(said, exc)})") from None
     if said:
         logger.debug("%s: OpenEXR said: %s", p, " | ".join(said))
     return chans, meta
+
+
+def _declared_bytes(header: dict) -> float:
+    """Bytes the pixels of an EXR header's data window take decoded (4 a sample, the
+    widest type, per channel; float: no integer overflow on hostile sizes)."""
+    (x0, y0), (x1, y1) = header["dataWindow"]
+    w, h = float(x1) - float(x0) + 1.0, float(y1) - float(y0) + 1.0
+    if w <= 0 or h <= 0:
+        return 0.0
+    return w * h * max(1, len(header.get("channels", []))) * 4.0
 
 
 def read_exr_header(path: str | Path) -> dict[str, Any]:
