@@ -140,6 +140,8 @@ def _adam_steps(scene, params, key, target, *, spp, steps, step_mm, seed):
     import drjit as dr
     import mitsuba as mi
 
+    from mitsweep.render import differentiable_render
+
     opt = mi.ad.Adam(lr=step_mm)
     opt[key] = params[key]
     params.update(opt)
@@ -147,8 +149,8 @@ def _adam_steps(scene, params, key, target, *, spp, steps, step_mm, seed):
         if it in (steps // 2, 3 * steps // 4):
             opt.set_learning_rate(opt.lr * 0.5)
         # spp given each time: a render with an spp override keeps it in the sampler.
-        img = mi.render(scene, params, seed=seed + 1 + 2 * it, seed_grad=seed + 2 + 2 * it,
-                        spp=spp)
+        img = differentiable_render(scene, params, seed=seed + 1 + 2 * it,
+                                    seed_grad=seed + 2 + 2 * it, spp=spp)
         loss = dr.mean(dr.square(img - target), axis=None)
         dr.backward(loss)
         opt.step()
@@ -163,13 +165,15 @@ def _gauss_newton_steps(scene, params, key, target, *, spp, steps, seed):
     import drjit as dr
     import mitsuba as mi
 
+    from mitsweep.render import differentiable_render
+
     target = target.numpy()
     for it in range(steps):
         value = params[key]
         dr.enable_grad(value)
         params.update()
-        img = mi.render(scene, params, seed=seed + 1 + 2 * it, seed_grad=seed + 2 + 2 * it,
-                        spp=spp)
+        img = differentiable_render(scene, params, seed=seed + 1 + 2 * it,
+                                    seed_grad=seed + 2 + 2 * it, spp=spp)
         dr.forward(value)
         jac, residual = dr.grad(img).numpy(), img.numpy() - target
         dr.disable_grad(value)

@@ -213,7 +213,7 @@ class FocalSweepSensor(mi.Sensor):
     """A thin-lens sensor translating along its axis during the exposure (see the
     module for its parameters, ray generation and derivatives)."""
 
-    def __init__(self, props):
+    def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
         self.m_needs_sample_3 = True  # aperture sample (docs/design.md, pitfalls)
         self.focal_length = _positive(props, "focal_length")
@@ -308,7 +308,7 @@ class FocalSweepSensor(mi.Sensor):
                     f"{self.motion_kind!r} the differentiable parameters are: {allowed}")
 
     # -- geometry --------------------------------------------------------------------
-    def sensor_distance(self, time):
+    def sensor_distance(self, time: mi.Float) -> mi.Float:
         """Sensor distance i(t), mm, at Mitsuba time ``time`` (s).
 
         In ``*_ad_*`` variants it is attached to the AD graph of ``sensor_start`` /
@@ -375,13 +375,17 @@ class FocalSweepSensor(mi.Sensor):
             ray.has_differentials = True
         return ray, wav_weight
 
-    def sample_ray(self, time, sample1, sample2, sample3, active=True):
+    def sample_ray(self, time: mi.Float, sample1: mi.Float, sample2: mi.Point2f,
+                   sample3: mi.Point2f, active: mi.Bool = True) -> tuple[mi.Ray3f, mi.Spectrum]:
         return self._rays(time, sample1, sample2, sample3, active, False)
 
-    def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
+    def sample_ray_differential(self, time: mi.Float, sample1: mi.Float, sample2: mi.Point2f,
+                                sample3: mi.Point2f, active: mi.Bool = True
+                                ) -> tuple[mi.RayDifferential3f, mi.Spectrum]:
         return self._rays(time, sample1, sample2, sample3, active, True)
 
-    def sample_direction(self, it, sample, active=True):
+    def sample_direction(self, it: mi.Interaction3f, sample: mi.Point2f, active: mi.Bool = True
+                         ) -> tuple[mi.DirectionSample3f, mi.Spectrum]:
         """Connect a scene point to a sampled aperture point (for light tracing)."""
         self._refuse_gradients_of_non_differentiable()
         to_world = self.world_transform()
@@ -420,12 +424,12 @@ class FocalSweepSensor(mi.Sensor):
         ds.delta = lens_area == 0
         return ds, mi.Color3f(value * inv_dist * inv_dist)
 
-    def bbox(self):
+    def bbox(self) -> mi.ScalarBoundingBox3f:
         p = self.world_transform() @ mi.ScalarPoint3f(0.0)
         return mi.ScalarBoundingBox3f(p, p)
 
     # -- traversal -------------------------------------------------------------------
-    def traverse(self, callback):
+    def traverse(self, callback: mi.TraversalCallback) -> None:
         flag = mi.ParamFlags
         callback.put("to_world", self.m_to_world, flag.NonDifferentiable)
         if not _VECTORISED:  # Python floats: a traversal could not update them in place
@@ -443,7 +447,7 @@ class FocalSweepSensor(mi.Sensor):
             callback.put("sensor_start", self.m_start, flag.Differentiable)
             callback.put("sensor_end", self.m_end, flag.Differentiable)
 
-    def parameters_changed(self, keys):
+    def parameters_changed(self, keys: list[str]) -> None:
         super().parameters_changed(keys)
         self._refuse_gradients_of_non_differentiable()
         sizes = [("sensor_start", self.m_start, 1), ("sensor_end", self.m_end, 1)]
@@ -467,7 +471,7 @@ class FocalSweepSensor(mi.Sensor):
                              "length")
         dr.make_opaque(*self._opaque_parameters())
 
-    def to_string(self):
+    def to_string(self) -> str:
         lo, hi = self.motion_span
         return (f"FocalSweepSensor[focal_length={self.focal_length}, "
                 f"aperture_radius={self.aperture_radius}, pixel_pitch={self.pixel_pitch}, "

@@ -34,7 +34,7 @@ class DepthLimitedIntegrator(mi.SamplingIntegrator):
     #: ``max_depth`` when the scene gives none.
     DEFAULT_DEPTH: int = 1
 
-    def __init__(self, props):
+    def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
         depth = int(props.get("max_depth", self.DEFAULT_DEPTH))
         if not 1 <= depth <= self.MAX_DEPTH:
@@ -42,8 +42,8 @@ class DepthLimitedIntegrator(mi.SamplingIntegrator):
                              f"got {depth}")
         self.max_depth = depth
 
-    def aov_names(self):
+    def aov_names(self) -> list[str]:
         return []
 
-    def to_string(self):
+    def to_string(self) -> str:
         return f"{type(self).__name__}[max_depth={self.max_depth}]"

@@ -89,7 +89,9 @@ class MirrorPathIntegrator(DepthLimitedIntegrator):
 
     NAME, MAX_DEPTH, DEFAULT_DEPTH = MIRRORPATH, MIRRORPATH_MAX_DEPTH, 3
 
-    def sample(self, scene, sampler, ray, medium=None, active=True):
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
+               medium: mi.Medium | None = None, active: mi.Bool = True
+               ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
         ctx = mi.BSDFContext()
         ray = mi.Ray3f(ray)
         alive = mi.Bool(active)

@@ -57,7 +57,9 @@ class MirrorViewIntegrator(DepthLimitedIntegrator):
 
     NAME, MAX_DEPTH, DEFAULT_DEPTH = MIRRORVIEW, MIRRORVIEW_MAX_DEPTH, 2
 
-    def sample(self, scene, sampler, ray, medium=None, active=True):
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
+               medium: mi.Medium | None = None, active: mi.Bool = True
+               ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
         ray = mi.Ray3f(ray)
         ctx = mi.BSDFContext()
         throughput = mi.Spectrum(1.0)
