@@ -9,6 +9,7 @@ radii <= 0 ended in tracebacks, and a zip bomb was inflated whole.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import zipfile
@@ -103,10 +104,21 @@ def _npy_header(shape, descr="<f8", version=(1, 0)) -> bytes:
     return buf.getvalue()
 
 
-def _zip_bomb(path: Path, arrays: dict) -> None:
-    """The bank plus a member that is not an array: 1 GiB of zeros deflated to ~1 MiB."""
-    from test_memory_gate import zeros_deflated
+_BOMBS: dict[bytes, bytes] = {}  # the archive per bank: deflating 1 GiB takes ~3 s
 
+
+def _zip_bomb(path: Path, arrays: dict) -> None:
+    """The bank plus a member that is not an array: 1 GiB of zeros deflated to ~1 MiB.
+
+    Built once per bank and reused: the three tests that plant it read the same bytes.
+    """
+    key = hashlib.sha256(b"".join(k.encode() + _save(v) for k, v in sorted(arrays.items())))
+    if key.digest() not in _BOMBS:
+        _BOMBS[key.digest()] = _zip_bomb_bytes(arrays)
+    path.write_bytes(_BOMBS[key.digest()])
+
+
+def _zip_bomb_bytes(arrays: dict) -> bytes:
     blob = io.BytesIO()
     with zipfile.ZipFile(blob, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         for k, v in arrays.items():
@@ -116,7 +128,7 @@ def _zip_bomb(path: Path, arrays: dict) -> None:
             step = bytes(1 << 24)
             for _ in range(64):
                 m.write(step)
-    path.write_bytes(blob.getvalue())
+    return blob.getvalue()
 
 
 def _declares_huge(path: Path, arrays: dict) -> None:
