@@ -83,6 +83,7 @@ from mitsweep.config import load_setup
 from mitsweep.tracer.cache import cached_bank
 s = load_setup(sys.argv[1])
 s = replace(s, sensor=replace(s.sensor, resolution=(128, 128), pixel_pitch=0.072))
+print("imported", flush=True)
 got = cached_bank(s, cache_dir=sys.argv[2], n_radii=3, rays=20_000, kernel_size=9)
 print(json.dumps({"traced": got.traced, "path": str(got.path)}))
 """
@@ -100,7 +101,11 @@ def test_two_processes_asking_for_one_bank_trace_it_once(coarse, tmp_path):
                                    str(ROOT / "scenes" / "sphere.toml"), str(tmp_path)],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                   env=env) for _ in range(2)]
-        time.sleep(8.0)   # imports done, both blocked on the lock
+        # imports done (each says so), then both blocked on the lock: cached_bank takes
+        # it after computing the key, well within the 2 s (was a flat 8 s for the imports)
+        for p in procs:
+            assert p.stdout.readline().strip() == "imported", p.stderr.read()
+        time.sleep(2.0)
         assert all(p.poll() is None for p in procs)
         assert not (entry / "bank.npz").exists()
     results = []
