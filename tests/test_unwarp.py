@@ -6,12 +6,14 @@ reflected direction, :func:`mitsweep.optics.panorama.image_to_direction`), while
 panorama is resampled through the forward map (Newton's method on the mirror surface).
 """
 
+import functools
 from dataclasses import replace
 
 import numpy as np
 import pytest
 from scipy import ndimage
 
+from conftest import SCENES
 from mitsweep.cli.main import main
 from mitsweep.config import load_setup
 from mitsweep.io import read_exr, write_exr
@@ -107,10 +109,30 @@ def test_forward_then_inverse_maps_agree_within_005_px(setup, projection, offset
     assert np.max(np.hypot(back_r - ir[okq], back_c - ic[okq])) < 1e-6
 
 
-@pytest.mark.parametrize("projection", PROJECTIONS)
-@pytest.mark.parametrize("azimuth_deg", [40.0, 180.0])   # 180: on the wrap-around
-def test_marker_at_a_world_direction_lands_where_the_geometry_says(setup, projection,
+@functools.cache
+def small_setup(name):
+    return small(load_setup(SCENES / f"{name}.toml"))
+
+
+def thinned(cases, fast):
+    """``cases`` (tuples starting with a setup name) as params; the tilted paraboloid's
+    cases not in ``fast`` marked slow (1.3-5 s each: its panoramas resample through the
+    off-axis forward map). The default run keeps every case on the sphere (~0.3 s each)
+    and the tilted mirror where it differs most: the wrap-around, in one projection (each
+    projection's formula is checked on both mirrors by the forward/inverse test). CI's
+    full run (``-m "slow or not slow"``) runs them all."""
+    return [pytest.param(*c, id="-".join(map(str, c)),
+                         marks=() if c[0] == "sphere" or c in fast else pytest.mark.slow)
+            for c in cases]
+
+
+@pytest.mark.parametrize("name, azimuth_deg, projection", thinned(
+    [(n, a, p) for n in ("sphere", "paraboloid_tilted") for a in (40.0, 180.0)  # 180: wrap
+     for p in PROJECTIONS],
+    fast={("paraboloid_tilted", 180.0, "equirectangular")}))
+def test_marker_at_a_world_direction_lands_where_the_geometry_says(name, projection,
                                                                    azimuth_deg):
+    setup = small_setup(name)
     pmap = panorama_map(setup, (N, N), projection=projection)
     Wp, Hp = pmap.size
     # an elevation the mirror shows at this azimuth: midway down the column's seen rows
@@ -148,8 +170,11 @@ def test_marker_at_a_world_direction_lands_where_the_geometry_says(setup, projec
     assert np.max(np.abs(pano - expected)[near]) < 0.03
 
 
-@pytest.mark.parametrize("projection", PROJECTIONS)
-def test_panorama_has_no_nan_and_no_seam_at_the_wrap(setup, projection):
+@pytest.mark.parametrize("name, projection", thinned(
+    [(n, p) for n in ("sphere", "paraboloid_tilted") for p in PROJECTIONS],
+    fast={("paraboloid_tilted", "equirectangular")}))
+def test_panorama_has_no_nan_and_no_seam_at_the_wrap(name, projection):
+    setup = small_setup(name)
     pmap = panorama_map(setup, (N, N), projection=projection)
 
     def world(d):  # smooth over the sphere of directions, azimuth-dependent
