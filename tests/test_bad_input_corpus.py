@@ -219,7 +219,7 @@ def _(tmp):
     return ["sweep-range", write(tmp, "setup.toml", text)]
 
 
-@case("setup-missing-file", "no such file")
+@case("setup-missing-file", "no such setup file")
 def _(tmp):
     return ["sweep-range", tmp / "nope.toml"]
 

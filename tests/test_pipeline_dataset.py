@@ -147,7 +147,7 @@ def test_cli_evaluate_json_and_bad_directory(tiny_dataset, tmp_path):
 
 @pytest.mark.parametrize("args,message", [
     (["--scenes", "0"], "--scenes: must be > 0"),
-    (["--lux", "-5"], "--lux: must be > 0"),
+    (["--lux", "-5"], "--lux: must be an illuminance in"),
     (["--executor", "cluster"], "invalid choice"),
 ])
 def test_cli_dataset_bad_input(tmp_path, scenes_dir, args, message):
