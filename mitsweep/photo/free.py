@@ -18,10 +18,9 @@ import math
 import numpy as np
 
 from ..optics.outline import RimOutline
-from ..resources import check_allocation
 from .coarse import coarse_search, search_scales
-from .image import fill_void, luminance, photo_void, reduce_by
-from .rim import WORK_BYTES_PER_PIXEL, CalibrationError, NoMirrorError, RimFit, fit_rim
+from .image import fill_void, photo_void, reduce_by
+from .rim import CalibrationError, NoMirrorError, RimFit, fit_rim, working_luminance
 
 __all__ = ["find_circle", "circle_outline", "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE",
            "CANDIDATES"]
@@ -77,12 +76,7 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
     mitsweep.photo.NoMirrorError
         No circle stands out as a mirror's outline.
     """
-    check_allocation(f"calibration of a {np.shape(image)[1]}x{np.shape(image)[0]} photo",
-                     WORK_BYTES_PER_PIXEL * float(np.shape(image)[0]) * np.shape(image)[1])
-    lum = luminance(image)
-    if lum.ndim != 2 or min(lum.shape) < 32:
-        raise NoMirrorError(f"the photo must be an image of at least 32x32 pixels, got "
-                            f"shape {np.shape(image)}")
+    lum = working_luminance(image, 32)
     H, W = lum.shape
     if radius_range_px is None:
         lo, hi = max(8.0, MIN_RADIUS_SHARE * min(H, W)), MAX_RADIUS_SHARE * max(H, W)

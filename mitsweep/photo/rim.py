@@ -38,8 +38,8 @@ from .edges import edge_offsets, edge_prominence
 from .image import fill_void, luminance, noise_sigma, photo_void, smooth
 from .robust import EDGE_CORRELATION_PX, centre_standard_error, tukey_lstsq
 
-__all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim", "MIN_INLIER_FRACTION",
-           "MIN_CONSISTENT_FRACTION", "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
+__all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim",
+           "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION", "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
            "RESIDUAL_WIDTH_SHARE", "RESIDUAL_RADIUS_SHARE", "PLAUSIBLE_SCALE",
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE"]
 
@@ -164,6 +164,22 @@ def _in_void(void: np.ndarray, centre, scale: float, pts: np.ndarray) -> np.ndar
     return out
 
 
+def working_luminance(image: np.ndarray, min_side: int) -> np.ndarray:
+    """The luminance a rim search works on, after the memory gate for its work arrays
+    (:data:`WORK_BYTES_PER_PIXEL`); :class:`NoMirrorError` for an image that is not
+    (H, W[, C]) with both sides at least ``min_side``."""
+    shape = np.shape(image)
+    if len(shape) < 2:
+        raise NoMirrorError(f"the photo must be an image, got shape {shape}")
+    check_allocation(f"calibration of a {shape[1]}x{shape[0]} photo",
+                     WORK_BYTES_PER_PIXEL * float(shape[0]) * shape[1])
+    lum = luminance(image)
+    if lum.ndim != 2 or min(lum.shape) < min_side:
+        raise NoMirrorError(f"the photo must be an image of at least {min_side}x{min_side} "
+                            f"pixels, got shape {shape}")
+    return lum
+
+
 def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
             scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
             max_iterations: int = 30, edge_half_width_px: float | None = None,
@@ -205,12 +221,7 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
         When too few outline points show a consistent edge or the residual is large:
         the photo does not show the mirror the setup describes.
     """
-    check_allocation(f"calibration of a {np.shape(image)[1]}x{np.shape(image)[0]} photo",
-                     WORK_BYTES_PER_PIXEL * float(np.shape(image)[0]) * np.shape(image)[1])
-    lum = luminance(image)
-    if lum.ndim != 2 or min(lum.shape) < 8:
-        raise CalibrationError(f"the photo must be an image of at least 8x8 pixels, got "
-                               f"shape {np.shape(image)}")
+    lum = working_luminance(image, 8)
     pts, nrm = outline.offsets_px(pitch)
     radius = outline.equivalent_radius_px(pitch)
     if radius < 8:
