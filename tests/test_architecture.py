@@ -53,6 +53,9 @@ LAYERS = {
     "pipeline": {"optics", "io", "backend", "plots", "tracer", "render", "deconv"},
     # training data read from a dataset directory: the pipeline's reader, never Mitsuba
     "datasets": {"pipeline", "io", "optics"},
+    # each command's job as a library function (issue 25): every unit but the CLI
+    "workflows": {"optics", "io", "backend", "jit", "plots", "tracer", "render", "deconv",
+                  "rig", "photo", "design", "pipeline", "datasets"},
     "cli": ANY,
     "__main__": {"cli"},
 }
