@@ -9,7 +9,8 @@ from mitsweep import backend
 from mitsweep.config import load_setup
 from mitsweep.optics.reference import reference_geometry
 from mitsweep.tracer import integrated_psf, ipsf_bank
-from mitsweep.tracer import kernel
+from mitsweep.tracer import kernel, sampling
+from mitsweep.tracer.deposit import MAX_COPIES, DepositStrategy
 from mitsweep.tracer.bank import field_radius
 
 SPHERE = load_setup("scenes/sphere.toml")
@@ -28,12 +29,12 @@ def _signed_fractions(h, generators):
 
 
 def test_r2_steps_are_the_successive_closest_returns():
-    h = np.arange(1, kernel._R2_STEPS[-1] + 1)
-    d = _signed_fractions(h, kernel._R2)
+    h = np.arange(1, sampling.R2_STEPS[-1] + 1)
+    d = _signed_fractions(h, sampling.R2)
     records = h[d < np.minimum.accumulate(np.concatenate(([np.inf], d[:-1])))]
-    assert tuple(int(x) for x in records[records > kernel._GROUP]) == kernel._R2_STEPS
+    assert tuple(int(x) for x in records[records > sampling.GROUP]) == sampling.R2_STEPS
     # the largest step keeps a group of 16 lanes within 1 % of the unit square
-    assert kernel._GROUP * _signed_fractions(922111, kernel._R2) < 0.011
+    assert sampling.GROUP * _signed_fractions(922111, sampling.R2) < 0.011
 
 
 @pytest.mark.parametrize("count", [1, 15, 16, 591, 592, 593, 4096, 12345, 1 << 14,
@@ -42,11 +43,11 @@ def test_coherent_order_is_a_permutation(count):
     m = backend.drjit_module()
     import drjit as dr
 
-    idx = kernel._coherent_order(dr.arange(m.UInt32, count), count).numpy()
+    idx = sampling.coherent_order(dr.arange(m.UInt32, count), count).numpy()
     assert np.array_equal(np.sort(idx), np.arange(count))
-    segments = kernel._coherent_segments(count)
-    assert len(segments) == kernel._SEGMENTS
-    covered = sum(kernel._GROUP * h for _, h in segments if h > 1)
+    segments = sampling.coherent_segments(count)
+    assert len(segments) == sampling.SEGMENTS
+    covered = sum(sampling.GROUP * h for _, h in segments if h > 1)
     # the lanes left in order: fewer than 0.3 % of a launch of 2^24 (measured 46240)
     if count >= 1 << 20:
         assert count - covered < 3e-3 * count
@@ -62,10 +63,27 @@ def test_fold_buffer_sums_the_copies():
 
 def test_deposit_copies_is_a_power_of_two():
     c = kernel.deposit_copies()
-    assert c >= 1 and c & (c - 1) == 0 and c <= kernel._MAX_COPIES
+    assert c >= 1 and c & (c - 1) == 0 and c <= MAX_COPIES
+    for bad in (0, 3, 2 * MAX_COPIES):
+        with pytest.raises(ValueError, match="power of two"):
+            DepositStrategy(copies=bad)
+    with pytest.raises(ValueError, match="ReduceMode"):
+        DepositStrategy(mode="Fastest")
+    assert kernel.deposit_copies(DepositStrategy(copies=4)) == 4
+
+
+def test_deposit_strategy_scope_is_deprecated_and_context_local():
+    """The old scope still applies its strategy (for one release), warns, and restores
+    the default on exit; it sets a context variable, not module globals."""
+    with pytest.warns(DeprecationWarning, match="DepositStrategy"):
+        with kernel.deposit_strategy_scope(copies=2, coherent=False):
+            assert kernel._strategy(None) == DepositStrategy(copies=2, coherent=False)
+            assert kernel._strategy(DepositStrategy()) == DepositStrategy()
+    assert kernel._strategy(None) == DepositStrategy()
     with pytest.raises(ValueError, match="power of two"):
-        with kernel.deposit_strategy_scope(copies=3):
-            pass
+        with pytest.warns(DeprecationWarning):
+            with kernel.deposit_strategy_scope(copies=3):
+                pass
 
 
 @pytest.mark.parametrize("method, extra", [("exact", {}), ("continuous", {"time_samples": 2}),
