@@ -231,7 +231,7 @@ def deposit_time_samples(buffer: DrJitArray, hits: dict, dists: Sequence[DrJitAr
     kernel_size : int
         K.
     base, mode
-        Per-lane first cell, and the ``drjit.ReduceMode``.
+        Per-lane first cell, and the ``drjit.ReduceMode`` (default ``Auto``).
 
     Returns
     -------
@@ -244,6 +244,7 @@ def deposit_time_samples(buffer: DrJitArray, hits: dict, dists: Sequence[DrJitAr
 
     m = drjit_module()
     UInt32, Int32, Acc = m.UInt32, m.Int32, type(buffer)
+    mode = dr.ReduceMode.Auto if mode is None else mode
     K = int(kernel_size)
     KK = K * K
     au, av, bu, bv = _window(hits, center, pitch, K)
@@ -308,6 +309,7 @@ def deposit_sweeps(buffer: DrJitArray, hits: dict, *, center: Sequence[DrJitArra
     import drjit as dr
 
     Float = type(hits["Au"])
+    mode = dr.ReduceMode.Auto if mode is None else mode
     K = int(kernel_size)
     i_lo, i_hi = dr.opaque(Float, float(span[0])), dr.opaque(Float, float(span[1]))
     au, av, bu, bv = _window(hits, center, pitch, K)
