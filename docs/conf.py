@@ -12,6 +12,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent / "_ext"))
 
 # autodoc imports every module, mitsweep.render and mitsweep.tracer included: they import
 # Mitsuba and Dr.Jit, whose backend mitsweep.backend chooses (CUDA, else LLVM with
@@ -29,7 +30,7 @@ version = release
 
 extensions = [
     "sphinx.ext.autodoc",
-    "sphinx.ext.mathjax",
+    "mathml",          # docs/_ext/mathml.py: math as MathML at build time (no CDN, no script)
     "sphinx.ext.viewcode",
     "numpydoc",
     "myst_parser",
@@ -40,7 +41,18 @@ exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
 # The API reference: one page per package and module (written into api/generated/ by
 # _write_api_pages below, before each build), documented by autodoc from the docstrings.
 autodoc_default_options = {"member-order": "bysource"}
-autodoc_typehints = "none"          # numpydoc's Parameters sections carry the types
+# Signatures show their types (every public callable is annotated); the Parameters
+# sections keep the prose. Types print short (``Setup``, not ``mitsweep.config.Setup``) and
+# link to their pages; names that two modules define (``Placement``: the TOML record in
+# mitsweep.config, the rigid transform in mitsweep.optics.placement) are linked by their
+# full name, resolved in _resolve_reexport below.
+autodoc_typehints = "signature"
+autodoc_typehints_format = "short"
+python_maximum_signature_line_length = 88   # one parameter per line beyond this
+# A name a package re-exports in its __all__ is documented on that package's page too;
+# viewcode's source pages link back only to where a name is defined (following the
+# import would write anchors the re-exporting page does not have).
+viewcode_follow_imported_members = False
 numpydoc_show_class_members = False  # members are listed by autodoc, once
 numpydoc_class_members_toctree = False
 numpydoc_xref_param_type = False
@@ -50,7 +62,9 @@ myst_heading_anchors = 3
 
 html_theme = "furo"
 html_title = f"mitsweep {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["mitsweep.css"]    # code and signatures wrap instead of being cut off
+html_math_renderer = "mathml"
 
 
 # -- the API reference ------------------------------------------------------------------
@@ -149,6 +163,17 @@ def _resolve_reexport(app, env, node, contnode):
                                              f"{home}.{qualname}", node, contnode)
 
 
+def _skip_deprecated(app, what, name, obj, skip, options):
+    """Deprecated aliases (``SweepRange.focus_min_mm`` and the like) stay out of the
+    listings: their docstrings start with "Deprecated alias"; the class's docstring says
+    they still read."""
+    doc = getattr(obj, "__doc__", None) or ""
+    if doc.lstrip().lower().startswith("deprecated alias"):
+        return True
+    return None
+
+
 def setup(app):
     app.connect("builder-inited", _write_api_pages)
+    app.connect("autodoc-skip-member", _skip_deprecated)
     app.connect("missing-reference", _resolve_reexport)

@@ -8,7 +8,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 stamp=".venv/.mitsweep-docs-installed"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] ||
-   ! .venv/bin/python -c "import sphinx, numpydoc, myst_parser, furo" 2>/dev/null; then
+   ! .venv/bin/python -c "import sphinx, numpydoc, myst_parser, furo, latex2mathml" 2>/dev/null; then
     echo "docs: installing the docs extra into .venv (log: .venv/pip-install-docs.log)" >&2
     if ! .venv/bin/python -m pip install -q -e ".[docs]" >.venv/pip-install-docs.log 2>&1; then
         tail -n 30 .venv/pip-install-docs.log >&2
