@@ -58,7 +58,7 @@ def run(args) -> int:
     from ..optics import optimal_sweep_range
     from ..pipeline import DatasetOptions, build_dataset, evaluate_dataset, item_names, white_level
     from ..plots import plot_focal_surfaces, plot_per_radius
-    from .dataset import check_dataset_outputs
+    from ..workflows.dataset import check_dataset_outputs
 
     if not (0 < args.spp_scale < math.inf):
         raise UsageError(f"--spp-scale: must be a finite number > 0, got {args.spp_scale:g}")

@@ -1,12 +1,14 @@
 """``mitsweep evaluate``: PSNR/SSIM of EDOF (every restoration method the dataset holds),
-focused and stopped images on ground truth."""
+focused and stopped images on ground truth; a thin wrapper over
+:func:`mitsweep.workflows.evaluate_dataset`."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from .common import check_outputs, json_text, print_json
+from ..workflows.dataset import evaluate_dataset
+from .common import print_json
 
 NAME = "evaluate"
 HELP = "score a dataset: PSNR and SSIM inside the mirror's image, per radius and depth band"
@@ -20,27 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from ..io import write_text_atomic
-    from ..io.atomic import check_writable
-    from ..pipeline import dataset_inputs, evaluate_dataset
-
-    # Before the (long) evaluation: the outputs overwrite none of the dataset's files,
-    # and can be written.
-    check_outputs(dataset_inputs(args.dataset), {"--plot": args.plot, "--out": args.out})
-    for path in (args.plot, args.out):
-        if path:
-            check_writable(path)
-    if args.plot:
-        from ..plots import check_figure_path
-
-        check_figure_path(args.plot, "--plot")
-    results = evaluate_dataset(args.dataset)
-    if args.plot:
-        from ..plots import plot_per_radius
-
-        plot_per_radius(results, args.plot)
-    if args.out:
-        write_text_atomic(args.out, json_text(results))      # the same text as --json
+    results = evaluate_dataset(args.dataset, plot=args.plot, out=args.out).value
     if args.json:
         print_json(results)
     else:

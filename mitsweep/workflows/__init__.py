@@ -10,6 +10,13 @@ these and print.
 Start here:
 
 - :func:`restore_photo`: a focal-sweep photo → its EDOF image (``mitsweep deconvolve``).
+- :func:`calibrate_photo` (from :mod:`mitsweep.photo`): the mirror's centre and rim on a
+  photo, and a setup for its camera (``mitsweep calibrate``).
+- :func:`unwarp_image`: a catadioptric image → its panorama (``mitsweep unwarp``).
+- :func:`trace_ipsf`, :func:`trace_ipsf_bank`: IPSFs of a setup (``mitsweep ipsf``).
+- :func:`build_dataset`, :func:`evaluate_dataset`: a synthetic dataset and its scores
+  (``mitsweep dataset``, ``mitsweep evaluate``).
+- :func:`design_motion_profile`: an optimised sweep motion (``mitsweep design-sweep``).
 
 Bad input raises :class:`InputError` (a :class:`ValueError`) or
 :class:`mitsweep.config.SetupError` with one line naming what is wrong.
@@ -18,7 +25,14 @@ Bad input raises :class:`InputError` (a :class:`ValueError`) or
 from ._base import WorkflowResult, json_text, progress_callback, resolve_setup
 from ._errors import InputError
 from ._paths import check_output_name, check_outputs
+from ..photo import calibrate_photo
+from .dataset import build_dataset, evaluate_dataset
+from .design_sweep import design_motion_profile
+from .ipsf import trace_ipsf, trace_ipsf_bank
 from .restore import restore_photo
+from .unwarp import unwarp_image
 
 __all__ = ["WorkflowResult", "InputError", "resolve_setup", "json_text", "progress_callback",
-           "check_output_name", "check_outputs", "restore_photo"]
+           "check_output_name", "check_outputs", "restore_photo", "trace_ipsf",
+           "trace_ipsf_bank", "build_dataset", "evaluate_dataset", "design_motion_profile",
+           "unwarp_image", "calibrate_photo"]
