@@ -69,7 +69,6 @@ def _rough_setup(entry, shape, error: float):
 
 #: Rough-setup calibrations that do not meet the reference's tolerance yet, and why.
 SETUP_KNOWN_FAILURES = {
-    "sphere_pageos_nasa.png": "the draped Mylar hides the limb's top; prominence < 3",
     "dome_store_bright_rim.jpg": "the dome's second, concentric edge",
     "omni_kaidan.jpg": "the mount's edge wins: centre 24 px off (the rim is no circle)",
 }

@@ -209,7 +209,7 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
             f"{100 * (fit.scale - 1):+.2f}%: the pixel pitch would be {implied_pitch:.5g} mm "
             f"(setup {pitch:g}) or the lens-mirror distance {vd} mm "
             f"(setup {setup.mirror.vertex_distance:g})")
-        if not outline.on_rim.any():
+        if not outline.on_rim.any() and not fit.limb:
             # A hemisphere's outline is its limb, seen at grazing incidence, where the
             # reflection continues what lies behind the mirror: a render shows no edge
             # there (the sphere at 200 px: the fit found the boards' reflection 14.7%
