@@ -8,13 +8,14 @@ a 16-bit TIFF (``photo.tif``). Then, as for a real file:
 
 1. :func:`mitsweep.io.camera.read_camera_image`: decoded to linear values (the TIFF's
    sRGB transfer undone);
-2. :func:`mitsweep.photo.calibrate_photo`: the mirror's centre and rim
+2. :func:`mitsweep.workflows.calibrate_photo`: the mirror's centre and rim
    radius on the photo, and the setup for this camera (``calibrated.toml``:
    resolution, pitch, centre offset);
-3. a radial IPSF bank for the calibrated setup (:func:`mitsweep.tracer.ipsf_bank`) and
-   :func:`mitsweep.deconv.deconvolve` about the calibrated centre (``restored.exr``);
-4. :func:`mitsweep.optics.panorama.panorama_map` and ``unwarp``: the cylindrical
-   panorama of the restored image (``panorama.png``).
+3. :func:`mitsweep.workflows.restore_photo`: the IPSF bank of the photo's geometry
+   (traced and cached) and the deconvolution about the calibrated centre
+   (``restored.exr``, with its provenance);
+4. :func:`mitsweep.workflows.unwarp_image`: the cylindrical panorama of the restored
+   image (``panorama.png``).
 
 Run::
 
@@ -70,29 +71,26 @@ def make_photo(path: Path, setup, *, spp: int, seed: int = 3) -> tuple[float, fl
 
 
 def restore(photo_path: Path, setup, out: Path, *, rays: int) -> dict:
+    """Calibrate, restore and unwarp the photo with the library's workflows (what
+    ``mitsweep calibrate``, ``deconvolve`` and ``unwarp`` run)."""
     from mitsweep.config import setup_to_toml
-    from mitsweep.deconv import deconvolve, estimate_nsr
-    from mitsweep.io import write_exr
     from mitsweep.io.camera import read_camera_image
-    from mitsweep.io.png import write_png
-    from mitsweep.photo import calibrate_photo
-    from mitsweep.optics.panorama import panorama_map, unwarp
-    from mitsweep.tracer import ipsf_bank
+    from mitsweep.workflows import calibrate_photo, restore_photo, unwarp_image
 
     photo = read_camera_image(photo_path, pixel_pitch=setup.sensor.pixel_pitch)
     cal = calibrate_photo(photo.data, setup)
     calibrated = cal.calibrated_setup(setup)
     (out / "calibrated.toml").write_text(setup_to_toml(calibrated))
-    bank = ipsf_bank(calibrated, n_radii=9, depths=[1000.0], rays=rays, kernel_size=15)
-    nsr = estimate_nsr(photo.data)
-    restored = deconvolve(photo.data, bank, method="wiener", nsr=nsr, prior="natural",
-                          center=cal.center_px)
-    write_exr(out / "restored.exr", restored, metadata={
-        "restored_from": str(photo_path), "nsr": nsr, "calibration": cal.as_dict()})
-    pmap = panorama_map(calibrated, restored.shape)
-    panorama, valid = unwarp(np.clip(restored, 0.0, None), pmap)
-    write_png(out / "panorama.png", panorama)
-    return {"calibration": cal.as_dict(), "nsr": nsr, "panorama_shape": list(panorama.shape),
+    # the bank of the photo's geometry is traced about the calibrated centre and cached
+    restored = restore_photo(photo_path, setup=calibrated, out=out / "restored.exr",
+                             depth=1000.0, rays=rays, pixel_pitch=setup.sensor.pixel_pitch,
+                             cache_dir=out / "bank_cache")
+    # the restored image carries its setup, centre and pitch: the panorama reads them
+    pano = unwarp_image(out / "restored.exr", out / "panorama.png", projection="cylindrical")
+    panorama, valid = pano.value
+    return {"calibration": cal.as_dict(), "nsr": restored.provenance["nsr"],
+            "center_from": restored.provenance["center_from"],
+            "panorama_shape": list(panorama.shape),
             "panorama_valid_fraction": float(valid.mean()), "out": str(out)}
 
 
@@ -139,7 +137,8 @@ def main(argv=None) -> int:
     if truth is not None:
         print(f"true centre   ({truth[0]:.2f}, {truth[1]:.2f}) px: off by "
               f"{result['center_error_px']:.3f} px")
-    print(f"restored      Wiener, NSR {result['nsr']:.3g} -> {out / 'restored.exr'}")
+    print(f"restored      Wiener, NSR {result['nsr']}, centre from {result['center_from']} -> "
+          f"{out / 'restored.exr'}")
     print(f"panorama      {result['panorama_shape'][1]}x{result['panorama_shape'][0]} px -> "
           f"{out / 'panorama.png'}")
     return 0

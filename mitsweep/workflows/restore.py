@@ -146,7 +146,7 @@ def _resolve_center(center, setup, shape) -> tuple[tuple[float, float], str]:
     return optical_center_px(shape), "the image centre"
 
 
-def _traced_bank(setup, shape, pitch, motion, depth, rays, progress):
+def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir):
     """The bank of the photo's geometry, from the cache (traced on a miss)."""
     from ..deconv.spatial import mirror_grid_shape
     from ..io.bank import bank_kernel_size
@@ -164,7 +164,7 @@ def _traced_bank(setup, shape, pitch, motion, depth, rays, progress):
         return cached_bank(photo, motion=motion, kind=kind,
                            depths=(depth if isinstance(depth, float) else 500.0,),
                            rays=rays or BANK_RAYS, kernel_size=bank_kernel_size(pitch),
-                           grid=grid, progress=step)
+                           grid=grid, cache_dir=cache_dir, progress=step)
 
 
 def _window(image: np.ndarray, center: tuple[float, float]):
@@ -213,6 +213,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
                   center: tuple[float, float] | None = None,
                   pixel_pitch: float | None = None, white_balance: str = "camera",
                   transfer: str | None = None, rays: int | None = None, force: bool = False,
+                  cache_dir: str | os.PathLike | None = None,
                   progress: Progress = None) -> WorkflowResult:
     """Restore the EDOF image of a focal-sweep photo (what ``mitsweep deconvolve`` runs).
 
@@ -258,6 +259,9 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         Rays per IPSF when tracing the bank (default :data:`mitsweep.tracer.bank.BANK_RAYS`).
     force : bool
         Use a given bank whose optics differ from the photo's (logged and recorded).
+    cache_dir : path-like, optional
+        Where a traced bank is cached (default: ``MITSWEEP_CACHE_DIR``, else the XDG
+        cache; :func:`mitsweep.tracer.cache.cached_bank`).
     progress : None, True or callable
         Progress of a bank trace (:func:`mitsweep.workflows.progress_callback`).
 
@@ -373,7 +377,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         if force:
             raise InputError("--force applies to a given --bank only")
         check_operator("radial" if setup.mirror.is_symmetric else "grid")
-        got = _traced_bank(setup, (H, W), pitch, motion, depth, rays, progress)
+        got = _traced_bank(setup, (H, W), pitch, motion, depth, rays, progress, cache_dir)
         bank, cache = got.bank, {"path": got.path and str(got.path), "traced": got.traced}
         identity = {"checked_against": "traced for the photo's geometry", "forced": False,
                     "problem": None, "bank_optics_sha256": optics_fingerprint(bank.optics)}
