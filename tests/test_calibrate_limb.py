@@ -7,6 +7,12 @@ Measured on ``mitsweep render`` images of scenes/sphere.toml at 200 px (pitch 0.
 69.19 px; the mean luminance steps by 0.12 at 59 px (the boards' reflection ends there,
 reflected rays at 114 deg from the axis) and by < 0.01 across the limb; the fit finds
 59.0 px (sweep) and 59.3 px (pinhole), -14.7 % and -14.4 %.
+
+The limb itself is found (mitsweep.photo.limb) by what changes there: the fine-detail
+energy (a render's noise: inside, a pixel averages the background over hundreds of its
+pixels) steps down, then a sign-agnostic step of the mean is fitted within 1.5 px. On
+pinhole renders that meets the issue's bars; on sweep renders it does not yet (strict
+expected failures below).
 """
 
 import numpy as np
@@ -62,3 +68,63 @@ def test_a_rim_outline_is_never_flagged():
     cal = calibrate_photo(disc_photo(0.86 * predicted), s)
     assert any("pixel pitch would be" in w for w in cal.warnings)
     assert not any(LIMB_WARNING in w for w in cal.warnings)
+
+
+# --- The limb of Mitsuba renders of scenes/sphere.toml (issue 24 item 1) -------------
+# The truth: the setup's predicted outline (the renderer's mirror mask matches it to
+# 0.03 px at 200 and 400 px, scripts/limb_study.py --check-mask), the axis moved by the
+# placement. Placements from scripts/limb_study.py: full frame, off-centre with a
+# sub-pixel offset in a larger canvas, and cropped by the frame (12% of the radius
+# beyond the limb on the left).
+
+CENTRE_TOL_PX = 0.25
+RADIUS_TOL_PX = 0.5
+
+
+@pytest.fixture(scope="session")
+def sphere_renders(tmp_path_factory):
+    import sys
+
+    from conftest import SCENES
+
+    sys.path.insert(0, str(SCENES.parent / "scripts"))
+    import limb_study
+
+    cache = tmp_path_factory.mktemp("limb_renders")
+    return limb_study, lambda size, mode: limb_study.render(size, mode, 32, cache)
+
+
+def _limb_case(sphere_renders, size, mode, case):
+    study, render = sphere_renders
+    img = render(size, mode)
+    name, canvas, at, sub = next(c for c in study.cases(size) if c[0] == case)
+    photo, truth = study.place(img, canvas, at, sub)
+    setup = study.sphere_setup(size)
+    cal = calibrate_photo(photo, setup)
+    radius = predicted_outline(setup).equivalent_radius_px(setup.sensor.pixel_pitch)
+    return cal, truth, radius
+
+
+#: Sweep renders: the fine-detail energy barely changes at the limb (0.15 in log, against
+#: 2-3 on pinhole renders), and a ring ~12 px outside it (at 200 and 400 px) steps more;
+#: the sign-agnostic step started at the true limb converges 0.3-0.5 px off the centre.
+SWEEP_MISS = "sweep renders: the limb's fine-detail step is too weak (a ring 12 px out wins)"
+
+
+def _limb_params(sizes):
+    for size in sizes:
+        for mode in ("pinhole", "sweep"):
+            for case in ("full", "offset", "cropped"):
+                marks = [pytest.mark.xfail(reason=SWEEP_MISS, strict=True)] \
+                    if mode == "sweep" else []
+                if size > 400:
+                    marks.append(pytest.mark.slow)
+                yield pytest.param(size, mode, case, id=f"{mode}{size}-{case}", marks=marks)
+
+
+@pytest.mark.parametrize("size, mode, case", list(_limb_params((200, 400, 1024))))
+def test_the_limb_of_a_sphere_render(sphere_renders, size, mode, case):
+    cal, truth, radius = _limb_case(sphere_renders, size, mode, case)
+    assert np.hypot(*np.subtract(cal.center_px, truth)) <= CENTRE_TOL_PX
+    assert abs(cal.rim_radius_px - radius) <= RADIUS_TOL_PX
+    assert cal.fit.limb

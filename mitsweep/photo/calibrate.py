@@ -219,6 +219,11 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
                 "edge where the reflection continues the background behind the mirror: "
                 "the fitted outline may be an edge inside the reflection, not the limb, "
                 "and its size then says nothing of the pitch or the distance")
+    if fit.limb:
+        warnings.append(
+            "the outline was found as the mirror's limb by the change of fine detail across "
+            "it (no edge there): on focal-sweep renders that change is weak and another "
+            "ring can be taken for it; check the radius")
     if fit.center_se_px > WARN_CENTRE_SE_PX:
         warnings.append(
             f"the rim is a faint edge: its {fit.points_used} edge points scatter by "
