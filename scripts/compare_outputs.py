@@ -36,6 +36,18 @@ RAYS = 1 << 15
 K = 21
 
 
+def _trace(**kw):
+    """Keywords of the tracing functions: the sampling ones in a TraceSettings where the
+    code has one, else as they were (so the script runs on the code before it too)."""
+    try:
+        from mitsweep.tracer import TraceSettings
+    except ImportError:
+        return kw
+    names = {"rays", "kernel_size", "seed", "method", "time_samples", "n_planes"}
+    settings = {k: kw.pop(k) for k in list(kw) if k in names}
+    return {**kw, "settings": TraceSettings(**settings)}
+
+
 def _setup(name):
     from mitsweep.config import load_setup
 
@@ -58,34 +70,35 @@ def tracer_outputs() -> dict[str, np.ndarray]:
                  ("off-300-planes", -r, 0.0, 300.0, {"method": "planes", "n_planes": 5}),
                  ("off-500-double", r, 0.3 * r, 500.0, {"double": True, "seed": 3})]
         for label, u, v, d, kw in cases:
-            k, info = integrated_psf(setup, u, v, d, rays=RAYS, kernel_size=K, **kw)
+            k, info = integrated_psf(setup, u, v, d, **_trace(rays=RAYS, kernel_size=K, **kw))
             out[f"{name}/ipsf/{label}"] = k
             out[f"{name}/ipsf/{label}/info"] = np.array(
                 [info["vignetted_fraction"], info["outside_kernel_fraction"],
                  info["rays_landed"], *info["centroid_px"]], dtype=np.float64)
         many = integrated_psfs(setup, [(0.0, 0.0, 500.0), (r, 0.0, np.inf), (0.0, r, 1e4)],
-                               rays=RAYS, kernel_size=K, seeds=[0, 1, 2])
+                               seeds=[0, 1, 2], **_trace(rays=RAYS, kernel_size=K))
         for j, res in enumerate(many):
             out[f"{name}/ipsfs/{j}"] = res[0]
-        geometry_ref = integrated_psf(setup, 0.0, 0.0, 500.0, rays=RAYS, kernel_size=K)[1]
+        geometry_ref = integrated_psf(setup, 0.0, 0.0, 500.0, **_trace(rays=RAYS,
+                                                                      kernel_size=K))[1]
         dist = geometry_ref["reference_sensor_distance_mm"]
         out[f"{name}/psf"] = psf(setup, r, 0.0, 500.0, dist + 0.4, rays=RAYS, kernel_size=K)[0]
         if name == "paraboloid_tilted":
             bank = ipsf_bank(setup, kind="grid", grid=(2, 3), depths=(500.0, np.inf),
-                             rays=1 << 14, kernel_size=15)
+                             **_trace(rays=1 << 14, kernel_size=15))
         else:
-            bank = ipsf_bank(setup, n_radii=3, depths=(400.0, np.inf), rays=1 << 14,
-                             kernel_size=15)
+            bank = ipsf_bank(setup, n_radii=3, depths=(400.0, np.inf),
+                             **_trace(rays=1 << 14, kernel_size=15))
         out[f"{name}/bank/kernels"] = bank.kernels
         out[f"{name}/bank/vignetted"] = bank.vignetted
         if name == "paraboloid":
-            single = ipsf_bank(setup, n_radii=2, depths=(600.0,), rays=1 << 13,
-                               kernel_size=11, batched=False)
+            single = ipsf_bank(setup, n_radii=2, depths=(600.0,), batched=False,
+                               **_trace(rays=1 << 13, kernel_size=11))
             out[f"{name}/bank-unbatched/kernels"] = single.kernels
             mirror = dataclasses.replace(setup.mirror, aspheric=(2e-6, -1e-9))
             asph = dataclasses.replace(setup, mirror=mirror)
-            out[f"{name}/asphere/ipsf"] = integrated_psf(asph, r, 0.0, 500.0, rays=RAYS,
-                                                         kernel_size=K)[0]
+            out[f"{name}/asphere/ipsf"] = integrated_psf(asph, r, 0.0, 500.0,
+                                                         **_trace(rays=RAYS, kernel_size=K))[0]
     return out
 
 

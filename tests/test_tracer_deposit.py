@@ -8,7 +8,7 @@ import pytest
 from mitsweep import backend
 from mitsweep.config import load_setup
 from mitsweep.optics.reference import reference_geometry
-from mitsweep.tracer import integrated_psf, ipsf_bank
+from mitsweep.tracer import TraceSettings, integrated_psf, ipsf_bank
 from mitsweep.tracer import kernel, sampling
 from mitsweep.tracer.deposit import MAX_COPIES, DepositStrategy
 from mitsweep.tracer.bank import field_radius
@@ -97,9 +97,10 @@ def test_every_deposit_strategy_gives_the_same_ipsf(method, extra):
     runs = []
     for kw in ({"copies": 1, "mode": dr.ReduceMode.Direct, "coherent": False}, {},
                {"copies": 1, "mode": dr.ReduceMode.Expand}, {"coherent": False}):
-        with kernel.deposit_strategy_scope(**kw):
-            runs.append(integrated_psf(SPHERE, 0.9 * EDGE, 0.0, 500.0, rays=300_000,
-                                       sweep=GEOM.sweep, method=method, **extra))
+        settings = TraceSettings(rays=300_000, method=method, deposit=DepositStrategy(**kw),
+                                 **extra)
+        runs.append(integrated_psf(SPHERE, 0.9 * EDGE, 0.0, 500.0, sweep=GEOM.sweep,
+                                   settings=settings))
     k0, i0 = runs[0]
     for k, info in runs[1:]:
         assert np.abs(k - k0).sum() < 1e-7
@@ -111,8 +112,9 @@ def test_every_deposit_strategy_gives_the_same_ipsf(method, extra):
 def test_batched_bank_with_copies_matches_single_buffer():
     import drjit as dr
 
-    kw = dict(kind="radial", n_radii=3, depths=(500.0, 5000.0), rays=1 << 14, seed=3)
-    with kernel.deposit_strategy_scope(copies=1, mode=dr.ReduceMode.Direct, coherent=False):
-        a = ipsf_bank(SPHERE, **kw).kernels
-    b = ipsf_bank(SPHERE, **kw).kernels
+    kw = dict(kind="radial", n_radii=3, depths=(500.0, 5000.0))
+    single = DepositStrategy(copies=1, mode=dr.ReduceMode.Direct, coherent=False)
+    a = ipsf_bank(SPHERE, settings=TraceSettings(rays=1 << 14, seed=3, deposit=single),
+                  **kw).kernels
+    b = ipsf_bank(SPHERE, settings=TraceSettings(rays=1 << 14, seed=3), **kw).kernels
     assert np.abs(a - b).sum(axis=(2, 3)).max() < 1e-7

@@ -9,6 +9,8 @@ Main entry points
 -----------------
 - :func:`integrated_psf` / :func:`psf`: one IPSF over the sweep / one PSF at a distance.
 - :func:`ipsf_bank`: radial or grid banks over depths (:class:`mitsweep.io.bank.IPSFBank`).
+- :class:`TraceSettings`: how an IPSF is sampled (rays, kernel size, seed, method, ...),
+  one object for all of the above and the bank cache.
 - :func:`numeric_focus`, :func:`traced_sweep_range`: traced foci and sweep range.
 - :mod:`mitsweep.tracer.metrics`: cross-sections, kurtosis, V and V_avg.
 """
@@ -16,5 +18,7 @@ Main entry points
 from .bank import ipsf_bank
 from .focus import numeric_focus, traced_sweep_range
 from .ipsf import integrated_psf, psf
+from .settings import TraceSettings
 
-__all__ = ["integrated_psf", "psf", "ipsf_bank", "numeric_focus", "traced_sweep_range"]
+__all__ = ["integrated_psf", "psf", "ipsf_bank", "numeric_focus", "traced_sweep_range",
+           "TraceSettings"]

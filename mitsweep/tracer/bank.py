@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import replace
 from collections.abc import Callable
 from typing import Any
 
@@ -24,8 +25,8 @@ from ..optics import SweepRange, chief_ray, image_point, placement_of
 from ..optics.motion import MotionProfile
 from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..resources import check_allocation
-from .ipsf import (DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, KERNEL_PIXEL_BYTES,
-                   integrated_psf, integrated_psfs)
+from .ipsf import KERNEL_PIXEL_BYTES, integrated_psf, integrated_psfs
+from .settings import TraceSettings, settings_from_keywords
 from .source import check_depth
 
 __all__ = ["ipsf_bank", "field_radius", "grid_points"]
@@ -33,7 +34,8 @@ __all__ = ["ipsf_bank", "field_radius", "grid_points"]
 logger = logging.getLogger(__name__)
 
 #: Rays per IPSF in a bank: ~0.05 s each on 2 cores; L1 error ~1e-2 (see README table).
-BANK_RAYS = 1_000_000
+#: The default of :class:`~mitsweep.tracer.settings.TraceSettings` (``rays``).
+BANK_RAYS = TraceSettings().rays
 
 
 def field_radius(setup: Setup, geometry: ReferenceGeometry | None = None) -> float:
@@ -63,11 +65,10 @@ def grid_points(setup: Setup, grid: tuple[int, int]) -> NDArray[np.float64]:
 
 def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
               grid: tuple[int, int] = (9, 9), depths: ArrayLike = (500.0,),
-              rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
+              settings: TraceSettings | None = None,
               motion: MotionProfile | None = None, sweep: SweepRange | None = None,
-              method: str = "exact", time_samples: int = DEFAULT_TIME_SAMPLES,
-              n_planes: int = 16, progress: Callable[[], object] | None = None,
-              batched: bool = True) -> IPSFBank:
+              progress: Callable[[], object] | None = None,
+              batched: bool = True, **deprecated: Any) -> IPSFBank:
     """A bank of IPSFs for a setup.
 
     Parameters
@@ -80,9 +81,12 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         kernel and ``vignetted = 1``; ``metadata["valid"]`` marks them).
     depths : sequence of float
         Depths l, mm (inf allowed).
-    rays, kernel_size, seed, motion, sweep, method, time_samples, n_planes
-        As :func:`mitsweep.tracer.integrated_psf`; ``sweep`` and ``motion`` are resolved
-        once by :func:`mitsweep.optics.reference.reference_geometry`, so the bank's
+    settings : TraceSettings, optional
+        As :func:`mitsweep.tracer.integrated_psf`; point ``j`` is traced with seed
+        ``settings.seed + j`` (default ``TraceSettings()``).
+    motion, sweep
+        As :func:`mitsweep.tracer.integrated_psf`, resolved once by
+        :func:`mitsweep.optics.reference.reference_geometry`, so the bank's
         ``reference_sensor_distance`` is the mid-travel of the motion it was traced for.
     progress : callable, optional
         Called with no argument after each IPSF (e.g. a tqdm ``update``); with
@@ -93,6 +97,9 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         instead of ~10-25 ms of fixed launch cost per IPSF. The kernels are those of
         ``batched=False`` (one :func:`mitsweep.tracer.integrated_psf` call per IPSF, same
         seeds) up to the float64 summation order of the deposit.
+    **deprecated
+        ``rays``, ``kernel_size``, ``seed``, ``method``, ``time_samples``, ``n_planes``:
+        the fields of ``settings``, still accepted for one release (DeprecationWarning).
 
     Returns
     -------
@@ -100,6 +107,7 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         With ``optics``: the setup's mirror, lens, sensor and sweep and the motion, the
         identity :func:`mitsweep.deconv.kernels.check_bank_identity` checks images by.
     """
+    settings = settings_from_keywords(settings, deprecated, caller="ipsf_bank")
     if kind not in ("radial", "grid"):
         raise ValueError(f"kind: must be 'radial' or 'grid', got {kind!r}")
     depths = [check_depth(d) for d in np.atleast_1d(np.asarray(depths, dtype=float))]
@@ -109,9 +117,7 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
     sweep, motion, ref = geometry.sweep, geometry.motion, geometry.sensor_distance
     radii = None
     grid_shape = None
-    K = int(kernel_size)
-    if K < 3 or K % 2 == 0:
-        raise ValueError(f"kernel_size: must be an odd integer >= 3, got {kernel_size!r}")
+    K, seed = settings.kernel_size, settings.seed
     n_points = float(n_radii) if kind == "radial" else float(grid[0]) * float(grid[1])
     # kernels (float32), per-point bookkeeping (3 float64 arrays, the grid's points) and
     # one IPSF being traced
@@ -134,12 +140,11 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
     outside = np.zeros((len(depths), len(points)))
     valid = np.ones(len(points), bool)
     t0 = time.perf_counter()
-    common: dict[str, Any] = dict(rays=rays, kernel_size=K, motion=motion, sweep=sweep,
-                                  method=method, time_samples=time_samples,
-                                  n_planes=n_planes, reference_sensor_distance=ref)
+    common: dict[str, Any] = dict(motion=motion, sweep=sweep,
+                                  reference_sensor_distance=ref)
     if batched:
         traced = integrated_psfs(setup, [(u, v, d) for d in depths for u, v in points],
-                                 seeds=[seed + pi for _ in depths for pi in range(len(points))],
+                                 settings=settings, seeds=[seed + pi for _ in depths for pi in range(len(points))],
                                  progress=progress, **common)
     else:
         traced = None
@@ -148,8 +153,8 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         for pi, (u, v) in enumerate(points):
             if traced is None:
                 try:
-                    res = integrated_psf(setup, float(u), float(v), depth, seed=seed + pi,
-                                         **common)
+                    res = integrated_psf(setup, float(u), float(v), depth, **common,
+                                         settings=replace(settings, seed=seed + pi))
                 except ValueError as exc:
                     res = exc
                 if progress is not None:
@@ -171,10 +176,10 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
     setup_dict = setup_to_dict(setup)
     meta = {
         "setup": setup_dict, "sweep_range": sweep.as_dict(),
-        "motion": motion.as_dict(), "method": method,
-        "time_samples": int(time_samples) if method == "continuous" else None,
-        "n_planes": int(n_planes) if method == "planes" else None,
-        "rays_per_ipsf": int(rays), "seed": int(seed), "version": __version__,
+        "motion": motion.as_dict(), "method": settings.method,
+        "time_samples": settings.time_samples if settings.method == "continuous" else None,
+        "n_planes": settings.n_planes if settings.method == "planes" else None,
+        "rays_per_ipsf": settings.rays, "seed": seed, "version": __version__,
         "generator": "mitsweep.tracer.ipsf_bank", "outside_kernel": outside.tolist(),
         "valid": valid.tolist(), "seconds": time.perf_counter() - t0,
     }

@@ -48,8 +48,9 @@ from ..config import DEFAULT_SETUP, Setup, load_setup
 from ..optics.reference import reference_geometry
 from . import kernel
 from .bank import field_radius, ipsf_bank
-from .kernel import trace_arrays
 from .ipsf import DEFAULT_TIME_SAMPLES, fit_sampling_box, integrated_psf
+from .kernel import DepositStrategy, trace_arrays
+from .settings import TraceSettings as Settings
 from .source import source_from_image
 
 __all__ = ["run_bench", "bank_error_per_second"]
@@ -156,8 +157,8 @@ def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: 
         for w in widths:
             with backend.llvm_vector_width_scope(w):
                 c0 = time.process_time()
-                _, info = integrated_psf(setup, u, 0.0, depth, rays=rays, sweep=sweep,
-                                         seed=rep + 1, time_samples=1, method="continuous")
+                _, info = integrated_psf(setup, u, 0.0, depth, sweep=sweep, settings=Settings(
+                    rays=rays, seed=rep + 1, time_samples=1, method="continuous"))
                 cpu = time.process_time() - c0
             if rep >= 0:
                 row = rows[w]
@@ -167,7 +168,7 @@ def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: 
 
 
 #: Deposit strategies timed side by side (:func:`_strategy_comparison`): label and
-#: :func:`mitsweep.tracer.kernel.deposit_strategy_scope` keywords (None: Dr.Jit's modes).
+#: :class:`mitsweep.tracer.kernel.DepositStrategy` fields (absent: the default).
 DEPOSIT_STRATEGIES = (
     ("one shared buffer, direct atomics, lanes in sample order (before)",
      {"copies": 1, "mode": "Direct", "coherent": False}),
@@ -182,8 +183,6 @@ def _strategy_comparison(setup, u: float, depth: float, sweep, rays: int, repeat
     each of :data:`DEPOSIT_STRATEGIES`, interleaved in this process: per strategy and
     method, the best of ``repeats`` useful rays per second and CPU seconds per ray. The
     kernels agree to the float64 summation order (tests/test_tracer_deposit.py)."""
-    import drjit as dr
-
     methods = (("continuous, 1 time/ray", {"method": "continuous", "time_samples": 1}),
                ("exact", {"method": "exact"}))
     rows = {(label, m): {"strategy": label, "method": m, "rays_per_s": 0.0,
@@ -192,14 +191,11 @@ def _strategy_comparison(setup, u: float, depth: float, sweep, rays: int, repeat
     for rep in range(-1, repeats):  # rep -1: each strategy's kernels compiled, not timed
         for m, kw in methods:
             for label, strategy in DEPOSIT_STRATEGIES:
-                strategy = dict(strategy)
-                if "mode" in strategy:
-                    strategy["mode"] = getattr(dr.ReduceMode, strategy["mode"])
-                with kernel.deposit_strategy_scope(**strategy):
-                    c0 = time.process_time()
-                    _, info = integrated_psf(setup, u, 0.0, depth, rays=rays, sweep=sweep,
-                                             seed=rep + 1, **kw)
-                    cpu = time.process_time() - c0
+                settings = Settings(rays=rays, seed=rep + 1, deposit=DepositStrategy(**strategy),
+                                    **kw)
+                c0 = time.process_time()
+                _, info = integrated_psf(setup, u, 0.0, depth, sweep=sweep, settings=settings)
+                cpu = time.process_time() - c0
                 if rep >= 0:
                     row = rows[(label, m)]
                     row["cpu_seconds_per_ray"] = min(row["cpu_seconds_per_ray"], cpu / rays)
@@ -255,8 +251,9 @@ def bank_error_per_second(setup: Setup, *, n_radii: int = 19,
     geometry = reference_geometry(setup)
     kw: dict[str, Any] = dict(kind="radial", n_radii=n_radii, depths=depths,
                               sweep=geometry.sweep, motion=geometry.motion)
-    ref = ipsf_bank(setup, rays=reference_rays, method="exact", seed=1000, **kw).kernels
-    ref2 = ipsf_bank(setup, rays=reference_rays, method="exact", seed=2000,
+    ref = ipsf_bank(setup, settings=Settings(rays=reference_rays, method="exact", seed=1000),
+                    **kw).kernels
+    ref2 = ipsf_bank(setup, settings=Settings(rays=reference_rays, method="exact", seed=2000),
                      **dict(kw, depths=depths[:1])).kernels
     self_l1 = float(np.abs(ref[:1] - ref2).sum(axis=(2, 3)).max())
 
@@ -264,7 +261,7 @@ def bank_error_per_second(setup: Setup, *, n_radii: int = 19,
         rows, rays = [], 1 << 12
         while rays <= max_rays:
             t0 = time.perf_counter()
-            bank = ipsf_bank(setup, rays=rays, seed=0, **extra, **kw)
+            bank = ipsf_bank(setup, settings=Settings(rays=rays, seed=0, **extra), **kw)
             seconds = time.perf_counter() - t0
             worst = float(np.abs(bank.kernels - reference).sum(axis=(2, 3)).max())
             rows.append((rays, seconds, worst))
@@ -282,12 +279,14 @@ def bank_error_per_second(setup: Setup, *, n_radii: int = 19,
         row = {"label": label, **ladder(extra, ref)}
         if extra.get("method") == "planes":
             # half the rays: its deposit costs n_planes scatters per ray
-            own = ipsf_bank(setup, rays=reference_rays // 2, seed=1000, **extra, **kw).kernels
+            own = ipsf_bank(setup, settings=Settings(rays=reference_rays // 2, seed=1000, **extra),
+                            **kw).kernels
             row["own_limit"] = ladder(extra, own)
         if row["rays_per_kernel"] is not None and extra.get("method") == "exact":
             # the same bank traced one IPSF at a time (as before batching), same rays
             t0 = time.perf_counter()
-            ipsf_bank(setup, rays=row["rays_per_kernel"], seed=0, batched=False, **extra, **kw)
+            ipsf_bank(setup, settings=Settings(rays=row["rays_per_kernel"], seed=0, **extra),
+                      batched=False, **kw)
             row["seconds_one_ipsf_at_a_time"] = time.perf_counter() - t0
         out_rows.append(row)
     out = {"setup": setup.name, "n_radii": int(n_radii), "depths_mm": list(depths),
@@ -317,16 +316,17 @@ def run_bench(args: argparse.Namespace) -> dict:
     threads = os.cpu_count() or 1
     llvm = backend.select_backend() == "llvm"
     # Warm-up: compile the kernel (Dr.Jit caches it for the process and on disk).
-    integrated_psf(setup, u, 0.0, depth, rays=1 << 16, sweep=sweep)
+    integrated_psf(setup, u, 0.0, depth, settings=Settings(rays=1 << 16), sweep=sweep)
 
-    integrated_psf(setup, u, 0.0, depth, rays=1 << 16, sweep=sweep, method="exact")
+    integrated_psf(setup, u, 0.0, depth, settings=Settings(rays=1 << 16, method="exact"),
+                   sweep=sweep)
 
     def measure(samples, method="continuous"):
         best = None
         for rep in range(2 if quick else 3):
             c0 = time.process_time()
-            _, info = integrated_psf(setup, u, 0.0, depth, rays=rays, sweep=sweep, seed=rep,
-                                     time_samples=samples, method=method)
+            _, info = integrated_psf(setup, u, 0.0, depth, sweep=sweep, settings=Settings(
+                rays=rays, seed=rep, time_samples=samples, method=method))
             info["cpu_seconds"] = time.process_time() - c0
             rate = info["rays_landed"] / info["seconds"]
             if best is None or rate > best[0]:
@@ -387,7 +387,8 @@ def run_bench(args: argparse.Namespace) -> dict:
         # Bounded memory: 1e9 rays in chunks of 2^22 (no per-ray arrays are stored).
         rss0 = _peak_rss_mb()
         t0 = time.perf_counter()
-        _, big = integrated_psf(setup, u, 0.0, depth, rays=1_000_000_000, sweep=sweep)
+        _, big = integrated_psf(setup, u, 0.0, depth, settings=Settings(rays=1_000_000_000),
+                                sweep=sweep)
         out["rays_1e9_seconds"] = time.perf_counter() - t0
         out["rays_1e9_peak_rss_growth_mb"] = _peak_rss_mb() - rss0
     out["peak_rss_mb"] = _peak_rss_mb()

@@ -27,6 +27,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -40,9 +41,9 @@ from ..io.cache import cache_root, warn_unusable
 from ..io.lock import DirectoryLock
 from ..optics.motion import MotionProfile
 from ..optics.reference import reference_geometry
-from .bank import BANK_RAYS, ipsf_bank
-from .ipsf import DEFAULT_KERNEL_SIZE, DEFAULT_TIME_SAMPLES, METHODS
+from .bank import ipsf_bank
 from .kernel import TRACE_REVISION
+from .settings import TraceSettings, settings_from_keywords
 
 __all__ = ["CachedBank", "cached_bank", "bank_cache_key", "bank_cache_dir"]
 
@@ -53,7 +54,7 @@ logger = logging.getLogger(__name__)
 #: bank traced by an older tracer under the same package version is not served.
 CACHE_LAYOUT = 1
 #: The tracing method of cached banks (that of :func:`mitsweep.tracer.ipsf_bank`).
-DEFAULT_METHOD = "exact"
+DEFAULT_METHOD = TraceSettings().method
 
 
 @dataclass(frozen=True)
@@ -71,10 +72,12 @@ def bank_cache_dir(cache_dir: str | Path | None = None) -> Path:
     return Path(cache_dir) if cache_dir is not None else cache_root() / "banks"
 
 
-def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed, method) -> dict:
+def _trace_settings(kind, depths, settings: TraceSettings, n_radii, grid) -> dict:
+    """The key's trace settings. Equal to the key of the keyword API this replaced for
+    equal settings (``time_samples`` was always the default there, ``n_planes`` absent:
+    :meth:`TraceSettings.cache_fields`), so banks cached before still hit."""
     out = {"kind": kind, "depths_mm": ["inf" if math.isinf(d) else float(d) for d in depths],
-           "rays": int(rays), "kernel_size": int(kernel_size), "seed": int(seed),
-           "method": method, "time_samples": DEFAULT_TIME_SAMPLES,
+           **settings.cache_fields(),
            "version": __version__, "layout": CACHE_LAYOUT, "trace_revision": TRACE_REVISION}
     if kind == "radial":
         out["n_radii"] = int(n_radii)
@@ -85,29 +88,38 @@ def _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed, method
 
 def bank_cache_key(setup: Setup, *, motion: MotionProfile | None = None,
                    kind: str | None = None, depths: ArrayLike = (500.0,),
-                   rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
-                   n_radii: int = 19, grid: tuple[int, int] = (9, 9), seed: int = 0,
-                   method: str = DEFAULT_METHOD) -> tuple[str, dict, dict]:
-    """``(entry name, optics, trace settings)`` of the bank :func:`cached_bank` returns."""
+                   settings: TraceSettings | None = None, n_radii: int = 19,
+                   grid: tuple[int, int] = (9, 9), **deprecated: Any
+                   ) -> tuple[str, dict, dict]:
+    """``(entry name, optics, trace settings)`` of the bank :func:`cached_bank` returns.
+
+    The key holds the optics' fingerprint and ``settings`` but its ``deposit`` strategy
+    (which changes the speed, not the bank); ``**deprecated`` as :func:`cached_bank`.
+    """
+    settings = settings_from_keywords(settings, deprecated, caller="bank_cache_key",
+                                      allowed=_CACHE_KEYWORDS)
     kind = kind or ("radial" if setup.mirror.is_symmetric else "grid")
     if kind not in ("radial", "grid"):
         raise ValueError(f"kind: must be 'radial' or 'grid', got {kind!r}")
     geometry = reference_geometry(setup, motion=motion)
     optics = optics_sections(setup_to_dict(setup), geometry.motion.as_dict())
     depths = [float(d) for d in np.atleast_1d(np.asarray(depths, dtype=float))]
-    if method not in METHODS:
-        raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
-    trace = _trace_settings(kind, depths, rays, kernel_size, n_radii, grid, seed, method)
+    trace = _trace_settings(kind, depths, settings, n_radii, grid)
     digest = hashlib.sha256(json.dumps(trace, sort_keys=True).encode()).hexdigest()
     return f"{kind}-{optics_fingerprint(optics)[:16]}-{digest[:12]}", optics, trace
 
 
+#: The deprecated keywords of :func:`cached_bank` (it never took ``time_samples`` or
+#: ``n_planes``: its banks used the defaults).
+_CACHE_KEYWORDS = frozenset({"rays", "kernel_size", "seed", "method"})
+
+
 def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
                 kind: str | None = None, depths: ArrayLike = (500.0,),
-                rays: int = BANK_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
-                n_radii: int = 19, grid: tuple[int, int] = (9, 9), seed: int = 0,
-                method: str = DEFAULT_METHOD, cache_dir: str | Path | None = None,
-                progress: Callable[[], object] | None = None) -> CachedBank:
+                settings: TraceSettings | None = None, n_radii: int = 19,
+                grid: tuple[int, int] = (9, 9), cache_dir: str | Path | None = None,
+                progress: Callable[[], object] | None = None,
+                **deprecated: Any) -> CachedBank:
     """The IPSF bank of ``setup`` and ``motion``, from the cache or traced into it.
 
     Parameters
@@ -120,25 +132,28 @@ def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
         bank's reference sensor distance (mid-travel).
     kind : {"radial", "grid"}, optional
         Default: radial for rotationally symmetric setups, grid for tilted ones.
-    depths, rays, kernel_size, n_radii, grid, seed, method, progress
-        As :func:`mitsweep.tracer.ipsf_bank`.
+    depths, settings, n_radii, grid, progress
+        As :func:`mitsweep.tracer.ipsf_bank`; ``settings`` (default ``TraceSettings()``)
+        and the optics make the cache key (:func:`bank_cache_key`).
     cache_dir : path, optional
         Default :func:`bank_cache_dir` (none where the cache is off or unusable).
+    **deprecated
+        ``rays``, ``kernel_size``, ``seed``, ``method``: the fields of ``settings``, still
+        accepted for one release (DeprecationWarning).
 
     Returns
     -------
     CachedBank
     """
+    settings = settings_from_keywords(settings, deprecated, caller="cached_bank",
+                                      allowed=_CACHE_KEYWORDS)
     name, optics, trace = bank_cache_key(setup, motion=motion, kind=kind, depths=depths,
-                                         rays=rays, kernel_size=kernel_size,
-                                         n_radii=n_radii, grid=grid, seed=seed,
-                                         method=method)
+                                         settings=settings, n_radii=n_radii, grid=grid)
     kw = {"n_radii": n_radii} if trace["kind"] == "radial" else {"grid": tuple(grid)}
 
     def trace_it() -> IPSFBank:
         geometry = reference_geometry(setup, motion=motion)
-        bank = ipsf_bank(setup, kind=trace["kind"], depths=depths, rays=rays,
-                         kernel_size=kernel_size, seed=seed, method=method,
+        bank = ipsf_bank(setup, kind=trace["kind"], depths=depths, settings=settings,
                          motion=geometry.motion, sweep=geometry.sweep, progress=progress,
                          **kw)
         bank.metadata["cache"] = {"entry": name, "trace": trace}

@@ -15,6 +15,7 @@ import json
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,7 @@ from ..config import Setup, load_setup
 from ..optics.reference import reference_geometry
 from .bank import field_radius
 from .ipsf import integrated_psf
+from .settings import TraceSettings
 
 __all__ = ["convergence_table", "main"]
 
@@ -44,13 +46,13 @@ def convergence_table(setup: Setup, *, u: float | None = None, depth: float = 50
     geometry = reference_geometry(setup)
     if u is None:
         u = 0.9 * field_radius(setup, geometry)
-    kw: dict[str, Any] = dict(sweep=geometry.sweep, motion=geometry.motion,
-                              kernel_size=kernel_size)
-    integrated_psf(setup, u, 0.0, depth, rays=1 << 16, **kw)  # compile
-    ref, _ = integrated_psf(setup, u, 0.0, depth, rays=reference_rays, seed=1001,
-                            method="exact", **kw)
-    ref2, _ = integrated_psf(setup, u, 0.0, depth, rays=reference_rays, seed=2002,
-                             method="exact", **kw)
+    kw: dict[str, Any] = dict(sweep=geometry.sweep, motion=geometry.motion)
+    base = TraceSettings(kernel_size=kernel_size)
+    integrated_psf(setup, u, 0.0, depth, settings=replace(base, rays=1 << 16), **kw)  # compile
+    ref, _ = integrated_psf(setup, u, 0.0, depth, **kw, settings=replace(
+        base, rays=reference_rays, seed=1001, method="exact"))
+    ref2, _ = integrated_psf(setup, u, 0.0, depth, **kw, settings=replace(
+        base, rays=reference_rays, seed=2002, method="exact"))
     rows = []
     for method, samples in variants:
         extra: dict[str, Any] = ({"time_samples": samples} if method == "continuous" else
@@ -59,8 +61,8 @@ def convergence_table(setup: Setup, *, u: float | None = None, depth: float = 50
             best = None
             for rep in range(2):  # best of two timings: the machine is shared
                 t0 = time.perf_counter()
-                k, _ = integrated_psf(setup, u, 0.0, depth, rays=n, method=method, seed=rep,
-                                      **extra, **kw)
+                k, _ = integrated_psf(setup, u, 0.0, depth, **kw, settings=replace(
+                    base, rays=n, method=method, seed=rep, **extra))
                 dt = time.perf_counter() - t0
                 best = dt if best is None else min(best, dt)
             rows.append({"method": method, "samples": samples, "rays": int(n),

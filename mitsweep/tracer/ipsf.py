@@ -41,24 +41,20 @@ from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..optics.reference import reference_geometry
 from ..optics.sweep import SweepRange
 from ..resources import check_allocation
-from .kernel import (Geometry, SourceBatch, TraceParams, deposit, deposit_batch,
-                     deposit_copies, deposit_segments, fold_buffer, trace_arrays,
-                     trace_arrays_batch)
+from .kernel import (DepositStrategy, Geometry, SourceBatch, TraceParams, _strategy, deposit,
+                     deposit_batch, deposit_copies, deposit_segments, fold_buffer,
+                     trace_arrays, trace_arrays_batch)
+from .settings import (DEFAULT_KERNEL_SIZE, DEFAULT_RAYS, DEFAULT_TIME_SAMPLES, METHODS,
+                       TraceSettings, settings_from_keywords)
 from .source import PointSource, source_from_image
 
 __all__ = ["integrated_psf", "integrated_psfs", "psf", "render_source", "render_sources",
            "fit_sampling_box", "fit_sampling_boxes", "METHODS",
            "DEFAULT_RAYS", "DEFAULT_KERNEL_SIZE",
-           "DEFAULT_TIME_SAMPLES"]
+           "DEFAULT_TIME_SAMPLES", "TraceSettings"]
 
 logger = logging.getLogger(__name__)
 
-METHODS = ("exact", "continuous", "planes")
-DEFAULT_RAYS = 1_000_000
-DEFAULT_KERNEL_SIZE = 31
-#: Stratified sweep times per ray. Measured (README convergence table): 1 and 4 reach
-#: the same L1 error per second; 4 halves the error at a given ray count.
-DEFAULT_TIME_SAMPLES = 4
 #: Rays per launch: the kernel holds no per-ray arrays, so this bounds only the index
 #: range; 2^24 keeps the per-launch cost (graph, literals, launch) under 1 %.
 _CHUNK = 1 << 24
@@ -360,13 +356,15 @@ def render_source(setup: Setup, source: PointSource, *, times: ArrayLike | None 
                   time_samples: int = DEFAULT_TIME_SAMPLES, exact: bool = False,
                   rays: int = DEFAULT_RAYS,
                   kernel_size: int = DEFAULT_KERNEL_SIZE, seed: int = 0,
-                  double: bool = False, aperture_radius: float | None = None
+                  double: bool = False, aperture_radius: float | None = None,
+                  deposit: DepositStrategy | None = None
                   ) -> tuple[NDArray[np.float32], dict[str, Any]]:
     """Trace ``rays`` rays from ``source`` and bin them on the reference pixel grid.
 
     Give either fixed sensor distances ``times`` (mm; equal weights) or a ``motion``,
     with ``time_samples`` stratified times per ray, or, with ``exact``, each ray's whole
-    sweep deposited as its segment (:func:`mitsweep.tracer.kernel.deposit_segments`).
+    sweep deposited as its segment (:func:`mitsweep.tracer.kernel.deposit_segments`),
+    the way ``deposit`` says (default :class:`~mitsweep.tracer.kernel.DepositStrategy`).
     Returns ``(kernel, info)`` as :func:`integrated_psf`.
     """
     import drjit as dr
@@ -380,13 +378,14 @@ def render_source(setup: Setup, source: PointSource, *, times: ArrayLike | None 
                                                  exact=exact, time_samples=time_samples)
     buf = _deposit_source(geom, params, source.image_uv, rays, K, pitch, exact=exact,
                           times=times, linear=linear, table=table, cdf=cdf, motion=motion,
-                          time_samples=time_samples, double=double)
+                          time_samples=time_samples, double=double,
+                          strategy=_strategy(deposit))
     return _kernel_and_info(buf, K, rays, source, box_info, seed=seed, double=double,
                             seconds=time.perf_counter() - t_start, pitch=pitch)
 
 
 def _deposit_source(geom, params, center_uv, rays, K, pitch, *, exact, times, linear, table,
-                    cdf, motion, time_samples, double) -> np.ndarray:
+                    cdf, motion, time_samples, double, strategy) -> np.ndarray:
     """Trace and deposit ``rays`` rays of one source; its (K·K + 2) buffer as NumPy."""
     import drjit as dr
 
@@ -398,12 +397,12 @@ def _deposit_source(geom, params, center_uv, rays, K, pitch, *, exact, times, li
             buffer = deposit_segments(geom, params, n, offset=done, kernel_size=K,
                                       pitch=pitch, center_uv=center_uv,
                                       span=motion.span, cdf_table=cdf, buffer=buffer,
-                                      double=double)
+                                      double=double, strategy=strategy)
         else:
             buffer = deposit(geom, params, n, offset=done, kernel_size=K, pitch=pitch,
                              center_uv=center_uv, times=times, sensor_table=table,
                              linear=linear, time_samples=int(time_samples), buffer=buffer,
-                             double=double)
+                             double=double, strategy=strategy)
         dr.eval(buffer)
         done += n
     dr.sync_thread()
@@ -415,7 +414,8 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
                    time_samples: int = DEFAULT_TIME_SAMPLES, exact: bool = False,
                    rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
                    double: bool = False, aperture_radius: float | None = None,
-                   progress: Callable[[], object] | None = None
+                   progress: Callable[[], object] | None = None,
+                   deposit: DepositStrategy | None = None
                    ) -> list[tuple[NDArray[np.float32], dict[str, Any]] | ValueError]:
     """:func:`render_source` for many sources of one setup, traced together.
 
@@ -435,7 +435,7 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
     progress : callable, optional
         Called with no argument once per source's worth of rays traced.
     Others
-        As :func:`render_source`.
+        As :func:`render_source` (``deposit`` included).
 
     Returns
     -------
@@ -451,9 +451,10 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
     if not sources:
         return []
     K, rays = _check_sizes(kernel_size, rays, len(sources))
+    strategy = _strategy(deposit)
     # the stacked float64 buffer (its copies, kernel.deposit_copies) and NumPy copies
     check_allocation(f"deposit buffer of {len(sources)} IPSFs",
-                     len(sources) * (K * K + 2) * 8 * (2 * deposit_copies() + 1))
+                     len(sources) * (K * K + 2) * 8 * (2 * deposit_copies(strategy) + 1))
     t_start = time.perf_counter()
     times, linear, table, cdf = _sweep_arguments(setup, times=times, motion=motion,
                                                  exact=exact, time_samples=time_samples)
@@ -468,7 +469,8 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
         return results
     pitch = setup.sensor.pixel_pitch
     sweep_kw = dict(exact=exact, times=times, linear=linear, table=table, cdf=cdf,
-                    motion=motion, time_samples=time_samples, double=double)
+                    motion=motion, time_samples=time_samples, double=double,
+                    strategy=strategy)
     if rays >= _BATCH_DEPOSIT_RAYS:
         # Many rays per source: the launch cost is amortised, and the literals of a
         # one-source launch are cheaper than the batch's per-lane table reads.
@@ -497,7 +499,7 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
 
 
 def _deposit_batch(batch, rays, K, pitch, *, exact, times, linear, table, cdf, motion,
-                   time_samples, double, progress) -> np.ndarray:
+                   time_samples, double, progress, strategy) -> np.ndarray:
     """Trace and deposit ``rays`` rays of every source of ``batch``; (S, K·K + 2) NumPy."""
     import drjit as dr
 
@@ -511,7 +513,7 @@ def _deposit_batch(batch, rays, K, pitch, *, exact, times, linear, table, cdf, m
                                sensor_table=table, linear=linear,
                                time_samples=int(time_samples),
                                span=None if motion is None else motion.span, cdf_table=cdf,
-                               buffer=buffer)
+                               buffer=buffer, strategy=strategy)
         dr.eval(buffer)
         done += 1 << log2_count
         if progress is not None:
@@ -563,14 +565,11 @@ def _kernel_and_info(buf, K, rays, source, box_info, *, seed, double, seconds, p
 
 
 def integrated_psf(setup: Setup, u: float, v: float, depth: float, *,
-                   rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
-                   seed: int = 0, motion: MotionProfile | None = None,
-                   sweep: SweepRange | None = None,
-                   method: str = "exact", time_samples: int = DEFAULT_TIME_SAMPLES,
-                   n_planes: int = 16,
+                   settings: TraceSettings | None = None,
+                   motion: MotionProfile | None = None, sweep: SweepRange | None = None,
                    reference_sensor_distance: float | None = None,
-                   double: bool = False, aperture_radius: float | None = None
-                   ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+                   double: bool = False, aperture_radius: float | None = None,
+                   **deprecated: Any) -> tuple[NDArray[np.float32], dict[str, Any]]:
     """The IPSF of a point source seen at image point (u, v), over the focal sweep.
 
     Parameters
@@ -581,12 +580,13 @@ def integrated_psf(setup: Setup, u: float, v: float, depth: float, *,
         distance, mm.
     depth : float
         Depth l of the source along the world-bound reflected chief ray, mm (inf allowed).
-    rays : int
-        Rays traced (after the pilot passes that fit the sampling box).
-    kernel_size : int
-        K, odd: the kernel is (K, K) pixels of ``setup.sensor.pixel_pitch``.
-    seed : int
-        Seed of the low-discrepancy sample stream.
+    settings : TraceSettings, optional
+        Rays, kernel size K (pixels of ``setup.sensor.pixel_pitch``), seed, method
+        (``"exact"``: each ray's whole sweep, its sensor-hit segment, deposited
+        analytically, no time samples, :func:`mitsweep.tracer.kernel.deposit_segments`;
+        ``"continuous"``: ``time_samples`` stratified times per ray; ``"planes"``: the
+        paper's sum over ``n_planes`` equally spaced-in-time focal planes) and the
+        deposit strategy. Default ``TraceSettings()``.
     motion : MotionProfile, optional
         Stage motion (default: ``motion_for(setup, sweep)``, from ``sweep.profile``), e.g.
         a measured (tabulated) one.
@@ -594,11 +594,6 @@ def integrated_psf(setup: Setup, u: float, v: float, depth: float, *,
         Default: ``optimal_sweep_range(setup)`` (honours ``sweep.focus_min/max``).
         ``sweep`` and ``motion`` are resolved by
         :func:`mitsweep.optics.reference.reference_geometry`, as the renderer does.
-    method : {"exact", "continuous", "planes"}
-        ``"exact"`` (default): each ray's whole sweep, its sensor-hit segment, deposited
-        analytically (no time samples; :func:`mitsweep.tracer.kernel.deposit_segments`);
-        ``"continuous"``: ``time_samples`` stratified times per ray; ``"planes"``: the
-        paper's sum over ``n_planes`` equally spaced-in-time focal planes.
     reference_sensor_distance : float, optional
         Pixel grid and centring distance, mm (default: the reference geometry's, the
         mid-travel of ``motion``; give another only to study a mismatched grid).
@@ -606,6 +601,9 @@ def integrated_psf(setup: Setup, u: float, v: float, depth: float, *,
         Trace in float64 (reference runs; float32 agrees to ~1e-4 in L1, see tests).
     aperture_radius : float, optional
         Override the lens aperture radius, mm.
+    **deprecated
+        ``rays``, ``kernel_size``, ``seed``, ``method``, ``time_samples``, ``n_planes``:
+        the fields of ``settings``, still accepted for one release (DeprecationWarning).
 
     Returns
     -------
@@ -625,26 +623,26 @@ def integrated_psf(setup: Setup, u: float, v: float, depth: float, *,
     mitsweep.config.SetupError
         Empty sweep or an unknown motion profile.
     """
-    geometry, ref, sweep_kw, extra = _sweep_setup(setup, motion=motion, sweep=sweep,
-                                                  method=method, time_samples=time_samples,
-                                                  n_planes=n_planes,
+    settings = settings_from_keywords(settings, deprecated, caller="integrated_psf")
+    geometry, ref, sweep_kw, extra = _sweep_setup(setup, settings, motion=motion, sweep=sweep,
                                                   reference_sensor_distance=reference_sensor_distance)
     source = source_from_image(setup, u, v, depth, reference_sensor_distance=ref)
-    kernel, info = render_source(setup, source, rays=rays, kernel_size=kernel_size, seed=seed,
-                                 double=double, aperture_radius=aperture_radius, **sweep_kw)
+    kernel, info = render_source(setup, source, rays=settings.rays,
+                                 kernel_size=settings.kernel_size, seed=settings.seed,
+                                 double=double, aperture_radius=aperture_radius,
+                                 deposit=settings.deposit, **sweep_kw)
     info.update(extra)
     info["image_uv_mm"] = (float(u), float(v))
     return kernel, info
 
 
 def integrated_psfs(setup: Setup, points: Iterable[tuple[float, float, float]], *,
-                    rays: int = DEFAULT_RAYS, kernel_size: int = DEFAULT_KERNEL_SIZE,
+                    settings: TraceSettings | None = None,
                     seeds: Iterable[int] | None = None, motion: MotionProfile | None = None,
-                    sweep: SweepRange | None = None, method: str = "exact",
-                    time_samples: int = DEFAULT_TIME_SAMPLES, n_planes: int = 16,
+                    sweep: SweepRange | None = None,
                     reference_sensor_distance: float | None = None, double: bool = False,
                     aperture_radius: float | None = None,
-                    progress: Callable[[], object] | None = None
+                    progress: Callable[[], object] | None = None, **deprecated: Any
                     ) -> list[tuple[NDArray[np.float32], dict[str, Any]] | ValueError]:
     """:func:`integrated_psf` of many points of one setup, traced together.
 
@@ -653,12 +651,12 @@ def integrated_psfs(setup: Setup, points: Iterable[tuple[float, float, float]], 
     points : sequence of (u, v, depth)
         Image points (mm, at the reference distance) and depths (mm, inf allowed).
     seeds : sequence of int, optional
-        One per point (default: all 0).
+        One per point (default: all ``settings.seed``).
     progress : callable, optional
         Called with no argument once per IPSF's worth of rays traced.
     Others
-        As :func:`integrated_psf`; the sweep, motion and reference distance are resolved
-        once for all points.
+        As :func:`integrated_psf` (``**deprecated`` but ``seed``); the sweep, motion and
+        reference distance are resolved once for all points.
 
     Returns
     -------
@@ -673,13 +671,13 @@ def integrated_psfs(setup: Setup, points: Iterable[tuple[float, float, float]], 
     ValueError
         Unknown method or bad sizes (errors of the whole batch).
     """
+    settings = settings_from_keywords(settings, deprecated, caller="integrated_psfs",
+                                      allowed=_PSFS_KEYWORDS)
     points = [(float(u), float(v), d) for u, v, d in points]
-    seeds = [0] * len(points) if seeds is None else [int(x) for x in seeds]
+    seeds = [settings.seed] * len(points) if seeds is None else [int(x) for x in seeds]
     if len(seeds) != len(points):
         raise ValueError(f"seeds: give one per point ({len(points)}), got {len(seeds)}")
-    geometry, ref, sweep_kw, extra = _sweep_setup(setup, motion=motion, sweep=sweep,
-                                                  method=method, time_samples=time_samples,
-                                                  n_planes=n_planes,
+    geometry, ref, sweep_kw, extra = _sweep_setup(setup, settings, motion=motion, sweep=sweep,
                                                   reference_sensor_distance=reference_sensor_distance)
     results: list = [None] * len(points)
     sources, index = [], []
@@ -691,9 +689,10 @@ def integrated_psfs(setup: Setup, points: Iterable[tuple[float, float, float]], 
             results[j] = exc
             if progress is not None:
                 progress()
-    traced = render_sources(setup, sources, seeds=[seeds[j] for j in index], rays=rays,
-                            kernel_size=kernel_size, double=double,
-                            aperture_radius=aperture_radius, progress=progress, **sweep_kw)
+    traced = render_sources(setup, sources, seeds=[seeds[j] for j in index],
+                            rays=settings.rays, kernel_size=settings.kernel_size,
+                            double=double, aperture_radius=aperture_radius, progress=progress,
+                            deposit=settings.deposit, **sweep_kw)
     for j, res in zip(index, traced):
         if not isinstance(res, Exception):
             res[1].update(extra)
@@ -702,10 +701,14 @@ def integrated_psfs(setup: Setup, points: Iterable[tuple[float, float, float]], 
     return results
 
 
-def _sweep_setup(setup, *, motion, sweep, method, time_samples, n_planes,
-                 reference_sensor_distance):
+#: The deprecated keywords of :func:`integrated_psfs` (it took ``seeds``, not ``seed``).
+_PSFS_KEYWORDS = frozenset({"rays", "kernel_size", "method", "time_samples", "n_planes"})
+
+
+def _sweep_setup(setup, settings, *, motion, sweep, reference_sensor_distance):
     """Resolve the sweep of an IPSF: ``(geometry, reference distance, render_source
     keywords, info entries)``."""
+    method, time_samples, n_planes = settings.method, settings.time_samples, settings.n_planes
     if method not in METHODS:
         raise ValueError(f"method: must be one of {', '.join(METHODS)}, got {method!r}")
     geometry = reference_geometry(setup, motion=motion, sweep=sweep)

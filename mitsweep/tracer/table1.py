@@ -20,6 +20,7 @@ from ..config import Setup
 from ..io.bank import IPSFBank
 from ..optics import image_distance, optimal_sweep_range
 from .bank import ipsf_bank
+from .settings import TraceSettings
 from .metrics import EPSILON, cross_sections, kurtosis, v_avg
 
 __all__ = ["PAPER_DEPTHS_MM", "PAPER_RANGE_FRACTIONS", "default_ranges", "conventional_psf",
@@ -102,9 +103,10 @@ def table1_banks(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None =
     banks = []
     for fmin, fmax in ranges:
         s, sr = _range_setup(setup, fmin, fmax)
-        banks.append(ipsf_bank(s, kind="radial", n_radii=n_radii, depths=depths, rays=rays,
-                               kernel_size=kernel_size, seed=seed, sweep=sr,
-                               progress=progress))
+        banks.append(ipsf_bank(s, kind="radial", n_radii=n_radii, depths=depths,
+                               settings=TraceSettings(rays=rays, kernel_size=kernel_size,
+                                                      seed=seed),
+                               sweep=sr, progress=progress))
     return banks
 
 
