@@ -223,9 +223,9 @@ def resampler(request, monkeypatch):
     from mitsweep.deconv import polar
 
     if request.param == "ndimage":
-        monkeypatch.setattr(polar, "_spline_kernels", lambda: None)
+        monkeypatch.setattr(polar.spline, "jit_kernels", lambda: None)
     else:
-        assert polar._spline_kernels() is not None
+        assert polar.spline.jit_kernels() is not None
     return request.param
 
 
@@ -272,14 +272,14 @@ def test_dr_jit_resampling_matches_its_ndimage_reference(dtype, tol, spec_tol, m
     img = np.stack([_gray(n, 160) for n in ("camera", "astronaut", "coins")], -1)
     img = img[:150].astype(dtype)
     g = polar_grid(img.shape, center=(70.3, 84.9))
-    assert len({n for _, n in polar._polar_levels(g, True)}) == 3
-    spec_jit = polar._angle_spectrum(img, g, np.complex128)
-    out_jit = polar._from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
-                                         outside=img, dtype=dtype)
-    monkeypatch.setattr(polar, "_spline_kernels", lambda: None)
-    spec_ref = polar._angle_spectrum(img, g, np.complex128)
-    out_ref = polar._from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
-                                         outside=img, dtype=dtype)
+    assert len({n for _, n in polar.grid._polar_levels(g, True)}) == 3
+    spec_jit = polar.resample.angle_spectrum(img, g, np.complex128)
+    out_jit = polar.resample.from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
+                                                 outside=img, dtype=dtype)
+    monkeypatch.setattr(polar.spline, "jit_kernels", lambda: None)
+    spec_ref = polar.resample.angle_spectrum(img, g, np.complex128)
+    out_ref = polar.resample.from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
+                                                 outside=img, dtype=dtype)
     scale = np.abs(spec_ref).max()
     assert np.abs(spec_jit - spec_ref).max() <= spec_tol * scale * g.n_angles ** 0.5
     assert out_jit.dtype == out_ref.dtype == dtype
@@ -294,7 +294,7 @@ def test_polar_deconvolution_without_dr_jit_gives_the_same_image(blurred_scene, 
 
     _, y, bank = blurred_scene
     fast = polar_deconvolve(y, bank, nsr=1e-3)
-    monkeypatch.setattr(polar, "_spline_kernels", lambda: None)
+    monkeypatch.setattr(polar.spline, "jit_kernels", lambda: None)
     ref = polar_deconvolve(y, bank, nsr=1e-3)
     np.testing.assert_allclose(fast, ref, rtol=0, atol=1.1e-13)
 
@@ -305,7 +305,7 @@ def test_polar_deconvolution_does_not_depend_on_threads_or_calls(blurred_scene, 
     _, y, bank = blurred_scene
     outs = []
     for n in (1, 3):
-        monkeypatch.setattr(polar, "_threads", lambda n=n: n)
+        monkeypatch.setattr(polar.spline, "threads", lambda n=n: n)
         outs.append(polar_deconvolve(y, bank, nsr=1e-3))
         outs.append(polar_deconvolve(y, bank, nsr=1e-3))
     for o in outs[1:]:
@@ -350,7 +350,7 @@ def test_memory_estimate_bounds_the_measured_peak():
 def test_spline_prefilter_matches_ndimage(shape, dtype, tol):
     import scipy.ndimage as ndi
 
-    from mitsweep.deconv.polar import _spline_filter
+    from mitsweep.deconv.polar.spline import _spline_filter
 
     a = (np.random.default_rng(3).random(shape) * 4 - 1).astype(dtype)  # values in [-1, 3]
     for axes in [(0,), (0, 1)]:
@@ -381,11 +381,11 @@ def _band_transfer_by_fft(k, r, step, L, M, cdt):
 @pytest.mark.parametrize("cdt,tol", [(np.complex64, 2e-6), (np.complex128, 1e-12)])
 @pytest.mark.parametrize("rows", [9, 8])     # odd: the even/odd split of the kernel
 def test_band_transfer_and_filter_match_their_definitions(L, step, cdt, tol, rows):
-    from mitsweep.deconv.polar import _band_transfer, _band_wiener
+    from mitsweep.deconv.polar.bands import band_transfer, band_wiener
     from mitsweep.deconv.wiener import regulariser, wiener_filter
 
     k = np.random.default_rng(4).random((rows, 13))
-    H = _band_transfer(k, 40.0, step, L, 70, cdt)
+    H = band_transfer(k, 40.0, step, L, 70, cdt)
     assert H.dtype == cdt
     np.testing.assert_allclose(H, _band_transfer_by_fft(k, 40.0, step, L, 70, cdt),
                                rtol=0, atol=tol)
@@ -396,6 +396,6 @@ def test_band_transfer_and_filter_match_their_definitions(L, step, cdt, tol, row
             R = regulariser(H.shape, nsr, prior, dtype=H.real.dtype,
                             freqs=(nu[:, None], ft[None, :]), n_px=256.0)
             ref = wiener_filter(H.copy(), R)
-            got = _band_wiener(H.copy(), nu, ft, nsr, prior, 256.0)
+            got = band_wiener(H.copy(), nu, ft, nsr, prior, 256.0)
             np.testing.assert_allclose(got, ref, rtol=20 * tol, atol=20 * tol)
             assert got[0, 0] == pytest.approx(1.0)       # DC passes: R = 0 there
