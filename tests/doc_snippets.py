@@ -16,6 +16,8 @@ separated by ``;``):
 ``<!-- needs: MODULE -->``
     the block imports an optional package (PyTorch, JAX); where it is not installed the
     block is skipped, with that reason.
+``<!-- file: NAME -->`` (on a block of any other language, e.g. ``toml``)
+    the block is written to NAME in its session's directory before the next block runs.
 ``<!-- printed -->`` (on a ``text`` block right after a ``python`` block)
     what the Python block prints, checked as a console block's output is.
 ``<!-- tolerance: REL -->``
@@ -51,7 +53,6 @@ LINKED = (".venv", "scenes", "scripts", "examples", "tests", "mitsweep", "docs",
 
 _FENCE = re.compile(r"^(?P<indent>[ ]{0,3})(?P<fence>`{3,})(?P<lang>[\w-]*)[^\n]*\n(?P<body>.*?)^(?P=indent)(?P=fence)\s*$",
                     re.M | re.S)
-_COMMENT = re.compile(r"<!--(.*?)-->\s*$", re.S)
 _NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -84,14 +85,18 @@ def doc_files() -> list[Path]:
 
 def _markers(text_before: str) -> dict:
     """The markers of the HTML comment that ends ``text_before`` (blank lines allowed)."""
-    m = _COMMENT.search(text_before.rstrip())
-    if not m or text_before.rstrip()[m.end():].strip():
+    text = text_before.rstrip()
+    if not text.endswith("-->"):
         return {}
+    start = text.rfind("<!--")
+    if start < 0:
+        return {}
+    body = text[start + 4:-3]
     out = {}
-    for part in m.group(1).split(";"):
+    for part in re.split(r";\s*(?=(?:skip|slow|session|tolerance|needs|printed|file)\b)", body):
         key, _, value = part.partition(":")
         key = key.strip().lower()
-        if key in ("skip", "slow", "session", "tolerance", "needs", "printed"):
+        if key in ("skip", "slow", "session", "tolerance", "needs", "printed", "file"):
             out[key] = value.strip()
     return out
 
@@ -110,7 +115,9 @@ def snippets(paths=None) -> list[Snippet]:
                 if "tolerance" in marks:
                     found[-1].tolerance = float(marks["tolerance"])
                 continue
-            if lang not in LANGS:
+            if "file" in marks and lang not in LANGS:
+                lang = "file"       # written to that file, in its session's directory
+            elif lang not in LANGS:
                 continue
             s = Snippet(path, text.count("\n", 0, m.start()) + 1, lang, m.group("body"), markers=marks)
             if "skip" in marks:
@@ -226,6 +233,10 @@ def _drive(spec_file: str) -> None:
     import io
     import traceback
     for block in spec["blocks"]:
+        if block["lang"] == "file":
+            Path(block["file"]).write_text(block["code"])
+            results.append({"ok": True, "output": ""})
+            continue
         if block["lang"] == "python":
             out = io.StringIO()
             ok = True
@@ -276,7 +287,8 @@ def run_session(blocks: list[Snippet], timeout: float = 1800) -> list[dict]:
     """Run the blocks in order in one fresh directory; their results, one per block."""
     with tempfile.TemporaryDirectory(prefix="mitsweep-doc-") as tmp:
         base = workdir(Path(tmp))
-        spec = {"blocks": [{"lang": b.lang, "code": b.code, "where": b.where} for b in blocks],
+        spec = {"blocks": [{"lang": b.lang, "code": b.code, "where": b.where,
+                            "file": b.markers.get("file")} for b in blocks],
                 "results": str(Path(tmp) / ".results.json"), "timeout": timeout}
         (Path(tmp) / ".spec.json").write_text(json.dumps(spec))
         proc = subprocess.run([str(ROOT / ".venv" / "bin" / "python"), str(Path(__file__)),
