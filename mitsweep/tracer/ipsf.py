@@ -30,6 +30,7 @@ import logging
 import math
 import time
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -315,6 +316,42 @@ def sweep_cdf(motion: MotionProfile, n: int = _SENSOR_TABLE) -> np.ndarray | Non
     return cdf
 
 
+@dataclass(frozen=True)
+class _DepositArgs:
+    """What the deposit launches of one trace share: the sweep's sampling
+    (:func:`_sweep_arguments`), the precision and the deposit strategy."""
+
+    exact: bool
+    times: list | None
+    linear: tuple[float, float] | None
+    sensor_table: np.ndarray | None
+    cdf_table: np.ndarray | None
+    span: tuple[float, float] | None
+    time_samples: int
+    double: bool
+    strategy: DepositStrategy
+
+    def kernel_keywords(self) -> dict[str, Any]:
+        """Keywords of :func:`~mitsweep.tracer.kernel.deposit_segments` (``exact``) or
+        :func:`~mitsweep.tracer.kernel.deposit`."""
+        if self.exact:
+            return {"span": self.span, "cdf_table": self.cdf_table, "strategy": self.strategy}
+        return {"times": self.times, "sensor_table": self.sensor_table, "linear": self.linear,
+                "time_samples": self.time_samples, "strategy": self.strategy}
+
+
+def _deposit_args(setup, *, times, motion, exact, time_samples, double,
+                  deposit: DepositStrategy | None) -> _DepositArgs:
+    """:func:`_sweep_arguments` with the rest of a trace's deposit arguments."""
+    times, linear, table, cdf = _sweep_arguments(setup, times=times, motion=motion,
+                                                 exact=exact, time_samples=time_samples)
+    return _DepositArgs(exact=bool(exact and times is None), times=times, linear=linear,
+                        sensor_table=table, cdf_table=cdf,
+                        span=None if motion is None else motion.span,
+                        time_samples=int(time_samples), double=bool(double),
+                        strategy=_strategy(deposit))
+
+
 def _sweep_arguments(setup, *, times, motion, exact, time_samples):
     """Validated deposit arguments: ``(times, linear, sensor_table, cdf_table)``."""
     linear = table = cdf = None
@@ -367,42 +404,31 @@ def render_source(setup: Setup, source: PointSource, *, times: ArrayLike | None 
     the way ``deposit`` says (default :class:`~mitsweep.tracer.kernel.DepositStrategy`).
     Returns ``(kernel, info)`` as :func:`integrated_psf`.
     """
-    import drjit as dr
-
     K, rays = _check_sizes(kernel_size, rays)
     t_start = time.perf_counter()
     geom = source.geometry(setup, aperture_radius=aperture_radius)
     params, box_info = fit_sampling_box(geom, seed=seed, double=double)
     pitch = setup.sensor.pixel_pitch
-    times, linear, table, cdf = _sweep_arguments(setup, times=times, motion=motion,
-                                                 exact=exact, time_samples=time_samples)
-    buf = _deposit_source(geom, params, source.image_uv, rays, K, pitch, exact=exact,
-                          times=times, linear=linear, table=table, cdf=cdf, motion=motion,
-                          time_samples=time_samples, double=double,
-                          strategy=_strategy(deposit))
+    args = _deposit_args(setup, times=times, motion=motion, exact=exact,
+                         time_samples=time_samples, double=double, deposit=deposit)
+    buf = _deposit_source(geom, params, source.image_uv, rays, K, pitch, args)
     return _kernel_and_info(buf, K, rays, source, box_info, seed=seed, double=double,
                             seconds=time.perf_counter() - t_start, pitch=pitch)
 
 
-def _deposit_source(geom, params, center_uv, rays, K, pitch, *, exact, times, linear, table,
-                    cdf, motion, time_samples, double, strategy) -> np.ndarray:
+def _deposit_source(geom, params, center_uv, rays, K, pitch, args: _DepositArgs
+                    ) -> np.ndarray:
     """Trace and deposit ``rays`` rays of one source; its (K·K + 2) buffer as NumPy."""
     import drjit as dr
 
     buffer = None
     done = 0
+    launch = deposit_segments if args.exact else deposit
     while done < rays:  # chunks bound the memory: the kernel holds no per-ray arrays
         n = min(_CHUNK, rays - done)
-        if exact and times is None:
-            buffer = deposit_segments(geom, params, n, offset=done, kernel_size=K,
-                                      pitch=pitch, center_uv=center_uv,
-                                      span=motion.span, cdf_table=cdf, buffer=buffer,
-                                      double=double, strategy=strategy)
-        else:
-            buffer = deposit(geom, params, n, offset=done, kernel_size=K, pitch=pitch,
-                             center_uv=center_uv, times=times, sensor_table=table,
-                             linear=linear, time_samples=int(time_samples), buffer=buffer,
-                             double=double, strategy=strategy)
+        buffer = launch(geom, params, n, offset=done, kernel_size=K, pitch=pitch,
+                        center_uv=center_uv, buffer=buffer, double=args.double,
+                        **args.kernel_keywords())
         dr.eval(buffer)
         done += n
     dr.sync_thread()
@@ -456,8 +482,8 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
     check_allocation(f"deposit buffer of {len(sources)} IPSFs",
                      len(sources) * (K * K + 2) * 8 * (2 * deposit_copies(strategy) + 1))
     t_start = time.perf_counter()
-    times, linear, table, cdf = _sweep_arguments(setup, times=times, motion=motion,
-                                                 exact=exact, time_samples=time_samples)
+    args = _deposit_args(setup, times=times, motion=motion, exact=exact,
+                         time_samples=time_samples, double=double, deposit=strategy)
     geoms = [s.geometry(setup, aperture_radius=aperture_radius) for s in sources]
     fits = fit_sampling_boxes(geoms, seeds=seeds, double=double)
     ok = [j for j, f in enumerate(fits) if not isinstance(f, Exception)]
@@ -468,23 +494,20 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
     if not ok:
         return results
     pitch = setup.sensor.pixel_pitch
-    sweep_kw = dict(exact=exact, times=times, linear=linear, table=table, cdf=cdf,
-                    motion=motion, time_samples=time_samples, double=double,
-                    strategy=strategy)
     if rays >= _BATCH_DEPOSIT_RAYS:
         # Many rays per source: the launch cost is amortised, and the literals of a
         # one-source launch are cheaper than the batch's per-lane table reads.
         buf = np.empty((len(ok), K * K + 2))
         for row, j in enumerate(ok):
             buf[row] = _deposit_source(geoms[j], fits[j][0], sources[j].image_uv, rays, K,
-                                       pitch, **sweep_kw)
+                                       pitch, args)
             if progress is not None:
                 progress()
     else:
         buf = _deposit_batch(SourceBatch([geoms[j] for j in ok], [fits[j][0] for j in ok],
                                          center_uv=[sources[j].image_uv for j in ok],
                                          double=double),
-                             rays, K, pitch, progress=progress, **sweep_kw)
+                             rays, K, pitch, args, progress=progress)
     seconds = (time.perf_counter() - t_start) / len(sources)
     for row, j in enumerate(ok):
         try:
@@ -498,8 +521,7 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
     return results
 
 
-def _deposit_batch(batch, rays, K, pitch, *, exact, times, linear, table, cdf, motion,
-                   time_samples, double, progress, strategy) -> np.ndarray:
+def _deposit_batch(batch, rays, K, pitch, args: _DepositArgs, *, progress) -> np.ndarray:
     """Trace and deposit ``rays`` rays of every source of ``batch``; (S, K·K + 2) NumPy."""
     import drjit as dr
 
@@ -509,11 +531,7 @@ def _deposit_batch(batch, rays, K, pitch, *, exact, times, linear, table, cdf, m
     while done < rays:
         log2_count = min(rays - done, per_launch).bit_length() - 1
         buffer = deposit_batch(batch, log2_count, offset=done, kernel_size=K, pitch=pitch,
-                               exact=exact and times is None, times=times,
-                               sensor_table=table, linear=linear,
-                               time_samples=int(time_samples),
-                               span=None if motion is None else motion.span, cdf_table=cdf,
-                               buffer=buffer, strategy=strategy)
+                               exact=args.exact, buffer=buffer, **args.kernel_keywords())
         dr.eval(buffer)
         done += 1 << log2_count
         if progress is not None:
