@@ -84,6 +84,13 @@ def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
     The temporary keeps the target's suffix (some writers pick the format from it). Any
     ``OSError`` raised while writing, flushing or renaming becomes a :class:`WriteError`
     naming ``path``; the temporary is removed.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    suffix : str, optional
+        The temporary's suffix (default: ``path``'s own).
     """
     p = check_writable(path)
     try:
@@ -107,10 +114,38 @@ def atomic_path(path: str | Path, suffix: str | None = None) -> Iterator[Path]:
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (through :func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    data : bytes
+        Its whole content.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
     return Path(path)
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically (through :func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    text : str
+        Its whole content, written as UTF-8.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     return write_bytes_atomic(path, text.encode("utf-8"))

@@ -175,7 +175,20 @@ def _first_cause(said: list[str], exc: BaseException) -> str:
     return str(exc) or type(exc).__name__
 
 def read_exr(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Read every channel (name → (H, W) float array) and the mitsweep metadata."""
+    """Read every channel (name → (H, W) float array) and the mitsweep metadata.
+
+    Parameters
+    ----------
+    path : str or Path
+        An OpenEXR file (mitsweep's, or any other: its metadata is then empty).
+
+    Returns
+    -------
+    channels : dict of str to ndarray
+        Every channel, e.g. ``"R"``, ``"depth.Z"``, ``"mask.Y"``.
+    metadata : dict
+        The provenance mitsweep wrote into the header.
+    """
     import OpenEXR
 
     p = Path(path)
@@ -211,7 +224,13 @@ def _declared_bytes(header: dict) -> float:
 
 
 def read_exr_header(path: str | Path) -> dict[str, Any]:
-    """Only the mitsweep metadata of an EXR file."""
+    """Only the mitsweep metadata of an EXR file.
+
+    Parameters
+    ----------
+    path : str or Path
+        An OpenEXR file.
+    """
     import OpenEXR
 
     p = Path(path)
@@ -227,7 +246,15 @@ def read_exr_header(path: str | Path) -> dict[str, Any]:
 
 def stack_channels(chans: Mapping[str, np.ndarray], names: Sequence[str] = ("R", "G", "B")
                   ) -> np.ndarray:
-    """(H, W, C) from named channels, or (H, W) for a single ``Y`` channel."""
+    """(H, W, C) from named channels, or (H, W) for a single ``Y`` channel.
+
+    Parameters
+    ----------
+    chans : mapping of str to ndarray
+        Channels by name, as :func:`read_exr` returns them.
+    names : sequence of str, optional
+        The channels to stack, in order (default RGB; EXR lists them B, G, R).
+    """
     if "Y" in chans and not all(n in chans for n in names):
         return chans["Y"]
     missing = [n for n in names if n not in chans]

@@ -23,7 +23,21 @@ __all__ = ["ChiefRay", "chief_ray", "intersect_mirror", "mirror_point_from_image
 
 @dataclass(frozen=True)
 class ChiefRay:
-    """Chief-ray quantities at mirror points (arrays broadcast over the points)."""
+    """Chief-ray quantities at mirror points (arrays broadcast over the points).
+
+    Attributes
+    ----------
+    surface : SurfacePoints
+        The mirror points (position, normal, ρ), as the profile gives them.
+    to_lens : ndarray, shape (..., 3)
+        Unit vector r̂ from each mirror point toward the lens centre.
+    world_dir : ndarray, shape (..., 3)
+        Unit direction w of the world-bound reflected chief ray.
+    cos_incidence : ndarray
+        n·r̂, the cosine of the angle of incidence (> 0 where the camera sees the front).
+    lens_distance : ndarray
+        Distance |p_c − p_r| from the lens centre to the mirror point, mm.
+    """
 
     surface: SurfacePoints
     to_lens: np.ndarray      # r̂, (..., 3)
@@ -38,7 +52,20 @@ class ChiefRay:
 
 
 def chief_ray(placement: Placement, surface: SurfacePoints) -> ChiefRay:
-    """Chief-ray quantities for points ``surface`` of ``placement``'s mirror."""
+    """Chief-ray quantities for points ``surface`` of ``placement``'s mirror.
+
+    Parameters
+    ----------
+    placement : Placement
+        The mirror profile placed in front of the lens.
+    surface : SurfacePoints
+        Points of that profile (e.g. from ``placement.profile``), in the mirror's frame.
+
+    Returns
+    -------
+    ChiefRay
+        Arrays broadcast over the points.
+    """
     to_lens = placement.lens_center - surface.position
     dist = np.linalg.norm(to_lens, axis=-1)
     r = to_lens / dist[..., None]
@@ -50,7 +77,15 @@ def chief_ray(placement: Placement, surface: SurfacePoints) -> ChiefRay:
 
 def image_point(ray: ChiefRay, sensor_distance: float
                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Upright image coordinates (u, v), mm, of the mirror points on a sensor at ``i``."""
+    """Upright image coordinates (u, v), mm, of the mirror points on a sensor at ``i``.
+
+    Parameters
+    ----------
+    ray : ChiefRay
+        Chief rays at the mirror points (:func:`chief_ray`).
+    sensor_distance : float
+        Lens-to-sensor distance i, mm.
+    """
     r = ray.to_lens
     return (-sensor_distance * r[..., 0] / r[..., 2], -sensor_distance * r[..., 1] / r[..., 2])
 
@@ -63,6 +98,17 @@ def intersect_mirror(placement: Placement, origin: ArrayLike, direction: ArrayLi
     cancellation-free quadratic formula, keeps the root on the mirror's branch
     (``R + (1+k) z ≥ 0``) nearest the origin, then refines for asphere terms by Newton
     steps on ``z + s(ρ) = 0``.
+
+    Parameters
+    ----------
+    placement : Placement
+        The mirror and where it sits.
+    origin : array_like, shape (..., 3)
+        Ray origins, mm, in the camera frame (lens centre at the origin).
+    direction : array_like, shape (..., 3)
+        Ray directions (need not be unit length; ``t`` is in their units).
+    newton_iters : int, optional
+        Newton steps that refine the conic's root for the asphere terms.
 
     Returns
     -------
@@ -116,6 +162,20 @@ def mirror_point_from_image(placement: Placement, u: ArrayLike, v: ArrayLike,
 
     Points whose chief ray misses the mirror get NaN positions (check
     ``np.isfinite(ray.surface.rho)``).
+
+    Parameters
+    ----------
+    placement : Placement
+        The mirror and where it sits.
+    u, v : array_like
+        Upright image coordinates, mm (broadcast together).
+    sensor_distance : float
+        Lens-to-sensor distance i, mm, at which (u, v) are measured.
+
+    Returns
+    -------
+    ChiefRay
+        The chief rays through those image points and the mirror points they hit.
     """
     u, v = np.broadcast_arrays(np.asarray(u, dtype=float), np.asarray(v, dtype=float))
     d = np.stack([u, v, -np.full_like(u, sensor_distance)], axis=-1)

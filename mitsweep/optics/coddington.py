@@ -38,7 +38,17 @@ __all__ = ["coddington_reflection", "focal_distances", "focal_image_axial_distan
 
 def coddington_reflection(r_m: ArrayLike, r_s: ArrayLike, cos_incidence: ArrayLike,
                           depth: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(d_m, d_s), mm, from principal radii, incidence cosine and depth (inf allowed)."""
+    """(d_m, d_s), mm, from principal radii, incidence cosine and depth (inf allowed).
+
+    Parameters
+    ----------
+    r_m, r_s : array_like
+        Meridional and sagittal principal radii of curvature of the mirror, mm.
+    cos_incidence : array_like
+        Cosine of the chief ray's angle of incidence.
+    depth : array_like
+        Object distance l along the reflected ray, mm (``inf`` allowed).
+    """
     r_m, r_s, c, l = (np.asarray(a, dtype=float) for a in (r_m, r_s, cos_incidence, depth))
     inv_l = np.where(np.isinf(l), 0.0, 1.0 / l)
     d_m = r_m * c / (2.0 + r_m * c * inv_l)
@@ -88,7 +98,17 @@ def focal_distances(setup: Setup, rho: ArrayLike, depth: ArrayLike
 
 def focal_image_axial_distances(setup: Setup, rho: ArrayLike, depth: ArrayLike
                                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(D_m, D_s), mm: axial distances from the lens to the focal images (Eq. 6–7)."""
+    """(D_m, D_s), mm: axial distances from the lens to the focal images (Eq. 6–7).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens and placement.
+    rho : array_like
+        Mirror points as signed tilt-plane coordinates, mm.
+    depth : array_like
+        Depths l, mm (``inf`` allowed); broadcast with ``rho``.
+    """
     placement, ray = _surface_points(setup, rho)
     d_m, d_s = focal_distances(setup, rho, depth)
     p, r = ray.surface.position, ray.to_lens

@@ -45,7 +45,16 @@ def center_offset_of(setup: Setup) -> tuple[float, float] | None:
 def optical_center_px(shape: tuple[int, ...],
                       center_offset_px: tuple[float, float] | None = None) -> tuple[float, float]:
     """``(row, col)`` of the optical axis on an image of ``shape = (H, W[, …])``,
-    moved by ``center_offset_px = (drow, dcol)`` pixels when given."""
+    moved by ``center_offset_px = (drow, dcol)`` pixels when given.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The image's shape, (H, W) or (H, W, C).
+    center_offset_px : tuple of float, optional
+        ``(drow, dcol)``: how far the optical axis sits from the image centre, pixels
+        (a calibrated camera's ``[sensor] center_offset_px``).
+    """
     H, W = shape[0], shape[1]
     drow, dcol = (0.0, 0.0) if center_offset_px is None else center_offset_px
     return H / 2.0 - 0.5 + float(drow), W / 2.0 - 0.5 + float(dcol)
@@ -54,7 +63,19 @@ def optical_center_px(shape: tuple[int, ...],
 def sensor_to_pixel(u: ArrayLike, v: ArrayLike, shape: tuple[int, ...], pitch: float, *,
                     center_offset_px: tuple[float, float] | None = None
                    ) -> tuple[float, float] | tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pitch ``pitch`` mm."""
+    """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pitch ``pitch`` mm.
+
+    Parameters
+    ----------
+    u, v : array_like
+        Upright sensor coordinates, mm (u right, v up).
+    shape : tuple of int
+        The image's shape, (H, W[, C]).
+    pitch : float
+        Pixel pitch, mm.
+    center_offset_px : tuple of float, optional
+        The optical axis's offset from the image centre, ``(drow, dcol)`` pixels.
+    """
     r0, c0 = optical_center_px(shape, center_offset_px)
     u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
     return _pair(r0 - v / pitch, c0 + u / pitch)
@@ -63,7 +84,19 @@ def sensor_to_pixel(u: ArrayLike, v: ArrayLike, shape: tuple[int, ...], pitch: f
 def pixel_to_sensor(row: ArrayLike, col: ArrayLike, shape: tuple[int, ...], pitch: float, *,
                     center_offset_px: tuple[float, float] | None = None
                    ) -> tuple[float, float] | tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Sensor point ``(u, v)`` mm of pixel ``(row, col)`` (centres at integers)."""
+    """Sensor point ``(u, v)`` mm of pixel ``(row, col)`` (centres at integers).
+
+    Parameters
+    ----------
+    row, col : array_like
+        Pixel coordinates (fractional allowed; pixel centres at integers).
+    shape : tuple of int
+        The image's shape, (H, W[, C]).
+    pitch : float
+        Pixel pitch, mm.
+    center_offset_px : tuple of float, optional
+        The optical axis's offset from the image centre, ``(drow, dcol)`` pixels.
+    """
     r0, c0 = optical_center_px(shape, center_offset_px)
     row, col = np.asarray(row, dtype=float), np.asarray(col, dtype=float)
     return _pair((col - c0) * pitch, (r0 - row) * pitch)

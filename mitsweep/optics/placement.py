@@ -43,7 +43,19 @@ class SurfacePoints:
 
 @dataclass(frozen=True)
 class Placement:
-    """A mirror profile placed in front of the lens."""
+    """A mirror profile placed in front of the lens.
+
+    Parameters
+    ----------
+    profile : Profile
+        The mirror's surface in its own frame (vertex at the origin, axis +z).
+    vertex_distance : float
+        Lens centre to mirror vertex, mm.
+    tilt : float, optional
+        Rotation of the mirror about its vertex in the x–z plane, radians.
+    rim_radius : float, optional
+        Radial extent of the mirror, mm (``inf``: unbounded).
+    """
 
     profile: Profile
     vertex_distance: float
@@ -88,5 +100,11 @@ class Placement:
 
 
 def placement_of(mirror: Mirror) -> Placement:
-    """The :class:`Placement` of a :class:`mitsweep.config.Mirror`."""
+    """The :class:`Placement` of a :class:`mitsweep.config.Mirror`.
+
+    Parameters
+    ----------
+    mirror : mitsweep.config.Mirror
+        The ``[mirror]`` table of a setup.
+    """
     return Placement(profile_of(mirror), mirror.vertex_distance, mirror.tilt, mirror.rim_radius)

@@ -135,5 +135,11 @@ class Profile:
 
 
 def profile_of(mirror: Mirror) -> Profile:
-    """The :class:`Profile` of a :class:`mitsweep.config.Mirror`."""
+    """The :class:`Profile` of a :class:`mitsweep.config.Mirror`.
+
+    Parameters
+    ----------
+    mirror : mitsweep.config.Mirror
+        The ``[mirror]`` table of a setup (kind, radius, conic, aspheric terms).
+    """
     return Profile(radius=mirror.radius, conic=mirror.conic, aspheric=tuple(mirror.aspheric))

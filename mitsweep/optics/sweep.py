@@ -35,7 +35,20 @@ _GRID = 4097
 
 @dataclass(frozen=True)
 class MirrorZone:
-    """The part of the mirror that serves the FOV, as signed tilt-plane coordinates."""
+    """The part of the mirror that serves the FOV, as signed tilt-plane coordinates.
+
+    Attributes
+    ----------
+    rho_start : float
+        Start of the zone, mm: 0 on the axis for an untilted mirror, the rim nearest the
+        camera for a tilted one.
+    rho_end : float
+        End of the zone, mm (signed).
+    fov_deg : float
+        The field of view the zone serves, degrees.
+    max_fov_deg : float
+        The largest FOV this mirror reaches from this camera, degrees.
+    """
 
     rho_start: float   # mm; 0 on the axis for untilted mirrors, the near rim for tilted
     rho_end: float     # mm; signed
@@ -63,6 +76,31 @@ class SweepRange:
 
     The former ``*_mm`` attribute names (``focus_min_mm``, ...) still read, with a
     :class:`DeprecationWarning`; :meth:`as_dict` keeps the ``*_mm`` keys.
+
+    Attributes
+    ----------
+    focus_min, focus_max : float
+        Nearest and farthest focus distances (object side) the sweep covers, mm.
+    sensor_start, sensor_end : float
+        Sensor distances focusing at ``focus_min`` and ``focus_max``, mm.
+    translation : float
+        Sensor travel ``|sensor_start − sensor_end|``, mm.
+    exposure_s : float
+        Exposure: the travel at ``velocity_mm_s``, s.
+    velocity_mm_s : float
+        Stage velocity, mm/s.
+    rho_max : float
+        Largest |ρ| of the mirror zone, mm.
+    rho_start, rho_end : float
+        The mirror zone, signed tilt-plane coordinates, mm (:class:`MirrorZone`).
+    fov_deg, max_fov_deg : float
+        The FOV served and the largest one the mirror reaches, degrees.
+    depth_min, depth_max : float
+        The depth range, mm (``depth_max`` may be ``inf``).
+    source : str
+        ``"optimal"`` (Eq. 8–9) or ``"setup"`` (the setup's given focus_min/max).
+    min_at, max_at : dict
+        Where each extreme is reached: ``surface``, ``rho_mm``, ``depth_mm``.
     """
 
     focus_min: float
@@ -140,13 +178,29 @@ def _visible_limit(placement, x_lo: float, x_hi: float) -> float:
 
 
 def max_fov_deg(setup: Setup) -> float:
-    """The largest FOV (degrees) this mirror gives this camera."""
+    """The largest FOV (degrees) this mirror gives this camera.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror and its placement in front of the lens.
+    """
     return mirror_zone(setup, reach_only=True).max_fov_deg
 
 
 def mirror_zone(setup: Setup, fov_deg: float | None = None, *, reach_only: bool = False
                ) -> MirrorZone:
     """The zone of the mirror that covers ``fov_deg`` (default: the setup's).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens and sweep.
+    fov_deg : float, optional
+        The field of view, degrees (default: ``setup.sweep.fov_deg``).
+    reach_only : bool, optional
+        Only find how far the mirror reaches (``max_fov_deg``), without refusing a FOV
+        beyond it.
 
     Raises
     ------

@@ -13,6 +13,13 @@ def image_distance(focal_length: float, object_distance: ArrayLike) -> float | N
 
     ``i = f o / (o − f)``; ``o = inf`` gives ``i = f``.
 
+    Parameters
+    ----------
+    focal_length : float
+        Focal length f, mm.
+    object_distance : array_like
+        Object distance o, mm (``inf`` allowed).
+
     Raises
     ------
     ValueError
@@ -29,7 +36,15 @@ def image_distance(focal_length: float, object_distance: ArrayLike) -> float | N
 
 
 def object_distance(focal_length: float, image_distance: ArrayLike) -> float | NDArray[np.float64]:
-    """Object distance o in focus for a sensor at distance i (i > f): ``o = f i / (i − f)``."""
+    """Object distance o in focus for a sensor at distance i (i > f): ``o = f i / (i − f)``.
+
+    Parameters
+    ----------
+    focal_length : float
+        Focal length f, mm.
+    image_distance : array_like
+        Lens-to-sensor distance i, mm (> f).
+    """
     i = np.asarray(image_distance, dtype=float)
     if np.any(~(i > focal_length)):
         bad = float(np.min(i))
@@ -40,5 +55,13 @@ def object_distance(focal_length: float, image_distance: ArrayLike) -> float | N
 
 
 def magnification(focal_length: float, object_distance: ArrayLike) -> float | NDArray[np.float64]:
-    """Lateral magnification i/o of an object at distance o."""
+    """Lateral magnification i/o of an object at distance o.
+
+    Parameters
+    ----------
+    focal_length : float
+        Focal length f, mm.
+    object_distance : array_like
+        Object distance o, mm (> f).
+    """
     return image_distance(focal_length, object_distance) / np.asarray(object_distance, dtype=float)
