@@ -77,9 +77,32 @@ def test_deposit_strategy_scope_is_deprecated_and_context_local():
     the default on exit; it sets a context variable, not module globals."""
     with pytest.warns(DeprecationWarning, match="DepositStrategy"):
         with kernel.deposit_strategy_scope(copies=2, coherent=False):
-            assert kernel._strategy(None) == DepositStrategy(copies=2, coherent=False)
-            assert kernel._strategy(DepositStrategy()) == DepositStrategy()
-    assert kernel._strategy(None) == DepositStrategy()
+            assert kernel.resolve_strategy(None) == DepositStrategy(copies=2, coherent=False)
+            assert kernel.resolve_strategy(DepositStrategy()) == DepositStrategy()
+    assert kernel.resolve_strategy(None) == DepositStrategy()
+
+
+def test_deprecated_scope_still_reaches_the_ipsf_deposits(monkeypatch):
+    """Under the old scope, integrated_psf with default settings deposits with the scoped
+    strategy; an explicit TraceSettings.deposit wins over it."""
+    from mitsweep.tracer import ipsf
+
+    seen = []
+    real = ipsf.deposit_segments
+
+    def spy(*args, **kw):
+        seen.append(kw["strategy"])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(ipsf, "deposit_segments", spy)
+    scoped = DepositStrategy(copies=2, coherent=False)
+    explicit = DepositStrategy(copies=1)
+    with pytest.warns(DeprecationWarning):
+        with kernel.deposit_strategy_scope(copies=2, coherent=False):
+            integrated_psf(SPHERE, 0.0, 0.0, 500.0, settings=TraceSettings(rays=1 << 12))
+            integrated_psf(SPHERE, 0.0, 0.0, 500.0,
+                           settings=TraceSettings(rays=1 << 12, deposit=explicit))
+    assert seen == [scoped, explicit]
     with pytest.raises(ValueError, match="power of two"):
         with pytest.warns(DeprecationWarning):
             with kernel.deposit_strategy_scope(copies=3):

@@ -42,9 +42,9 @@ from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..optics.reference import reference_geometry
 from ..optics.sweep import SweepRange
 from ..resources import check_allocation
-from .kernel import (DepositStrategy, Geometry, SourceBatch, TraceParams, _strategy, deposit,
+from .kernel import (DepositStrategy, Geometry, SourceBatch, TraceParams, deposit,
                      deposit_batch, deposit_copies, deposit_segments, fold_buffer,
-                     trace_arrays, trace_arrays_batch)
+                     resolve_strategy, trace_arrays, trace_arrays_batch)
 from .settings import (DEFAULT_KERNEL_SIZE, DEFAULT_RAYS, DEFAULT_TIME_SAMPLES, METHODS,
                        TraceSettings, settings_from_keywords)
 from .source import PointSource, source_from_image
@@ -349,7 +349,7 @@ def _deposit_args(setup, *, times, motion, exact, time_samples, double,
                         sensor_table=table, cdf_table=cdf,
                         span=None if motion is None else motion.span,
                         time_samples=int(time_samples), double=bool(double),
-                        strategy=_strategy(deposit))
+                        strategy=resolve_strategy(deposit))
 
 
 def _sweep_arguments(setup, *, times, motion, exact, time_samples):
@@ -477,7 +477,7 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
     if not sources:
         return []
     K, rays = _check_sizes(kernel_size, rays, len(sources))
-    strategy = _strategy(deposit)
+    strategy = resolve_strategy(deposit)
     # the stacked float64 buffer (its copies, kernel.deposit_copies) and NumPy copies
     check_allocation(f"deposit buffer of {len(sources)} IPSFs",
                      len(sources) * (K * K + 2) * 8 * (2 * deposit_copies(strategy) + 1))

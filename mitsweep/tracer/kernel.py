@@ -74,7 +74,8 @@ from .stages import trace_lanes
 
 __all__ = ["Geometry", "TraceParams", "SourceBatch", "DepositStrategy", "trace_arrays",
            "trace_arrays_batch", "deposit", "deposit_segments", "deposit_batch",
-           "deposit_copies", "deposit_strategy_scope", "fold_buffer", "TRACE_REVISION"]
+           "deposit_copies", "deposit_strategy_scope", "resolve_strategy", "fold_buffer",
+           "TRACE_REVISION"]
 
 #: Bumped whenever the rays a seed produces or the way they are deposited change, so that
 #: kernels cached under an unchanged package version are not served stale (2: R2 lattice
@@ -94,9 +95,9 @@ _SCOPED_STRATEGY: contextvars.ContextVar[DepositStrategy | None] = contextvars.C
     "mitsweep_deposit_strategy", default=None)
 
 
-def _strategy(strategy: DepositStrategy | None) -> DepositStrategy:
-    """``strategy``, else that of an enclosing :func:`deposit_strategy_scope`, else the
-    default."""
+def resolve_strategy(strategy: DepositStrategy | None = None) -> DepositStrategy:
+    """``strategy``, else that of an enclosing :func:`deposit_strategy_scope`
+    (deprecated), else the default :class:`DepositStrategy`."""
     if strategy is not None:
         return strategy
     return _SCOPED_STRATEGY.get() or DepositStrategy()
@@ -170,7 +171,7 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
     return _deposit_samples(geom, lanes, kernel_size=kernel_size, pitch=pitch, times=times,
                             sensor_table=sensor_table, linear=linear,
                             time_samples=time_samples, buffer=buffer, double=double,
-                            strategy=_strategy(strategy))
+                            strategy=resolve_strategy(strategy))
 
 
 def _deposit_samples(geom, lanes, *, kernel_size, pitch, times, sensor_table, linear,
@@ -205,7 +206,7 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
     ``cdf_table`` holds ``F`` at uniform ``s = (i − i_lo)/(i_hi − i_lo)``. Cells ``K·K``,
     ``K·K+1``, the buffer's copies and ``strategy`` as in :func:`deposit`.
     """
-    strategy = _strategy(strategy)
+    strategy = resolve_strategy(strategy)
     lanes = single_lanes(geom, params, n, offset, double, center_uv,
                          coherent=strategy.coherent)
     return _deposit_sweeps(geom, lanes, kernel_size=kernel_size, pitch=pitch, span=span,
@@ -243,7 +244,7 @@ def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_si
     :func:`deposit` (``times``, ``sensor_table``, ``linear``, ``time_samples``); the window
     of source ``j`` is centred on the batch's ``center_uv[j]``.
     """
-    strategy = _strategy(strategy)
+    strategy = resolve_strategy(strategy)
     lanes = Lanes(batch.double, 0, offset, batch=batch, log2_count=int(log2_count),
                   coherent=exact and strategy.coherent)
     if exact:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from .deposit import DepositStrategy
@@ -66,9 +66,11 @@ class TraceSettings:
         Times per ray of ``"continuous"``, 1 to 64.
     n_planes : int
         Planes of ``"planes"``, 1 to 64.
-    deposit : DepositStrategy
+    deposit : DepositStrategy, optional
         How the deposit adds the weights (speed only: results agree to the float64
-        summation order); not part of a bank's cache key.
+        summation order); not part of a bank's cache key. None (default): the default
+        strategy, or that of an enclosing deprecated
+        :func:`~mitsweep.tracer.kernel.deposit_strategy_scope`.
 
     Raises
     ------
@@ -82,7 +84,7 @@ class TraceSettings:
     method: str = "exact"
     time_samples: int = DEFAULT_TIME_SAMPLES
     n_planes: int = DEFAULT_PLANES
-    deposit: DepositStrategy = field(default_factory=DepositStrategy)
+    deposit: DepositStrategy | None = None
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -102,7 +104,7 @@ class TraceSettings:
         if self.method == "planes" and (not _is_int(self.n_planes)
                                         or not 1 <= self.n_planes <= 64):
             raise ValueError(f"n_planes: must be in [1, 64], got {self.n_planes!r}")
-        if not isinstance(self.deposit, DepositStrategy):
+        if self.deposit is not None and not isinstance(self.deposit, DepositStrategy):
             raise ValueError(f"deposit: must be a DepositStrategy, got {self.deposit!r}")
         for name in ("rays", "kernel_size", "seed", "time_samples", "n_planes"):
             if _is_int(getattr(self, name)):
