@@ -282,7 +282,13 @@ def _apply_width_setting() -> None:
 def llvm_vector_width_scope(width: int | str) -> Iterator[int | None]:
     """Kernels compiled inside the ``with`` block use ``width``; the previous width is
     restored on exit. Safe between kernels: Dr.Jit caches kernels by their IR, which
-    names the width, so no kernel compiled at one width is reused at another."""
+    names the width, so no kernel compiled at one width is reused at another.
+
+    Parameters
+    ----------
+    width : int or str
+        Lanes per vector instruction, or ``"auto"`` / ``"native"``.
+    """
     before = llvm_vector_width()
     now = set_llvm_vector_width(width)
     try:
@@ -395,7 +401,15 @@ def _unroute_mitsuba_log() -> None:
 
 
 def mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str:
-    """The Mitsuba variant for the selected backend, e.g. ``llvm_ad_rgb``."""
+    """The Mitsuba variant for the selected backend, e.g. ``llvm_ad_rgb``.
+
+    Parameters
+    ----------
+    spectrum : str, optional
+        ``"rgb"``, ``"mono"`` or ``"spectral"``.
+    prefer : {"cuda", "llvm", "scalar"}, optional
+        A backend to use (default: :func:`select_backend`'s choice).
+    """
     backend = select_backend(prefer)
     return f"scalar_{spectrum}" if backend == "scalar" else f"{backend}_ad_{spectrum}"
 
@@ -407,6 +421,13 @@ def set_mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str
     which comes with the NVIDIA driver) falls back to the LLVM variant with a warning;
     a requested one (``prefer`` or ``$MITSWEEP_BACKEND``) raises :class:`BackendError`.
     Mitsuba's log goes to :mod:`logging` from here on (:func:`route_mitsuba_log`).
+
+    Parameters
+    ----------
+    spectrum : str, optional
+        ``"rgb"``, ``"mono"`` or ``"spectral"``.
+    prefer : {"cuda", "llvm", "scalar"}, optional
+        A backend to use (default: :func:`select_backend`'s choice).
     """
     import mitsuba as mi
 
@@ -430,7 +451,13 @@ def set_mitsuba_variant(spectrum: str = "rgb", prefer: str | None = None) -> str
 
 
 def drjit_module(prefer: str | None = None) -> types.ModuleType:
-    """``drjit.cuda`` or ``drjit.llvm`` for the tracer (scalar is refused: too slow)."""
+    """``drjit.cuda`` or ``drjit.llvm`` for the tracer (scalar is refused: too slow).
+
+    Parameters
+    ----------
+    prefer : {"cuda", "llvm"}, optional
+        A backend to use (default: :func:`select_backend`'s choice).
+    """
     backend = select_backend(prefer)
     if backend == "scalar":
         raise BackendError("the tracer needs the 'llvm' or 'cuda' backend, not 'scalar'")

@@ -379,7 +379,13 @@ def open_dataset(path: str | Path, *, input: str = "sweep", target: str = GROUND
 def stack_items(items: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """A batch of items or patches: each array stacked along a new first axis
     ((N, H, W, C) float32), ``meta`` a list of the items' metas. For NumPy and JAX
-    pipelines (PyTorch's ``DataLoader`` collates by itself)."""
+    pipelines (PyTorch's ``DataLoader`` collates by itself).
+
+    Parameters
+    ----------
+    items : sequence of dict
+        Items (``dataset[i]``) or patches (:class:`PatchSampler`), all of one shape.
+    """
     if not items:
         raise ValueError("stack_items: no items to stack")
     out: dict[str, Any] = {}

@@ -74,6 +74,13 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
 
     ``flag`` (e.g. ``"--plot"``) is named in the message.
 
+    Parameters
+    ----------
+    path : str or Path
+        The figure file.
+    flag : str, optional
+        The command-line option that gave it.
+
     Raises
     ------
     ValueError
@@ -97,7 +104,19 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
 
 def new_figure(*args: int, figsize: tuple[float, float] = (7.0, 4.5),
                layout: str | None = "constrained", **kwargs: Any) -> tuple[Figure, Any]:
-    """A new figure and its axes: ``Figure(figsize, layout).subplots(*args, **kwargs)``."""
+    """A new figure and its axes: ``Figure(figsize, layout).subplots(*args, **kwargs)``.
+
+    Parameters
+    ----------
+    *args : int
+        ``nrows, ncols`` for :meth:`matplotlib.figure.Figure.subplots`.
+    figsize : tuple of float, optional
+        Inches.
+    layout : str, optional
+        matplotlib's layout engine.
+    **kwargs
+        Passed to ``subplots``.
+    """
     fig = Figure(figsize=figsize, layout=layout)
     return fig, fig.subplots(*args, **kwargs)
 
@@ -107,6 +126,15 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = DPI) -> Path:
 
     PNG, PDF, SVG and PostScript files name their maker (``Creator: mitsweep <version>``)
     in their metadata; matplotlib has no metadata for the other formats.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure.
+    path : str or Path
+        Where to write it.
+    dpi : int, optional
+        Resolution of raster formats.
     """
     from . import __version__
 

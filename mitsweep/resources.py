@@ -56,7 +56,13 @@ class ResourceError(ValueError):
 
 
 def format_bytes(nbytes: float) -> str:
-    """``1.5 GiB``, ``12.0 MiB``: binary units, one decimal."""
+    """``1.5 GiB``, ``12.0 MiB``: binary units, one decimal.
+
+    Parameters
+    ----------
+    nbytes : float
+        A size in bytes.
+    """
     for unit, scale in (("TiB", GIB << 10), ("GiB", GIB), ("MiB", 1 << 20), ("KiB", 1 << 10)):
         if nbytes >= scale:
             return f"{nbytes / scale:.1f} {unit}"
@@ -166,6 +172,11 @@ def bundled_setup(name: str) -> Path:
     """The setup file of a bundled setup, by name (``"sphere"`` →
     ``.../scenes/sphere.toml``).
 
+    Parameters
+    ----------
+    name : str
+        A bundled setup's name, e.g. ``"sphere"``.
+
     Raises
     ------
     ValueError
@@ -189,7 +200,13 @@ _KINDS = ((stat.S_ISFIFO, "a named pipe (FIFO)"), (stat.S_ISCHR, "a character de
 
 def file_kind(mode: int) -> str:
     """What an ``st_mode`` names, in words (``"a regular file"``, ``"a named pipe
-    (FIFO)"``, ...)."""
+    (FIFO)"``, ...).
+
+    Parameters
+    ----------
+    mode : int
+        An ``os.stat_result.st_mode``.
+    """
     if stat.S_ISREG(mode):
         return "a regular file"
     return next((name for test, name in _KINDS if test(mode)), "not a regular file")

@@ -59,7 +59,17 @@ _MARGIN = 1e-7
 
 @dataclass(frozen=True)
 class StageLimits:
-    """Exposure (s) and the stage's limits (mm/s, mm/s²)."""
+    """Exposure (s) and the stage's limits (mm/s, mm/s²).
+
+    Attributes
+    ----------
+    exposure_s : float
+        The fixed exposure T, s.
+    max_velocity : float
+        The stage's largest velocity, mm/s.
+    acceleration : float
+        The stage's acceleration, mm/s².
+    """
 
     exposure_s: float
     max_velocity: float
@@ -230,6 +240,21 @@ def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
     ``acceleration=False`` drops the acceleration limit (a diagnostic: how much of the
     certificate's gap that constraint accounts for).
 
+    Parameters
+    ----------
+    model : WienerModel
+        The predicted MSE of every field point and depth as a function of τ.
+    widths : array_like
+        Widths of the sweep's bins, mm.
+    limits : StageLimits
+        The exposure and the stage's limits.
+    objective : {"worst", "mean"}, optional
+        Minimise the largest or the mean MSE over points × depths.
+    extra_starts : dict, optional
+        More starting points, name → τ.
+    acceleration : bool, optional
+        Enforce the acceleration limit.
+
     Returns
     -------
     Solution
@@ -270,6 +295,17 @@ def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
 def certified_lower_bound(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
                           objective: str = "worst") -> tuple[float, dict]:
     """A lower bound on ``min_τ objective(MSE(τ))`` over the feasible set (docstring).
+
+    Parameters
+    ----------
+    model : WienerModel
+        The predicted MSE of every field point and depth as a function of τ.
+    widths : array_like
+        Widths of the sweep's bins, mm.
+    limits : StageLimits
+        The exposure and the stage's limits.
+    objective : {"worst", "mean"}, optional
+        Minimise the largest or the mean MSE over points × depths.
 
     Returns
     -------
@@ -329,6 +365,21 @@ def brute_force(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
     coordinates in multiples of ``1/steps`` (C(steps + N − 1, N − 1) points), the
     stage-infeasible ones dropped. The local optimiser is run on the same problem from
     its usual starts and from the best lattice point.
+
+    Parameters
+    ----------
+    model : WienerModel
+        The predicted MSE of every field point and depth as a function of τ.
+    widths : array_like
+        Widths of the sweep's bins, mm.
+    limits : StageLimits
+        The exposure and the stage's limits.
+    objective : {"worst", "mean"}, optional
+        Minimise the largest or the mean MSE over points × depths.
+    steps : int, optional
+        Lattice resolution: coordinates in multiples of ``1/steps``.
+    batch : int, optional
+        Lattice points evaluated per vectorised batch.
 
     Returns
     -------

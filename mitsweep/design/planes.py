@@ -192,7 +192,31 @@ def plane_bank(setup: Setup, points_uv: ArrayLike, depths_mm: ArrayLike, edges_m
                kernel_size: int = 31, seed: int = 0, sub_planes: int = DEFAULT_SUB_PLANES,
                progress: Callable[[], object] | None = None) -> PlaneBank:
     """:func:`plane_psfs` over field points × depths (point ``p`` traced with ``seed + p``,
-    as :func:`mitsweep.tracer.ipsf_bank` seeds its points)."""
+    as :func:`mitsweep.tracer.ipsf_bank` seeds its points).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens and sensor.
+    points_uv : array_like, shape (P, 2)
+        Field points, upright mm at ``reference_sensor_distance``.
+    depths_mm : array_like
+        Depths l, mm.
+    edges_mm : array_like
+        Edges of the sweep's bins, sensor distances, mm.
+    reference_sensor_distance : float
+        Sensor distance of the kernels' pixel grid, mm.
+    rays : int, optional
+        Rays traced per point and depth.
+    kernel_size : int, optional
+        Kernel side, pixels (odd).
+    seed : int, optional
+        Base seed (point ``p`` uses ``seed + p``).
+    sub_planes : int, optional
+        Distances per bin at which each ray's hits are deposited.
+    progress : callable, optional
+        Called once per point.
+    """
     pts = np.asarray(points_uv, dtype=float).reshape(-1, 2)
     depths = np.asarray(depths_mm, dtype=float).ravel()
     edges = np.asarray(edges_mm, dtype=float)

@@ -73,7 +73,13 @@ class SweepDesign:
 
 
 def design_depths(setup: Setup) -> list[float]:
-    """The setup's depth range's ends and the paper's V_avg depths within it, mm."""
+    """The setup's depth range's ends and the paper's V_avg depths within it, mm.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``[sweep]`` depth range.
+    """
     s = setup.sweep
     inner = [d for d in V_DEPTHS_MM if s.depth_min <= d <= s.depth_max]
     return sorted({float(s.depth_min), *inner, float(s.depth_max)})
@@ -82,7 +88,21 @@ def design_depths(setup: Setup) -> list[float]:
 def design_points(setup: Setup, i_ref: float, geometry: ReferenceGeometry, *, n_radii: int,
                   grid: tuple[int, int]) -> np.ndarray:
     """Field points: ``n_radii`` radii from the centre to the FOV's edge (untilted), or
-    the centres of a grid over the sensor that see the mirror (tilted; the 2-D field)."""
+    the centres of a grid over the sensor that see the mirror (tilted; the 2-D field).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens and sensor.
+    i_ref : float
+        Reference sensor distance, mm.
+    geometry : mitsweep.optics.reference.ReferenceGeometry
+        The reference grid.
+    n_radii : int
+        Radii of an untilted mirror's field.
+    grid : tuple of int
+        ``(rows, cols)`` of a tilted mirror's grid.
+    """
     if setup.mirror.is_symmetric:
         r = np.linspace(0.0, field_radius(setup, geometry), int(n_radii))
         return np.stack([r, np.zeros_like(r)], axis=1)

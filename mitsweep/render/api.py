@@ -100,12 +100,29 @@ def reference_sensor_distance(setup: Setup, sweep: SweepRange | None = None, *,
     """Reference sensor distance ``i_ref`` (mm): mid-travel of the motion run.
 
     A thin wrapper of :func:`mitsweep.optics.reference.reference_geometry`.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens and sweep.
+    sweep : mitsweep.optics.sweep.SweepRange, optional
+        The sweep (default: the setup's optimal or given range).
+    motion : mitsweep.optics.motion.MotionProfile, optional
+        The motion actually run (default: the setup's profile over the sweep).
     """
     return reference_geometry(setup, sweep=sweep, motion=motion).sensor_distance
 
 
 def focus_distance_mirror_centre(setup: Setup, depth: float = FOCUS_REFERENCE_DEPTH_MM) -> float:
-    """Object distance (mm) of the focal image of the mirror vertex for ``depth`` mm."""
+    """Object distance (mm) of the focal image of the mirror vertex for ``depth`` mm.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror and lens.
+    depth : float, optional
+        Object depth l along the reflected chief ray of the vertex, mm.
+    """
     d_m, d_s = focal_image_axial_distances(setup, np.array(0.0), depth)
     return float(0.5 * (np.asarray(d_m) + np.asarray(d_s)))
 
@@ -120,6 +137,27 @@ def camera_dict(setup: Setup, *, sensor_distance: float | None = None,
     Give ``sensor_distance`` (fixed) or ``motion`` (a sweep over ``exposure_s``).
     ``crop = (x, y, w, h)`` renders a window of the film (pixels). ``sampler`` is one
     of :data:`SAMPLERS`.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The camera, lens and mirror.
+    sensor_distance : float, optional
+        A fixed sensor distance, mm.
+    motion : mitsweep.optics.motion.MotionProfile, optional
+        A sensor motion during the exposure (the sweep).
+    aperture_radius : float, optional
+        Lens aperture radius, mm (0: a pinhole).
+    pixel_pitch : float, optional
+        Pixel pitch, mm (default: the setup's).
+    spp : int, optional
+        Samples per pixel.
+    crop : tuple of int, optional
+        ``(x, y, w, h)``: a window of the film to render, pixels.
+    exposure_s : float, optional
+        Exposure over which ``motion`` runs, s.
+    sampler : str, optional
+        One of :data:`SAMPLERS`.
     """
     if sampler not in SAMPLERS:
         raise ValueError(f"sampler: must be one of {', '.join(SAMPLERS)}, got {sampler!r}")
@@ -160,6 +198,17 @@ def mode_camera(setup: Setup, mode: str, geometry: ReferenceGeometry | None = No
     distance, the sweep and motion, and for ``focused``/``stopped`` the focus distance,
     sensor distance, f-number and the pitch scale ``i_f / i_ref`` that puts the image on
     the reference grid.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens, sensor and sweep.
+    mode : str
+        One of :data:`MODES`.
+    geometry : mitsweep.optics.reference.ReferenceGeometry, optional
+        The reference grid (default: resolved from the setup).
+    f_number : float, optional
+        The ``stopped`` mode's f-number (default 11).
     """
     if mode not in MODES:
         raise ValueError(f"mode: must be one of {', '.join(MODES)}, got {mode!r}")
@@ -192,7 +241,17 @@ def mode_camera(setup: Setup, mode: str, geometry: ReferenceGeometry | None = No
 
 def mirror_image_bbox(setup: Setup, sensor_distance: float,
                       margin_px: int = 8) -> tuple[int, int, int, int]:
-    """Pixel window (x, y, w, h) holding the mirror's image (rim and centre + margin)."""
+    """Pixel window (x, y, w, h) holding the mirror's image (rim and centre + margin).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens and sensor.
+    sensor_distance : float
+        Sensor distance of the pixel grid, mm.
+    margin_px : int, optional
+        Pixels added on every side.
+    """
     placement = placement_of(setup.mirror)
     phi = np.linspace(0.0, 2 * math.pi, 721)
     rims = []
@@ -506,7 +565,15 @@ def user_scene_depth(setup: Setup, user_depth: int | None) -> int:
 
 
 def render_to_exr(path: str | Path, result: RenderResult) -> Path:
-    """Write a :class:`RenderResult` as EXR (atomic): RGB plus ``depth.Z`` and ``mask.Y``."""
+    """Write a :class:`RenderResult` as EXR (atomic): RGB plus ``depth.Z`` and ``mask.Y``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The EXR file to write.
+    result : RenderResult
+        A render (:func:`render_image`), its AOVs and metadata.
+    """
     from ..io import write_exr
 
     channels = {}
@@ -548,6 +615,35 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
     ``sensor_distance`` (with mode ``"fixed"``) renders a fixed sensor at that distance
     with the setup's pitch and aperture (the N-plane reference). ``mesh_tol`` (mm and
     rad) forces a mirror mesh with that sag and normal bound (accuracy studies).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens, sensor and sweep.
+    u, v : float
+        Upright image point at the reference distance, mm.
+    depth : float
+        Depth l of the emitter along the chief ray, mm.
+    spp : int
+        Samples per pixel.
+    seed : int, optional
+        Random seed.
+    mode : str, optional
+        One of :data:`MODES`.
+    window : int, optional
+        Side of the rendered crop, pixels.
+    sweep : mitsweep.optics.sweep.SweepRange, optional
+        The sweep (default: the setup's).
+    motion : mitsweep.optics.motion.MotionProfile, optional
+        The sensor's motion (default: the setup's profile).
+    sensor_distance : float, optional
+        A fixed sensor distance, mm (instead of the mode's).
+    f_number : float, optional
+        The ``stopped`` mode's f-number.
+    radius_px : float, optional
+        The emitter's radius as a fraction of a pixel's world size.
+    mesh_tol : float, optional
+        Sag tolerance of the mirror mesh, mm (default: the setup's).
     """
     from .scene import build_scene
     from .sensor import register

@@ -78,7 +78,21 @@ def differentiable_render(scene: Any, params: Any = None, sensor: Any = 0,
                           integrator: Any = None, **kwargs: Any) -> Any:
     """:func:`mitsuba.render` (same arguments: ``seed``, ``seed_grad``, ``spp``,
     ``spp_grad``), after refusing an integrator that would drop the gradient asked of a
-    ``focalsweep`` sensor's sweep (:func:`refuse_integrators_that_drop_the_sweep`)."""
+    ``focalsweep`` sensor's sweep (:func:`refuse_integrators_that_drop_the_sweep`).
+
+    Parameters
+    ----------
+    scene : mitsuba.Scene
+        The scene, with a ``focalsweep`` sensor.
+    params : mitsuba.SceneParameters, optional
+        The scene's parameters (``mi.traverse(scene)``) whose gradients are asked.
+    sensor : int or mitsuba.Sensor, optional
+        The sensor to render.
+    integrator : mitsuba.Integrator, optional
+        Default: the scene's.
+    **kwargs
+        Passed to :func:`mitsuba.render` (``seed``, ``seed_grad``, ``spp``, ``spp_grad``).
+    """
     import mitsuba as mi
 
     camera = scene.sensors()[sensor] if isinstance(sensor, int) else sensor

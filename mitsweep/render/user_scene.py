@@ -427,6 +427,18 @@ def user_scene(setup: Setup, scene: str | Path | Mapping[str, Any], *,
     (shapes, emitters) for :func:`mitsuba.load_dict`, beside the mirror
     (:func:`mitsweep.render.mirror.mirror_shape`) and a camera
     (:func:`mitsweep.render.api.camera_dict`).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``[scene]`` gives the default ``unit`` and ``placement``.
+    scene : str, Path or dict
+        A Mitsuba XML file, or a scene dict (as :func:`mitsuba.load_dict` takes).
+    unit : {"mm", "cm", "m"}, optional
+        The scene's length unit (default: the setup's ``scene.unit``, else mm).
+    placement : mitsweep.config.Placement, optional
+        Where the scene sits in the mirror's frame (default: the setup's
+        ``scene.placement``).
     """
     return load_user_scene(setup, scene, unit=unit, placement=placement).objects
 
@@ -441,6 +453,18 @@ def check_user_scene(setup: Setup, scene: str | Path | Mapping[str, Any], *,
     mirror at the reference sensor distance
     (:func:`mitsweep.optics.reference.reference_geometry`) and the setup's lens aperture
     (the ``focused`` and ``sweep`` modes'; the others' smaller apertures see less).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``[scene]`` gives the default ``unit`` and ``placement``.
+    scene : str, Path or dict
+        A Mitsuba XML file, or a scene dict (as :func:`mitsuba.load_dict` takes).
+    unit : {"mm", "cm", "m"}, optional
+        The scene's length unit (default: the setup's ``scene.unit``, else mm).
+    placement : mitsweep.config.Placement, optional
+        Where the scene sits in the mirror's frame (default: the setup's
+        ``scene.placement``).
 
     Raises
     ------
@@ -467,6 +491,19 @@ def check_view(scene: Any, setup: Setup, sensor_distance: float, *, label: str =
     (:func:`mitsweep.optics.mirror_point_from_image` at ``sensor_distance``) are cast
     from the lens centre and from four points on the aperture rim (``aperture_radius``,
     default the setup's lens) to their mirror point, then reflected into the scene.
+
+    Parameters
+    ----------
+    scene : mitsuba.Scene
+        The loaded scene, with the mirror in it.
+    setup : mitsweep.config.Setup
+        The mirror, lens and sensor.
+    sensor_distance : float
+        Sensor distance of the probe's image points, mm.
+    label : str, optional
+        How the scene is named in messages.
+    aperture_radius : float, optional
+        Radius of the aperture the probe's rays start from, mm (default: the setup's lens).
 
     Raises
     ------

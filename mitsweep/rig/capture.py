@@ -102,7 +102,21 @@ CAPTURE_SIGNALS = tuple(name for name in ("SIGINT", "SIGTERM", "SIGHUP")
 class RigPorts:
     """Serial ports of the rig: ``arduino`` (always: the shutter, and the stepper when no
     Zaber stage is given) and ``zaber`` (optional stage). ``watchdog_s``: the board's
-    watchdog, s (None: ``setup.rig.watchdog_s``; 0 turns it off; else 0.1 .. 600)."""
+    watchdog, s (None: ``setup.rig.watchdog_s``; 0 turns it off; else 0.1 .. 600).
+
+    Parameters
+    ----------
+    arduino : str
+        Serial port of the Arduino sweep controller, e.g. ``/dev/ttyACM0``.
+    zaber : str, optional
+        Serial port of a Zaber ASCII stage (the Arduino then only fires the shutter).
+    checksums : bool, optional
+        Send and check Zaber's message checksums.
+    ready_timeout_s : float, optional
+        How long to wait for the board's ``READY`` line after opening its port, s.
+    watchdog_s : float, optional
+        The board's watchdog, s.
+    """
 
     arduino: str
     zaber: str | None = None
@@ -222,7 +236,13 @@ def _failure_reason(exc: BaseException) -> str:
 def safety_summary(record: CaptureRecord) -> tuple[bool, str]:
     """Whether every step of the safety path was confirmed by its device, and one line
     saying which were and which were not, e.g. ``"shutter released: confirmed; stage
-    stopped: NOT confirmed (port lost)"``."""
+    stopped: NOT confirmed (port lost)"``.
+
+    Parameters
+    ----------
+    record : CaptureRecord
+        A capture's record, complete or not.
+    """
     steps = record.safety_actions
     if not steps:
         return False, "safety path not run: state of the stage and shutter unknown"
@@ -525,6 +545,25 @@ def _stop_and_record(dev: _Devices, record: CaptureRecord, exc: BaseException,
 
 def capture(setup: Setup, *, port: str, zaber_port: str | None = None,
             out: str | Path | None = None, checksums: bool = False) -> CaptureRecord:
-    """Convenience wrapper of :func:`run_capture`."""
+    """Convenience wrapper of :func:`run_capture`.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The setup to capture (its sweep, motion and ``[rig]``).
+    port : str
+        Serial port of the Arduino sweep controller.
+    zaber_port : str, optional
+        Serial port of a Zaber stage, if the rig has one.
+    out : str or Path, optional
+        Where to write the capture record (JSON, atomically); none: not written.
+    checksums : bool, optional
+        Use Zaber's message checksums.
+
+    Returns
+    -------
+    CaptureRecord
+        The record, complete or marked incomplete with its reason.
+    """
     return run_capture(setup, RigPorts(arduino=port, zaber=zaber_port, checksums=checksums),
                        out=out)

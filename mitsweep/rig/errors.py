@@ -62,7 +62,15 @@ class HostTooSlow(RigError):
 class CaptureInterrupted(KeyboardInterrupt):
     """A signal stopped the capture: ``signal_name`` (``"SIGINT"``, ``"SIGTERM"``,
     ``"SIGHUP"``) and ``signum``. A ``KeyboardInterrupt``, so that code which handles
-    Ctrl-C handles the other two alike."""
+    Ctrl-C handles the other two alike.
+
+    Parameters
+    ----------
+    signum : int
+        The signal's number.
+    signal_name : str
+        Its name, e.g. ``"SIGTERM"``.
+    """
 
     def __init__(self, signum: int, signal_name: str) -> None:
         super().__init__(f"interrupted by {signal_name}")

@@ -70,6 +70,56 @@ class CapturePlan:
     ``*_mm`` properties give them in mm) because the plan needs them exact: the board
     triggers the shutter at those step positions, the exposure is a whole number of
     steps, and a move is checked to end on its target step.
+
+    Attributes
+    ----------
+    setup : str
+        The setup's name.
+    stage : str
+        ``"arduino"`` or ``"zaber"``.
+    steps_per_mm : float
+        Controller steps (or microsteps) per mm of stage travel.
+    sensor_start_mm, sensor_end_mm : float
+        Sensor distances at the start and end of the exposure, mm.
+    translation_mm : float
+        Sensor travel during the exposure, mm.
+    exposure_s : float
+        The optical exposure: translation over the requested velocity, s.
+    velocity_mm_s : float
+        The requested sweep velocity (``sweep.velocity``; with a profile, its mean), mm/s.
+    velocity_actual_mm_s : float
+        The velocity the controller will run, mm/s.
+    acceleration_mm_s2 : float
+        The acceleration the controller will run, mm/s².
+    ramp_mm : float
+        Acceleration ramp before the shutter opens, mm (v²/2a).
+    settle_mm : float
+        Constant-velocity travel between the ramp and the shutter's opening, mm.
+    direction : int
+        Sign of the stage's motion during the sweep (+1 or −1).
+    sensor_distance_at_zero_mm : float
+        Sensor distance at stage position 0, mm.
+    sensor_direction : int
+        Sign relating stage position to sensor distance.
+    mapping : str
+        ``"calibrated"`` or ``"centred (uncalibrated rig)"``.
+    soft_limit_min_mm, soft_limit_max_mm : float
+        The soft limits set on the device, mm (stage coordinates).
+    approach_steps, open_steps, close_steps, end_steps : int
+        Stage positions, in controller steps: start of the approach, shutter open, shutter
+        closed, end of the move.
+    planned_exposure_s : float
+        The exposure after quantisation to whole steps: what the shutter will be held for, s.
+    ramp_time_s : float
+        Duration of the acceleration ramp, s.
+    sweep_duration_s : float
+        Approach to end at the sweep velocity, s.
+    positioning_velocity_mm_s, positioning_acceleration_mm_s2 : float
+        Velocity and acceleration of the positioning moves (homing, approach).
+    profile : ProfileTable, optional
+        A motion profile's step-rate table (None: the linear sweep).
+    exit_ramp_mm : float
+        Deceleration after the shutter closes, mm (with a profile).
     """
 
     setup: str

@@ -65,7 +65,21 @@ VERSION = 1
 
 
 class CaptureRecord:
-    """Accumulates a capture as it happens; :meth:`save` writes it (atomically)."""
+    """Accumulates a capture as it happens; :meth:`save` writes it (atomically).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The setup captured.
+    plan : CapturePlan
+        The resolved plan.
+    log : CommandLog
+        Every line exchanged with the devices, with timestamps.
+    ports : RigPorts, optional
+        The ports used (recorded as they were given).
+    path : str or Path, optional
+        Where :meth:`save` writes the record (none: not written).
+    """
 
     def __init__(self, *, setup: Setup, plan: CapturePlan, log: CommandLog, ports: Any = None,
                  path: str | Path | None = None) -> None:
@@ -285,7 +299,13 @@ def _jsonable(o):
 
 
 def load_capture_record(path: str | Path) -> dict:
-    """Read a capture record; :class:`ValueError` if it is not one this version reads."""
+    """Read a capture record; :class:`ValueError` if it is not one this version reads.
+
+    Parameters
+    ----------
+    path : str or Path
+        A capture record written by ``mitsweep capture`` (JSON).
+    """
     p = Path(path)
     try:
         data = json.loads(p.read_text(encoding="utf-8"))
