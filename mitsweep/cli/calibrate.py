@@ -10,19 +10,16 @@ accepts.
 
 Exit status 2, one line: an unreadable photo, no mirror found, or a mirror found whose size
 disagrees with the setup's prediction by more than 35% (the message says the pitch or
-distance it implies).
+distance it implies). A thin wrapper over :func:`mitsweep.workflows.calibrate_camera`
+(``--free``: :func:`mitsweep.workflows.find_mirror_circle`).
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
-import logging
 
-from .common import (add_photo_arguments, check_outputs, load_setup_arg, photo_options,
-                     print_json)
-
-logger = logging.getLogger(__name__)
+from ..workflows.calibrate import calibrate_camera, find_mirror_circle
+from .common import UsageError, add_photo_arguments, photo_options, print_json
 
 NAME = "calibrate"
 HELP = ("find the mirror in a photo: its centre and rim radius (sub-pixel) against the "
@@ -30,7 +27,6 @@ HELP = ("find the mirror in a photo: its centre and rim radius (sub-pixel) again
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-
     p.add_argument("photo", help="photo of the mirror: RAW (DNG, CR2, NEF, ARW, ...), TIFF, "
                                  "PNG, JPEG or EXR")
     p.add_argument("--setup", help="setup TOML file (see scenes/); without it (or with "
@@ -50,54 +46,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_photo_arguments(p)
 
 
-def _sha256(path: str) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def run(args) -> int:
-    from .. import __version__
-    from ..photo import calibrate_photo
-    from ..config import setup_to_toml
-    from ..io import write_text_atomic
-    from ..io.camera import read_camera_image
-
     if args.free or args.setup is None:
         return _run_free(args)
-    check_outputs([args.photo, args.setup], {"--write": args.write})
-    setup = load_setup_arg(args.setup)
-    photo = read_camera_image(args.photo, log_warnings=False, **photo_options(args))
-    pitch = photo.pixel_pitch or setup.sensor.pixel_pitch
-    pitch_source = photo.meta.get("pixel_pitch_source") or "setup"
-    cal = calibrate_photo(photo.data, setup, pixel_pitch=pitch, fit_roll=args.fit_roll)
-    photo.log_warnings()  # the photo's quality matters once a mirror is found in it
-    out = cal.as_dict()
-    out.update(photo=str(args.photo), setup=setup.name, kind=photo.kind,
-               bit_depth=photo.bit_depth, pixel_pitch_source=pitch_source,
-               tilted=not setup.mirror.is_symmetric,
-               warnings=list(photo.warnings) + list(cal.warnings))
-    if args.write:
-        calibrated = cal.calibrated_setup(setup)
-        header = (f"Written by mitsweep calibrate {__version__} from {args.photo} "
-                  f"(sha256 {_sha256(args.photo)})\nand the setup {args.setup}: centre "
-                  f"(row, col) = ({cal.center_px[0]:.3f}, {cal.center_px[1]:.3f}) px, rim "
-                  f"radius {cal.rim_radius_px:.3f} px\n(setup predicts "
-                  f"{cal.predicted_radius_px:.3f} px), {cal.fit.points_used} of "
-                  f"{cal.fit.points_total} rim points, rms {cal.fit.residual_rms_px:.3f} px.")
-        write_text_atomic(args.write, setup_to_toml(calibrated, header=header))
-        out["written"] = args.write
+    result = calibrate_camera(args.photo, args.setup, write=args.write,
+                              fit_roll=args.fit_roll, **photo_options(args))
+    cal, out, p = result.value, result.summary, result.provenance
     if args.json:
         print_json(out)
         return 0
     H, W = cal.image_shape
-    vd = cal.implied_vertex_distance
+    vd, pitch = cal.implied_vertex_distance, p["pixel_pitch"]
     lines = [
-        f"photo            {args.photo} ({photo.kind}, {photo.bit_depth}-bit, {W}x{H} px, "
-        f"pitch {pitch:g} mm from the {pitch_source})",
-        f"setup            {setup.name}{' (tilted mirror)' if out['tilted'] else ''}",
+        f"photo            {args.photo} ({out['kind']}, {out['bit_depth']}-bit, {W}x{H} px, "
+        f"pitch {pitch:g} mm from the {p['pixel_pitch_source']})",
+        f"setup            {out['setup']}{' (tilted mirror)' if out['tilted'] else ''}",
         f"centre           row {cal.center_px[0]:.3f}, col {cal.center_px[1]:.3f} px "
         f"(offset from the image centre {cal.center_offset_px[0]:+.3f}, "
         f"{cal.center_offset_px[1]:+.3f} px)",
@@ -106,7 +69,7 @@ def run(args) -> int:
         f"implies          pixel pitch {cal.implied_pixel_pitch:.6g} mm (setup {pitch:g}), "
         f"or lens-mirror distance "
         f"{'n/a' if vd is None else f'{vd:.3f} mm'} (setup "
-        f"{setup.mirror.vertex_distance:g})",
+        f"{p['vertex_distance']:g})",
         f"fit              {cal.fit.points_used} of {cal.fit.points_total} rim points, "
         f"rms {cal.fit.residual_rms_px:.3f} px (centre standard error "
         f"{cal.fit.center_se_px:.3f} px)",
@@ -121,42 +84,20 @@ def run(args) -> int:
 
 def _run_free(args) -> int:
     """``calibrate --free``: the outline as a circle from the photo alone."""
-    from ..io.camera import read_camera_image
-    from ..optics.pixels import optical_center_px
-    from ..photo.free import find_circle
-    from .common import UsageError
-
     if args.write or args.fit_roll:
         raise UsageError("--write and --fit-roll need --setup (--free finds a circle only)")
-    check_outputs([args.photo], [])
-    photo = read_camera_image(args.photo, log_warnings=False, **photo_options(args))
-    fit, radius = find_circle(photo.data)
-    photo.log_warnings()
-    H, W = photo.shape
-    r0, c0 = optical_center_px((H, W))
-    offset = (fit.center_px[0] - r0, fit.center_px[1] - c0)
-    pitch = photo.pixel_pitch
-    skeleton = ["[sensor]", f"resolution = [{W}, {H}]"]
-    skeleton.append(f"pixel_pitch = {pitch:.6g}" if pitch else
-                    "# pixel_pitch = ?  (mm; the file does not say)")
-    skeleton.append(f"center_offset_px = [{offset[0]:.3f}, {offset[1]:.3f}]")
-    out = {"photo": str(args.photo), "kind": photo.kind, "bit_depth": photo.bit_depth,
-           "image_shape": [H, W], "center_px": list(fit.center_px), "radius_px": radius,
-           "center_offset_px": list(offset), "pixel_pitch_mm": pitch,
-           "points_used": fit.points_used, "points_total": fit.points_total,
-           "residual_rms_px": fit.residual_rms_px,
-           "center_standard_error_px": fit.center_se_px,
-           "setup_skeleton": "\n".join(skeleton) + "\n",
-           "warnings": list(photo.warnings)}
+    out = find_mirror_circle(args.photo, **photo_options(args)).summary
     if args.json:
         print_json(out)
         return 0
+    (H, W), (row, col), offset = out["image_shape"], out["center_px"], out["center_offset_px"]
     print("\n".join([
-        f"photo            {args.photo} ({photo.kind}, {photo.bit_depth}-bit, {W}x{H} px)",
-        f"centre           row {fit.center_px[0]:.3f}, col {fit.center_px[1]:.3f} px "
+        f"photo            {args.photo} ({out['kind']}, {out['bit_depth']}-bit, {W}x{H} px)",
+        f"centre           row {row:.3f}, col {col:.3f} px "
         f"(offset from the image centre {offset[0]:+.3f}, {offset[1]:+.3f} px)",
-        f"radius           {radius:.3f} px (a circle; no setup)",
-        f"fit              {fit.points_used} of {fit.points_total} outline points, rms "
-        f"{fit.residual_rms_px:.3f} px (centre standard error {fit.center_se_px:.3f} px)",
-        "setup skeleton:", *skeleton]))
+        f"radius           {out['radius_px']:.3f} px (a circle; no setup)",
+        f"fit              {out['points_used']} of {out['points_total']} outline points, rms "
+        f"{out['residual_rms_px']:.3f} px (centre standard error "
+        f"{out['center_standard_error_px']:.3f} px)",
+        "setup skeleton:", *out["setup_skeleton"].splitlines()]))
     return 0

@@ -1,29 +1,10 @@
 """``mitsweep capture``: run a focal-sweep capture on the rig over serial.
 
-The sensor travel and exposure come from the setup's sweep range and velocity; the rig
-section of the setup gives the stage limits, acceleration, settle distance, sensor
-mapping and the board's watchdog. ``--dry-run`` prints the plan without opening a port.
-
-``--motion PROFILE.json`` runs a motion-profile file (e.g. from ``mitsweep design-sweep``)
-instead of the linear sweep, for the file's ``exposure_s`` (or, when it has none, the
-linear sweep's exposure over the same span): the plan turns it into a step-rate table
-(Arduino: ``TABLE``/``SEG``/``TSWEEP``; Zaber: a stored stream of ``line abs`` moves)
-and refuses, before any port is opened, a profile the stage cannot follow, a span that
-reaches the focal length, or a table that is empty or not monotonic. The record then
-holds the planned and the measured motion (``measured.profile``).
-
-``--out`` (default ``capture_<setup>_<UTC time>.json``) is never the setup file, and an
-existing file is replaced only with ``--force``.
-
-Stopping a capture: Ctrl-C (SIGINT), ``kill`` (SIGTERM) and a closed terminal (SIGHUP)
-release the shutter and stop the stage, then write the record marked incomplete
-(``status: "interrupted"``, ``signal``); a second signal does not cut that short. What
-cannot be caught (SIGKILL, a crash) is left to the board's watchdog (``rig.watchdog_s``).
-
-With a Zaber stage the host times the shutter; when it answers too late to do so within
-the settle distance it abandons the attempt (shutter released) and tries again, and after
-three it stops with status ``"host too slow"`` (exit 1): close other programs, or raise
-``rig.settle_distance``.
+A thin wrapper over :func:`mitsweep.workflows.capture` (``--dry-run``:
+:func:`mitsweep.workflows.plan_rig_capture`), whose module documents the plan, the motion
+profiles, the record and how a capture stops (Ctrl-C, SIGTERM and SIGHUP release the
+shutter and stop the stage, then write the record marked incomplete; what cannot be
+caught is left to the board's watchdog, ``rig.watchdog_s``).
 
 Exit status
 -----------
@@ -45,20 +26,16 @@ devices confirmed, e.g. ``shutter released: confirmed; stage stopped: NOT confir
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
-import os
 import sys
 
-from .common import UsageError, check_outputs, load_setup_arg, print_json
+from ..workflows.capture import (EXIT_COMPLETE, EXIT_INCOMPLETE_SAFE,  # noqa: F401
+                                 EXIT_MAYBE_UNSAFE, capture, capture_failure, exit_status,
+                                 plan_rig_capture)
+from .common import print_json
 
 NAME = "capture"
 HELP = ("drive the linear stage and the shutter over serial for one focal-sweep "
         "capture, and write its record")
-
-#: Exit statuses (see the module docstring).
-EXIT_COMPLETE = 0
-EXIT_INCOMPLETE_SAFE = 1
-EXIT_MAYBE_UNSAFE = 3
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -83,99 +60,41 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_motion_argument(p)
 
 
-def _parse_stage(text: str) -> str | None:
-    if text == "arduino":
-        return None
-    kind, sep, port = text.partition(":")
-    if kind != "zaber" or not sep or not port:
-        raise UsageError(f"--stage: expected 'arduino' or 'zaber:PORT', got {text!r}")
-    return port
-
-
-def _check_out(out: str, setup_path: str, force: bool) -> None:
-    check_outputs([setup_path], {"--out": out})          # never the setup, even with --force
-    if os.path.lexists(out) and not force:
-        raise UsageError(f"--out {out} exists: pass --force to replace it, or choose "
-                         f"another path")
-
-
-def exit_status(exc: BaseException, safe: bool) -> int:
-    """The exit status of an incomplete capture (table in the module docstring)."""
-    if not safe:
-        return EXIT_MAYBE_UNSAFE
-    if isinstance(exc, KeyboardInterrupt):
-        return 128 + getattr(exc, "signum", 2)   # SIGINT is 2
-    return EXIT_INCOMPLETE_SAFE
-
-
-def _report_incomplete(exc: BaseException, record, out: str) -> int:
-    from ..rig import safety_summary
-    from ..rig.capture import status_of
-
-    safe, steps = safety_summary(record)
-    if isinstance(exc, KeyboardInterrupt):
-        head = f"capture incomplete (interrupted by {record.signal})"
-    else:
-        head = f"capture incomplete ({status_of(exc)}): {exc or type(exc).__name__}"
-    tail = "" if safe else "; the rig may be unsafe: check the stage and the shutter"
-    try:
-        print(f"mitsweep: {head}; {steps}{tail}; record: {out}", file=sys.stderr)
-    except OSError:   # SIGHUP: the terminal may be gone; the record and status remain
-        pass
-    return exit_status(exc, safe)
-
-
 def run(args) -> int:
-    from ..rig import RigError, RigPorts, plan_capture, run_capture
+    from ..rig import RigError
 
-    from .motion import motion_file_from_args
-
-    zaber_port = _parse_stage(args.stage)
-    setup = load_setup_arg(args.setup)
-    motion_file = motion_file_from_args(args, setup)
-    stage = "zaber" if zaber_port else "arduino"
-    if motion_file is None:
-        plan = plan_capture(setup, stage=stage)
-    else:
-        plan = plan_capture(setup, stage=stage, motion=motion_file.profile,
-                            exposure_s=motion_file.exposure_s)
     if args.dry_run:
+        plan = plan_rig_capture(args.setup, stage=args.stage, motion=args.motion)
         if args.json:
-            print_json({"setup": setup.name, "dry_run": True, "plan": plan.as_dict()})
+            print_json(plan.summary)
         else:
-            sys.stdout.write(plan.summary() + "\n")
+            sys.stdout.write(plan.value.summary() + "\n")
         return 0
-    if not args.port:
-        raise UsageError("--port is required (the Arduino's serial port) unless --dry-run")
-    out = args.out or (f"capture_{setup.name}_"
-                       f"{_dt.datetime.now(_dt.timezone.utc):%Y%m%dT%H%M%SZ}.json")
-    _check_out(out, args.setup, args.force)
-    ports = RigPorts(arduino=args.port, zaber=zaber_port, checksums=args.checksums)
     try:
-        record = run_capture(setup, ports, out=out, plan=plan, motion_file=motion_file)
+        result = capture(args.setup, port=args.port, stage=args.stage, out=args.out,
+                         force=args.force, checksums=args.checksums, motion=args.motion)
     except (RigError, KeyboardInterrupt) as exc:
-        record = getattr(exc, "capture_record", None)
-        if record is None:      # not from the device phase: nothing was moved
+        if getattr(exc, "capture_record", None) is None:  # nothing was moved
             raise
-        return _report_incomplete(exc, record, out)
-    m = record.measurement()
-    cmp = m.get("profile")
+        line, status = capture_failure(exc)
+        try:
+            print(line, file=sys.stderr)
+        except OSError:   # SIGHUP: the terminal may be gone; the record and status remain
+            pass
+        return status
+    s = result.summary
     if args.json:
-        extra = {} if cmp is None else {
-            "profile_max_deviation_steps": cmp["max_deviation_steps"],
-            "profile_tolerance_steps": cmp["tolerance_steps"]}
-        print_json({"setup": setup.name, "record": str(out), "complete": record.complete,
-                    **m["exposure"], **extra})
-    else:
-        e = m["exposure"]
-        sys.stdout.write("\n".join([
-            f"record             {out} (complete)",
-            f"exposure           {e['measured_exposure_s']:.6f} s measured, "
-            f"{e['planned_exposure_s']:.6f} s planned",
-            f"sensor distance    {e['open_sensor_distance_mm']:.4f} -> "
-            f"{e['close_sensor_distance_mm']:.4f} mm",
-        ] + ([] if cmp is None else [
-            f"motion profile     measured within {cmp['max_deviation_steps']:.2f} steps of "
-            f"the plan at {len(cmp['time_s'])} samples (allowed "
-            f"{cmp['tolerance_steps']:.2f})"])) + "\n")
+        print_json(s)
+        return EXIT_COMPLETE
+    cmp = result.provenance["measurement"].get("profile")
+    sys.stdout.write("\n".join([
+        f"record             {s['record']} (complete)",
+        f"exposure           {s['measured_exposure_s']:.6f} s measured, "
+        f"{s['planned_exposure_s']:.6f} s planned",
+        f"sensor distance    {s['open_sensor_distance_mm']:.4f} -> "
+        f"{s['close_sensor_distance_mm']:.4f} mm",
+    ] + ([] if cmp is None else [
+        f"motion profile     measured within {cmp['max_deviation_steps']:.2f} steps of "
+        f"the plan at {len(cmp['time_s'])} samples (allowed "
+        f"{cmp['tolerance_steps']:.2f})"])) + "\n")
     return EXIT_COMPLETE

@@ -1,4 +1,5 @@
-"""``mitsweep render``: render a setup's scene through the mirror with Mitsuba 3."""
+"""``mitsweep render``: render a setup's scene through the mirror with Mitsuba 3; a thin
+wrapper over :func:`mitsweep.workflows.render_exr`."""
 
 from __future__ import annotations
 
@@ -6,10 +7,9 @@ import argparse
 import math
 import sys
 
-from ..config import MAX_RESOLUTION
-from .common import (UsageError, check_outputs, load_setup_arg, positive_float, positive_int,
-                     print_json)
-from .motion import add_motion_argument, motion_from_args
+from ..workflows.render import render_exr
+from .common import positive_float, positive_int, print_json
+from .motion import add_motion_argument
 
 NAME = "render"
 HELP = ("render a setup's scene, or your own Mitsuba scene, through the mirror (pinhole "
@@ -53,64 +53,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print a JSON summary")
 
 
-def _check_out(path: str, suffix: str) -> None:
-    from ..io.atomic import check_writable
-
-    if not path.lower().endswith(suffix):
-        raise UsageError(f"{path}: the output must end in {suffix}")
-    try:
-        check_writable(path)
-    except OSError as exc:
-        raise UsageError(str(exc)) from None
-
-
 def run(args) -> int:
-    from ..render import render_image, render_to_exr
-
-    if args.scene is not None and not args.scene.strip():
-        raise UsageError("--scene: an empty path; give a Mitsuba XML scene file")
-    setup = load_setup_arg(args.setup)
-    check_outputs([args.setup, args.scene or setup.scene.file, args.motion],
-                  {"--out": args.out, "--preview": args.preview})
-    _check_out(args.out, ".exr")
-    if args.preview:
-        _check_out(args.preview, ".png")
-    if args.f_number is not None and args.mode != "stopped":
-        raise UsageError("--f-number applies to --mode stopped only (the other modes use "
-                         "the setup's lens.f_number)")
-    if args.seed < 0:
-        raise UsageError(f"--seed: must be >= 0, got {args.seed}")
-    if args.scene_unit is not None and args.scene is None and setup.scene.file is None:
-        raise UsageError("--scene-unit applies to a scene file (--scene, or [scene] file in "
-                         "the setup)")
-    if args.resolution is not None and max(args.resolution) > MAX_RESOLUTION:
-        raise UsageError(f"--resolution: each side must be at most {MAX_RESOLUTION} px, "
-                         f"got {args.resolution[0]} {args.resolution[1]}")
-    motion = motion_from_args(args, setup)
-    result = render_image(setup, args.mode, spp=args.spp, seed=args.seed, motion=motion,
-                          aovs=tuple(dict.fromkeys(args.aov)), f_number=args.f_number,
-                          mirror_only=not args.full_frame, progress=sys.stderr.isatty(),
-                          sampler=args.sampler, scene=args.scene, scene_unit=args.scene_unit,
-                          resolution=args.resolution)
-    render_to_exr(args.out, result)
-    if args.preview:
-        from ..io.png import write_png
-
-        write_png(args.preview, result.image, max_width=args.preview_size)
-    m = result.metadata
-    summary = {"out": args.out, "mode": args.mode, "spp": args.spp, "seed": args.seed,
-               "sampler": m["sampler"],
-               "render_s": m["render_s"], "aovs": sorted(result.aovs),
-               "reference_sensor_distance_mm": m["reference_sensor_distance_mm"],
-               "mean": float(result.image.mean())}
-    if args.preview:
-        summary["preview"] = args.preview
-    if "resolution" in m:
-        summary["resolution"] = m["resolution"]
-    if args.motion:
-        summary["motion"] = args.motion
-    if "user_scene" in m:
-        summary["scene"] = {k: m["user_scene"][k] for k in ("source", "sha256", "unit", "replaced")}
+    got = render_exr(args.setup, args.out, mode=args.mode, spp=args.spp, seed=args.seed,
+                     resolution=args.resolution, aovs=args.aov, f_number=args.f_number,
+                     sampler=args.sampler, full_frame=args.full_frame, preview=args.preview,
+                     preview_size=args.preview_size, scene=args.scene,
+                     scene_unit=args.scene_unit, motion=args.motion,
+                     progress=sys.stderr.isatty())
+    summary, m = got.summary, got.provenance
     if args.json:
         print_json(summary)
     else:

@@ -9,14 +9,19 @@ these and print.
 
 Start here:
 
+- :func:`run_demo`: the whole chain on the paper's sphere (``mitsweep demo``).
 - :func:`restore_photo`: a focal-sweep photo → its EDOF image (``mitsweep deconvolve``).
-- :func:`calibrate_photo` (from :mod:`mitsweep.photo`): the mirror's centre and rim on a
-  photo, and a setup for its camera (``mitsweep calibrate``).
+- :func:`calibrate_camera`: the mirror's centre and rim on a photo, and a setup for its
+  camera (``mitsweep calibrate``; :func:`find_mirror_circle` without a setup;
+  :func:`calibrate_photo`, from :mod:`mitsweep.photo`, on an image array).
 - :func:`unwarp_image`: a catadioptric image → its panorama (``mitsweep unwarp``).
+- :func:`compute_sweep_range`: the optimal sweep range of a setup (``mitsweep sweep-range``).
+- :func:`render_exr`: a render through the mirror with Mitsuba 3 (``mitsweep render``).
 - :func:`trace_ipsf`, :func:`trace_ipsf_bank`: IPSFs of a setup (``mitsweep ipsf``).
 - :func:`build_dataset`, :func:`evaluate_dataset`: a synthetic dataset and its scores
   (``mitsweep dataset``, ``mitsweep evaluate``).
 - :func:`design_motion_profile`: an optimised sweep motion (``mitsweep design-sweep``).
+- :func:`plan_rig_capture`, :func:`capture`: a capture on the rig (``mitsweep capture``).
 
 Bad input raises :class:`InputError` (a :class:`ValueError`) or
 :class:`mitsweep.config.SetupError` with one line naming what is wrong.
@@ -26,13 +31,20 @@ from ._base import WorkflowResult, json_text, progress_callback, resolve_setup
 from ._errors import InputError
 from ._paths import check_output_name, check_outputs
 from ..photo import calibrate_photo
+from .calibrate import calibrate_camera, find_mirror_circle
+from .capture import capture, plan_rig_capture
 from .dataset import build_dataset, evaluate_dataset
+from .demo import run_demo
 from .design_sweep import design_motion_profile
 from .ipsf import trace_ipsf, trace_ipsf_bank
+from .render import render_exr
 from .restore import restore_photo
+from .sweep_range import compute_sweep_range
 from .unwarp import unwarp_image
 
 __all__ = ["WorkflowResult", "InputError", "resolve_setup", "json_text", "progress_callback",
            "check_output_name", "check_outputs", "restore_photo", "trace_ipsf",
            "trace_ipsf_bank", "build_dataset", "evaluate_dataset", "design_motion_profile",
-           "unwarp_image", "calibrate_photo"]
+           "unwarp_image", "calibrate_photo", "capture", "plan_rig_capture",
+           "compute_sweep_range", "render_exr", "calibrate_camera", "find_mirror_circle",
+           "run_demo"]
