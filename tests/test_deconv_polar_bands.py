@@ -12,8 +12,8 @@ from mitsweep.deconv.polar import polar_grid
 from mitsweep.deconv.polar.bands import Band, band_plan
 from mitsweep.deconv.polar.grid import _SPLINE_PX
 
-GRIDS = [((256, 256), None, 1.5, 15), ((512, 384), None, 1.0, 31), ((300, 200), (40.5, 60.0), 2.0, 9),
-         ((2048, 2048), None, 1.5, 63)]
+GRIDS = [((256, 256), None, 1.5, 15), ((512, 384), None, 1.0, 31),
+         ((300, 200), (40.5, 60.0), 2.0, 9), ((2048, 2048), None, 1.5, 63)]
 
 
 def _grid(shape, center, oversampling):

@@ -140,11 +140,11 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
     outside = np.zeros((len(depths), len(points)))
     valid = np.ones(len(points), bool)
     t0 = time.perf_counter()
-    common: dict[str, Any] = dict(motion=motion, sweep=sweep,
-                                  reference_sensor_distance=ref)
+    common: dict[str, Any] = dict(motion=motion, sweep=sweep, reference_sensor_distance=ref)
     if batched:
         traced = integrated_psfs(setup, [(u, v, d) for d in depths for u, v in points],
-                                 settings=settings, seeds=[seed + pi for _ in depths for pi in range(len(points))],
+                                 settings=settings,
+                                 seeds=[seed + pi for _ in depths for pi in range(len(points))],
                                  progress=progress, **common)
     else:
         traced = None
