@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 
 import numpy as np
 import scipy.fft as sfft
@@ -132,7 +133,8 @@ def kernel_shares(bank: IPSFBank, image_shape: tuple[int, ...], *,
     Radial bank: each pixel's radius from ``center`` (default the optical axis) shared
     between its two neighbouring bank radii by linear interpolation, the end kernels
     holding beyond (as :func:`~mitsweep.deconv.polar.polar_deconvolve` does); grid bank:
-    the product-convolution's hat windows.
+    the product-convolution's hat windows (a node whose chief ray misses the mirror
+    keeps its share: the deconvolution applies its stand-in delta kernel there).
     """
     from .spatial import grid_axes_px, hat_weights
 
@@ -197,10 +199,11 @@ def _kernel_power(kernels: np.ndarray, L: int) -> np.ndarray:
 
 
 def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
-                floor_var: float | None = None, mask: np.ndarray | None = None, depth_mm: float | str | None = None,
+                floor_var: float | None = None, mask: np.ndarray | None = None,
+                depth_mm: float | str | None = None,
                 center: tuple[float, float] | None = None, n_px: float | None = None,
                 bounds: tuple[float, float] = (1e-10, MAX_NSR)
-                ) -> tuple[float, "callable"]:
+                ) -> tuple[float, Callable[[float], float]]:
     r"""The natural-prior NSR of least expected error for ``image`` with noise
     variance ``noise_var`` (its units²), and the risk function (module docstring).
 

@@ -51,7 +51,7 @@ from .runner import DatasetError, Task, sha256
 
 __all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source",
            "setup_scene_digests", "trace_bank",
-           "add_noise", "restore", "edof_name", "NOISE_PIXEL_MM", "DECONV_PRIOR",
+           "add_noise", "restore", "edof_name", "NOISE_PIXEL_MM", "DECONV_PRIOR", "WEIGHT_RULE",
            "WHITE_PERCENTILE", "BANK"]
 
 logger = logging.getLogger(__name__)
@@ -261,55 +261,83 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
     return {}
 
 
+#: The dataset's rule for the restorations' weights (a restore task's ``weights``):
+#: ``"model"``, Wiener's NSR of least expected error from the image's noise model and its
+#: own spectrum (:func:`mitsweep.deconv.weights.model_nsr`); ``"estimated"``, the former
+#: rule (max of the model's NSR at exposure 0.5 and the image's variance-based estimate),
+#: which older manifests' tasks (no ``weights`` in their parameters) still run.
+WEIGHT_RULE = "model"
+
+
 def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
-            nsr: float | None, noise: dict | None = None) -> dict:
-    """Deconvolve ``image`` with ``method``; Wiener with NSR = max(the noise model's,
-    the image's own estimate).
+            nsr: float | None = None, noise: dict | None = None,
+            ground_truth: Path | None = None, weights: str = "estimated") -> dict:
+    """Deconvolve ``image`` with ``method`` and the weight ``weights`` says.
 
-    The noise model's NSR (``nsr``) covers sensor noise only; Monte Carlo noise of the
-    render and the residual mismatch between the bank and the image are not in it, and a
-    Wiener filter regularised below them amplifies them without bound (measured: 50-lux
-    EDOF at the model's NSR 5e-5 lost 9 dB against the un-deconvolved sweep). The image's
-    estimate assumes a white signal spectrum, so it goes with the natural-image (1/f²)
-    prior: on the demo's sphere that pair came within 0.1 dB of the best hand-tuned
-    constant NSR at 50 and 2 lux and beat it at 0.5 and 0.1 lux (README). Other methods
-    get the same NSR, their noise level.
+    ``weights="model"`` (every task :func:`plan` makes): Wiener's NSR (and the NSR of
+    the priors' first Wiener step) is :func:`mitsweep.deconv.weights.model_nsr`: the
+    NSR of least expected error for this image, with the noise variance of the sensor
+    model the image carries (``noise``, ``SensorNoise.as_dict()`` as :func:`add_noise`
+    records it, in relative exposure: at the image's mean exposure over the mirror)
+    and, where larger, what blur and prior leave unexplained in it (the render's Monte
+    Carlo noise, the bank's mismatch: GCV), over the mirror's image (the ``mask.Y`` AOV
+    of ``ground_truth``, the pinhole render). Without a noise model (a noise-free
+    sweep) that second part is all there is. Measured on the bundled setups at 256 px
+    (sphere, paraboloid, tilted paraboloid; noise-free, 50, 2 and 0.5 lux): within
+    0.21 dB of the oracle NSR everywhere, where the former rule lost up to 0.39 dB
+    (docs/guide/weights.md).
 
-    ``noise``: the sensor noise model the image carries (``SensorNoise.as_dict()``, as
-    :func:`add_noise` records it), for the prior-based methods (RL, TV,
-    hyper-Laplacian), whose σ is then at least the model's (each takes the largest of
-    it and its own estimates). The model is in relative exposure, so they restore the
-    image divided by its recorded white level and the result is scaled back. It must be
-    the noise the image's metadata records. Wiener's NSR is ``nsr`` (from the same
-    model), so it takes none.
+    ``weights="estimated"``: the former rule, for older manifests' tasks: NSR = max(
+    ``nsr``, the image's variance-based estimate).
+
+    The prior-based methods (RL, TV, hyper-Laplacian) get the noise model itself too
+    (their σ is then at least the model's); the model is in relative exposure, so they
+    restore the image divided by its recorded white level and the result is scaled
+    back. ``noise`` must be the noise the image's metadata records.
     """
     from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..io.bank import load_bank
 
+    if weights not in ("model", "estimated"):
+        raise ValueError(f"restore: weights must be 'model' or 'estimated', got {weights!r}")
     img, _, meta = read_rgb(image)
-    if noise is not None and method == "wiener":
+    if noise is not None and method == "wiener" and weights != "model":
         raise ValueError("restore: method 'wiener' takes its noise as nsr, not noise=")
     if noise is not None and (meta.get("noise") != noise or "white_level" not in meta):
         raise DatasetError(f"{Path(image).name}: its metadata does not record the noise "
                            f"model this restoration was planned with ({noise}); recorded: "
                            f"{meta.get('noise')}, white level {meta.get('white_level')}")
     ipsf = load_bank(bank)
-    estimated = estimate_nsr(img)
-    used = max(estimated, nsr) if nsr is not None else estimated
+    model = SensorNoise.from_dict(noise) if noise is not None else None
+    level = np.float32(meta["white_level"]) if noise is not None else np.float32(1.0)
+    record: dict[str, Any] = {}
+    if weights == "model":
+        from ..deconv.weights import model_nsr
+
+        mask = None
+        if ground_truth is not None:
+            chans = read_rgb(ground_truth)[1]
+            mask = chans["mask.Y"] > 0.5 if "mask.Y" in chans else None
+        details: dict = {}
+        used = model_nsr(img, ipsf, model, mask=mask, level=float(level), details=details)
+        record = {"nsr_rule": "model", "noise_variance": details["noise_variance"]}
+    else:
+        estimated = estimate_nsr(img)
+        used = max(estimated, nsr) if nsr is not None else estimated
+        record = {"nsr_model": nsr, "nsr_estimated": estimated}
     kw: dict[str, Any] = {"nsr": used}
     if method == "wiener":
         kw["prior"] = DECONV_PRIOR
     x = img.astype(np.float32)
-    if noise is not None:
-        level = np.float32(meta["white_level"])
-        kw["noise"], x = SensorNoise.from_dict(noise), x / level
+    if model is not None and method != "wiener":
+        kw["noise"], x = model, x / level
     t0 = time.perf_counter()
     restored = deconvolve(x, ipsf, method=method, **kw)
-    if noise is not None:
+    if model is not None and method != "wiener":
         restored = restored * level
     seconds = time.perf_counter() - t0
     meta = dict(meta, deconvolved_from=Path(image).name, bank=Path(bank).name,
-                method=method, nsr=used, nsr_model=nsr, nsr_estimated=estimated)
+                method=method, nsr=used, **record)
     write_exr(out, restored, metadata=meta)
     return {"deconvolve_s": seconds}
 
@@ -370,8 +398,8 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
                 params["setup_scene"] = own_scene
             add(f"{mode}.exr", render, params)
         for m in opts.methods:
-            add(f"{edof_name(m)}.exr", restore, {"method": m, "nsr": None},
-                {"image": f"{d}/sweep.exr", "bank": BANK})
+            add(f"{edof_name(m)}.exr", restore, {"method": m, "weights": WEIGHT_RULE},
+                {"image": f"{d}/sweep.exr", "bank": BANK, "ground_truth": f"{d}/pinhole.exr"})
         for j, lux in enumerate(opts.light_levels_lux):
             for mode in ("sweep", "stopped"):
                 s = settings[j][mode]
@@ -380,15 +408,14 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
                      "exposure_s": s.exposure_s, "pixel_pitch": NOISE_PIXEL_MM,
                      "seed": [opts.seed, i, j]},
                     {"ground_truth": f"{d}/pinhole.exr", "image": f"{d}/{mode}.exr"})
-            nsr = settings[j]["sweep"].nsr(0.5)
             for m in opts.methods:
-                # the prior methods get the noise model itself (Wiener: its NSR); in
-                # their parameters, so a dataset restored before they had it is redone
-                params = {"method": m, "nsr": nsr}
-                if m != "wiener":
-                    params["noise"] = settings[j]["sweep"].as_dict()
+                # every method gets the noise model itself (Wiener's NSR comes from it);
+                # in their parameters, so a dataset restored under another rule is redone
+                params = {"method": m, "noise": settings[j]["sweep"].as_dict(),
+                          "weights": WEIGHT_RULE}
                 add(f"{edof_name(m, f'_{lux:g}lux')}.exr", restore, params,
-                    {"image": f"{d}/sweep_{lux:g}lux.exr", "bank": BANK})
+                    {"image": f"{d}/sweep_{lux:g}lux.exr", "bank": BANK,
+                     "ground_truth": f"{d}/pinhole.exr"})
     return tasks
 
 

@@ -1,0 +1,118 @@
+"""The weight choice against the oracle: chosen NSR vs the best NSR, before and after.
+
+:func:`weight_rows` scores any set of candidate weights for one image against the oracle
+weight (:func:`mitsweep.deconv.budget.oracle_weight`: the NSR whose restoration is
+nearest the truth); :func:`independent_blur_problem` is the issue's test case (a
+spatially varying blur that is *not* the deconvolver's model: a 49 × 49 product
+convolution of the synthetic IPSF field, restored by the polar method with a 19-radius
+bank, white Gaussian noise σ); :func:`synthetic_weight_bench` runs it at each size and σ,
+with the former blind estimate (``nsr=None``: σ²/variance), the noise-model NSR
+(:func:`~mitsweep.deconv.weights.model_nsr` with the known σ) and the new blind one
+(:func:`~mitsweep.deconv.weights.blind_nsr`), side by side in one process. The datasets'
+version is :func:`mitsweep.pipeline.weight_bench.dataset_weight_bench`;
+``scripts/weight_bench.py`` prints both.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["weight_rows", "independent_blur_problem", "synthetic_weight_bench",
+           "format_rows"]
+
+logger = logging.getLogger(__name__)
+
+
+def weight_rows(image: np.ndarray, truth: np.ndarray,
+                restore: Callable[[np.ndarray, float], np.ndarray],
+                candidates: dict[str, float], *, mask: np.ndarray | None = None,
+                bounds: tuple[float, float] = (1e-10, 1.0)) -> dict:
+    """The oracle weight of ``image`` and each candidate's PSNR and loss against it.
+
+    Returns ``{"oracle": {"weight", "psnr_db"}, name: {"weight", "psnr_db",
+    "loss_db"}, ...}`` (PSNR over ``mask``, data range 1; ``loss_db`` = oracle −
+    candidate, ≥ 0 up to the oracle search's tolerance).
+    """
+    from .budget import _mse_map, oracle_weight
+
+    m = np.ones(np.shape(truth)[:2], bool) if mask is None else np.asarray(mask, bool)
+    w, _, mse = oracle_weight(image, truth, restore, mask=m, bounds=bounds)
+    best = -10 * math.log10(mse)
+    out: dict = {"oracle": {"weight": float(w), "psnr_db": best}}
+    for name, nsr in candidates.items():
+        p = -10 * math.log10(float(_mse_map(restore(image, nsr), truth)[m].mean()))
+        out[name] = {"weight": float(nsr), "psnr_db": p, "loss_db": best - p}
+    return out
+
+
+def independent_blur_problem(size: int = 512, sigma: float = 0.005, *, seed: int = 0,
+                             kernel_size: int | None = None) -> dict:
+    """The bench mosaic inside a disk of radius 0.47 size, blurred by a 49 × 49 grid
+    product-convolution of the synthetic IPSF field (independent of the polar
+    deconvolver's own model), plus white Gaussian noise ``sigma``; the 19-radius radial
+    bank to restore it with. Returns ``sharp``, ``blurred``, ``mask``, ``bank``,
+    ``sigma``."""
+    from .bench import mosaic
+    from .metrics import disk_mask
+    from .spatial import spatially_varying_blur
+    from .synthetic import synthetic_grid_bank, synthetic_radial_bank
+
+    K = kernel_size or (15 if size <= 256 else 21 if size <= 1024 else 31)
+    shape = (int(size), int(size))
+    r = 0.47 * size
+    mask = disk_mask(shape, r)
+    sharp = np.where(mask, mosaic(size, tile=min(512, size // 2)), 0.0)
+    blurred = spatially_varying_blur(sharp, synthetic_grid_bank(shape, (49, 49), size=K,
+                                                                r_max_px=r))
+    noisy = blurred + np.random.default_rng(seed).normal(0.0, sigma, shape)
+    return {"sharp": sharp, "blurred": noisy, "mask": mask, "sigma": float(sigma),
+            "bank": synthetic_radial_bank(shape, size=K, r_max_px=r, n_radii=19)}
+
+
+def synthetic_weight_bench(sizes=(512,), sigmas=(0.005, 0.001), *, seed: int = 0) -> list[dict]:
+    """:func:`weight_rows` on :func:`independent_blur_problem` for each size and σ:
+    ``before`` (polar Wiener's ``nsr=None``, the variance-based estimate), ``model``
+    (the known σ) and ``blind`` (nothing known). One row per case, with ``seconds``
+    of each new rule's NSR choice."""
+    from .polar import polar_deconvolve
+    from .wiener import estimate_nsr
+    from .weights import blind_nsr, model_nsr
+
+    rows = []
+    for size in sizes:
+        for sigma in sigmas:
+            p = independent_blur_problem(size, sigma, seed=seed)
+            y, bank, mask = p["blurred"], p["bank"], p["mask"]
+            t0 = time.perf_counter()
+            model = model_nsr(y, bank, sigma, mask=mask)
+            t1 = time.perf_counter()
+            blind = blind_nsr(y, bank, mask=mask)
+            t2 = time.perf_counter()
+            r = weight_rows(y, p["sharp"], lambda x, w: polar_deconvolve(x, bank, nsr=w),
+                            {"before": estimate_nsr(y), "model": model, "blind": blind},
+                            mask=mask)
+            rows.append({"case": f"independent blur {size} px, sigma {sigma:g}",
+                         "model_seconds": t1 - t0, "blind_seconds": t2 - t1, **r})
+    return rows
+
+
+def format_rows(rows: list[dict], names: tuple[str, ...]) -> str:
+    """A text table: per case the oracle's NSR and PSNR, then each named rule's NSR
+    and its loss against the oracle (dB)."""
+    head = f"{'case':<44s} {'oracle NSR':>10s} {'dB':>6s}" + "".join(
+        f" {n + ' NSR':>12s} {'loss dB':>7s}" for n in names)
+    lines = [head]
+    for r in rows:
+        line = f"{r['case']:<44s} {r['oracle']['weight']:10.3g} {r['oracle']['psnr_db']:6.2f}"
+        for n in names:
+            if n in r:
+                line += f" {r[n]['weight']:12.3g} {r[n]['loss_db']:7.2f}"
+            else:
+                line += f" {'-':>12s} {'-':>7s}"
+        lines.append(line)
+    return "\n".join(lines) + "\n"

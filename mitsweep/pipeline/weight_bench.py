@@ -1,0 +1,65 @@
+"""A dataset's Wiener weights against the oracle, before and after the noise-model rule.
+
+For every scene's noise-free sweep and noisy sweep of a complete dataset,
+:func:`dataset_weight_bench` restores the image as the dataset does (Wiener, natural
+prior, the bank's 500-mm kernels) with the oracle NSR
+(:func:`mitsweep.deconv.budget.oracle_weight`), with the former rule (``before``: the
+larger of the image's variance-based estimate and the noise model's NSR at exposure
+0.5) and with the dataset's rule now (``after``:
+:func:`mitsweep.deconv.weights.model_nsr` with the image's noise model and mirror
+mask), and reports each one's PSNR loss against the oracle, in one process.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .dataset import load_manifest
+from .evaluation import checked_items, read_finite
+from .tasks import BANK, DECONV_PRIOR, white_level
+
+__all__ = ["dataset_weight_bench"]
+
+_SWEEP = re.compile(r"sweep(?:_(?P<lux>[0-9.e+-]+)lux)?")
+
+
+def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) -> list[dict]:
+    """Rows of :func:`mitsweep.deconv.weight_bench.weight_rows` for each sweep image
+    (``case``: dataset, scene, image), names ``before`` and ``after``; ``scenes``: only
+    the first so many scenes."""
+    from ..deconv import SensorNoise, deconvolve, estimate_nsr
+    from ..deconv.weight_bench import weight_rows
+    from ..deconv.weights import model_nsr
+    from ..io.bank import load_bank
+
+    root = Path(directory)
+    files = checked_items(root, load_manifest(root))
+    bank = load_bank(files[BANK])
+    scene_dirs = sorted({Path(n).parent.name for n in files if "/" in n})
+    rows = []
+    for scene in scene_dirs[:scenes]:
+        gt, chans, _ = read_finite(files[f"{scene}/pinhole.exr"])
+        mask = chans["mask.Y"] > 0.5
+        level = white_level(gt, chans["mask.Y"])
+        truth = gt / level
+        sweeps = sorted((n for n in files if n.startswith(f"{scene}/")
+                         and _SWEEP.fullmatch(Path(n).stem)),
+                        key=lambda n: -float(_SWEEP.fullmatch(Path(n).stem)["lux"] or "inf"))
+        for name in sweeps:
+            img, _, meta = read_finite(files[name])
+            noise = SensorNoise.from_dict(meta["noise"]) if "noise" in meta else None
+            before = estimate_nsr(img)
+            if noise is not None:
+                before = max(before, noise.nsr(0.5))
+            after = model_nsr(img, bank, noise, mask=mask, level=level)
+            x = (img / level).astype(np.float32)
+
+            def restore(im, w):
+                return deconvolve(im, bank, method="wiener", weight=w, prior=DECONV_PRIOR)
+
+            r = weight_rows(x, truth, restore, {"before": before, "after": after}, mask=mask)
+            rows.append({"case": f"{root.name} {scene} {Path(name).stem}", **r})
+    return rows
