@@ -431,17 +431,17 @@ def test_render_reaches_into_no_private_mitsuba_frame():
 # prints. Checkable rules: (1) no module of mitsweep/cli is over CLI_MAX_LINES lines;
 # (2) none imports a numerical library (NumPy, SciPy, Dr.Jit, Mitsuba, scikit-image,
 # Matplotlib), at module level or inside a function, so no array arithmetic can live
-# there. Sizes when the rule was set (issue 25, before -> after): deconvolve 406 -> 94,
-# ipsf 304 -> 118, common 313 -> 92 (+ args 75, dataset_args 61), dataset 210 -> 99,
-# design_sweep 207 -> 103, unwarp 171 -> 76, evaluate 52 -> 34, capture 181 -> 100,
-# sweep_range 142 -> 79, render 122 -> 72, calibrate 162 -> 103,
-# demo 154 -> 43; the largest module that
-# meets the rule is ipsf's, 118 lines.
+# there. Sizes when the rule was set (issue 25, lines before -> after): deconvolve 406 ->
+# 94, ipsf 304 -> 118, common 313 -> 92 (+ args 75, dataset_args 61), dataset 210 -> 99,
+# design_sweep 207 -> 103, capture 181 -> 100, unwarp 171 -> 73, bench 170 -> 81,
+# calibrate 162 -> 103, demo 154 -> 44, sweep_range 142 -> 79, render 122 -> 72,
+# evaluate 52 -> 34. The largest module is ipsf's, 118 lines (its options take 50).
 CLI_MAX_LINES = 120
 CLI_NUMERICAL = {"numpy", "scipy", "drjit", "mitsuba", "skimage", "matplotlib"}
 # Commands still to be moved into mitsweep.workflows, at their size when the rule was
-# set: they may not grow; one that meets the rule must leave this list.
-CLI_NOT_YET_THIN = {"bench": 170}
+# set: they may not grow; one that meets the rule must leave this list (empty now; the
+# checker's own test plants one).
+CLI_NOT_YET_THIN: dict[str, int] = {}
 
 
 def cli_offences(cli_dir: Path) -> list[str]:
@@ -465,6 +465,8 @@ def cli_offences(cli_dir: Path) -> list[str]:
 
 
 def test_cli_modules_are_thin_wrappers():
+    """No cli module over 120 lines (measured max: ipsf.py, 118), none importing a
+    numerical library."""
     offences = cli_offences(PKG / "cli")
     assert not offences, "\n".join(offences)
 
@@ -473,9 +475,10 @@ def test_cli_modules_are_thin_wrappers():
     ("fat.py", "x = 1\n" * (CLI_MAX_LINES + 1), f"fat.py: {CLI_MAX_LINES + 1} lines"),
     ("numeric.py", "def run(args):\n    import numpy as np\n", "numeric.py:2 imports numpy"),
     ("sci.py", "from scipy import ndimage\n", "sci.py:1 imports scipy"),
-    ("bench.py", "x = 1\n" * 10, "bench.py: 10 lines meets the rule"),
+    ("pending.py", "x = 1\n" * 10, "pending.py: 10 lines meets the rule"),
 ])
-def test_cli_checker_reports_planted_logic(tmp_path, name, source, message):
+def test_cli_checker_reports_planted_logic(tmp_path, monkeypatch, name, source, message):
+    monkeypatch.setitem(CLI_NOT_YET_THIN, "pending", 130)
     cli = tmp_path / TOP / "cli"
     cli.mkdir(parents=True)
     (cli / name).write_text(source)
@@ -495,7 +498,8 @@ def test_workflows_are_documented_and_exported():
     assert {f.__name__ for f in functions} >= {
         "restore_photo", "trace_ipsf", "trace_ipsf_bank", "build_dataset", "evaluate_dataset",
         "design_motion_profile", "unwarp_image", "capture", "plan_rig_capture", "compute_sweep_range", "render_exr",
-        "calibrate_camera", "find_mirror_circle", "run_demo"}
+        "calibrate_camera", "find_mirror_circle", "run_demo",
+        "run_benchmarks"}
     for f in functions:
         doc = f.__doc__ or ""
         for section in ("Parameters\n", "Returns\n", "Raises\n", "Examples\n"):

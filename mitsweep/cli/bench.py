@@ -9,33 +9,25 @@ machine (:func:`mitsweep.backend.describe_machine`: CPU, cores, memory, load, GP
 LLVM, Dr.Jit, Mitsuba and NumPy versions, backend and variant), then for each target
 its wall time, its peak resident memory and its own result; a target whose module is
 not installed is reported as skipped with the reason, one that fails with its error
-(exit status 1).
+(exit status 1). A thin wrapper over :func:`mitsweep.workflows.run_benchmarks`.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
-import logging
-import os
-import resource
 import sys
-import time
 
+from ..workflows.bench import (BENCH_TARGETS, TargetMissing, missing_module,  # noqa: F401
+                               peak_rss_mib, reset_peak_rss, run_benchmarks)
 from .common import UsageError, print_json
 
 NAME = "bench"
 HELP = "benchmarks (run time against error, against baselines in the same run)"
 
-logger = logging.getLogger(__name__)
-
-TARGETS = {
-    "tracer": "mitsweep.tracer.bench",
-    "render": "mitsweep.render.bench",
-    "deconv": "mitsweep.deconv.bench",
-    "dataset": "mitsweep.pipeline.bench",
-    "calibrate": "mitsweep.photo.bench",
-}
+#: Target name → its benchmark module (a command-line registry: the modules are loaded
+#: by name, which only the CLI may do; see tests/test_architecture.py).
+TARGETS = dict(BENCH_TARGETS)
 ALL = "all"
 
 
@@ -56,12 +48,8 @@ def _print_table(result: dict, prefix: str = "") -> None:
             sys.stdout.write(f"{prefix + key:<40s} {value}\n")
 
 
-class TargetMissing(Exception):
-    """The benchmark module of a target is not part of this installation."""
-
-
 def load_target(name: str):
-    """The benchmark module of target ``name``.
+    """The benchmark module of target ``name`` (:data:`TARGETS`).
 
     Raises
     ------
@@ -75,96 +63,19 @@ def load_target(name: str):
     except ModuleNotFoundError as exc:
         # only the target's own module path counts as missing: a dependency that the
         # module imports and cannot find is a real error
-        if exc.name is not None and (modname == exc.name or modname.startswith(exc.name + ".")):
+        if missing_module(exc, modname):
             raise TargetMissing(f"{modname} is not available ({exc})") from exc
         raise
 
 
-# -- peak memory ----------------------------------------------------------------------
-
-def _read_status_kib(field: str) -> float | None:
-    try:
-        with open("/proc/self/status", encoding="ascii") as f:
-            for line in f:
-                if line.startswith(field + ":"):
-                    return float(line.split()[1])
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-def reset_peak_rss() -> bool:
-    """Reset this process's peak resident set (Linux: ``/proc/self/clear_refs``, 5) to
-    its current size, so the next peak read belongs to what runs next; False where the
-    kernel does not allow it."""
-    try:
-        with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
-            f.write("5")
-        return True
-    except OSError:
-        return False
-
-
-def peak_rss_mib() -> float:
-    """Peak resident memory of this process, MiB: ``VmHWM`` (which
-    :func:`reset_peak_rss` resets), else ``getrusage``'s ``ru_maxrss`` (process life)."""
-    hwm = _read_status_kib("VmHWM")
-    if hwm is not None:
-        return hwm / 1024
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-
-
-def run_all(args) -> tuple[dict, int]:
-    """Every target in this process; (report, exit status: 1 if a target failed)."""
-    from ..backend import describe_machine
-
-    report = {"machine": describe_machine(), "quick": bool(args.quick), "targets": {}}
-    status = 0
-    t_all = time.perf_counter()
-    for name in TARGETS:
-        entry: dict = {}
-        try:
-            mod = load_target(name)
-        except TargetMissing as exc:
-            entry["skipped"] = str(exc)
-            logger.warning("bench %s skipped: %s", name, exc)
-            report["targets"][name] = entry
-            continue
-        resettable = reset_peak_rss()
-        rss0 = peak_rss_mib()
-        t0 = time.perf_counter()
-        logger.info("bench %s ...", name)
-        try:
-            entry["result"] = mod.run_bench(args)
-        except Exception as exc:  # one broken target must not hide the others' figures
-            logger.debug("bench %s failed", name, exc_info=True)
-            entry["error"] = f"{type(exc).__name__}: {exc}"
-            status = 1
-        entry["seconds"] = time.perf_counter() - t0
-        entry["peak_rss_mib"] = peak_rss_mib()
-        entry["peak_rss_growth_mib"] = entry["peak_rss_mib"] - rss0
-        entry["peak_rss_scope"] = "this target" if resettable else "process so far"
-        report["targets"][name] = entry
-    report["seconds"] = time.perf_counter() - t_all
-    # the resets also reset ru_maxrss: the process's peak is the largest target's
-    report["peak_rss_mib"] = max([peak_rss_mib()] + [e["peak_rss_mib"] for e in
-                                                     report["targets"].values()
-                                                     if "peak_rss_mib" in e])
-    report["machine"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
-    return report, status
-
-
 def run(args) -> int:
-    if args.target == ALL:
-        result, status = run_all(args)
-    else:
-        try:
-            mod = load_target(args.target)
-        except TargetMissing as exc:
-            raise UsageError(f"bench target {args.target!r}: {exc}") from exc
-        result, status = mod.run_bench(args), 0
+    try:
+        got = run_benchmarks(args.target, quick=args.quick, load=load_target,
+                             names=list(TARGETS))
+    except TargetMissing as exc:
+        raise UsageError(f"bench target {args.target!r}: {exc}") from exc
     if args.json:
-        print_json(result)
+        print_json(got.value)
     else:
-        _print_table(result)
-    return status
+        _print_table(got.value)
+    return got.provenance["status"]

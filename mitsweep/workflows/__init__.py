@@ -17,6 +17,7 @@ Start here:
 - :func:`unwarp_image`: a catadioptric image → its panorama (``mitsweep unwarp``).
 - :func:`compute_sweep_range`: the optimal sweep range of a setup (``mitsweep sweep-range``).
 - :func:`render_exr`: a render through the mirror with Mitsuba 3 (``mitsweep render``).
+- :func:`run_benchmarks`: benchmarks against baselines, in one process (``mitsweep bench``).
 - :func:`trace_ipsf`, :func:`trace_ipsf_bank`: IPSFs of a setup (``mitsweep ipsf``).
 - :func:`build_dataset`, :func:`evaluate_dataset`: a synthetic dataset and its scores
   (``mitsweep dataset``, ``mitsweep evaluate``).
@@ -31,6 +32,7 @@ from ._base import WorkflowResult, json_text, progress_callback, resolve_setup
 from ._errors import InputError
 from ._paths import check_output_name, check_outputs
 from ..photo import calibrate_photo
+from .bench import run_benchmarks
 from .calibrate import calibrate_camera, find_mirror_circle
 from .capture import capture, plan_rig_capture
 from .dataset import build_dataset, evaluate_dataset
@@ -47,4 +49,4 @@ __all__ = ["WorkflowResult", "InputError", "resolve_setup", "json_text", "progre
            "trace_ipsf_bank", "build_dataset", "evaluate_dataset", "design_motion_profile",
            "unwarp_image", "calibrate_photo", "capture", "plan_rig_capture",
            "compute_sweep_range", "render_exr", "calibrate_camera", "find_mirror_circle",
-           "run_demo"]
+           "run_demo", "run_benchmarks"]

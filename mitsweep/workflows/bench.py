@@ -1,0 +1,178 @@
+"""Reproducible benchmarks, every target in one process (``mitsweep bench``).
+
+Each target is a module ``mitsweep.<pkg>.bench`` exposing ``run_bench(options) -> dict``
+(``options.quick``: smaller problem sizes). Baselines run in the same process as what
+they are compared with, so that ratios survive a noisy machine.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import os
+import resource
+import time
+from types import ModuleType, SimpleNamespace
+from typing import Callable, Iterable
+
+from .. import __version__
+from ._base import WorkflowResult
+
+__all__ = ["run_benchmarks", "BENCH_TARGETS", "TargetMissing", "reset_peak_rss",
+           "peak_rss_mib"]
+
+logger = logging.getLogger(__name__)
+
+#: Target name → its benchmark module.
+BENCH_TARGETS = {
+    "tracer": "mitsweep.tracer.bench",
+    "render": "mitsweep.render.bench",
+    "deconv": "mitsweep.deconv.bench",
+    "dataset": "mitsweep.pipeline.bench",
+    "calibrate": "mitsweep.photo.bench",
+}
+# Each module imported by its literal name (the layering check reads every import).
+_IMPORTERS: dict[str, Callable[[], ModuleType]] = {
+    "tracer": lambda: importlib.import_module("mitsweep.tracer.bench"),
+    "render": lambda: importlib.import_module("mitsweep.render.bench"),
+    "deconv": lambda: importlib.import_module("mitsweep.deconv.bench"),
+    "dataset": lambda: importlib.import_module("mitsweep.pipeline.bench"),
+    "calibrate": lambda: importlib.import_module("mitsweep.photo.bench"),
+}
+
+
+class TargetMissing(Exception):
+    """The benchmark module of a target is not part of this installation."""
+
+
+def missing_module(exc: ModuleNotFoundError, modname: str) -> bool:
+    """Whether ``exc`` says that ``modname`` itself (or a package holding it) does not
+    exist, rather than a dependency it imports."""
+    return exc.name is not None and (modname == exc.name or modname.startswith(exc.name + "."))
+
+
+def _import_target(name: str) -> ModuleType:
+    try:
+        return _IMPORTERS[name]()
+    except ModuleNotFoundError as exc:
+        if missing_module(exc, BENCH_TARGETS[name]):
+            raise TargetMissing(f"{BENCH_TARGETS[name]} is not available ({exc})") from exc
+        raise
+
+
+def _read_status_kib(field: str) -> float | None:
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return float(line.split()[1])
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def reset_peak_rss() -> bool:
+    """Reset this process's peak resident set (Linux: ``/proc/self/clear_refs``, 5) to
+    its current size, so the next peak read belongs to what runs next; False where the
+    kernel does not allow it."""
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
+def peak_rss_mib() -> float:
+    """Peak resident memory of this process, MiB: ``VmHWM`` (which
+    :func:`reset_peak_rss` resets), else ``getrusage``'s ``ru_maxrss`` (process life)."""
+    hwm = _read_status_kib("VmHWM")
+    if hwm is not None:
+        return hwm / 1024
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def run_benchmarks(target: str = "all", *, quick: bool = False,
+                   load: Callable[[str], ModuleType] | None = None,
+                   names: Iterable[str] | None = None) -> WorkflowResult:
+    """Run one benchmark target, or every one in turn in this process (``mitsweep bench``).
+
+    Parameters
+    ----------
+    target : str
+        A name of :data:`BENCH_TARGETS`, or ``"all"``.
+    quick : bool
+        Smaller problem sizes (a smoke run).
+    load : callable, optional
+        Target name → its benchmark module (default: the modules of :data:`BENCH_TARGETS`);
+        raises :class:`TargetMissing` for a module this installation lacks.
+    names : iterable of str, optional
+        The targets ``"all"`` runs (default: those of :data:`BENCH_TARGETS`).
+
+    Returns
+    -------
+    WorkflowResult
+        ``value`` and ``summary``: one target's result dict; for ``"all"``, ``machine``
+        (:func:`mitsweep.backend.describe_machine`), ``quick``, ``seconds``,
+        ``peak_rss_mib`` and ``targets``: per target its ``result`` (or ``error``, or
+        ``skipped`` with the reason), ``seconds`` and peak resident memory.
+        ``provenance``: ``target``, ``quick``, ``status`` (1 if a target failed, else 0),
+        ``version``.
+
+    Raises
+    ------
+    TargetMissing
+        A single target whose module is not installed.
+
+    Examples
+    --------
+    >>> from mitsweep.workflows import run_benchmarks
+    >>> r = run_benchmarks("deconv", quick=True)                  # doctest: +SKIP
+    >>> r.value["polar"]["time_ratio_vs_skimage"] > 0             # doctest: +SKIP
+    True
+    """
+    load = load or _import_target
+    options = SimpleNamespace(quick=bool(quick))
+    if target != "all":
+        result = load(target).run_bench(options)
+        return WorkflowResult(result, {"workflow": "run_benchmarks", "version": __version__,
+                                       "target": target, "quick": bool(quick), "status": 0},
+                              result)
+    from ..backend import describe_machine
+
+    report = {"machine": describe_machine(), "quick": bool(quick), "targets": {}}
+    status = 0
+    t_all = time.perf_counter()
+    for name in (list(BENCH_TARGETS) if names is None else names):
+        entry: dict = {}
+        try:
+            mod = load(name)
+        except TargetMissing as exc:
+            entry["skipped"] = str(exc)
+            logger.warning("bench %s skipped: %s", name, exc)
+            report["targets"][name] = entry
+            continue
+        resettable = reset_peak_rss()
+        rss0 = peak_rss_mib()
+        t0 = time.perf_counter()
+        logger.info("bench %s ...", name)
+        try:
+            entry["result"] = mod.run_bench(options)
+        except Exception as exc:  # one broken target must not hide the others' figures
+            logger.debug("bench %s failed", name, exc_info=True)
+            entry["error"] = f"{type(exc).__name__}: {exc}"
+            status = 1
+        entry["seconds"] = time.perf_counter() - t0
+        entry["peak_rss_mib"] = peak_rss_mib()
+        entry["peak_rss_growth_mib"] = entry["peak_rss_mib"] - rss0
+        entry["peak_rss_scope"] = "this target" if resettable else "process so far"
+        report["targets"][name] = entry
+    report["seconds"] = time.perf_counter() - t_all
+    # the resets also reset ru_maxrss: the process's peak is the largest target's
+    report["peak_rss_mib"] = max([peak_rss_mib()] + [e["peak_rss_mib"] for e in
+                                                     report["targets"].values()
+                                                     if "peak_rss_mib" in e])
+    report["machine"]["load_average_end"] = [round(x, 2) for x in os.getloadavg()]
+    return WorkflowResult(report, {"workflow": "run_benchmarks", "version": __version__,
+                                   "target": target, "quick": bool(quick), "status": status},
+                          report)
