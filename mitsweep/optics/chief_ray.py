@@ -36,7 +36,7 @@ class ChiefRay:
     cos_incidence : ndarray
         n·r̂, the cosine of the angle of incidence (> 0 where the camera sees the front).
     lens_distance : ndarray
-        Distance |p_c − p_r| from the lens centre to the mirror point, mm.
+        Distance ``|p_c − p_r|`` from the lens centre to the mirror point, mm.
     """
 
     surface: SurfacePoints

@@ -90,7 +90,7 @@ class SweepRange:
     velocity_mm_s : float
         Stage velocity, mm/s.
     rho_max : float
-        Largest |ρ| of the mirror zone, mm.
+        Largest ``|ρ|`` of the mirror zone, mm.
     rho_start, rho_end : float
         The mirror zone, signed tilt-plane coordinates, mm (:class:`MirrorZone`).
     fov_deg, max_fov_deg : float
