@@ -1,16 +1,16 @@
 """An optimised sweep: a sensor time profile that beats the paper's linear sweep.
 
-The paper sweeps the sensor at constant velocity. :func:`mitsweep.design.design_sweep`
-(what ``mitsweep design-sweep`` runs) treats the time spent per bin of sensor distance
-as the design variable: it traces a PSF bank per bin once, predicts the Wiener MSE of a
+The paper sweeps the sensor at constant velocity.
+:func:`mitsweep.workflows.design_motion_profile` (what ``mitsweep design-sweep`` runs;
+its optimiser is :func:`mitsweep.design.design_sweep`) treats the time spent per bin of
+sensor distance as the design variable: it traces a PSF bank per bin once, predicts the Wiener MSE of a
 natural image at every field point and depth for any time profile (noise at ``--lux``,
 the paper's Fig. 10 camera settings), and minimises the worst (or mean) of them under
 the stage's velocity and acceleration limits, with a certified lower bound. This script
 compares the predicted MSE of the linear and optimised sweeps per field point, writes
-the profile as a motion-profile file (:func:`mitsweep.optics.motion_file.save_motion_file`,
-``profile.json``), and reads it back as the stage would
-(:func:`~mitsweep.optics.motion_file.load_motion_file` and ``check_motion_file``): the file
-is what ``mitsweep ipsf --motion``, ``render --motion`` and ``capture`` take.
+the profile as a motion-profile file (``profile.json``), which the workflow reads back
+as the stage would (:func:`mitsweep.optics.motion_file.check_motion_file`): the file is
+what ``mitsweep ipsf --motion``, ``render --motion`` and ``capture`` take.
 
 Run::
 
@@ -39,30 +39,21 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def optimise(setup, out: Path, *, lux: float, objective: str, quick: bool) -> dict:
-    from mitsweep import __version__
-    from mitsweep.deconv import paper_fig10_settings
-    from mitsweep.design import design_sweep
-    from mitsweep.optics.motion_file import check_motion_file, load_motion_file, save_motion_file
-    from mitsweep.pipeline import NOISE_PIXEL_MM
+    """Design, write and check the profile (what ``mitsweep design-sweep`` runs), then
+    compare the two sweeps per field point."""
+    from mitsweep.workflows import design_motion_profile
 
-    noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
     if quick:
-        kw = {"n_planes": 8, "n_radii": 2, "depths": [300.0, 10000.0], "rays": 4096,
+        kw = {"planes": 8, "radii": 2, "depths": [300.0, 10000.0], "rays": 4096,
               "brute_force_steps": 0}
     else:
-        kw = {"n_planes": 32, "n_radii": 5, "rays": 1 << 15, "brute_force_steps": 8}
-    design = design_sweep(setup, noise=noise, objective=objective, **kw)
-    r = design.report
-    path = save_motion_file(out / "profile.json", design.profile, exposure_s=design.exposure_s,
-                            provenance={"generator": "examples/optimised_sweep.py",
-                                        "version": __version__, "setup": setup.name,
-                                        "lux": lux, "objective": objective,
-                                        "predicted": {k: r[k] for k in (
-                                            "linear_worst_mse", "optimized_worst_mse",
-                                            "linear_mean_mse", "optimized_mean_mse")}})
-    check_motion_file(load_motion_file(path), setup)  # raises if the stage cannot run it
+        kw = {"planes": 32, "radii": 5, "rays": 1 << 15, "brute_force_steps": 8}
+    # written to profile.json, then read back and checked against the stage
+    result = design_motion_profile(setup, out / "profile.json", lux=lux, objective=objective,
+                                   **kw)
+    design, r = result.value, result.summary
     radii = np.hypot(design.points_uv[:, 0], design.points_uv[:, 1])
-    return {"profile": str(path), "objective": objective, "lux": lux,
+    return {"profile": r["out"], "objective": objective, "lux": lux,
             "span_mm": r["span_mm"], "exposure_s": design.exposure_s,
             "worst_mse": {"linear": r["linear_worst_mse"], "optimised": r["optimized_worst_mse"]},
             "mean_mse": {"linear": r["linear_mean_mse"], "optimised": r["optimized_mean_mse"]},

@@ -59,9 +59,10 @@ def render_exr(setup: Setup | str | os.PathLike, out: str | os.PathLike, *, mode
     preview, preview_size
         A tone-mapped PNG too, shrunk by an integer factor to at most ``preview_size``
         pixels wide.
-    scene : path-like, optional
-        A Mitsuba scene to render instead of the built-in room (default: the setup's
-        ``[scene]`` file, if any); ``scene_unit`` its length unit (mm, cm, m).
+    scene : path-like or dict, optional
+        A Mitsuba scene (an XML file, or a scene dict) to render instead of the built-in
+        room (default: the setup's ``[scene]`` file, if any); ``scene_unit`` its length
+        unit (mm, cm, m).
     motion : path-like, optional
         A motion-profile file to run instead of the setup's sweep.
     progress : bool
@@ -93,11 +94,12 @@ def render_exr(setup: Setup | str | os.PathLike, out: str | os.PathLike, *, mode
     from ..optics.motion_file import check_motion_file, load_motion_file
     from ..render import render_image, render_to_exr
 
-    if scene is not None and not os.fspath(scene).strip():
+    scene_file = scene if isinstance(scene, (str, os.PathLike)) else None
+    if scene_file is not None and not os.fspath(scene_file).strip():
         raise InputError("--scene: an empty path; give a Mitsuba XML scene file")
     setup_path = None if isinstance(setup, Setup) else setup
     setup = resolve_setup(setup)
-    check_outputs([setup_path, scene or setup.scene.file, motion],
+    check_outputs([setup_path, scene_file or setup.scene.file, motion],
                   {"--out": out, "--preview": preview})
     _check_out(out, ".exr")
     if preview:
