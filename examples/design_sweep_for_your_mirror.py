@@ -6,13 +6,13 @@ script writes the setup TOML (``my_mirror.toml``, loadable by every ``mitsweep``
 command), then computes
 
 - the optimal sweep range (paper Eq. 8–9): the focus distances, the sensor travel and the
-  exposure at the setup's velocity (:func:`mitsweep.optics.optimal_sweep_range`);
+  exposure at the setup's velocity (:func:`mitsweep.workflows.compute_sweep_range`);
 - the focal surfaces: meridional and sagittal image distances D_m, D_s from the lens
   (paper Eq. 6–7, :func:`mitsweep.optics.focal_image_axial_distances`) across the mirror
   at the depth range's two ends (``focal_surfaces.csv`` and ``focal_surfaces.png``, the
   paper's Fig. 6);
-- a radial IPSF bank over the field and several depths (:func:`mitsweep.tracer.ipsf_bank`,
-  ``bank.npz``) and its depth invariance V_avg (paper Eq. 3) and the kurtosis of each
+- a radial IPSF bank over the field and several depths
+  (:func:`mitsweep.workflows.trace_ipsf_bank`, ``bank.npz``) and its depth invariance V_avg (paper Eq. 3) and the kurtosis of each
   IPSF's radial cross-section (Gaussian = 3; a focal sweep's IPSF is peakier).
 
 Run::
@@ -96,25 +96,24 @@ def bank_metrics(bank) -> dict:
 
 
 def design(out: Path, *, quick: bool, **numbers) -> dict:
-    from mitsweep.config import load_setup
-    from mitsweep.io.bank import save_bank
-    from mitsweep.optics import optimal_sweep_range
-    from mitsweep.plots import plot_focal_surfaces
-    from mitsweep.tracer import ipsf_bank
+    """The sweep range with its plot (:func:`mitsweep.workflows.compute_sweep_range`,
+    ``mitsweep sweep-range --plot``), the focal surfaces as a table, and an IPSF bank
+    (:func:`mitsweep.workflows.trace_ipsf_bank`, ``mitsweep ipsf --bank radial``)."""
+    from mitsweep.workflows import compute_sweep_range, resolve_setup, trace_ipsf_bank
 
-    setup = load_setup(write_setup(out / "my_mirror.toml", **numbers))
-    sweep = optimal_sweep_range(setup)
+    setup_file = write_setup(out / "my_mirror.toml", **numbers)
+    setup = resolve_setup(setup_file)
+    sweep = compute_sweep_range(setup_file, plot=out / "focal_surfaces.png").value
     ends = [setup.sweep.depth_min, setup.sweep.depth_max]
     rows = focal_surfaces(setup, ends)
     with open(out / "focal_surfaces.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
-    plot_focal_surfaces(setup, sweep, out / "focal_surfaces.png")
     depths = [ends[0], 1000.0, ends[1]]
-    bank = ipsf_bank(setup, n_radii=3 if quick else 9, depths=depths,
-                     rays=4096 if quick else 1 << 18, kernel_size=9 if quick else 31)
-    save_bank(out / "bank.npz", bank)
+    bank = trace_ipsf_bank(setup_file, kind="radial", radii=3 if quick else 9, depths=depths,
+                           rays=4096 if quick else 1 << 18, kernel_size=9 if quick else 31,
+                           output=out / "bank.npz").value
     return {"setup": str(out / "my_mirror.toml"),
             "focus_mm": [sweep.focus_min, sweep.focus_max],
             "sensor_mm": [sweep.sensor_start, sweep.sensor_end],
