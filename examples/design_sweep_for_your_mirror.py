@@ -12,8 +12,9 @@ command), then computes
   at the depth range's two ends (``focal_surfaces.csv`` and ``focal_surfaces.png``, the
   paper's Fig. 6);
 - a radial IPSF bank over the field and several depths
-  (:func:`mitsweep.workflows.trace_ipsf_bank`, ``bank.npz``) and its depth invariance V_avg (paper Eq. 3) and the kurtosis of each
-  IPSF's radial cross-section (Gaussian = 3; a focal sweep's IPSF is peakier).
+  (:func:`mitsweep.workflows.trace_ipsf_bank`, ``bank.npz``) and its depth invariance
+  V_avg (paper Eq. 3) and the kurtosis of each IPSF's radial cross-section (Gaussian = 3;
+  a focal sweep's IPSF is peakier).
 
 Run::
 
