@@ -523,7 +523,12 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
 
         traced = float(np.max(radii_px(bank)))
         info["traced_radius_px"] = traced
-        regions.append(("beyond_fov", m & (rr > traced)))
+        # a bank traced to the mirror's rim records the design FOV's edge: the region
+        # stays the same pixels whichever bank restores them
+        fov_mm = (bank.metadata or {}).get("fov_radius_mm")
+        fov = traced if fov_mm is None else float(fov_mm) / float(bank.pixel_pitch)
+        info["fov_radius_px"] = fov
+        regions.append(("beyond_fov", m & (rr > fov)))
     if depth is not None:
         regions.append(("occlusion_edges", m & _occlusion_edges(depth, edge_width_px)))
         info.update(edge_width_px=int(edge_width_px), edge_depth_ratio=EDGE_DEPTH_RATIO)

@@ -10,6 +10,8 @@ at ``[K // 2, K // 2]``; pixels and sensor millimetres convert through
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import logging
 import math
 from typing import Any, Mapping
@@ -22,7 +24,7 @@ from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..resources import check_allocation
 
 __all__ = ["PAPER_DECONV_DEPTH_MM", "optical_center", "select_depth", "radii_px",
-           "interpolate_radial", "rotate_kernel", "grid_bank_from_radial",
+           "interpolate_radial", "rotate_kernel", "grid_bank_from_radial", "fill_invalid_nodes",
            "check_bank_matches", "bank_identity_problem", "check_bank_identity", "normalise"]
 
 logger = logging.getLogger(__name__)
@@ -153,6 +155,35 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
                     kind="grid", grid_shape=(rows_n, cols_n),
                     metadata={**bank.metadata, "derived_from": "radial bank, rotated"},
                     optics=bank.optics, fingerprinted=bank.fingerprinted)
+
+
+def fill_invalid_nodes(bank: IPSFBank) -> IPSFBank:
+    """A grid bank whose nodes off the mirror take the kernel of the nearest traced node.
+
+    The tracer gives a grid node whose chief ray misses the mirror a centred delta
+    kernel and marks it invalid (``metadata["valid"]``). The product-convolution then
+    blends that delta into every pixel of the cells around it, so the mirror's image
+    near its rim (on the tilted paraboloid, most of what lies beyond the design FOV) is
+    restored with a kernel part blur, part identity: under-deconvolved. Beyond the rim
+    there is no mirror and no image to restore, so the nearest traced kernel (in the
+    sensor plane) is the bank's best knowledge of the blur at every node, and the cells
+    that straddle the rim get the rim's blur. Radial banks and grid banks with every
+    node valid are returned unchanged; ``metadata["filled_nodes"]`` lists the nodes
+    filled and ``metadata["filled_from"]`` the node each copies.
+    """
+    valid = np.asarray((bank.metadata or {}).get("valid", []), dtype=bool)
+    if bank.kind != "grid" or valid.size != len(bank.points_uv) or valid.all() \
+            or not valid.any():
+        return bank
+    pts = np.asarray(bank.points_uv, dtype=np.float64)
+    good = np.flatnonzero(valid)
+    bad = np.flatnonzero(~valid)
+    d = np.hypot(pts[bad, None, 0] - pts[None, good, 0], pts[bad, None, 1] - pts[None, good, 1])
+    src = good[np.argmin(d, axis=1)]
+    kernels = np.array(bank.kernels, copy=True)
+    kernels[:, bad] = kernels[:, src]
+    meta = {**bank.metadata, "filled_nodes": bad.tolist(), "filled_from": src.tolist()}
+    return replace(bank, kernels=kernels, metadata=meta)
 
 
 def _setup_resolution(meta: dict[str, Any]) -> tuple[int, int] | None:

@@ -15,7 +15,7 @@ import logging
 import re
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -23,6 +23,9 @@ from .dataset import load_manifest
 from .evaluation import DEPTH_BANDS_MM, checked_items, read_finite
 from .runner import DatasetError
 from .tasks import BANK, DECONV_PRIOR, white_level
+
+if TYPE_CHECKING:
+    from ..io.bank import IPSFBank
 
 __all__ = ["dataset_budget", "budget_items", "budget_json"]
 
@@ -76,7 +79,8 @@ def _second_render(root: Path, manifest: dict, scene: str, seed: int, work_dir: 
 
 def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
                    second_seed: int | None = None, work_dir: str | Path | None = None,
-                   n_radial_bins: int = 8, edge_width_px: int = 2) -> dict:
+                   n_radial_bins: int = 8, edge_width_px: int = 2,
+                   bank: "IPSFBank | None" = None) -> dict:
     """Error budgets of a dataset's EDOF images (see :mod:`mitsweep.deconv.budget`).
 
     Parameters
@@ -92,6 +96,13 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
         term; ``work_dir`` keeps those renders (required then; a rerun reuses them).
     n_radial_bins, edge_width_px
         As in :func:`~mitsweep.deconv.budget.error_budget` (the evaluation's bins).
+    bank : IPSFBank, optional
+        Restore every step with this bank instead of the dataset's (one traced to the
+        mirror's rim, :func:`mitsweep.pipeline.rim.rim_bank`, or with its off-mirror
+        grid nodes filled, :func:`mitsweep.deconv.kernels.fill_invalid_nodes`): the
+        EDOF image is then restored again from its input with it, with the dataset's
+        weight rule (Wiener: :func:`mitsweep.deconv.weights.model_nsr`), so the budget
+        says what that bank would have given.
 
     Returns
     -------
@@ -110,7 +121,8 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
     names = budget_items(manifest, items)
     if second_seed is not None and work_dir is None:
         raise DatasetError("a second seed needs a directory for its renders (work_dir)")
-    bank = load_bank(files[BANK])
+    other_bank = bank is not None
+    bank = load_bank(files[BANK]) if bank is None else bank
     out: dict[str, Any] = {"dataset": str(root), "second_seed": second_seed, "budgets": {}}
     for name in names:
         scene = Path(name).parent.name
@@ -144,10 +156,18 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
         if depth is not None:
             depth = np.where(depth > 0, depth, np.nan)
         logger.info("budget of %s", name)
+        restored, weight = item / level, meta.get("nsr") if method == "wiener" else None
+        if other_bank:
+            from ..deconv.weights import model_nsr
+
+            # as tasks.restore would have made it with this bank (its weight rule)
+            weight = model_nsr(observed, bank, SensorNoise.from_dict(noise) if noise else None,
+                               mask=mask > 0.5, level=level) if method == "wiener" else None
+            restored = None
         b = error_budget(gt / level, observed / level, bank, clean_observed=clean / level,
-                         second_seed=second, restored=item / level, depth=depth,
+                         second_seed=second, restored=restored, depth=depth,
                          mask=mask > 0.5, method=method,
-                         weight=meta.get("nsr") if method == "wiener" else None,
+                         weight=weight,
                          depth_bands_mm=DEPTH_BANDS_MM, n_radial_bins=n_radial_bins,
                          edge_width_px=edge_width_px, **kw)
         out["budgets"][name] = replace(b, info={**b.info, "item": name, "scene": scene,
