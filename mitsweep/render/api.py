@@ -64,7 +64,7 @@ SAMPLERS = ("multijitter", "independent")
 #: fixed cameras (the pinhole's two seeds agree to 42 dB at 64 spp instead of 30 dB).
 #: Independent for the sweep: the EDOF image's Wiener NSR is estimated from the sweep
 #: image's own noise, and with stratified noise that estimate fell 2.4× and the EDOF
-#: image lost 0.4 dB at 512 spp and 1.0 dB at 216 spp (the demo; README).
+#: image lost 0.4 dB at 512 spp and 1.0 dB at 216 spp (the demo; docs/reference/render.md).
 MODE_SAMPLERS = {"pinhole": "multijitter", "focused": "multijitter", "sweep": "independent",
                  "stopped": "multijitter"}
 #: Depth (mm) whose focal image at the mirror centre the ``focused`` camera focuses on.
