@@ -131,6 +131,12 @@ def test_signatures_show_types_and_deprecated_aliases_are_not_listed(site):
     ipsf = (out / "api" / "generated" / "mitsweep.tracer.ipsf.html").read_text()
     sig = ipsf.split('id="mitsweep.tracer.ipsf.integrated_psf"', 1)[1].split("</dt>", 1)[0]
     assert "Setup" in sig and "float" in sig, sig[:2000]
+    # the two Placement classes: each signature links the one its module means
+    scene = (out / "api" / "generated" / "mitsweep.render.user_scene.html").read_text()
+    assert 'href="mitsweep.config.html#mitsweep.config.Placement"' in scene
+    assert "optics.placement.Placement" not in scene
+    ray = (out / "api" / "generated" / "mitsweep.optics.chief_ray.html").read_text()
+    assert 'href="mitsweep.optics.placement.html#mitsweep.optics.placement.Placement"' in ray
     sweep = (out / "api" / "generated" / "mitsweep.optics.sweep.html").read_text()
     assert "<strong>focus_min</strong>" in sweep        # the dataclass's fields, documented
     assert not re.findall(r'id="mitsweep[.\w]*_mm"', sweep), "a deprecated *_mm alias is listed"
