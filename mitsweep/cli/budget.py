@@ -1,14 +1,14 @@
 """``mitsweep budget``: where each EDOF image's error comes from (information limit,
 forward-model mismatch, Monte Carlo and sensor noise, the weight choice), per radius and
-depth band (:func:`mitsweep.pipeline.budget.dataset_budget`)."""
+depth band; a thin wrapper over :func:`mitsweep.workflows.error_budget`."""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from .common import check_outputs, json_text, print_json
+from ..workflows.budget import error_budget
+from .common import print_json
 
 NAME = "budget"
 HELP = ("error budget of a dataset's EDOF images: information limit, model mismatch, "
@@ -30,34 +30,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from ..io import write_text_atomic
-    from ..pipeline import dataset_inputs
-    from ..pipeline.budget import budget_json, dataset_budget
-    from .common import UsageError
-
-    if args.second_seed is not None and not args.out:
-        raise UsageError("--second-seed needs --out DIR (the second renders are kept there)")
-    out = Path(args.out) if args.out else None
-    if out is not None:
-        if out.exists() and not out.is_dir():
-            raise UsageError(f"--out {out}: not a directory")
-        check_outputs(dataset_inputs(args.dataset), [out / "budget.json", out / "budget.txt"])
-    result = dataset_budget(args.dataset, items=args.item, second_seed=args.second_seed,
-                            work_dir=out / "renders" if out is not None else None)
-    text = "".join(f"{name} (restored from {b.info['restored_from']})\n{b.table()}\n"
-                   for name, b in result["budgets"].items())
-    data = budget_json(result)
-    if out is not None:
-        from ..plots import plot_error_budget
-
-        out.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(out / "budget.json", json_text(data))   # the same text as --json
-        write_text_atomic(out / "budget.txt", text)
-        for name, b in data["budgets"].items():
-            stem = name.removesuffix(".exr").replace("/", "_")
-            plot_error_budget(b, out / f"budget_{stem}.png", title=name)
+    result = error_budget(args.dataset, items=args.item, second_seed=args.second_seed,
+                          out=args.out)
     if args.json:
-        print_json(data)
+        print_json(result.summary)
     else:
-        sys.stdout.write(text)
+        sys.stdout.write(result.provenance["text"])
     return 0

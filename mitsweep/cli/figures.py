@@ -1,12 +1,13 @@
-"""``mitsweep figures``: every figure of the paper, for its three setups, in one command."""
+"""``mitsweep figures``: every figure of the paper, for its three setups, in one command; a
+thin wrapper over :func:`mitsweep.workflows.make_paper_figures`."""
 
 from __future__ import annotations
 
 import argparse
 import sys
-from pathlib import Path
 
-from .common import UsageError, check_outputs, load_setup_arg, number_type
+from ..workflows.paper import make_paper_figures
+from .common import number_type
 
 NAME = "figures"
 HELP = ("regenerate the paper's figures (Figs. 3-6, 8-10 and Table 1) for its three setups, "
@@ -36,57 +37,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"seed of traces and renders, 0 to {MAX_SEED} (0)")
 
 
-def resolve_setup(text: str) -> Path:
-    """A ``--setup`` value → its TOML file: a paper setup's name (the bundled file,
-    :func:`mitsweep.resources.bundled_setup`) or a path."""
-    from ..pipeline.figures import PAPER_SETUPS
-    from ..resources import bundled_setup
-
-    if text in PAPER_SETUPS:
-        return bundled_setup(text)
-    p = Path(text)
-    if p.suffix == ".toml" and p.is_file():
-        return p
-    raise UsageError(f"--setup {text!r}: not a paper setup ({', '.join(PAPER_SETUPS)}) nor "
-                     f"an existing .toml file")
+def _step(msg: str) -> None:
+    sys.stderr.write(f"[figures] {msg}\n")
+    sys.stderr.flush()
 
 
 def run(args) -> int:
-    from ..pipeline.figures import FULL, PAPER_SETUPS, QUICK, data_dir, figure_files, make_figures
-
-    if args.out.strip() == "":
-        raise UsageError("--out: must name a directory")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out {out}: exists and is not a directory")
-    paths = [resolve_setup(s) for s in (args.setup or PAPER_SETUPS)]
-    setups = [load_setup_arg(str(p)) for p in paths]
-    names = [s.name for s in setups]
-    dup = sorted({n for n in names if names.count(n) > 1})
-    if dup:
-        raise UsageError(f"--setup: {', '.join(dup)} given twice (each setup's name is its "
-                         f"files' suffix)")
-    quality = QUICK if args.quick else FULL
-    files = [out / name for s in setups for name in figure_files(s)] + [out / "figures.json"]
-    check_outputs([str(p) for p in paths], {"--out": files})
-    if not args.force:
-        existing = [f for f in files if f.exists()]
-        existing += [d for d in (data_dir(out, s, quality) for s in setups) if d.exists()]
-        if existing:
-            more = f" (and {len(existing) - 1} more)" if len(existing) > 1 else ""
-            raise UsageError(f"{existing[0]} exists{more}: refusing to overwrite an earlier "
-                             f"run's figures; pass --force, or choose another --out")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise UsageError(f"--out: cannot create {out} ({exc.strerror})") from None
-
-    def step(msg: str) -> None:
-        sys.stderr.write(f"[figures] {msg}\n")
-        sys.stderr.flush()
-
-    report = make_figures(setups, out, quality=quality, seed=args.seed, step=step)
+    result = make_paper_figures(args.out, setups=args.setup, quick=args.quick,
+                                force=args.force, seed=args.seed, step=_step)
+    report, p = result.value, result.provenance
     n = sum(len(v["files"]) for v in report["setups"].values())
-    print(f"{n} files for {', '.join(names)} ({quality.name} quality) in {out}, "
-          f"{report['total_s']:.0f} s; provenance: {out / 'figures.json'}")
+    print(f"{n} files for {', '.join(p['setups'])} ({p['quality']} quality) in {p['out']}, "
+          f"{report['total_s']:.0f} s; provenance: {p['out']}/figures.json")
     return 0

@@ -1,11 +1,13 @@
-"""``mitsweep table1``: the paper's Table 1 (V_avg and kurtosis per sweep range)."""
+"""``mitsweep table1``: the paper's Table 1 (V_avg and kurtosis per sweep range); a thin
+wrapper over :func:`mitsweep.workflows.reproduce_table1`."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from .common import UsageError, check_outputs, load_setup_arg, positive_int, print_json
+from ..workflows.paper import reproduce_table1
+from .common import positive_int, print_json
 
 NAME = "table1"
 HELP = ("reproduce the paper's Table 1: depth variance V_avg (Eq. 3) and IPSF kurtosis at "
@@ -37,32 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    from tqdm import tqdm
-
-    from ..tracer.table1 import PAPER_DEPTHS_MM, default_ranges, table1
-
-    from ..io.atomic import check_writable
-
-    setup = load_setup_arg(args.setup)
-    check_outputs([args.setup], {"--plot": args.plot})
-    if args.plot:  # before the traces, not after
-        from ..plots import check_figure_path
-
-        check_writable(args.plot)
-        check_figure_path(args.plot, "--plot")
-    if args.kernel_size % 2 == 0 or args.kernel_size < 3:
-        raise UsageError(f"--kernel-size: must be odd and >= 3, got {args.kernel_size}")
-    ranges = args.ranges or default_ranges(setup)
-    total = len(ranges) * args.radii * len(PAPER_DEPTHS_MM)
-    with tqdm(total=total, desc="Table 1", unit="ipsf", file=sys.stderr,
-              disable=not sys.stderr.isatty()) as bar:
-        result = table1(setup, ranges=ranges, n_radii=args.radii, rays=args.rays,
-                        kernel_size=args.kernel_size, seed=args.seed, progress=bar.update)
-    if args.plot:
-        from ..plots import plot_table1
-
-        plot_table1(result, args.plot)
-        result["plot"] = args.plot
+    result = reproduce_table1(args.setup, ranges=args.ranges, radii=args.radii,
+                              rays=args.rays, kernel_size=args.kernel_size, seed=args.seed,
+                              plot=args.plot, progress=True).value
     if args.json:
         print_json(result)
         return 0

@@ -20,7 +20,10 @@ Start here:
 - :func:`run_benchmarks`: benchmarks against baselines, in one process (``mitsweep bench``).
 - :func:`trace_ipsf`, :func:`trace_ipsf_bank`: IPSFs of a setup (``mitsweep ipsf``).
 - :func:`build_dataset`, :func:`evaluate_dataset`: a synthetic dataset and its scores
-  (``mitsweep dataset``, ``mitsweep evaluate``).
+  (``mitsweep dataset``, ``mitsweep evaluate``); :func:`error_budget`: where each EDOF
+  image's error comes from (``mitsweep budget``).
+- :func:`reproduce_table1`, :func:`make_paper_figures`: the paper's Table 1 and figures
+  (``mitsweep table1``, ``mitsweep figures``).
 - :func:`design_motion_profile`: an optimised sweep motion (``mitsweep design-sweep``).
 - :func:`plan_rig_capture`, :func:`capture`: a capture on the rig (``mitsweep capture``).
 
@@ -34,11 +37,13 @@ from ._paths import check_output_name, check_outputs
 from ..photo import calibrate_photo
 from .bench import run_benchmarks
 from .calibrate import calibrate_camera, find_mirror_circle
+from .budget import error_budget
 from .capture import capture, plan_rig_capture
 from .dataset import build_dataset, evaluate_dataset
 from .demo import run_demo
 from .design_sweep import design_motion_profile
 from .ipsf import trace_ipsf, trace_ipsf_bank
+from .paper import make_paper_figures, reproduce_table1
 from .render import render_exr
 from .restore import restore_photo
 from .sweep_range import compute_sweep_range
@@ -49,4 +54,5 @@ __all__ = ["WorkflowResult", "InputError", "resolve_setup", "json_text", "progre
            "trace_ipsf_bank", "build_dataset", "evaluate_dataset", "design_motion_profile",
            "unwarp_image", "calibrate_photo", "capture", "plan_rig_capture",
            "compute_sweep_range", "render_exr", "calibrate_camera", "find_mirror_circle",
-           "run_demo", "run_benchmarks"]
+           "run_demo", "run_benchmarks", "error_budget", "make_paper_figures",
+           "reproduce_table1"]

@@ -1,0 +1,84 @@
+"""Where each EDOF image's error comes from (``mitsweep budget``): information limit,
+forward-model mismatch, Monte Carlo and sensor noise, the weight choice, per radius and
+depth band (:func:`mitsweep.pipeline.budget.dataset_budget`)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Sequence
+
+from .. import __version__
+from ._base import InputError, WorkflowResult, json_text
+from ._paths import check_outputs
+
+__all__ = ["error_budget"]
+
+
+def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = None,
+                 second_seed: int | None = None,
+                 out: str | os.PathLike | None = None) -> WorkflowResult:
+    """The error budget of a dataset's EDOF images (``mitsweep budget``).
+
+    Parameters
+    ----------
+    dataset : path-like
+        A dataset directory (:func:`mitsweep.workflows.build_dataset`).
+    items : sequence of str, optional
+        EDOF items (``scene_000/edof_2lux.exr``, or a stem such as ``edof_2lux`` for every
+        scene); default: every Wiener EDOF image.
+    second_seed : int, optional
+        Render each scene's sweep again with this Monte Carlo seed (into ``out``) to
+        measure the Monte Carlo term; needs ``out``.
+    out : path-like, optional
+        Write ``budget.json``, ``budget.txt`` and one ``budget_*.png`` per item here.
+
+    Returns
+    -------
+    WorkflowResult
+        ``value``: :func:`mitsweep.pipeline.budget.dataset_budget`'s result (``budgets``:
+        item → budget). ``summary``: its JSON form (what ``mitsweep budget --json``
+        prints). ``provenance``: ``dataset``, ``items``, ``second_seed``, ``out``, ``text``
+        (the tables ``budget.txt`` holds), ``version``.
+
+    Raises
+    ------
+    InputError
+        ``second_seed`` without ``out``, an ``out`` that is a file, outputs that would
+        overwrite the dataset's files.
+
+    Examples
+    --------
+    >>> from mitsweep.workflows import error_budget
+    >>> print(error_budget("data").provenance["text"])  # doctest: +SKIP
+    """
+    from ..io import write_text_atomic
+    from ..pipeline import dataset_inputs
+    from ..pipeline.budget import budget_json, dataset_budget
+
+    if second_seed is not None and not out:
+        raise InputError("--second-seed needs --out DIR (the second renders are kept there)")
+    out = Path(out) if out else None
+    if out is not None:
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {out}: not a directory")
+        check_outputs(dataset_inputs(dataset), [out / "budget.json", out / "budget.txt"])
+    result = dataset_budget(dataset, items=items, second_seed=second_seed,
+                            work_dir=out / "renders" if out is not None else None)
+    text = "".join(f"{name} (restored from {b.info['restored_from']})\n{b.table()}\n"
+                   for name, b in result["budgets"].items())
+    data = budget_json(result)
+    if out is not None:
+        from ..plots import plot_error_budget
+
+        out.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(out / "budget.json", json_text(data))   # the same text as --json
+        write_text_atomic(out / "budget.txt", text)
+        for name, b in data["budgets"].items():
+            stem = name.removesuffix(".exr").replace("/", "_")
+            plot_error_budget(b, out / f"budget_{stem}.png", title=name)
+    provenance = {"workflow": "error_budget", "version": __version__,
+                  "dataset": os.fspath(dataset), "items": None if items is None else list(items),
+                  "second_seed": second_seed, "out": None if out is None else str(out),
+                  "text": text}
+    return WorkflowResult(result, provenance, data)
