@@ -8,7 +8,7 @@ import pytest
 
 from mitsweep.config import load_setup
 from mitsweep.io.bank import load_bank, save_bank
-from mitsweep.tracer import integrated_psf, ipsf_bank
+from mitsweep.tracer import TraceSettings, integrated_psf, ipsf_bank
 
 SPHERE = load_setup("scenes/sphere.toml")
 TILTED = load_setup("scenes/paraboloid_tilted.toml")
@@ -16,7 +16,7 @@ TILTED = load_setup("scenes/paraboloid_tilted.toml")
 
 def test_radial_bank_round_trip_and_contract(tmp_path):
     t0 = time.perf_counter()
-    bank = ipsf_bank(SPHERE, depths=(500.0, 5000.0), rays=200_000)
+    bank = ipsf_bank(SPHERE, depths=(500.0, 5000.0), settings=TraceSettings(rays=200_000))
     # Brief: a 19-radius x 1-depth sphere bank "well under a minute on 2 cores";
     # this is 2 depths at 1/5 of the default rays.
     assert time.perf_counter() - t0 < 30
@@ -25,7 +25,8 @@ def test_radial_bank_round_trip_and_contract(tmp_path):
     assert bank.radii_mm[0] == 0.0 and np.all(np.diff(bank.radii_mm) > 0)
     np.testing.assert_array_equal(bank.points_uv[:, 1], 0.0)
     # The bank's kernel equals a direct integrated_psf call with the same seed.
-    k, _ = integrated_psf(SPHERE, float(bank.radii_mm[7]), 0.0, 5000.0, rays=200_000, seed=7)
+    k, _ = integrated_psf(SPHERE, float(bank.radii_mm[7]), 0.0, 5000.0,
+                          settings=TraceSettings(rays=200_000, seed=7))
     np.testing.assert_array_equal(bank.kernels[1, 7], k)
     path = save_bank(tmp_path / "b.npz", bank)
     back = load_bank(path)
@@ -37,11 +38,11 @@ def test_radial_bank_round_trip_and_contract(tmp_path):
 
 def test_radial_bank_refuses_tilted_mirror():
     with pytest.raises(ValueError, match="grid"):
-        ipsf_bank(TILTED, kind="radial", rays=1000)
+        ipsf_bank(TILTED, kind="radial", settings=TraceSettings(rays=1000))
 
 
 def test_grid_bank_marks_points_off_the_mirror():
-    bank = ipsf_bank(TILTED, kind="grid", grid=(3, 3), rays=100_000)
+    bank = ipsf_bank(TILTED, kind="grid", grid=(3, 3), settings=TraceSettings(rays=100_000))
     assert bank.kernels.shape == (1, 9, 31, 31)
     valid = np.array(bank.metadata["valid"])
     # The centre cell sees the mirror; the paper's tilted paraboloid fills part of the
@@ -65,7 +66,8 @@ def test_batched_bank_equals_one_ipsf_at_a_time(method, batch_deposit, monkeypat
 
     if not batch_deposit:
         monkeypatch.setattr(ipsf_module, "_BATCH_DEPOSIT_RAYS", 1)
-    kw = dict(n_radii=5, depths=(500.0, math.inf), rays=3001, method=method, seed=3)
+    kw = dict(n_radii=5, depths=(500.0, math.inf),
+              settings=TraceSettings(rays=3001, method=method, seed=3))
     one = ipsf_bank(SPHERE, batched=False, **kw)
     calls = []
     both = ipsf_bank(SPHERE, batched=True, progress=lambda: calls.append(1), **kw)
@@ -77,7 +79,7 @@ def test_batched_bank_equals_one_ipsf_at_a_time(method, batch_deposit, monkeypat
 
 
 def test_batched_grid_bank_marks_the_same_points():
-    kw = dict(kind="grid", grid=(3, 3), rays=5000)
+    kw = dict(kind="grid", grid=(3, 3), settings=TraceSettings(rays=5000))
     one = ipsf_bank(TILTED, batched=False, **kw)
     both = ipsf_bank(TILTED, batched=True, **kw)
     assert both.metadata["valid"] == one.metadata["valid"]

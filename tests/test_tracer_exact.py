@@ -7,7 +7,7 @@ import pytest
 from mitsweep.config import load_setup
 from mitsweep.optics.motion import MotionProfile
 from mitsweep.optics.reference import reference_geometry
-from mitsweep.tracer import integrated_psf
+from mitsweep.tracer import TraceSettings, integrated_psf
 from mitsweep.tracer.bank import field_radius
 from mitsweep.tracer.ipsf import fit_sampling_box, sweep_cdf
 from mitsweep.tracer.kernel import deposit_segments, fold_buffer, trace_arrays
@@ -89,9 +89,9 @@ def test_exact_deposit_is_the_time_average_of_the_same_rays(setup, u, v, K, moti
 
 @pytest.mark.parametrize("u", [0.0, 0.9])
 def test_exact_and_stratified_sweeps_converge_to_the_same_ipsf(u):
-    k_e, _ = integrated_psf(SPHERE, u * EDGE, 0.0, 800.0, rays=2_000_000)
-    k_c, _ = integrated_psf(SPHERE, u * EDGE, 0.0, 800.0, rays=4_000_000,
-                            method="continuous", time_samples=8, seed=5)
+    k_e, _ = integrated_psf(SPHERE, u * EDGE, 0.0, 800.0, settings=TraceSettings(rays=2_000_000))
+    k_c, _ = integrated_psf(SPHERE, u * EDGE, 0.0, 800.0, settings=TraceSettings(
+        rays=4_000_000, method="continuous", time_samples=8, seed=5))
     # Independent estimates of one IPSF: Monte Carlo L1 of 4e6 stratified rays
     # ~2e-4 to 5e-4 (seed to seed), of the exact 2e6 ~1e-4; bound 1.5e-3.
     assert np.abs(k_e - k_c).sum() < 1.5e-3
@@ -99,12 +99,11 @@ def test_exact_and_stratified_sweeps_converge_to_the_same_ipsf(u):
 
 def test_exact_method_needs_fewer_rays_for_the_same_error():
     u = EDGE
-    ref, _ = integrated_psf(SPHERE, u, 0.0, 500.0, rays=1 << 23, seed=77)
+    ref, _ = integrated_psf(SPHERE, u, 0.0, 500.0, settings=TraceSettings(rays=1 << 23, seed=77))
     errs = {}
     for method, kw in (("exact", {}), ("continuous", {"time_samples": 4})):
-        errs[method] = max(np.abs(integrated_psf(SPHERE, u, 0.0, 500.0, rays=1 << 19,
-                                                 method=method, seed=s, **kw)[0] - ref).sum()
-                           for s in (1, 2))
+        errs[method] = max(np.abs(integrated_psf(SPHERE, u, 0.0, 500.0, settings=TraceSettings(
+            rays=1 << 19, method=method, seed=s, **kw))[0] - ref).sum() for s in (1, 2))
     # measured 1e-4 (exact) and 6e-4 (4 times per ray) at 2^19 rays
     assert errs["exact"] < 0.6 * errs["continuous"]
 
@@ -124,12 +123,14 @@ def test_rim_bookkeeping_does_not_depend_on_the_deposit():
     g = reference_geometry(setup, sweep=optimal_sweep_range(setup, fov_deg=60.0))
     u, _ = image_point(chief_ray(pl, pl.surface(np.array([9.95]), np.array([0.0]))),
                        g.sensor_distance)
-    cases = [(setup, float(u[0]), dict(rays=200_000, kernel_size=31, sweep=g.sweep)),
-             (SPHERE, EDGE, dict(rays=200_000, kernel_size=5))]  # a window too small
+    cases = [(setup, float(u[0]), 31, {"sweep": g.sweep}),
+             (SPHERE, EDGE, 5, {})]  # a window too small
     (rim_e, rim_c), (small_e, small_c) = [
-        (integrated_psf(su, uu, 0.0, 500.0, **kw)[1],
-         integrated_psf(su, uu, 0.0, 500.0, method="planes", n_planes=64, **kw)[1])
-        for su, uu, kw in cases]
+        (integrated_psf(su, uu, 0.0, 500.0, **kw,
+                        settings=TraceSettings(rays=200_000, kernel_size=K))[1],
+         integrated_psf(su, uu, 0.0, 500.0, **kw, settings=TraceSettings(
+             rays=200_000, kernel_size=K, method="planes", n_planes=64))[1])
+        for su, uu, K, kw in cases]
     assert 0.05 < rim_e["vignetted_fraction"] < 0.95
     assert small_e["outside_kernel_fraction"] > 0.01
     for ie, ic in ((rim_e, rim_c), (small_e, small_c)):

@@ -11,7 +11,7 @@ from mitsweep.config import Mirror, SetupError, load_setup
 from mitsweep.optics import image_distance, intersect_mirror, optimal_sweep_range, placement_of
 from mitsweep.optics.reference import reference_geometry
 from mitsweep.optics.motion import MotionProfile
-from mitsweep.tracer import integrated_psf, psf
+from mitsweep.tracer import TraceSettings, integrated_psf, psf
 from mitsweep.tracer.kernel import trace_arrays
 from mitsweep.tracer.ipsf import fit_sampling_box
 from mitsweep.tracer.source import source_from_mirror
@@ -29,7 +29,7 @@ def _with_mirror(**kw):
 
 @pytest.mark.parametrize("u,v", [(0.0, 0.0), (2.0, 0.0), (0.0, -3.0), (2.5, 2.5)])
 def test_ipsf_is_unit_sum_finite_and_centred(u, v):
-    k, info = integrated_psf(SPHERE, u, v, 500.0, rays=400_000)
+    k, info = integrated_psf(SPHERE, u, v, 500.0, settings=TraceSettings(rays=400_000))
     assert k.dtype == np.float32 and k.shape == (31, 31)
     assert np.all(np.isfinite(k)) and np.all(k >= 0)
     assert k.sum() == pytest.approx(1.0, abs=1e-5)
@@ -60,8 +60,8 @@ def test_defocused_axial_psf_is_the_thin_lens_disk():
 
 
 def test_rotational_symmetry_of_the_sphere():
-    k1, _ = integrated_psf(SPHERE, 3.0, 0.0, 1000.0, rays=2_000_000)
-    k2, _ = integrated_psf(SPHERE, 0.0, 3.0, 1000.0, rays=2_000_000)
+    k1, _ = integrated_psf(SPHERE, 3.0, 0.0, 1000.0, settings=TraceSettings(rays=2_000_000))
+    k2, _ = integrated_psf(SPHERE, 0.0, 3.0, 1000.0, settings=TraceSettings(rays=2_000_000))
     # (0, 3) is (3, 0) rotated 90° counter-clockwise; rows go down (-v), so that is
     # np.rot90 of the array. L1 tolerance: Monte Carlo error of 2e6 QMC rays ~1e-3.
     assert np.abs(np.rot90(k1) - k2).sum() < 5e-3
@@ -69,11 +69,11 @@ def test_rotational_symmetry_of_the_sphere():
 
 @pytest.mark.parametrize("u", [0.5, 3.4])
 def test_continuous_sweep_and_plane_sum_converge_to_the_same_ipsf(u):
-    k_c, _ = integrated_psf(SPHERE, u, 0.0, 800.0, rays=2_000_000)
-    k_p, _ = integrated_psf(SPHERE, u, 0.0, 800.0, rays=2_000_000, method="planes",
-                            n_planes=64)
-    k_16, _ = integrated_psf(SPHERE, u, 0.0, 800.0, rays=2_000_000, method="planes",
-                             n_planes=4)
+    k_c, _ = integrated_psf(SPHERE, u, 0.0, 800.0, settings=TraceSettings(rays=2_000_000))
+    k_p, _ = integrated_psf(SPHERE, u, 0.0, 800.0,
+                            settings=TraceSettings(rays=2_000_000, method="planes", n_planes=64))
+    k_16, _ = integrated_psf(SPHERE, u, 0.0, 800.0,
+                             settings=TraceSettings(rays=2_000_000, method="planes", n_planes=4))
     d64 = np.abs(k_c - k_p).sum()
     d4 = np.abs(k_c - k_16).sum()
     # 64 planes approximate the continuous sweep to ~1e-3 in L1; 4 planes are
@@ -86,8 +86,8 @@ def test_ipsf_is_the_time_average_of_psfs():
     """The N-plane IPSF equals the mean of the N single-distance PSFs on the same grid."""
     n = 4
     motion = MotionProfile.linear(SR.sensor_start, SR.sensor_end)
-    k, _ = integrated_psf(SPHERE, 2.0, 0.0, 500.0, rays=1_000_000, method="planes",
-                          n_planes=n, motion=motion, reference_sensor_distance=REF)
+    k, _ = integrated_psf(SPHERE, 2.0, 0.0, 500.0, motion=motion, reference_sensor_distance=REF,
+                          settings=TraceSettings(rays=1_000_000, method="planes", n_planes=n))
     dists = motion.sensor_distance((np.arange(n) + 0.5) / n)
     mean = sum(psf(SPHERE, 2.0, 0.0, 500.0, i, rays=1_000_000,
                    reference_sensor_distance=REF)[0] for i in dists) / n
@@ -98,8 +98,10 @@ def test_ipsf_is_the_time_average_of_psfs():
 def test_trapezoidal_motion_dwells_longer_at_the_ends():
     lin = MotionProfile.linear(SR.sensor_start, SR.sensor_end)
     trap = MotionProfile.trapezoidal(SR.sensor_start, SR.sensor_end, 0.4)
-    kl, _ = integrated_psf(SPHERE, 0.0, 0.0, 10000.0, rays=1_000_000, motion=lin, sweep=SR)
-    kt, _ = integrated_psf(SPHERE, 0.0, 0.0, 10000.0, rays=1_000_000, motion=trap, sweep=SR)
+    kl, _ = integrated_psf(SPHERE, 0.0, 0.0, 10000.0, motion=lin, sweep=SR,
+                           settings=TraceSettings(rays=1_000_000))
+    kt, _ = integrated_psf(SPHERE, 0.0, 0.0, 10000.0, motion=trap, sweep=SR,
+                           settings=TraceSettings(rays=1_000_000))
     # A far source focuses near the start of the sweep; the slow trapezoidal start
     # spends more time near focus, so its IPSF peak is higher.
     assert kt.max() > 1.05 * kl.max()
@@ -107,8 +109,9 @@ def test_trapezoidal_motion_dwells_longer_at_the_ends():
 
 @pytest.mark.parametrize("u", [0.0, 3.0])
 def test_float32_matches_float64(u):
-    k32, _ = integrated_psf(SPHERE, u, 0.0, 500.0, rays=1_000_000)
-    k64, _ = integrated_psf(SPHERE, u, 0.0, 500.0, rays=1_000_000, double=True)
+    k32, _ = integrated_psf(SPHERE, u, 0.0, 500.0, settings=TraceSettings(rays=1_000_000))
+    k64, _ = integrated_psf(SPHERE, u, 0.0, 500.0, double=True,
+                            settings=TraceSettings(rays=1_000_000))
     # Same sample stream: only rounding differs; measured ~2e-5 L1, stated bound 2e-4
     # (a ray moving across a pixel border flips ~1 pitch of its weight).
     assert np.abs(k32 - k64).sum() < 2e-4
@@ -123,19 +126,23 @@ def test_vignetting_is_reported_at_the_rim():
     geometry = reference_geometry(setup, sweep=optimal_sweep_range(setup, fov_deg=60.0))
     u, _ = image_point(chief_ray(pl, pl.surface(np.array([src_rho]), np.array([0.0]))),
                        geometry.sensor_distance)
-    k, info = integrated_psf(setup, float(u[0]), 0.0, 500.0, rays=400_000,
-                             sweep=geometry.sweep)
+    k, info = integrated_psf(setup, float(u[0]), 0.0, 500.0, sweep=geometry.sweep,
+                             settings=TraceSettings(rays=400_000))
     assert 0.05 < info["vignetted_fraction"] < 0.95
     assert k.sum() == pytest.approx(1.0, abs=1e-5)
 
 
+FEW = TraceSettings(rays=1000)
+
+
 @pytest.mark.parametrize("call,err,match", [
-    (lambda: integrated_psf(SPHERE, 50.0, 0.0, 500.0, rays=1000), ValueError, "outside"),
-    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 0.0, rays=1000), ValueError, "depth"),
-    (lambda: integrated_psf(SPHERE, 1.0, 0.0, -5.0, rays=1000), ValueError, "depth"),
-    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, method="magic"), ValueError, "method"),
-    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, kernel_size=30), ValueError,
-     "kernel_size"),
+    (lambda: integrated_psf(SPHERE, 50.0, 0.0, 500.0, settings=FEW), ValueError, "outside"),
+    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 0.0, settings=FEW), ValueError, "depth"),
+    (lambda: integrated_psf(SPHERE, 1.0, 0.0, -5.0, settings=FEW), ValueError, "depth"),
+    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, settings=TraceSettings(method="magic")),
+     ValueError, "method"),
+    (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, settings=TraceSettings(kernel_size=30)),
+     ValueError, "kernel_size"),
     (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0, motion="linear"), TypeError,
      "MotionProfile"),
     (lambda: integrated_psf(SPHERE, 1.0, 0.0, 500.0,
