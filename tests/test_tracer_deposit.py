@@ -79,6 +79,7 @@ def test_deposit_strategy_scope_is_deprecated_and_context_local():
         with kernel.deposit_strategy_scope(copies=2, coherent=False):
             assert kernel.resolve_strategy(None) == DepositStrategy(copies=2, coherent=False)
             assert kernel.resolve_strategy(DepositStrategy()) == DepositStrategy()
+            assert kernel.deposit_copies() == 2  # as the old scope set the count
     assert kernel.resolve_strategy(None) == DepositStrategy()
 
 

@@ -66,8 +66,9 @@ from typing import Any
 
 import numpy as np
 
-from .deposit import (DepositStrategy, deposit_copies, deposit_sweeps, deposit_time_samples,
-                      fold_buffer, new_buffer, sensor_distances)
+from . import deposit as _deposit
+from .deposit import (DepositStrategy, deposit_sweeps, deposit_time_samples, fold_buffer,
+                      new_buffer, sensor_distances)
 from .geometry import Geometry, TraceParams
 from .sampling import Lanes, SourceBatch, array_types, single_lanes
 from .stages import trace_lanes
@@ -101,6 +102,13 @@ def resolve_strategy(strategy: DepositStrategy | None = None) -> DepositStrategy
     if strategy is not None:
         return strategy
     return _SCOPED_STRATEGY.get() or DepositStrategy()
+
+
+def deposit_copies(strategy: DepositStrategy | None = None) -> int:
+    """Copies of a new deposit buffer (:func:`mitsweep.tracer.deposit.deposit_copies`) for
+    ``strategy`` resolved by :func:`resolve_strategy` (so an enclosing deprecated
+    :func:`deposit_strategy_scope` still sets the count)."""
+    return _deposit.deposit_copies(resolve_strategy(strategy))
 
 
 _ARRAY_KEYS = ("landed", "landed_free", "weight", "Au", "Av", "Bu", "Bv", "a", "b")
