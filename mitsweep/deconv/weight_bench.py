@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -74,7 +74,9 @@ def independent_blur_problem(size: int = 512, sigma: float = 0.005, *, seed: int
             "bank": synthetic_radial_bank(shape, size=K, r_max_px=r, n_radii=19)}
 
 
-def synthetic_weight_bench(sizes=(512,), sigmas=(0.005, 0.001), *, seed: int = 0) -> list[dict]:
+def synthetic_weight_bench(sizes: Sequence[int] = (512,),
+                           sigmas: Sequence[float] = (0.005, 0.001), *,
+                           seed: int = 0) -> list[dict]:
     """:func:`weight_rows` on :func:`independent_blur_problem` for each size and σ:
     ``before`` (polar Wiener's ``nsr=None``, the variance-based estimate), ``model``
     (the known σ) and ``blind`` (nothing known). One row per case, with ``seconds``

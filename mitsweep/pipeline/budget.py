@@ -15,17 +15,15 @@ import logging
 import re
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from .dataset import load_manifest
 from .evaluation import DEPTH_BANDS_MM, checked_items, read_finite
 from .runner import DatasetError
+from ..io.bank import IPSFBank
 from .tasks import BANK, DECONV_PRIOR, white_level
-
-if TYPE_CHECKING:
-    from ..io.bank import IPSFBank
 
 __all__ = ["dataset_budget", "budget_items", "budget_json"]
 
@@ -80,7 +78,7 @@ def _second_render(root: Path, manifest: dict, scene: str, seed: int, work_dir: 
 def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
                    second_seed: int | None = None, work_dir: str | Path | None = None,
                    n_radial_bins: int = 8, edge_width_px: int = 2,
-                   bank: "IPSFBank | None" = None) -> dict:
+                   bank: IPSFBank | None = None) -> dict:
     """Error budgets of a dataset's EDOF images (see :mod:`mitsweep.deconv.budget`).
 
     Parameters
