@@ -222,13 +222,14 @@ def trace_bank(setup: Setup, out: Path, *, depths: list, rays: int | None, grid:
     """Trace the IPSF bank: radial for a rotationally symmetric setup, else a grid;
     ``motion``: the sweep's profile, if not the setup's."""
     from ..io.bank import bank_kernel_size, save_bank
-    from ..tracer import ipsf_bank
+    from ..tracer import TraceSettings, ipsf_bank
 
     kind = "radial" if setup.mirror.is_symmetric else "grid"
-    kw: dict[str, Any] = {"kind": kind, "depths": tuple(depths), "seed": seed,
-                          "kernel_size": bank_kernel_size(setup.sensor.pixel_pitch)}
+    trace = {"seed": seed, "kernel_size": bank_kernel_size(setup.sensor.pixel_pitch)}
     if rays:
-        kw["rays"] = rays
+        trace["rays"] = rays
+    kw: dict[str, Any] = {"kind": kind, "depths": tuple(depths),
+                          "settings": TraceSettings(**trace)}
     if kind == "grid":
         kw["grid"] = tuple(grid)
     if motion is not None:
