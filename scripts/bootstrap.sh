@@ -58,7 +58,7 @@ stamp=".venv/.mitsweep-installed"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
     echo "bootstrap: installing mitsweep and its dependencies into .venv (log: .venv/pip-install.log)" >&2
     if ! { .venv/bin/python -m pip install -q --upgrade pip &&
-           .venv/bin/python -m pip install -q -e ".[dev,docs]"; } >.venv/pip-install.log 2>&1; then
+           .venv/bin/python -m pip install -q -e ".[dev,docs,test]"; } >.venv/pip-install.log 2>&1; then
         tail -n 30 .venv/pip-install.log >&2
         echo "bootstrap: pip install failed (full log: .venv/pip-install.log)" >&2
         exit 1

@@ -1,8 +1,34 @@
 #!/usr/bin/env bash
 # The test suite. Installs what is missing first (scripts/bootstrap.sh).
-# Extra arguments go to pytest (e.g. -m slow, or -m "slow or not slow" for everything).
+# Extra arguments go to pytest (e.g. -m slow, or -m "slow or not slow" for everything;
+# a file or a test id runs just that).
+#
+# Runs in parallel (pytest-xdist): one worker per core plus one, at most 8, because one
+# worker spends most of its time in the rig tests' real-time waits (tests/conftest.py keeps
+# those tests together in one worker, in order, as a serial run has them). Set
+# MITSWEEP_TEST_WORKERS=N for N workers (0: serially, in this process), or pass -n /
+# -p no:xdist yourself. MITSWEEP_TEST_BUSY_CORES (see tests/conftest.py) runs serially.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/scripts/bootstrap.sh" --test
 cd "$root"
-exec .venv/bin/python -m pytest "$@"
+
+workers="${MITSWEEP_TEST_WORKERS:-}"
+if [ -z "$workers" ]; then
+    cores="$(nproc 2>/dev/null || getconf _NPROCESSORS_ONLN 2>/dev/null || echo 1)"
+    workers=$((cores + 1 > 8 ? 8 : cores + 1))
+fi
+case "$workers" in
+    ''|*[!0-9]*) echo "test.sh: MITSWEEP_TEST_WORKERS must be a whole number of workers (0: serial), got '$workers'" >&2
+                 exit 2 ;;
+esac
+busy="${MITSWEEP_TEST_BUSY_CORES:-0}"
+[ "${busy//[[:space:]]/}" != "" ] && [ "${busy//[[:space:]]/}" != 0 ] && workers=0
+for arg in "$@"; do   # the caller chose: -n N, --numprocesses, -p no:xdist, --dist ...
+    case "$arg" in
+        -n|-n[0-9]*|--numprocesses|--numprocesses=*|no:xdist|-pno:xdist|--dist|--dist=*) workers=0 ;;
+    esac
+done
+parallel=()
+[ "$workers" -gt 0 ] && parallel=(-n "$workers" --dist loadgroup)
+exec .venv/bin/python -m pytest "${parallel[@]}" "$@"

@@ -56,18 +56,69 @@ def busy_cores():
         yield pids
 
 
-@pytest.fixture(autouse=True)
-def _busy_cores_from_env():
-    """``$MITSWEEP_TEST_BUSY_CORES`` = n > 0: every test runs beside n spinning processes."""
+def _busy_cores_wanted() -> int:
     text = os.environ.get(BUSY_CORES_ENV, "").strip() or "0"
     if not text.isdigit():
         raise pytest.UsageError(f"{BUSY_CORES_ENV} must be a whole number of processes, "
                                 f"got {text!r}")
-    if int(text) == 0:
+    return int(text)
+
+
+#: The xdist group of the tests that drive the simulated rig over ptys against real-time
+#: deadlines (tests/test_rig_*.py): under ``--dist loadgroup`` (scripts/test.sh) they run
+#: in one worker, one at a time and in file order, as in a serial run, while the other
+#: workers keep the CPUs busy, the load CI's serial busy-core pass checks them under.
+RIG_GROUP = "rig"
+
+
+def pytest_configure(config):
+    if _busy_cores_wanted() and getattr(config.option, "numprocesses", None):
+        # each worker would start its own n spinners: not the load the variable names
+        raise pytest.UsageError(f"{BUSY_CORES_ENV} runs every test beside that many "
+                                f"spinning processes: run serially (-p no:xdist), not "
+                                f"under -n")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name.startswith("test_rig_"):
+            item.add_marker(pytest.mark.xdist_group(RIG_GROUP))
+
+
+@pytest.fixture(autouse=True)
+def _busy_cores_from_env():
+    """``$MITSWEEP_TEST_BUSY_CORES`` = n > 0: every test runs beside n spinning processes."""
+    n = _busy_cores_wanted()
+    if n == 0:
         yield
         return
-    with busy_processes(int(text)):
+    with busy_processes(n):
         yield
+
+
+@pytest.fixture(scope="session")
+def host_firmware(tmp_path_factory):
+    """The rig's Arduino sketch built for this machine (scripts/firmware/host): a program
+    that serves the board on a pty (tests/test_rig_firmware.py's HostBoard). Compiled
+    once per session (per worker under xdist), for every rig test module that runs it."""
+    import shutil
+    import subprocess
+
+    cxx = shutil.which("g++")
+    if cxx is None:
+        if os.environ.get("CI"):
+            pytest.fail("no C++ compiler (g++) for the host build of the sketch")
+        pytest.skip("no C++ compiler (g++) for the host build of the sketch")
+    sketch_dir = ROOT / "scripts" / "firmware" / "mitsweep_sweep"
+    host_dir = sketch_dir.parent / "host"
+    out = tmp_path_factory.mktemp("fwhost") / "mitsweep_sweep_host"
+    proc = subprocess.run([cxx, "-O2", "-std=c++11", "-Wall", "-Wextra", "-Werror",
+                           "-I", str(host_dir), "-x", "c++",
+                           str(sketch_dir / "mitsweep_sweep.ino"), "-x", "none",
+                           str(host_dir / "host_main.cpp"), "-o", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return out
 
 
 @pytest.fixture
