@@ -10,6 +10,7 @@ A test module takes the fixtures by importing them
 from __future__ import annotations
 
 import contextlib
+import functools
 import subprocess
 import time
 from pathlib import Path
@@ -20,6 +21,7 @@ import pytest
 from conftest import SCENES
 
 from mitsweep.config import Setup, load_setup
+from mitsweep.optics import SweepRange, optimal_sweep_range
 from mitsweep.optics.motion import MotionProfile
 from mitsweep.rig import (CapturePlan, CaptureRecord, RigPorts, load_capture_record,
                           plan_capture, run_capture)
@@ -28,7 +30,8 @@ from mitsweep.rig.testing import fast_rig_setup
 
 __all__ = ["ZABER_STEPS_PER_MM", "ZABER_MAX_POSITION", "TIMER_RESOLUTION_S", "arduino_capture",
            "assert_board_timed_exposure", "assert_safe", "bent_profile", "complete_exposure",
-           "killed_on_exit", "soft_limit_steps", "sphere", "sphere_zaber", "zaber_capture"]
+           "killed_on_exit", "soft_limit_steps", "sphere", "sphere_zaber", "sweep_of",
+           "zaber_capture"]
 
 #: 0.047625 µm microsteps (Zaber X-LSM family).
 ZABER_STEPS_PER_MM = 1 / 0.047625e-3
@@ -37,6 +40,13 @@ ZABER_MAX_POSITION = int(26 * ZABER_STEPS_PER_MM)
 #: Timing resolution of a measured exposure: the simulated board stamps events from the
 #: analytic motion at its 1 µs ``micros()``, and an exposure is two such stamps apart.
 TIMER_RESOLUTION_S = 2e-6
+
+
+@functools.lru_cache(maxsize=None)
+def sweep_of(setup: Setup) -> SweepRange:
+    """``optimal_sweep_range(setup)``, once per setup in this process (a pure function
+    of the frozen setup that takes ~0.1-0.4 s of solving; the rig tests ask it often)."""
+    return optimal_sweep_range(setup)
 
 
 def bent_profile(sr, n: int = 64, bend: float = 0.3) -> MotionProfile:

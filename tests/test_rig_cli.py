@@ -1,5 +1,9 @@
 """``mitsweep capture``: dry run, bad input (exit 2, one line, before any motion), and a
-full capture from the command line against the pty simulator."""
+full capture from the command line against the pty simulator.
+
+The refusals run the command in this process (``cli_contract.refused``: the same
+``main`` a ``mitsweep`` process runs, without a Python start-up each); the captures and
+the dry run run it as a real process (``conftest.run_cli``)."""
 
 from __future__ import annotations
 
@@ -8,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_contract import refused
 from conftest import run_cli
 
 from mitsweep.rig import load_capture_record
@@ -50,14 +55,12 @@ def test_dry_run_prints_plan_without_opening_a_port(tmp_path):
     ("", None, ["--port", "/dev/ttyDOESNOTEXIST"], "cannot open"),
     ("", None, [], "--port is required"),
 ], ids=["travel", "velocity", "exposure", "stage-syntax", "missing-port", "no-port"])
-def test_bad_input_exits_2_with_one_line(tmp_path, extra, velocity, args, message):
+def test_bad_input_exits_2_with_one_line(tmp_path, capsys, extra, velocity, args, message):
     setup = setup_file(tmp_path, extra, velocity)
     argv = ["capture", setup, *args]
     if "--port" not in args and message != "--port is required":
         argv += ["--port", "/dev/ttyDOESNOTEXIST"]   # must be refused before it is tried
-    rc, out, err = run_cli(*argv, "--out", tmp_path / "rec.json", timeout=120)
-    assert rc == 2
-    assert message in err and len(err.strip().splitlines()) == 1
+    assert message in refused(capsys, [*argv, "--out", tmp_path / "rec.json"])
     assert not (tmp_path / "rec.json").exists()   # nothing captured, nothing recorded
 
 
@@ -87,23 +90,22 @@ def test_cli_fault_exits_1_with_incomplete_record(tmp_path):
     assert load_capture_record(out)["status"] == "fault"
 
 
-def test_unwritable_record_path_exits_2_before_opening_ports(tmp_path):
+def test_unwritable_record_path_exits_2_before_opening_ports(tmp_path, capsys):
     setup = setup_file(tmp_path)
     with PtyDevice(ArduinoModel()) as dev:
-        rc, out, err = run_cli("capture", setup, "--port", dev.port,
-                               "--out", tmp_path / "missing_dir" / "rec.json", timeout=120)
+        err = refused(capsys, ["capture", setup, "--port", dev.port,
+                               "--out", tmp_path / "missing_dir" / "rec.json"])
         assert not [line for _, d, line in dev.model.log if d == "rx"], "port was used"
-    assert rc == 2 and "does not exist" in err
+    assert "does not exist" in err
 
 
-def test_out_refuses_an_existing_file_without_force(tmp_path):
+def test_out_refuses_an_existing_file_without_force(tmp_path, capsys):
     setup = setup_file(tmp_path)
     out = tmp_path / "rec.json"
     out.write_text("an earlier capture\n")
     with PtyDevice(ArduinoModel()) as dev:
-        rc, _, err = run_cli("capture", setup, "--port", dev.port, "--out", out, timeout=120)
+        err = refused(capsys, ["capture", setup, "--port", dev.port, "--out", out])
         assert not [line for _, d, line in dev.model.log if d == "rx"], "port was used"
-    assert rc == 2 and len(err.strip().splitlines()) == 1
     assert err.startswith("mitsweep: error: --out") and "--force" in err
     assert out.read_text() == "an earlier capture\n"
 
@@ -120,7 +122,7 @@ def test_out_with_force_replaces_an_existing_file(tmp_path):
 
 
 @pytest.mark.parametrize("alias", ["same", "relative", "symlink", "hardlink"])
-def test_out_is_never_the_setup_file_even_with_force(tmp_path, alias):
+def test_out_is_never_the_setup_file_even_with_force(tmp_path, capsys, alias):
     import os
 
     setup = setup_file(tmp_path)
@@ -133,9 +135,7 @@ def test_out_is_never_the_setup_file_even_with_force(tmp_path, alias):
     elif alias == "hardlink":
         os.link(setup, out)
     with PtyDevice(ArduinoModel()) as dev:
-        rc, _, err = run_cli("capture", setup, "--port", dev.port, "--out", out, "--force",
-                             timeout=120)
+        err = refused(capsys, ["capture", setup, "--port", dev.port, "--out", out, "--force"])
         assert not [line for _, d, line in dev.model.log if d == "rx"], "port was used"
-    assert rc == 2 and len(err.strip().splitlines()) == 1, err
     assert "is the input" in err
     assert setup.read_text() == before

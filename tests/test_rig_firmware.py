@@ -18,7 +18,7 @@ import subprocess
 from pathlib import Path
 
 import pytest
-from rig_fixtures import bent_profile
+from rig_fixtures import bent_profile, sweep_of
 from rig_fixtures import sphere  # noqa: F401 - fixture
 
 from mitsweep.rig import arduino as driver
@@ -109,7 +109,6 @@ def test_firmware_boots_under_simavr_and_greets_driver(firmware):
 
 
 # -- the sketch's own code on the host, against the Python driver ------------------------
-HOST_DIR = SKETCH_DIR.parent / "host"
 # The host build's steps happen when the OS schedules the polling loop (it naps 20 µs
 # per turn): a step, and so the shutter edge and its event, can be late by a scheduling
 # delay, which on this shared 2-core machine reaches several ms (a real Uno's loop
@@ -119,20 +118,7 @@ HOST_TIMING_TOLERANCE_S = 25e-3
 SAME_TURN_S = 200e-6
 
 
-@pytest.fixture(scope="module")
-def host_firmware(tmp_path_factory):
-    cxx = shutil.which("g++")
-    if cxx is None:
-        if IN_CI:
-            pytest.fail("no C++ compiler (g++) for the host build of the sketch")
-        pytest.skip("no C++ compiler (g++) for the host build of the sketch")
-    out = tmp_path_factory.mktemp("fwhost") / "mitsweep_sweep_host"
-    proc = subprocess.run([cxx, "-O2", "-std=c++11", "-Wall", "-Wextra", "-Werror",
-                           "-I", str(HOST_DIR), "-x", "c++", str(SKETCH), "-x", "none",
-                           str(HOST_DIR / "host_main.cpp"), "-o", str(out)],
-                          capture_output=True, text=True, timeout=300)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return out
+# host_firmware: the host build of the sketch, compiled once per session (tests/conftest.py)
 
 
 class HostBoard:
@@ -217,11 +203,10 @@ def test_sketch_runs_a_motion_profile_with_the_python_driver(host_firmware, sphe
     a real pty with an optimised-like profile: the shutter pin was high once, exactly
     between the planned steps, for the table's time, and the board's positions follow
     the plan (one step, plus the peak rate over the host build's scheduling delay)."""
-    from mitsweep.optics import optimal_sweep_range
     from mitsweep.rig import plan_capture
 
     # 1.3x the mean velocity at the start, 0.7x at the end
-    motion = bent_profile(optimal_sweep_range(sphere))
+    motion = bent_profile(sweep_of(sphere))
     plan = plan_capture(sphere, motion=motion, exposure_s=0.7)
     data, (t_open, t_close) = capture_on_host_board(host_firmware, tmp_path, sphere, plan)
     # the table is timed from the open step on the board's clock: its last step, which

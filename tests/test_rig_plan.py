@@ -5,9 +5,9 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+from rig_fixtures import sweep_of
 
 from mitsweep.config import SetupError, load_setup
-from mitsweep.optics import optimal_sweep_range
 from mitsweep.rig.arduino import MAX_STEP_RATE
 from mitsweep.rig.errors import PlanError
 from mitsweep.rig.plan import plan_capture
@@ -37,7 +37,7 @@ def scenes_dir_module():
 @pytest.mark.parametrize("stage, spm", [("arduino", 400.0), ("zaber", 20997.4)])
 def test_plan_covers_sweep_range_at_constant_velocity(scenes_dir_module, scene, stage, spm):
     setup = with_rig(load_setup(scenes_dir_module / f"{scene}.toml"), steps_per_mm=spm)
-    sr = optimal_sweep_range(setup)
+    sr = sweep_of(setup)
     plan = plan_capture(setup, stage=stage, sweep_range=sr)
     # the shutter window maps onto the optical sweep, to within half a step
     half_step = 0.5 / spm
@@ -66,7 +66,7 @@ def test_plan_covers_sweep_range_at_constant_velocity(scenes_dir_module, scene, 
 
 @pytest.mark.parametrize("direction", [1, -1])
 def test_calibrated_mapping_puts_sweep_where_the_rig_says(sphere, direction):
-    sr = optimal_sweep_range(sphere)
+    sr = sweep_of(sphere)
     s0 = sr.sensor_start - direction * 10.0   # stage 10 mm maps to the sweep start
     plan = plan_capture(with_rig(sphere, sensor_distance_at_zero=s0, sensor_direction=direction))
     assert plan.mapping == "calibrated"
@@ -80,7 +80,7 @@ def test_sweep_longer_than_travel_is_refused(sphere):
 
 
 def test_calibrated_sweep_outside_soft_limits_is_refused(sphere):
-    sr = optimal_sweep_range(sphere)
+    sr = sweep_of(sphere)
     with pytest.raises(PlanError, match="outside the soft limits"):
         plan_capture(with_rig(sphere, sensor_distance_at_zero=sr.sensor_start - 24.95))
 

@@ -22,18 +22,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_contract import refused
 from conftest import ROOT, run_cli
 from rig_fixtures import (TIMER_RESOLUTION_S, ZABER_MAX_POSITION, arduino_capture,
                           assert_board_timed_exposure, assert_safe, bent_profile,
-                          complete_exposure, zaber_capture)
+                          complete_exposure, sweep_of, zaber_capture)
 from rig_fixtures import sphere, sphere_zaber  # noqa: F401 - fixtures
 from test_rig_cli import setup_file
-from test_rig_firmware import HostBoard, host_firmware  # noqa: F401 - fixture
+from test_rig_firmware import HostBoard
 from test_rig_signals import ZABER_RIG, finish, received, signal_exit_status, wait_for
 from test_rig_watchdog import MARGIN_S, WATCHDOG_RIG, WATCHDOG_S, read_lines
 
 from mitsweep.config import SetupError, load_setup
-from mitsweep.optics import optimal_sweep_range
 from mitsweep.optics.motion import MotionProfile
 from mitsweep.optics.motion_file import save_motion_file
 from mitsweep.rig import (DeviceError, DeviceFault, PortLost, ProtocolError, ReplyTimeout, RigPorts,
@@ -48,7 +48,7 @@ from mitsweep.rig.zaber import SPEED_UNIT, ZaberStage
 
 @pytest.fixture(scope="module")
 def profile(sphere):
-    return bent_profile(optimal_sweep_range(sphere))
+    return bent_profile(sweep_of(sphere))
 
 
 def setup_for(stage, sphere, sphere_zaber):
@@ -109,7 +109,7 @@ def test_table_follows_profile_within_its_stated_tolerance(sphere, sphere_zaber,
 
 
 def test_linear_profile_plans_the_linear_sweeps_shutter_window(sphere):
-    sr = optimal_sweep_range(sphere)
+    sr = sweep_of(sphere)
     linear = plan_capture(sphere)
     plan = plan_capture(sphere, motion=MotionProfile.linear(sr.sensor_start, sr.sensor_end),
                         exposure_s=sr.exposure_s)
@@ -123,7 +123,7 @@ def test_linear_profile_plans_the_linear_sweeps_shutter_window(sphere):
 
 
 def test_profile_with_more_knots_than_the_board_holds_is_reknotted(sphere):
-    sr = optimal_sweep_range(sphere)
+    sr = sweep_of(sphere)
     plan = plan_capture(sphere, motion=bent_profile(sr, n=300), exposure_s=0.7)
     table = plan.profile
     assert len(table.steps) == MAX_TABLE_SEGMENTS
@@ -148,7 +148,7 @@ def with_rig(setup, **rig):
     ("too long", "outside the camera's range"),
 ])
 def test_profile_the_stage_cannot_follow_is_refused(sphere, case, match):
-    sr = optimal_sweep_range(sphere)
+    sr = sweep_of(sphere)
     s0, s1 = sr.sensor_start, sr.sensor_end
     exposure = 0.7
     setup = sphere
@@ -182,7 +182,7 @@ def test_a_profile_whole_steps_cannot_follow_is_refused(sphere):
     """Coarse steps (9.3 steps/mm: 6.4 steps over the sweep) and knots whose bends lie
     within a step of each other: the best table of whole steps is 1.65 steps off (found
     by a random search over such profiles), more than the one step allowed."""
-    sr = optimal_sweep_range(sphere)
+    sr = sweep_of(sphere)
     t = np.array([0.0, 0.3341, 0.3349, 0.3359, 0.5883, 0.5894, 0.7406, 0.7418, 0.7424,
                   1.0169])
     x = np.array([0.0, 0.482, 1.977, 2.684, 3.595, 4.796, 5.057, 6.264, 6.369, 6.436])
@@ -197,7 +197,7 @@ def test_a_profile_whole_steps_cannot_follow_is_refused(sphere):
 @pytest.mark.parametrize("stage", ["arduino", "zaber"])
 def test_a_dwell_inside_the_exposure_is_refused(sphere, sphere_zaber, stage):
     setup = with_rig(setup_for(stage, sphere, sphere_zaber), acceleration=1000.0)
-    sr = optimal_sweep_range(setup)
+    sr = sweep_of(setup)
     s0, s1 = sr.sensor_start, sr.sensor_end
     mid = s0 + 0.5 * (s1 - s0)
     dwell = MotionProfile.tabulated([0, 0.45, 0.55, 1.0], [s0, mid, mid, s1])
@@ -209,7 +209,7 @@ def test_a_slow_long_interval_before_a_fast_short_one_is_refused(sphere):
     """The velocity change must fit in the shorter interval: 9 -> 0.05 mm/s within the
     fast interval's 7.7 ms needs ~1160 mm/s², though spread over the mean of the two
     intervals (the slow one lasts 1.39 s) it would look like ~13 mm/s²."""
-    sr = optimal_sweep_range(sphere)
+    sr = sweep_of(sphere)
     s0, s1 = sr.sensor_start, sr.sensor_end
     step = (s1 - s0) / 10
     t_slow, t_fast = abs(step) / 0.05, abs(step) / 9.0
@@ -429,8 +429,10 @@ def test_cli_capture_with_motion_file_against_simulator(rig_setup_file, sphere, 
     ("non-monotonic", "monotonic"),
 ])
 def test_cli_bad_motion_exits_2_with_one_line_before_any_motion(rig_setup_file, sphere,
-                                                                tmp_path, case, message):
-    sr = optimal_sweep_range(sphere)
+                                                                tmp_path, capsys, case,
+                                                                message):
+    """In this process (``cli_contract.refused``): exit 2, one line, no traceback."""
+    sr = sweep_of(sphere)
     s0, s1 = sr.sensor_start, sr.sensor_end
     f = sphere.lens.focal_length
     t, d, exposure = [0.0, 0.5, 1.0], [s0, 0.5 * (s0 + s1), s1], 0.7
@@ -459,12 +461,10 @@ def test_cli_bad_motion_exits_2_with_one_line_before_any_motion(rig_setup_file, 
     motion = motion_json(tmp_path / "profile.json", t, d, exposure)
     out = tmp_path / "rec.json"
     with PtyDevice(ArduinoModel()) as dev:
-        rc, _, err = run_cli("capture", rig_setup_file, "--port", dev.port, "--motion",
-                             motion, "--out", out, timeout=120)
+        err = refused(capsys, ["capture", rig_setup_file, "--port", dev.port, "--motion",
+                               motion, "--out", out])
         assert not [line for _, di, line in dev.model.log if di == "rx"], "port was used"
-    assert rc == 2, err
-    assert err.startswith("mitsweep: error:") and len(err.strip().splitlines()) == 1, err
-    assert message in err
+    assert err.startswith("mitsweep: error:") and message in err, err
     assert not out.exists()
 
 
@@ -502,7 +502,7 @@ def slow_profile_rig(tmp_path, rig_kind, extra_rig=""):
     """(setup path, motion path, plan) of the slow profile on a fast-positioning rig."""
     setup_path = setup_file(tmp_path, (ZABER_RIG if rig_kind == "zaber" else "") + extra_rig)
     setup = load_setup(setup_path)
-    motion = bent_profile(optimal_sweep_range(setup))
+    motion = bent_profile(sweep_of(setup))
     path = save_motion_file(tmp_path / "profile.json", motion, exposure_s=SLOW_EXPOSURE_S,
                             provenance={"generator": "test_rig_profile"})
     return setup_path, path, plan_capture(setup, stage=rig_kind, motion=motion,
@@ -557,7 +557,7 @@ def test_sigkilled_host_mid_table_the_simulated_board_stops_within_watchdog(tmp_
 
 
 def test_sigkilled_host_mid_table_the_firmware_stops_within_watchdog(
-        host_firmware, tmp_path):  # noqa: F811
+        host_firmware, tmp_path):
     setup_path, motion_path, plan = slow_profile_rig(tmp_path, "arduino", WATCHDOG_RIG)
     board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
     shutter = lambda: [v for _, v, _ in board.pin_changes(6)]  # noqa: E731 - PIN_SHUTTER

@@ -18,7 +18,7 @@ import time
 import pytest
 from conftest import ROOT
 from test_rig_cli import setup_file
-from test_rig_firmware import HostBoard, host_firmware  # noqa: F401 - fixture
+from test_rig_firmware import HostBoard
 from test_rig_signals import SWEEP_VELOCITY, Rig, wait_for
 
 from mitsweep.rig.arduino import ArduinoSweepController
@@ -80,7 +80,7 @@ def test_sigkilled_host_simulator_board_stops_within_watchdog(tmp_path, rig_kind
     assert elapsed <= WATCHDOG_S + MARGIN_S
 
 
-def test_sigkilled_host_firmware_stops_within_watchdog(host_firmware, tmp_path):  # noqa: F811
+def test_sigkilled_host_firmware_stops_within_watchdog(host_firmware, tmp_path):
     setup = setup_file(tmp_path, WATCHDOG_RIG, SWEEP_VELOCITY)
     board = HostBoard(host_firmware, tmp_path / "pins.txt", start_steps=400)
     out = tmp_path / "rec.json"

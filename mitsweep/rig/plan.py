@@ -35,6 +35,7 @@ lens's focal length, velocities or accelerations beyond ``rig.max_velocity`` and
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass
 
@@ -263,6 +264,25 @@ def _check_soft_limits(what: str, approach_steps: int, end_steps: int, spm: floa
                             f"{lo:g} .. {hi:g} mm; check rig.sensor_distance_at_zero")
 
 
+@functools.lru_cache(maxsize=16)
+def _cached_sweep_range(setup: Setup) -> SweepRange:
+    from ..optics import optimal_sweep_range
+
+    return optimal_sweep_range(setup)
+
+
+def _optimal_sweep_range(setup: Setup) -> SweepRange:
+    """``optimal_sweep_range(setup)``, computed once per setup in a process: a pure
+    function of the frozen setup (~0.1-0.4 s of solving), which a dry run then the
+    capture, or a sequence of plans for one setup, would otherwise repeat."""
+    try:
+        return _cached_sweep_range(setup)
+    except TypeError:        # a setup holding something unhashable: not cached
+        from ..optics import optimal_sweep_range
+
+        return optimal_sweep_range(setup)
+
+
 def plan_capture(setup: Setup, *, stage: str = "arduino",
                  sweep_range: SweepRange | None = None,
                  motion: MotionProfile | None = None,
@@ -300,9 +320,7 @@ def plan_capture(setup: Setup, *, stage: str = "arduino",
     if exposure_s is not None:
         raise ValueError("plan_capture: exposure_s is the exposure of a motion profile")
     if sweep_range is None:
-        from ..optics import optimal_sweep_range
-
-        sweep_range = optimal_sweep_range(setup)
+        sweep_range = _optimal_sweep_range(setup)
     rig = setup.rig
     spm = rig.steps_per_mm
     v = float(sweep_range.velocity_mm_s)
