@@ -206,7 +206,7 @@ class _SetupFigures:
         """The IPSF of the mirror point ``x_mm`` at ``depth`` over the sweep ``focus``
         (default the optimal range), traced once."""
         from ..optics.reference import reference_geometry
-        from ..tracer import integrated_psf
+        from ..tracer import TraceSettings, integrated_psf
 
         focus = focus or (self.sweep.focus_min, self.sweep.focus_max)
         key = (round(x_mm, 9), float(depth), round(focus[0], 9), round(focus[1], 9))
@@ -214,9 +214,10 @@ class _SetupFigures:
             setup, sweep = _range_setup(self.setup, *focus)
             ref = reference_geometry(setup, sweep=sweep).sensor_distance
             (p,) = field_points(setup, sweep, ref, xs=[x_mm])
+            settings = TraceSettings(rays=self.quality.ipsf_rays, kernel_size=self.kernel_size,
+                                     seed=self.seed)
             kernel, _ = self._timed("ipsf_s", integrated_psf, setup, p.u, p.v, depth,
-                                    rays=self.quality.ipsf_rays, kernel_size=self.kernel_size,
-                                    seed=self.seed, sweep=sweep)
+                                    settings=settings, sweep=sweep)
             self._ipsfs[key] = kernel
         return self._ipsfs[key]
 
