@@ -46,7 +46,8 @@ from scipy import fft as sfft
 from ..deconv.noise import SensorNoise
 from ..deconv.wiener import regulariser
 
-__all__ = ["WienerModel", "wiener_model", "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
+__all__ = ["WienerModel", "wiener_model", "DeployedWienerModel", "deployed_wiener_model",
+           "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
 
 #: DFT grid of the MSE sum (steps of 1/32 cycle/pixel; a 31 px kernel fits). Measured on
 #: the paraboloid at 50 and 0.5 lux: uniform and optimised worst-case MSE within 0.1 % of
@@ -161,3 +162,117 @@ def wiener_model(kernels: np.ndarray, noise: SensorNoise, *, n_fft: int = DEFAUL
                        spectra_im=np.ascontiguousarray(spec.imag), magnitude=np.abs(spec),
                        weight=weight[1:].copy(), reg=reg[1:].astype(float),
                        noise_var=float(noise.variance(SIGNAL_MEAN)))
+
+
+@dataclass(frozen=True)
+class DeployedWienerModel:
+    r"""The MSE of the *deployed* restoration as a function of τ.
+
+    The pipeline does not restore depth d with its own IPSF and the design's NSR: it
+    deconvolves every depth with the bank's kernel at one depth :math:`d_0` (500 mm)
+    and its own NSR. With :math:`K_d(f;τ) = \sum_k τ_k \hat P_{d,k}(f)`, the deployed
+    filter :math:`G = K_{d_0}^*/(|K_{d_0}|^2 + R_f)` (:math:`R_f` = the deployed NSR ×
+    the natural prior's :math:`c(f)`) and a natural image of spectrum
+    :math:`S = σ^2/R_t` (:math:`R_t` from the sensor noise, as :class:`WienerModel`),
+    the error of depth d is
+
+    .. math:: \mathrm{MSE}_d(τ) = \frac{σ^2}{n^2}\sum_{f\ne 0}
+              \frac{|D - K_{d_0}^* K_d|^2}{R_t D^2} + \frac{|K_{d_0}|^2}{D^2},
+              \qquad D = |K_{d_0}|^2 + R_f ,
+
+    which is :class:`WienerModel`'s MSE when :math:`K_d = K_{d_0}` and
+    :math:`R_f = R_t`. It is not convex in τ and has no certified bound here; the same
+    optimiser (:func:`~mitsweep.design.optimize.local_optimum`) minimises it.
+
+    Attributes
+    ----------
+    spectra_re, spectra_im : (J, N, F) ndarray
+        :math:`\hat P_{d,k}` of each kernel j = (depth, point).
+    deployed_re, deployed_im : (J, N, F) ndarray
+        :math:`\hat P_{d_0,k}` of the same point at the deployed depth.
+    weight, reg_true, reg_filter : (F,) ndarray
+    noise_var : float
+    """
+
+    spectra_re: np.ndarray
+    spectra_im: np.ndarray
+    deployed_re: np.ndarray
+    deployed_im: np.ndarray
+    weight: np.ndarray
+    reg_true: np.ndarray
+    reg_filter: np.ndarray
+    noise_var: float
+
+    @property
+    def n_kernels(self) -> int:
+        return self.spectra_re.shape[0]
+
+    def _parts(self, tau):
+        t = np.asarray(tau, dtype=float)
+        c = WienerModel._combine
+        kr, ki = c(t, self.spectra_re), c(t, self.spectra_im)
+        qr, qi = c(t, self.deployed_re), c(t, self.deployed_im)
+        D = qr * qr + qi * qi + self.reg_filter
+        # N = D - conj(K0) K
+        nr = D - (qr * kr + qi * ki)
+        ni = -(qr * ki - qi * kr)
+        return t, kr, ki, qr, qi, D, nr, ni
+
+    def mse(self, tau: ArrayLike) -> np.ndarray:
+        """(J,) deployed MSE at ``tau`` (N,), or (B, J) for (B, N)."""
+        _, _, _, qr, qi, D, nr, ni = self._parts(tau)
+        e = (nr * nr + ni * ni) / (self.reg_true * D * D) + (qr * qr + qi * qi) / (D * D)
+        return self.noise_var * (self.weight * e).sum(axis=-1)
+
+    def mse_and_grad(self, tau: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """(J,) deployed MSE and its (J, N) gradient in τ (for one τ)."""
+        _, kr, ki, qr, qi, D, nr, ni = self._parts(tau)
+        n2, q2 = nr * nr + ni * ni, qr * qr + qi * qi
+        Rt = self.reg_true
+        e = n2 / (Rt * D * D) + q2 / (D * D)
+        value = self.noise_var * (self.weight * e).sum(axis=-1)
+        # M = conj(N) K, L = N K0: d|N|²/dτ_k = 2 Re(N) dD_k - 2 Re(conj(Q_k) M)
+        # - 2 Re(P_k conj(L)), with P_k, Q_k the bin spectra of K_d and K_{d0}
+        mr, mi = nr * kr + ni * ki, nr * ki - ni * kr
+        lr, li = nr * qr - ni * qi, nr * qi + ni * qr
+        s = self.noise_var * self.weight
+        a = 2.0 / (Rt * D * D)
+        dD = -2.0 * n2 / (Rt * D ** 3) + 1.0 / (D * D) - 2.0 * q2 / D ** 3   # ∂e/∂D (+q2 term)
+        # ∂e/∂τ_k = a (Re(N) dD_k - Re(conj(Q_k) M) - Re(P_k conj(L)))
+        #           + (-2 n2/(Rt D³) - 2 q2/D³) dD_k + dq2_k / D²,  dD_k = dq2_k = 2 Re(conj(K0) Q_k)
+        coef_q2 = a * nr + dD                       # multiplies dD_k = 2 (qr Qr + qi Qi)
+        cqr = s * (2.0 * coef_q2 * qr - a * mr)
+        cqi = s * (2.0 * coef_q2 * qi - a * mi)
+        cpr = -s * a * lr
+        cpi = -s * a * li
+        grad = (np.matmul(self.deployed_re, cqr[:, :, None])[..., 0]
+                + np.matmul(self.deployed_im, cqi[:, :, None])[..., 0]
+                + np.matmul(self.spectra_re, cpr[:, :, None])[..., 0]
+                + np.matmul(self.spectra_im, cpi[:, :, None])[..., 0])
+        return value, grad
+
+
+def deployed_wiener_model(kernels: np.ndarray, depths_mm: ArrayLike, noise: SensorNoise, *,
+                          deploy_depth_mm: float = 500.0, deploy_nsr: float | None = None,
+                          n_fft: int = DEFAULT_FFT_SIZE, n_px: float) -> DeployedWienerModel:
+    """The :class:`DeployedWienerModel` of bin-averaged kernels (n_depths, n_points, N,
+    K, K): each depth restored with the kernels of the bank depth nearest
+    ``deploy_depth_mm`` (in 1/depth, as :func:`mitsweep.deconv.kernels.select_depth`)
+    and the NSR ``deploy_nsr`` (default the sensor's, :meth:`SensorNoise.nsr` at 0.5:
+    then only the kernel's depth differs from :func:`wiener_model`)."""
+    base = wiener_model(kernels, noise, n_fft=n_fft, n_px=n_px)
+    k = np.asarray(kernels)
+    D, P = k.shape[:2]
+    depths = np.asarray(depths_mm, dtype=float)
+    if depths.shape != (D,):
+        raise ValueError(f"depths_mm: need {D} depths, got {depths.shape}")
+    with np.errstate(divide="ignore"):
+        d0 = int(np.argmin(np.abs(1.0 / depths - 1.0 / float(deploy_depth_mm))))
+    idx = np.array([d0 * P + p for _ in range(D) for p in range(P)])
+    c = base.reg / float(noise.nsr(SIGNAL_MEAN))
+    reg_f = base.reg if deploy_nsr is None else c * float(deploy_nsr)
+    return DeployedWienerModel(spectra_re=base.spectra_re, spectra_im=base.spectra_im,
+                               deployed_re=np.ascontiguousarray(base.spectra_re[idx]),
+                               deployed_im=np.ascontiguousarray(base.spectra_im[idx]),
+                               weight=base.weight, reg_true=base.reg, reg_filter=reg_f,
+                               noise_var=base.noise_var)

@@ -19,13 +19,13 @@ from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..tracer.bank import field_radius, grid_points
 from ..tracer.metrics import v_avg
 from ..tracer.source import source_from_image
-from .objective import DEFAULT_FFT_SIZE, wiener_model
+from .objective import DEFAULT_FFT_SIZE, deployed_wiener_model, wiener_model
 from .optimize import (OBJECTIVES, StageLimits, brute_force, certified_lower_bound,
                        local_optimum, stage_feasible)
 from .planes import DEFAULT_PLANE_RAYS, DEFAULT_SUB_PLANES, PlaneBank, plane_bank
 
 __all__ = ["SweepDesign", "design_sweep", "design_depths", "design_points", "V_DEPTHS_MM",
-           "MIN_PLANES"]
+           "MIN_PLANES", "RESTORATIONS"]
 
 logger = logging.getLogger(__name__)
 
@@ -70,6 +70,10 @@ class SweepDesign:
     depths_mm: np.ndarray
     report: dict = field(default_factory=dict)
     bank: PlaneBank | None = field(default=None, repr=False)
+
+
+#: The restorations a design can predict (:func:`design_sweep`'s ``restoration``).
+RESTORATIONS = ("matched", "deployed")
 
 
 def design_depths(setup: Setup) -> list[float]:
@@ -146,7 +150,9 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
                  kernel_size: int = 31, seed: int = 0, n_fft: int = DEFAULT_FFT_SIZE,
                  sub_planes: int = DEFAULT_SUB_PLANES, brute_force_steps: int = 16,
                  bank: PlaneBank | None = None,
-                 progress: Callable[[], object] | None = None) -> SweepDesign:
+                 progress: Callable[[], object] | None = None,
+                 restoration: str = "matched", deploy_depth_mm: float = 500.0,
+                 deploy_nsr: float | None = None) -> SweepDesign:
     """Design the time profile of a focal sweep (objective in :mod:`mitsweep.design`).
 
     Parameters
@@ -176,6 +182,16 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         bank does not depend on the light level).
     progress : callable, optional
         Called after each traced point.
+    restoration : {"matched", "deployed"}
+        The restoration whose error is predicted: ``"matched"``, each depth restored
+        with its own IPSF and the sensor's NSR (:func:`~mitsweep.design.wiener_model`,
+        with a certified bound); ``"deployed"``, as the pipeline restores: every depth
+        with the kernels at ``deploy_depth_mm`` and the NSR ``deploy_nsr`` (default the
+        sensor's; a dataset's is :func:`mitsweep.deconv.weights.model_nsr` of its
+        images) (:func:`~mitsweep.design.objective.deployed_wiener_model`; no certified
+        bound). When the designed profile does not beat the linear one under this
+        model, the design returns the linear profile and says so
+        (``report["returns_linear"]``).
 
     Returns
     -------
@@ -190,6 +206,9 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     t_start = time.perf_counter()
     if objective not in OBJECTIVES:
         raise SetupError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    if restoration not in RESTORATIONS:
+        raise SetupError(f"restoration: must be one of {', '.join(RESTORATIONS)}, got "
+                         f"{restoration!r}")
     if int(n_planes) < MIN_PLANES:
         raise SetupError(f"planes: need at least {MIN_PLANES}, got {n_planes}")
     sweep = optimal_sweep_range(setup)
@@ -233,7 +252,16 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     widths = bank.widths_mm
     n_px = math.sqrt(setup.sensor.resolution[0] * setup.sensor.resolution[1])
     t0 = time.perf_counter()
-    model = wiener_model(bank.kernels, noise, n_fft=n_fft, n_px=n_px)
+    deployed = restoration == "deployed"
+
+    def predictor(b: PlaneBank):
+        if deployed:
+            return deployed_wiener_model(b.kernels, b.depths_mm, noise, n_fft=n_fft, n_px=n_px,
+                                         deploy_depth_mm=deploy_depth_mm,
+                                         deploy_nsr=deploy_nsr)
+        return wiener_model(b.kernels, noise, n_fft=n_fft, n_px=n_px)
+
+    model = predictor(bank)
     shape = (len(depths), len(points))
     # the uniform sweep over the optimal range, same exposure: the baseline
     optimal = span_mm is None or (np.isclose(start, sweep.sensor_start, rtol=0, atol=1e-12)
@@ -251,18 +279,21 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         lin_bank = plane_bank(setup, lin_points, depths, lin_edges,
                               reference_sensor_distance=lin_geom.sensor_distance, **common)
         lw = lin_bank.widths_mm
-        lin_model = wiener_model(lin_bank.kernels, noise, n_fft=n_fft, n_px=n_px)
+        lin_model = predictor(lin_bank)
         mse_lin = lin_model.mse(lw / lw.sum()).reshape(shape)
         kernels_lin = lin_bank.ipsf(lw / lw.sum())
         lin_feasible = True
     sol = local_optimum(model, widths, limits, objective=objective)
-    bound, bound_info = certified_lower_bound(model, widths, limits, objective=objective)
+    if deployed:
+        bound, bound_info = None, {"relaxed_value": None}
+    else:
+        bound, bound_info = certified_lower_bound(model, widths, limits, objective=objective)
     free = local_optimum(model, widths, limits, objective=objective, acceleration=False)
     t_opt = time.perf_counter() - t0
     brute = None
     if brute_force_steps:
         small = bank.coarsened(_BRUTE_BINS)
-        brute = brute_force(wiener_model(small.kernels, noise, n_fft=n_fft, n_px=n_px),
+        brute = brute_force(predictor(small),
                             small.widths_mm, limits, objective=objective,
                             steps=brute_force_steps)
     # uniform τ is in the design's feasible set only when the span is the optimal range
@@ -274,15 +305,25 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     times[-1] = 1.0
     profile = MotionProfile.tabulated(times, edges)
     mse = sol.mse.reshape(shape)
+    value = sol.value
+    lin_value = float(mse_lin.max() if objective == "worst" else mse_lin.mean())
+    returns_linear = bool(deployed and optimal and lin_feasible and value >= lin_value)
+    if returns_linear:
+        # under the deployed restoration no profile the optimiser found beats linear
+        tau, mse, value = tau_lin, mse_lin, lin_value
+        profile = motion_lin
     kernels = bank.ipsf(tau)
     v_opt, v_depths = _v_avg(kernels, depths)
     v_lin, _ = _v_avg(kernels_lin, depths)
     velocity = widths / (tau * T)
     accel = np.diff(velocity) / (np.minimum(tau[:-1], tau[1:]) * T)
-    value = sol.value
-    gap = value - bound
+    gap = None if bound is None else value - bound
     report = {
         "setup": setup.name, "objective": objective, "planes": N,
+        "restoration": restoration,
+        "deploy": ({"depth_mm": float(deploy_depth_mm), "nsr": deploy_nsr} if deployed
+                   else None),
+        "returns_linear": returns_linear,
         "span_mm": [start, end], "optimal_range_mm": [sweep.sensor_start, sweep.sensor_end],
         "exposure_s": T, "noise": noise.as_dict(), "depths_mm": list(depths),
         "points_uv_mm": points.tolist(),
@@ -304,15 +345,20 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         "certificate": {
             "objective_value": value,
             "lower_bound": bound,
-            "gap": gap, "relative_gap": gap / value,
+            "gap": gap, "relative_gap": None if gap is None else gap / value,
             "uniform_value": uniform_value,
             "relaxed_value": bound_info["relaxed_value"],
             "without_acceleration_value": free.value,
             "starts": sol.info["starts"], "best_start": sol.info["best_start"],
             "iterations": sol.info["iterations"],
-            "says": (f"the optimum of this objective (worst/mean predicted MSE over the bank, "
-                     f"these stage limits) lies in [{bound:.6g}, {value:.6g}]: the profile "
-                     f"found is within {100 * gap / value:.3g} % of it"),
+            "says": (("no profile found beats the linear sweep under the deployed "
+                      "restoration: the design is the linear sweep") if returns_linear else
+                     ("the deployed restoration's objective has no certified bound; the "
+                      f"profile found predicts {value:.6g} against linear {lin_value:.6g}")
+                     if deployed else
+                     (f"the optimum of this objective (worst/mean predicted MSE over the "
+                      f"bank, these stage limits) lies in [{bound:.6g}, {value:.6g}]: the "
+                      f"profile found is within {100 * gap / value:.3g} % of it")),
             "brute_force": brute,
         },
         "seconds": {"plane_bank": bank.metadata["seconds"], "optimise_and_bound": t_opt,
