@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 from ..workflows.dataset import build_dataset, scene_options
 from .args import illuminance_lux, positive_int

@@ -31,7 +31,8 @@ Bad input raises :class:`InputError` (a :class:`ValueError`) or
 :class:`mitsweep.config.SetupError` with one line naming what is wrong.
 """
 
-from ._base import WorkflowResult, json_text, progress_callback, resolve_setup
+from ._base import (WorkflowResult, json_text, progress_callback, read_motion_file,
+                    resolve_setup)
 from ._errors import InputError
 from ._paths import check_output_name, check_outputs
 from ..photo import calibrate_photo
@@ -49,7 +50,8 @@ from .restore import restore_photo
 from .sweep_range import compute_sweep_range
 from .unwarp import unwarp_image
 
-__all__ = ["WorkflowResult", "InputError", "resolve_setup", "json_text", "progress_callback",
+__all__ = ["WorkflowResult", "InputError", "resolve_setup", "read_motion_file", "json_text",
+           "progress_callback",
            "check_output_name", "check_outputs", "restore_photo", "trace_ipsf",
            "trace_ipsf_bank", "build_dataset", "evaluate_dataset", "design_motion_profile",
            "unwarp_image", "calibrate_photo", "capture", "plan_rig_capture",

@@ -16,7 +16,8 @@ from ..resources import bundled_setup, bundled_setup_names
 from ._errors import InputError
 from ._paths import shown_path
 
-__all__ = ["InputError", "WorkflowResult", "resolve_setup", "json_text", "progress_callback"]
+__all__ = ["InputError", "WorkflowResult", "resolve_setup", "read_motion_file", "json_text",
+           "progress_callback"]
 
 Progress = Any  # None, True or a callable: see progress_callback
 
@@ -88,6 +89,32 @@ def resolve_setup(setup: Setup | str | os.PathLike) -> Setup:
                          f"(bundled: {', '.join(bundled_setup_names())})")
     mirror_zone(result)
     return result
+
+
+def read_motion_file(path: str | os.PathLike | None, setup: Setup):
+    """A motion-profile file (``--motion``: e.g. from ``mitsweep design-sweep``), read and
+    checked against ``setup`` (:func:`mitsweep.optics.motion_file.check_motion_file`: the
+    focal length, the rig's travel, velocity and acceleration) before any work; None when
+    ``path`` is None.
+
+    Returns
+    -------
+    mitsweep.optics.motion_file.MotionFile or None
+        Its ``profile`` is what the tracer and the renderer run, its ``exposure_s`` what
+        the rig does.
+
+    Raises
+    ------
+    mitsweep.config.SetupError
+        One line: the file breaks the format, or the setup cannot run it.
+    OSError
+        The file cannot be read.
+    """
+    if path is None:
+        return None
+    from ..optics.motion_file import check_motion_file, load_motion_file
+
+    return check_motion_file(load_motion_file(path), setup)
 
 
 def _finite_json(o: Any):

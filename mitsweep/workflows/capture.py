@@ -34,7 +34,7 @@ import os
 
 from .. import __version__
 from ..config import Setup
-from ._base import InputError, WorkflowResult, resolve_setup
+from ._base import InputError, WorkflowResult, read_motion_file, resolve_setup
 from ._paths import check_outputs
 
 __all__ = ["plan_rig_capture", "capture", "capture_failure", "exit_status",
@@ -56,13 +56,11 @@ def _parse_stage(text: str) -> str | None:
 
 
 def _plan(setup, stage: str, motion):
-    from ..optics.motion_file import check_motion_file, load_motion_file
     from ..rig import plan_capture
 
     zaber_port = _parse_stage(stage)
     setup = resolve_setup(setup)
-    motion_file = None if motion is None else check_motion_file(load_motion_file(motion),
-                                                                setup)
+    motion_file = read_motion_file(motion, setup)
     kind = "zaber" if zaber_port else "arduino"
     if motion_file is None:
         plan = plan_capture(setup, stage=kind)

@@ -16,7 +16,7 @@ from typing import Mapping, Sequence
 
 from .. import __version__
 from ..config import Setup, setup_to_dict
-from ._base import InputError, WorkflowResult, json_text, resolve_setup
+from ._base import InputError, WorkflowResult, json_text, read_motion_file, resolve_setup
 from ._paths import check_outputs
 
 __all__ = ["build_dataset", "evaluate_dataset", "scene_options", "check_dataset_outputs"]
@@ -145,7 +145,6 @@ def build_dataset(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
     """
     from dataclasses import asdict
 
-    from ..optics.motion_file import check_motion_file, load_motion_file
     from ..pipeline import DatasetError, DatasetOptions, item_names
     from ..pipeline import build_dataset as _build
 
@@ -156,7 +155,7 @@ def build_dataset(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
     fields = scene_options(setup, scenes=scenes, family=family, family_params=family_params,
                            scenes_from=scenes_from, scene_unit=scene_unit)
     if motion is not None:
-        profile = check_motion_file(load_motion_file(motion), setup).profile
+        profile = read_motion_file(motion, setup).profile
         fields["motion"] = {"times": profile.times.tolist(),
                             "positions_mm": profile.positions.tolist()}
     try:

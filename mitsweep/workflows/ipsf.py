@@ -11,7 +11,8 @@ import numpy as np
 
 from .. import __version__
 from ..config import Setup, SetupError, setup_to_dict
-from ._base import InputError, Progress, WorkflowResult, progress_callback, resolve_setup
+from ._base import (InputError, Progress, WorkflowResult, progress_callback, read_motion_file,
+                    resolve_setup)
 from ._paths import check_outputs
 
 __all__ = ["trace_ipsf", "trace_ipsf_bank", "depth_tag", "per_depth_path"]
@@ -78,7 +79,6 @@ def _geometry(setup, seed, motion, motion_table):
     its reference distance."""
     from ..optics import optimal_sweep_range
     from ..optics.motion import motion_for
-    from ..optics.motion_file import check_motion_file, load_motion_file
     from ..optics.reference import reference_geometry
 
     if seed < 0:
@@ -86,7 +86,7 @@ def _geometry(setup, seed, motion, motion_table):
     if motion is not None and motion_table is not None:
         raise InputError("--motion and --motion-table both give the stage motion: give one")
     if motion is not None:  # a motion-profile file: its span sets the reference grid
-        designed = check_motion_file(load_motion_file(motion), setup).profile
+        designed = read_motion_file(motion, setup).profile
         return reference_geometry(setup, sweep=optimal_sweep_range(setup), motion=designed)
     table = _motion_table(setup, motion_table) if motion_table is not None else None
     sweep = optimal_sweep_range(setup)

@@ -7,7 +7,7 @@ import os
 from typing import Sequence
 
 from ..config import MAX_RESOLUTION, Setup
-from ._base import InputError, WorkflowResult, resolve_setup
+from ._base import InputError, WorkflowResult, read_motion_file, resolve_setup
 from ._paths import check_outputs
 
 __all__ = ["render_exr"]
@@ -91,7 +91,6 @@ def render_exr(setup: Setup | str | os.PathLike, out: str | os.PathLike, *, mode
     >>> r.summary["resolution"]["resolution_px"]   # doctest: +SKIP
     [128, 128]
     """
-    from ..optics.motion_file import check_motion_file, load_motion_file
     from ..render import render_image, render_to_exr
 
     scene_file = scene if isinstance(scene, (str, os.PathLike)) else None
@@ -115,8 +114,7 @@ def render_exr(setup: Setup | str | os.PathLike, out: str | os.PathLike, *, mode
     if resolution is not None and max(resolution) > MAX_RESOLUTION:
         raise InputError(f"--resolution: each side must be at most {MAX_RESOLUTION} px, "
                          f"got {resolution[0]} {resolution[1]}")
-    profile = None if motion is None else check_motion_file(load_motion_file(motion),
-                                                            setup).profile
+    profile = None if motion is None else read_motion_file(motion, setup).profile
     result = render_image(setup, mode, spp=spp, seed=seed, motion=profile,
                           aovs=tuple(dict.fromkeys(aovs)), f_number=f_number,
                           mirror_only=not full_frame, progress=progress, sampler=sampler,

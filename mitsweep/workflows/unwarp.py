@@ -124,7 +124,8 @@ def unwarp_image(image: str | os.PathLike, out: str | os.PathLike, *, projection
     if size is not None and min(size) < 2:
         raise InputError(f"--size {size[0]} {size[1]}: at least 2 x 2")
     # its warnings are logged once the photo is accepted: a refusal is the only line
-    photo = read_camera_image(src, pixel_pitch=pixel_pitch, white_balance=white_balance, transfer=transfer, log_warnings=False)
+    photo = read_camera_image(src, pixel_pitch=pixel_pitch, white_balance=white_balance,
+                              transfer=transfer, log_warnings=False)
     meta = photo.meta.get("exr_header") or {}
     if setup is not None:
         setup = resolve_setup(setup)
