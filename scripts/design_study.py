@@ -164,12 +164,17 @@ def _mitsweep(args: list[str]) -> str:
 
 
 def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path, *,
-                      planes: int, rays: int, tables_only: bool = False) -> dict:
+                      planes: int, rays: int, tables_only: bool = False,
+                      restoration: str = "matched", objective: str = "worst",
+                      deploy_nsr: dict | None = None) -> dict:
     """The linear profile and one designed per light level (worst-case objective, as
     ``mitsweep design-sweep`` by default), as motion-profile files under ``out``, and the
     designs' reports. A profile whose file and report exist from an earlier run with the
     same setup file, planes and rays is read, not designed again (``tables_only``: must
-    be)."""
+    be). ``restoration="deployed"``: the design's objective is the deployed pipeline's
+    (:func:`mitsweep.design.design_sweep`'s ``restoration``), with ``deploy_nsr[lux]``,
+    the NSR the linear dataset's restorations used at that light level; ``objective``
+    the mean or the worst case."""
     from mitsweep.config import load_setup
     from mitsweep.deconv import paper_fig10_settings
     from mitsweep.design import design_sweep
@@ -181,6 +186,8 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
     setup = load_setup(setup_path)
     sweep = optimal_sweep_range(setup)
     key = {"setup_file": setup_path.read_text(encoding="utf-8"), "planes": planes, "rays": rays}
+    if restoration != "matched" or objective != "worst":
+        key.update(restoration=restoration, objective=objective)
     out.mkdir(parents=True, exist_ok=True)
     linear = out / f"{name}_linear.json"
     save_motion_file(linear, MotionProfile.linear(sweep.sensor_start, sweep.sensor_end),
@@ -193,7 +200,10 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
         path, rep = out / f"{name}_{lux:g}lux.json", out / f"{name}_{lux:g}lux_design.json"
         if path.is_file() and rep.is_file():
             old = json.loads(rep.read_text(encoding="utf-8"))
-            if old.get("key") == key:
+            if {k: v for k, v in old.get("key", {}).items() if k != "deploy_nsr"} == key and (
+                    restoration != "deployed"
+                    or (old["key"].get("deploy_nsr") or {}).get("nsr")
+                    == (deploy_nsr or {}).get(lux)):
                 logging.info("%s %g lux: profile from the earlier run (%s)", name, lux, path)
                 res["designs"][lux] = (path, old["report"])
                 continue
@@ -201,13 +211,20 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
             raise SystemExit(f"{rep}: no design of this setup, planes and rays (run without "
                              f"--tables-only first)")
         noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
-        d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank)
+        if restoration == "deployed":
+            nsr = (deploy_nsr or {}).get(lux)
+            d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank,
+                             restoration="deployed", objective=objective, deploy_nsr=nsr)
+        else:
+            d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank,
+                             objective=objective)
         bank = d.bank
         save_motion_file(path, d.profile, exposure_s=d.exposure_s,
                          provenance={"generator": "scripts/design_study.py", "setup": name,
                                      "lux": lux, "planes": planes, "rays": rays})
         report = dict(d.report, points_uv_mm=d.points_uv.tolist())
-        rep.write_text(json.dumps({"key": key, "report": report}), encoding="utf-8")
+        rep.write_text(json.dumps({"key": {**key, "deploy_nsr": report.get("deploy")},
+                                   "report": report}), encoding="utf-8")
         logging.info("%s %g lux: designed, predicted worst %.2f -> %.2f dB", name, lux,
                      report["linear_worst_psnr_db"], report["optimized_worst_psnr_db"])
         res["designs"][lux] = (path, report)
@@ -242,7 +259,8 @@ def _same_ground_truth(a: Path, b: Path, scenes: int) -> bool:
 
 def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, seed: int,
                    family: str, spp: list[str] | None, resolution: int | None, planes: int,
-                   rays: int, tables_only: bool = False) -> list[dict]:
+                   rays: int, tables_only: bool = False, restoration: str = "matched",
+                   objective: str = "worst") -> list[dict]:
     """Datasets rendered with the linear and each designed profile, deconvolved with their
     own banks and scored (``mitsweep dataset --motion`` and ``mitsweep evaluate``); one
     row per (setup, lux) case.
@@ -257,16 +275,37 @@ def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, se
     rows = []
     for name in dict.fromkeys(n for n, _ in cases):
         luxes = [lux for n, lux in cases if n == name]
-        t0 = time.perf_counter()
         sfile = setup_file(name, out, resolution)
-        prof = designed_profiles(sfile, name, luxes, out / "profiles", planes=planes,
-                                 rays=rays, tables_only=tables_only)
-        t_design = time.perf_counter() - t0
         common = [str(sfile), "--scenes", str(scenes), "--seed", str(seed), "--family",
                   family, "--lux", *(f"{x:g}" for x in levels)]
         if spp:
             common += ["--spp", *spp]
         evals, dirs, seconds = {}, {}, {}
+        deploy_nsr = None
+        if restoration == "deployed":
+            # the deployed NSR is the linear dataset's (its restorations' weight rule),
+            # so the linear profile's dataset comes first
+            from mitsweep.optics import optimal_sweep_range
+            from mitsweep.optics.motion import MotionProfile
+            from mitsweep.optics.motion_file import save_motion_file
+            from mitsweep.config import load_setup as _load
+
+            sw = optimal_sweep_range(_load(sfile))
+            lin_file = out / "profiles" / f"{name}_linear.json"
+            lin_file.parent.mkdir(parents=True, exist_ok=True)
+            save_motion_file(lin_file, MotionProfile.linear(sw.sensor_start, sw.sensor_end),
+                             exposure_s=float(sw.exposure_s),
+                             provenance={"generator": "scripts/design_study.py", "setup": name,
+                                         "profile": "linear over the optimal range"})
+            d = out / "datasets" / name / "linear"
+            if not tables_only:
+                _mitsweep(["dataset", *common, "--out", str(d), "--motion", str(lin_file)])
+            deploy_nsr = {lux: float(np.mean(_used_nsr(d, lux, scenes))) for lux in luxes}
+        t0 = time.perf_counter()
+        prof = designed_profiles(sfile, name, luxes, out / "profiles", planes=planes,
+                                 rays=rays, tables_only=tables_only, restoration=restoration,
+                                 objective=objective, deploy_nsr=deploy_nsr)
+        t_design = time.perf_counter() - t0
         for tag, mfile in [("linear", prof["linear"]),
                            *((f"opt_{lux:g}lux", prof["designs"][lux][0]) for lux in luxes)]:
             d = out / "datasets" / name / tag
@@ -297,6 +336,7 @@ def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, se
                          rows[-1]["paired_db"]["mean"], rows[-1]["paired_db"]["se"])
         (out / "measured.json").write_text(json.dumps(
             {"options": {"scenes": scenes, "seed": seed, "family": family,
+                         "restoration": restoration, "objective": objective,
                          "spp": spp or "dataset default", "resolution": resolution,
                          "planes": planes, "rays": rays, "light_levels": levels},
              "cases": rows}, indent=1), encoding="utf-8")
@@ -537,6 +577,12 @@ def main(argv=None) -> int:
     p.add_argument("--resolution", type=int,
                    help="render an N x N sensor of the same size (default: the setup's)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--restoration", choices=("matched", "deployed"), default="matched",
+                   help="the design's objective: each depth restored with its own IPSF "
+                        "(matched, default) or as the dataset restores (deployed: the "
+                        "500-mm kernels and the linear dataset's NSR; falls back to "
+                        "linear where no profile beats it)")
+    p.add_argument("--objective", choices=("worst", "mean"), default="worst")
     p.add_argument("--diagnose", action="store_true",
                    help="with --measured or --all: also the design's model with the "
                         "dataset's deconvolution (one 500-mm kernel per point, the NSR it "
@@ -567,7 +613,8 @@ def main(argv=None) -> int:
             [(n, lux) for n in SETUPS for lux in LUX]
         rows = measured_cases(out, cases, scenes=a.scenes, seed=a.seed, family=a.family,
                               spp=a.spp, resolution=a.resolution, planes=a.planes,
-                              rays=a.rays, tables_only=a.tables_only)
+                              rays=a.rays, tables_only=a.tables_only,
+                              restoration=a.restoration, objective=a.objective)
         text = measured_table(rows)
         if a.diagnose:
             diagnose(out, rows, resolution=a.resolution)

@@ -56,7 +56,7 @@ def test_a_deployed_design_beats_linear_under_its_model_or_returns_linear():
 
     setup = load_setup(ROOT / "scenes" / "paraboloid.toml")
     d = design_sweep(setup, noise=NOISE, n_planes=8, n_radii=2, depths=[300.0, 500.0, 10000.0],
-                     rays=4096, brute_force_steps=0, restoration="deployed",
+                     rays=4096, restoration="deployed",
                      objective="mean", deploy_nsr=0.01)
     r = d.report
     assert r["restoration"] == "deployed" and r["deploy"] == {"depth_mm": 500.0, "nsr": 0.01}

@@ -175,7 +175,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     n_fft : int
         DFT grid of the MSE sum.
     brute_force_steps : int
-        Lattice resolution of the brute-force check (0 skips it).
+        Lattice resolution of the brute-force check (0 skips it; so does
+        ``restoration="deployed"``, whose objective has no convex bound to check against).
     bank : PlaneBank, optional
         A plane bank of an earlier design of this setup with the same span, planes,
         points and depths (``SweepDesign.bank``): reused instead of traced again (the
@@ -291,7 +292,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     free = local_optimum(model, widths, limits, objective=objective, acceleration=False)
     t_opt = time.perf_counter() - t0
     brute = None
-    if brute_force_steps:
+    if brute_force_steps and not deployed:     # its check holds the convex bound's
         small = bank.coarsened(_BRUTE_BINS)
         brute = brute_force(predictor(small),
                             small.widths_mm, limits, objective=objective,
