@@ -5,6 +5,10 @@ Using Focal Sweep": optics and the optimal sweep range (:mod:`mitsweep.optics`),
 Dr.Jit point-source tracer for IPSFs (:mod:`mitsweep.tracer`), Mitsuba 3 rendering with
 a moving-sensor thin lens (:mod:`mitsweep.render`), deconvolution
 (:mod:`mitsweep.deconv`) and rig control (:mod:`mitsweep.rig`).
+
+Start with :mod:`mitsweep.workflows`: each ``mitsweep`` command's job as one documented
+function (``restore_photo``, ``calibrate_camera``, ``trace_ipsf``, ``build_dataset``,
+``render_exr``, ...) that returns its result with its provenance.
 """
 
 __version__ = "0.1.0"
