@@ -24,9 +24,9 @@ case "$workers" in
 esac
 busy="${MITSWEEP_TEST_BUSY_CORES:-0}"
 [ "${busy//[[:space:]]/}" != "" ] && [ "${busy//[[:space:]]/}" != 0 ] && workers=0
-for arg in "$@"; do   # the caller chose: -n N, --numprocesses, -p no:xdist, --dist ...
+for arg in "$@"; do   # the caller chose (-n N, -p no:xdist, --dist), or a debugger needs one process
     case "$arg" in
-        -n|-n[0-9]*|--numprocesses|--numprocesses=*|no:xdist|-pno:xdist|--dist|--dist=*) workers=0 ;;
+        -n|-n[0-9]*|-nauto|--numprocesses|--numprocesses=*|no:xdist|-pno:xdist|--dist|--dist=*|--pdb|--trace) workers=0 ;;
     esac
 done
 parallel=()
