@@ -22,6 +22,7 @@ from rig_fixtures import bent_profile, sweep_of
 from rig_fixtures import sphere  # noqa: F401 - fixture
 
 from mitsweep.rig import arduino as driver
+from mitsweep.rig.sim.pty import raise_priority
 from mitsweep.rig.testing import expected_protocol
 
 SKETCH_DIR = Path(__file__).resolve().parents[1] / "scripts" / "firmware" / "mitsweep_sweep"
@@ -136,6 +137,9 @@ class HostBoard:
                    MITSWEEP_FW_TRACE=str(trace))
         self.proc = subprocess.Popen([str(binary)], stdin=self.master, stdout=self.master,
                                      env=env)
+        # the board is separate hardware: the host's load must not slow it (as for the
+        # simulator's thread, mitsweep.rig.sim.pty); single-threaded, so its pid suffices
+        raise_priority(self.proc.pid)
 
     def close(self) -> None:
         import os

@@ -4,6 +4,12 @@
 on the master side; the driver opens the slave path (``/dev/pts/N``) with pyserial
 exactly like a real port. Closing the master mid-run is an unplugged cable: the driver's
 next read or write fails like a vanished USB adapter.
+
+The device thread asks the OS for a raised scheduling priority (:data:`DEVICE_NICE`)
+where it may (root or CAP_SYS_NICE; elsewhere it keeps the default): it stands in for
+separate hardware, which the host's load cannot slow, so a loaded test machine (other
+tests in parallel, CI's spinning processes) must starve the host under test, not the
+simulated device answering it.
 """
 
 from __future__ import annotations
@@ -20,9 +26,23 @@ import tty
 
 from .base import Model
 
-__all__ = ["PtyDevice"]
+__all__ = ["PtyDevice", "DEVICE_NICE", "raise_priority"]
+
+#: Niceness asked for a simulated device's thread or process (lower runs first).
+DEVICE_NICE = -10
 
 logger = logging.getLogger(__name__)
+
+
+def raise_priority(tid: int | None = None, nice: int = DEVICE_NICE) -> bool:
+    """Set thread (or process) ``tid`` (default: the calling thread) to ``nice`` if the
+    OS allows it; True if it did. Never raises: the priority is a help, not a need."""
+    try:
+        tid = threading.get_native_id() if tid is None else tid
+        os.setpriority(os.PRIO_PROCESS, tid, nice)
+    except (AttributeError, OSError):
+        return False
+    return True
 
 
 class PtyDevice:
@@ -102,6 +122,7 @@ class PtyDevice:
                     pass
 
     def _run(self) -> None:
+        raise_priority()
         buf = bytearray()
         while not self._stop.is_set() and not self.unplugged:
             now = time.monotonic()
