@@ -44,15 +44,19 @@ def sphere_setup(size: int):
                                     pixel_pitch=BASE[1] * BASE[0] / size))
 
 
-def render(size: int, mode: str, spp: int, cache: Path, seed: int = 1) -> np.ndarray:
-    """A full-frame render (H, W, 3) float32 of the sphere, cached."""
-    path = cache / f"sphere_{size}_{mode}_{spp}spp_s{seed}.npy"
+def render(size: int, mode: str, spp: int, cache: Path, seed: int = 1, *,
+           full_frame: bool = True) -> np.ndarray:
+    """A render (H, W, 3) float32 of the sphere, cached: full frame (``--full-frame``),
+    or only the mirror's window (8 px beyond the outline's box; the rest exactly 0)."""
+    kind = "full" if full_frame else "window"
+    path = cache / f"sphere_{size}_{mode}_{kind}_{spp}spp_s{seed}.npy"
     if path.exists():
         return np.load(path)
     from mitsweep.render.api import render_image
 
     t = time.time()
-    img = render_image(sphere_setup(size), mode, spp=spp, seed=seed).image
+    img = render_image(sphere_setup(size), mode, spp=spp, seed=seed,
+                       mirror_only=not full_frame).image
     cache.mkdir(parents=True, exist_ok=True)
     np.save(path, img)
     print(f"# rendered {path.name} in {time.time() - t:.0f} s", flush=True)

@@ -83,6 +83,7 @@ RADIUS_TOL_PX = 0.5
 
 @pytest.fixture(scope="session")
 def sphere_renders(tmp_path_factory):
+    """Renders (32 spp, full frame, cached for the session) and their calibrations."""
     import sys
 
     from conftest import SCENES
@@ -91,40 +92,51 @@ def sphere_renders(tmp_path_factory):
     import limb_study
 
     cache = tmp_path_factory.mktemp("limb_renders")
-    return limb_study, lambda size, mode: limb_study.render(size, mode, 32, cache)
+    done = {}
+
+    def calibrated(size, mode, case):
+        if (size, mode, case) not in done:
+            img = limb_study.render(size, mode, 32, cache)
+            _, canvas, at, sub = next(c for c in limb_study.cases(size) if c[0] == case)
+            photo, truth = limb_study.place(img, canvas, at, sub)
+            setup = limb_study.sphere_setup(size)
+            radius = predicted_outline(setup).equivalent_radius_px(setup.sensor.pixel_pitch)
+            done[size, mode, case] = (calibrate_photo(photo, setup), truth, radius)
+        return done[size, mode, case]
+    return calibrated
 
 
-def _limb_case(sphere_renders, size, mode, case):
-    study, render = sphere_renders
-    img = render(size, mode)
-    name, canvas, at, sub = next(c for c in study.cases(size) if c[0] == case)
-    photo, truth = study.place(img, canvas, at, sub)
-    setup = study.sphere_setup(size)
-    cal = calibrate_photo(photo, setup)
-    radius = predicted_outline(setup).equivalent_radius_px(setup.sensor.pixel_pitch)
-    return cal, truth, radius
+#: Sweep renders from 400 px: the limb's centre comes out 0.29-0.42 px off the axis, in
+#: the same direction (+row, -col) at every seed, offset and spp (32, 128) and with
+#: the ridge weighted per sector, so not noise; pinhole renders of the same scene
+#: 0.02-0.11 px. Radius within 0.17 px.
+SWEEP_CENTRE_MISS = ("sweep renders from 400 px: the limb's centre 0.29-0.42 px off "
+                     "(systematic +row -col)")
 
 
-#: Sweep renders: the fine-detail energy barely changes at the limb (0.15 in log, against
-#: 2-3 on pinhole renders), and a ring ~12 px outside it (at 200 and 400 px) steps more;
-#: the sign-agnostic step started at the true limb converges 0.3-0.5 px off the centre.
-SWEEP_MISS = "sweep renders: the limb's fine-detail step is too weak (a ring 12 px out wins)"
-
-
-def _limb_params(sizes):
+def _limb_params(sizes, xfail_sweep_from=None):
     for size in sizes:
         for mode in ("pinhole", "sweep"):
             for case in ("full", "offset", "cropped"):
-                marks = [pytest.mark.xfail(reason=SWEEP_MISS, strict=True)] \
-                    if mode == "sweep" else []
+                marks = []
+                if mode == "sweep" and xfail_sweep_from and size >= xfail_sweep_from:
+                    marks.append(pytest.mark.xfail(reason=SWEEP_CENTRE_MISS, strict=True))
                 if size > 400:
                     marks.append(pytest.mark.slow)
                 yield pytest.param(size, mode, case, id=f"{mode}{size}-{case}", marks=marks)
 
 
-@pytest.mark.parametrize("size, mode, case", list(_limb_params((200, 400, 1024))))
-def test_the_limb_of_a_sphere_render(sphere_renders, size, mode, case):
-    cal, truth, radius = _limb_case(sphere_renders, size, mode, case)
-    assert np.hypot(*np.subtract(cal.center_px, truth)) <= CENTRE_TOL_PX
-    assert abs(cal.rim_radius_px - radius) <= RADIUS_TOL_PX
+@pytest.mark.parametrize("size, mode, case", list(_limb_params((200, 400, 1024), 400)))
+def test_the_centre_of_a_sphere_renders_limb(sphere_renders, size, mode, case):
+    cal, truth, _ = sphere_renders(size, mode, case)
     assert cal.fit.limb
+    assert np.hypot(*np.subtract(cal.center_px, truth)) <= CENTRE_TOL_PX
+
+
+@pytest.mark.parametrize("size, mode, case", list(_limb_params((200, 400, 1024))))
+def test_the_radius_of_a_sphere_renders_limb(sphere_renders, size, mode, case):
+    cal, _, radius = sphere_renders(size, mode, case)
+    assert cal.fit.limb
+    assert abs(cal.rim_radius_px - radius) <= RADIUS_TOL_PX
+    # found as the limb: no pitch or distance is blamed beyond the 1% warning level
+    assert not any("pixel pitch would be" in w for w in cal.warnings)

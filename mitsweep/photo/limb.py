@@ -33,7 +33,8 @@ from .image import smooth
 from .robust import tukey_lstsq
 
 __all__ = ["LimbFit", "fit_limb", "energy_map", "LIMB_SMOOTHING_PX", "LIMB_HALF_WIDTH_PX",
-           "LIMB_ANNULUS_PX", "MIN_ENERGY_STEP"]
+           "LIMB_ANNULUS_PX", "STRONG_ENERGY_STEP", "RIDGE_SMOOTHING_PX",
+           "MIN_RIDGE"]
 
 #: Gaussian smoothing (px) of the luminance the sign-agnostic step is located on.
 LIMB_SMOOTHING_PX = 1.0
@@ -43,9 +44,19 @@ LIMB_HALF_WIDTH_PX = 1.5
 #: Half-width (px) of the annulus over which the energy step is fitted (at least; 6% of
 #: the radius on large images).
 LIMB_ANNULUS_PX = 6.0
-#: Smallest drop of the mean log energy across the limb (inside minus outside, natural
-#: log) that counts as a limb.
-MIN_ENERGY_STEP = 0.25
+#: Drop of the mean log fine-detail energy across the limb (inside minus outside,
+#: natural log) from which it places the limb to start from: 2.3-5.6 on pinhole
+#: renders (32 spp), 0.15-0.3 on sweep renders, where the ridge starts instead.
+STRONG_ENERGY_STEP = 1.0
+#: Gaussian smoothing (px) of the luminance whose radial derivative's ridge is fitted.
+RIDGE_SMOOTHING_PX = 0.7
+#: Smallest height of that ridge over the median squared radial derivative in the
+#: annulus for a limb to be found.
+MIN_RIDGE = 0.5
+#: Share of the most prominent ridge's prominence from which a ridge is tried as the
+#: limb, and how many are tried (nearest the predicted size first).
+RIDGE_SHARE = 0.25
+MAX_RIDGE_STARTS = 4
 
 
 @dataclass(frozen=True)
@@ -59,6 +70,8 @@ class LimbFit:
     center_px: tuple[float, float]
     radius_px: float
     energy_step: float
+    ridge_height: float
+    step_coherence: float
     energy_center_px: tuple[float, float]
     energy_radius_px: float
     points_used: int
@@ -148,62 +161,169 @@ def _energy_step_fit(e, centre, radius, band, shown=None):
     return (float(cy), float(cx)), float(R), float(-b)
 
 
+def _radial_gradient_sq(lum_s, gy, gx, centre, radius, band):
+    """Squared radial derivative (about ``centre``) of the smoothed luminance over the
+    annulus ``radius ± band``: pixel rows, cols and values."""
+    H, W = lum_s.shape
+    r0 = max(int(centre[0] - radius - band - 2), 0), min(int(centre[0] + radius + band + 3), H)
+    c0 = max(int(centre[1] - radius - band - 2), 0), min(int(centre[1] + radius + band + 3), W)
+    rows, cols = np.mgrid[r0[0]:r0[1], c0[0]:c0[1]]
+    dy, dx = rows - centre[0], cols - centre[1]
+    rr = np.hypot(dy, dx)
+    g = (gy[r0[0]:r0[1], c0[0]:c0[1]] * dy + gx[r0[0]:r0[1], c0[0]:c0[1]] * dx) \
+        / np.maximum(rr, 1e-9)
+    m = np.abs(rr - radius) < band
+    return rows[m].astype(np.float64), cols[m].astype(np.float64), g[m] ** 2, m, (r0, c0)
+
+
+def _ridge_fit(gy, gx, lum_s, centre, radius, band, shown=None, iterations=3):
+    """Circle of the ridge of the squared radial derivative: ``a + b exp(-q²/2w²) +
+    c Φ(q/w)`` with ``q`` the distance from the circle (a ridge where the mean steps
+    at the limb, whatever its sign, and a step where the texture changes), fitted by
+    least squares (soft L1) over the annulus ``radius ± band``, the radial direction
+    taken about the previous pass's centre. Returns centre, radius, the ridge height
+    ``b`` over the median level, and the parameters."""
+    from scipy.optimize import least_squares
+    from scipy.special import erf
+
+    p = None
+    for _ in range(iterations):
+        y, x, s, m, (r0, c0) = _radial_gradient_sq(lum_s, gy, gx, centre, radius, band)
+        if shown is not None:
+            keep = shown[r0[0]:r0[1], c0[0]:c0[1]][m]
+            y, x, s = y[keep], x[keep], s[keep]
+        if len(s) < 50:
+            return centre, radius, 0.0, None
+        med = float(np.median(s))
+
+        def resid(q, y=y, x=x, s=s):
+            cy, cx, R, a, b, c, w = q
+            d = np.hypot(y - cy, x - cx) - R
+            w = abs(w) + 0.05
+            return a + b * np.exp(-d * d / (2.0 * w * w)) \
+                + c * 0.5 * (1.0 + erf(d / (math.sqrt(2.0) * w))) - s
+
+        p0 = [centre[0], centre[1], radius, med, float(np.percentile(s, 90)) - med, 0.0, 1.0]
+        sol = least_squares(resid, p0, loss="soft_l1", f_scale=float(np.std(s)) + 1e-30,
+                            max_nfev=300)
+        p = sol.x
+        if abs(p[2] - radius) > band:  # ran off the annulus
+            return centre, radius, 0.0, None
+        centre, radius = (float(p[0]), float(p[1])), float(p[2])
+    return centre, radius, float(p[4] / (med + 1e-30)), p
+
+
+def _ridge_starts(gy, gx, lum_s, centre, r_lo, r_hi, predicted, shown=None):
+    """Radii of the ridges of the azimuthal mean squared radial derivative in
+    ``[r_lo, r_hi]``: the peaks at least :data:`RIDGE_SHARE` as prominent as the most
+    prominent (over the median within 6% of the radius), nearest ``predicted`` first."""
+    band = 0.5 * (r_hi - r_lo) + 4.0
+    mid = 0.5 * (r_lo + r_hi)
+    y, x, s, m, (r0, c0) = _radial_gradient_sq(lum_s, gy, gx, centre, mid, band)
+    if shown is not None:
+        keep = shown[r0[0]:r0[1], c0[0]:c0[1]][m]
+        y, x, s = y[keep], x[keep], s[keep]
+    r = np.hypot(y - centre[0], x - centre[1])
+    step = 0.5
+    bins = np.arange(mid - band, mid + band + step, step)
+    idx = np.clip(np.digitize(r, bins) - 1, 0, len(bins) - 2)
+    n = np.bincount(idx, minlength=len(bins) - 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        prof = np.log(np.bincount(idx, weights=s, minlength=len(bins) - 1) / n)
+    rc = 0.5 * (bins[:-1] + bins[1:])
+    k = max(2, int(round(0.06 * mid / step)))
+    cand = []
+    for i in range(k, len(prof) - k):
+        if not r_lo <= rc[i] <= r_hi or not np.isfinite(prof[i]):
+            continue
+        win = prof[i - k:i + k + 1]
+        if prof[i] < np.nanmax(prof[i - 2:i + 3]):
+            continue
+        cand.append((float(prof[i] - np.nanmedian(win)), float(rc[i])))
+    if not cand:
+        return []
+    top = max(c[0] for c in cand)
+    strong = [c[1] for c in cand if c[0] >= RIDGE_SHARE * top]
+    return sorted(strong, key=lambda r: abs(r - predicted))
+
+
+def _step_coherence(lum_s, centre, scale, pts, nrm, good) -> float:
+    """``|mean Δ| / RMS Δ`` of the steps ``Δ`` of the mean across the circle (outside,
+    0.5-1.5 px beyond it, minus inside, as far within) at the outline points ``good``:
+    near 0 at a limb (the step's sign is the local background's against its far
+    average), near 1 at an edge (a holder, a dark ring, a rim)."""
+    from scipy.ndimage import map_coordinates
+
+    t = np.array([-1.5, -1.0, -0.5, 0.5, 1.0, 1.5])
+    xy = np.asarray(centre)[None, None, :] + scale * pts[good][:, None, :] \
+        + t[None, :, None] * nrm[good][:, None, :]
+    prof = map_coordinates(lum_s, [xy[..., 0].ravel(), xy[..., 1].ravel()], order=1,
+                           mode="nearest").reshape(xy.shape[:2])
+    d = prof[:, 3:].mean(axis=1) - prof[:, :3].mean(axis=1)
+    return float(abs(d.mean()) / (math.sqrt(float(np.mean(d * d))) + 1e-30))
+
+
 def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
              nrm: np.ndarray, scale_range: tuple[float, float], *,
-             shown: np.ndarray | None = None, iterations: int = 6) -> LimbFit | None:
+             shown: np.ndarray | None = None) -> LimbFit | None:
     """Find a circular limb (see the module docstring) about ``centre`` (row, col; good
     to a few px), its size within ``scale_range`` times the outline ``pts`` (N, 2
-    offsets from the axis, px, with outward normals ``nrm``). None where no drop of
-    the fine-detail energy of at least :data:`MIN_ENERGY_STEP` is found."""
+    offsets from the axis, px, with outward normals ``nrm``). None where neither cue
+    finds one (no energy drop of :data:`STRONG_ENERGY_STEP` and no ridge of the radial
+    derivative :data:`MIN_RIDGE` times its median level)."""
     radius0 = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
+    r_lo, r_hi = radius0 * scale_range[0], radius0 * scale_range[1]
     e, _ = energy_map(lum)
     e_shown = None if shown is None else (shown[1:, 1:] & shown[:-1, 1:] & shown[1:, :-1]
                                           & shown[:-1, :-1])
-    band = max(LIMB_ANNULUS_PX, 0.06 * radius0 * scale_range[0])
-    start, drop = _radial_start(e, centre, radius0 * scale_range[0],
-                                radius0 * scale_range[1], band, e_shown)
-    if not math.isfinite(start) or drop < MIN_ENERGY_STEP:
-        return None
+    band = max(LIMB_ANNULUS_PX, 0.04 * radius0 * scale_range[0])
+    lum_r = smooth(lum, RIDGE_SMOOTHING_PX)
+    gy, gx = np.gradient(lum_r)
+    start, drop = _radial_start(e, centre, r_lo, r_hi, band, e_shown)
+    step = 0.0
     c, R = centre, start
-    for _ in range(2):
-        c, R, step = _energy_step_fit(e, c, R, band, e_shown)
-    if step < MIN_ENERGY_STEP:
-        return None
-    energy_c, energy_R = c, R
-    lum_s = smooth(lum, LIMB_SMOOTHING_PX)
-    A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])
-    scale = R / radius0
-    centre = c
-    off = np.full(len(pts), np.nan)
-    wts = np.zeros(0)
-    good = np.zeros(len(pts), bool)
-    res = np.zeros(0)
-    for _ in range(iterations):
-        off, _strength, _width = edge_offsets(lum_s, centre, scale, pts, nrm,
-                                              LIMB_HALF_WIDTH_PX)
-        good = np.isfinite(off)
-        if shown is not None:
-            at = np.rint(np.asarray(centre)[None, :] + scale * pts).astype(int)
-            H, W = shown.shape
-            ins = (at[:, 0] >= 0) & (at[:, 0] < H) & (at[:, 1] >= 0) & (at[:, 1] < W)
-            good &= ins
-            good[ins] &= shown[at[ins, 0], at[ins, 1]]
-        if good.sum() < 8:
-            return None
-        x, wts = tukey_lstsq(A[good], off[good], np.ones(int(good.sum())))
-        res = off[good] - A[good] @ x
-        centre = (centre[0] + float(x[0]), centre[1] + float(x[1]))
-        scale += float(x[2])
-        if max(abs(x[0]), abs(x[1]), abs(x[2]) * radius0) < 1e-3:
+    if math.isfinite(start) and drop >= STRONG_ENERGY_STEP:
+        for _ in range(2):
+            c, R, step = _energy_step_fit(e, c, R, band, e_shown)
+    if step >= STRONG_ENERGY_STEP:
+        starts = [(c, R)]
+    else:  # no render noise to go by: the ridges, nearest the prediction first
+        starts = [(centre, r) for r in _ridge_starts(gy, gx, lum_r, centre, r_lo, r_hi,
+                                                     radius0, shown)[:MAX_RIDGE_STARTS]]
+    for c0, R0 in starts:
+        c, R, height, _ = _ridge_fit(gy, gx, lum_r, c0, R0, band, shown)
+        if height >= MIN_RIDGE and r_lo / 1.04 <= R <= r_hi * 1.04:
             break
+    else:
+        return None
+    energy_c, energy_R = c0, R0
+    # The sign-agnostic step along each normal at the circle found, for the report: its
+    # inliers' scatter about the circle (the centre's uncertainty).
+    scale = R / radius0
+    lum_s = smooth(lum, LIMB_SMOOTHING_PX)
+    off, _strength, _width = edge_offsets(lum_s, c, scale, pts, nrm, LIMB_HALF_WIDTH_PX)
+    good = np.isfinite(off)
+    if shown is not None:
+        at = np.rint(np.asarray(c)[None, :] + scale * pts).astype(int)
+        H, W = shown.shape
+        ins = (at[:, 0] >= 0) & (at[:, 0] < H) & (at[:, 1] >= 0) & (at[:, 1] < W)
+        good &= ins
+        good[ins] &= shown[at[ins, 0], at[ins, 1]]
+    if good.sum() < 8:
+        return None
+    A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])
+    _, wts = tukey_lstsq(A[good], off[good], np.ones(int(good.sum())))
     inl = wts > 0
-    rms = float(np.sqrt(np.mean(res[inl] ** 2))) if inl.any() else math.inf
-    edges = np.asarray(centre)[None, :] + scale * pts + np.nan_to_num(off)[:, None] * nrm
+    res = off[good][inl]
+    rms = float(np.sqrt(np.mean(res ** 2))) if inl.any() else math.inf
     used = np.zeros(len(pts), bool)
     used[np.flatnonzero(good)[inl]] = True
-    return LimbFit(center_px=(float(centre[0]), float(centre[1])),
-                   radius_px=float(scale * radius0), energy_step=float(step),
+    edges = np.asarray(c)[None, :] + scale * pts + np.nan_to_num(off)[:, None] * nrm
+    coherence = _step_coherence(lum_s, c, scale, pts, nrm, good)
+    return LimbFit(center_px=(float(c[0]), float(c[1])), radius_px=float(R),
+                   energy_step=float(step), ridge_height=float(height),
+                   step_coherence=coherence,
                    energy_center_px=energy_c, energy_radius_px=energy_R,
                    points_used=int(used.sum()), points_total=len(pts),
                    residual_rms_px=rms, edge_points_px=edges[used],
-                   used_index=np.flatnonzero(used), residuals_px=res[inl])
+                   used_index=np.flatnonzero(used), residuals_px=res)

@@ -42,6 +42,7 @@ __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", 
            "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION", "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
            "RESIDUAL_WIDTH_SHARE", "RESIDUAL_RADIUS_SHARE", "PLAUSIBLE_SCALE",
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE", "LIMB_INSIDE_SHARE",
+           "MAX_LIMB_COHERENCE",
            "fit_edges"]
 
 logger = logging.getLogger(__name__)
@@ -101,6 +102,13 @@ ROLL_OBSERVABLE = 0.01
 #: the limb; on the real chrome balls of tests/data/real the edge fit is the limb (a
 #: dark line), and the limb fit (made for renders) lands 0.0-1.3% outside it.
 LIMB_INSIDE_SHARE = 0.05
+#: Largest coherence of the sign of the mean's step across a limb the limb fit finds
+#: (:func:`mitsweep.photo.limb._step_coherence`) for it to replace an edge fit: a limb's
+#: step has the sign of the local background against its far average (0.00-0.26 on the
+#: full sphere renders, 0.40 where the frame crops 12% of the radius off the limb),
+#: an edge one sign all round (a holder's dark ring 8 px outside the synthetic sphere's
+#: rim: 0.87; the dark line of the real sphere_lamp: 0.83).
+MAX_LIMB_COHERENCE = 0.6
 
 
 class CalibrationError(ValueError):
@@ -207,8 +215,9 @@ def _limb_or_edge(image, outline, pitch, **kw) -> RimFit:
     own fit (:func:`mitsweep.photo.limb.fit_limb`: the step of the fine-detail energy,
     then the sign-agnostic step of the mean) where it finds one, unless the edge fit
     (:func:`fit_edges`) finds an edge at it or outside it (a real ball's dark rim):
-    an edge fit more than :data:`LIMB_INSIDE_SHARE` of the radius inside the limb found is an edge of
-    the reflection (the rendered room's boards, 14% inside), not the outline."""
+    an edge fit more than :data:`LIMB_INSIDE_SHARE` of the radius inside a limb found
+    whose step has no consistent sign (:data:`MAX_LIMB_COHERENCE`) is an edge of the
+    reflection (the rendered room's boards, 14% inside), not the outline."""
     from .limb import fit_limb
 
     try:
@@ -235,7 +244,8 @@ def _limb_or_edge(image, outline, pitch, **kw) -> RimFit:
             <= scale_range[1] * 1.04:
         limb = None
     if limb is None or (edge is not None
-                        and edge.scale * radius >= (1.0 - LIMB_INSIDE_SHARE) * limb.radius_px):
+                        and (edge.scale * radius >= (1.0 - LIMB_INSIDE_SHARE) * limb.radius_px
+                             or limb.step_coherence > MAX_LIMB_COHERENCE)):
         if edge is None:
             raise refused
         return edge
