@@ -10,8 +10,11 @@ import json
 
 import numpy as np
 import pytest
+from conftest import SCENES
 from skimage import data, transform
+from test_io_write_errors import tiny_setup_toml
 
+from mitsweep import workflows
 from mitsweep.cli.common import UsageError
 from mitsweep.cli.main import main
 from mitsweep.config import SetupError, load_setup, setup_to_dict
@@ -19,13 +22,9 @@ from mitsweep.deconv.spatial import scatter_blur
 from mitsweep.deconv.synthetic import synthetic_kernel_field, synthetic_radial_bank
 from mitsweep.io import read_exr, write_exr
 from mitsweep.io.bank import load_bank, save_bank
-from mitsweep import workflows
 from mitsweep.workflows import (InputError, WorkflowResult, build_dataset, evaluate_dataset,
                                 resolve_setup, restore_photo, trace_ipsf, trace_ipsf_bank,
                                 unwarp_image)
-
-from conftest import SCENES
-from test_io_write_errors import tiny_setup_toml
 
 SIZE, K = 96, 13
 
@@ -231,8 +230,8 @@ def test_calibrate_camera_gives_what_calibrate_prints(tmp_path, capsys):
     from dataclasses import replace
 
     import tifffile
-
     from camera_files import synthetic_mirror_photo
+
     from mitsweep.config import Sensor, setup_to_toml
     from mitsweep.io.png import linear_to_srgb
 

@@ -69,7 +69,7 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
                         "from its metadata; see the README)")
 
 
-def photo_options(args) -> dict:
+def photo_options(args: argparse.Namespace) -> dict:
     """``read_camera_image`` keyword arguments from :func:`add_photo_arguments`'s options."""
     return {"pixel_pitch": args.pixel_pitch, "white_balance": args.white_balance,
             "transfer": args.transfer}

@@ -18,8 +18,14 @@ import argparse
 import importlib
 import sys
 
-from ..workflows.bench import (BENCH_TARGETS, TargetMissing, missing_module,  # noqa: F401
-                               peak_rss_mib, reset_peak_rss, run_benchmarks)
+from ..workflows.bench import (  # noqa: F401
+    BENCH_TARGETS,
+    TargetMissing,
+    missing_module,
+    peak_rss_mib,
+    reset_peak_rss,
+    run_benchmarks,
+)
 from .common import UsageError, print_json
 
 NAME = "bench"

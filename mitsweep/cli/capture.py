@@ -28,9 +28,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..workflows.capture import (EXIT_COMPLETE, EXIT_INCOMPLETE_SAFE,  # noqa: F401
-                                 EXIT_MAYBE_UNSAFE, capture, capture_failure, exit_status,
-                                 plan_rig_capture)
+from ..workflows.capture import (  # noqa: F401
+    EXIT_COMPLETE,
+    EXIT_INCOMPLETE_SAFE,
+    EXIT_MAYBE_UNSAFE,
+    capture,
+    capture_failure,
+    exit_status,
+    plan_rig_capture,
+)
 from .common import print_json
 
 NAME = "capture"

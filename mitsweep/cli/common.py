@@ -16,8 +16,8 @@ from ..config import Setup, SetupError
 from ..workflows._base import json_text, resolve_setup
 from ..workflows._errors import InputError
 from ..workflows._paths import check_output_name, check_outputs, shown_path
-from .args import (add_photo_arguments, depth_mm, illuminance_lux, number_type, photo_options,
-                   positive_float, positive_int)
+from .args import (add_photo_arguments, depth_mm, illuminance_lux, number_type,
+                   photo_options, positive_float, positive_int)
 
 __all__ = ["depth_mm", "number_type", "UsageError", "USER_ERRORS", "ArgumentParser",
            "ArgumentParserError", "check_output_name", "check_outputs", "json_text",

@@ -8,9 +8,9 @@ import math
 
 from ..workflows.dataset import build_dataset, scene_options
 from .args import illuminance_lux, positive_int
+from .common import print_json
 from .dataset_args import (family_param, method_names, non_negative_int, scheduler_address,
                            seconds, shard)
-from .common import print_json
 from .motion import add_motion_argument
 
 NAME = "dataset"

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..pipeline import Shard
 from .args import number_type
 
 __all__ = ["family_param", "method_names", "non_negative_int", "scheduler_address",
@@ -48,7 +49,7 @@ def scheduler_address(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc).partition(": ")[2]) from None
 
 
-def shard(text: str):
+def shard(text: str) -> Shard:
     from ..pipeline import DatasetError, Shard
 
     try:

@@ -11,7 +11,7 @@ import math
 import sys
 
 from ..workflows.ipsf import trace_ipsf, trace_ipsf_bank
-from .common import (number_type, UsageError, depth_mm, positive_float, positive_int,
+from .common import (UsageError, depth_mm, number_type, positive_float, positive_int,
                      print_json)
 from .motion import add_motion_argument
 

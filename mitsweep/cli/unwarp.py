@@ -7,7 +7,7 @@ import argparse
 import sys
 
 from ..workflows.unwarp import unwarp_image
-from .common import (number_type, add_photo_arguments, positive_float, positive_int,
+from .common import (add_photo_arguments, number_type, positive_float, positive_int,
                      print_json)
 
 NAME = "unwarp"

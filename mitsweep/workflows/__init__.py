@@ -31,14 +31,14 @@ Bad input raises :class:`InputError` (a :class:`ValueError`) or
 :class:`mitsweep.config.SetupError` with one line naming what is wrong.
 """
 
+from ..photo import calibrate_photo
 from ._base import (WorkflowResult, json_text, progress_callback, read_motion_file,
                     resolve_setup)
 from ._errors import InputError
 from ._paths import check_output_name, check_outputs
-from ..photo import calibrate_photo
 from .bench import run_benchmarks
-from .calibrate import calibrate_camera, find_mirror_circle
 from .budget import error_budget
+from .calibrate import calibrate_camera, find_mirror_circle
 from .capture import capture, plan_rig_capture
 from .dataset import build_dataset, evaluate_dataset
 from .demo import run_demo

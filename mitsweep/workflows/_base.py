@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterator
 
 from ..config import Setup, SetupError, load_setup
+from ..optics.motion_file import MotionFile
 from ..resources import bundled_setup, bundled_setup_names
 from ._errors import InputError
 from ._paths import shown_path
@@ -91,7 +92,7 @@ def resolve_setup(setup: Setup | str | os.PathLike) -> Setup:
     return result
 
 
-def read_motion_file(path: str | os.PathLike | None, setup: Setup):
+def read_motion_file(path: str | os.PathLike | None, setup: Setup) -> MotionFile | None:
     """A motion-profile file (``--motion``: e.g. from ``mitsweep design-sweep``), read and
     checked against ``setup`` (:func:`mitsweep.optics.motion_file.check_motion_file`: the
     focal length, the rig's travel, velocity and acceleration) before any work; None when
@@ -135,7 +136,7 @@ def json_text(obj: Any) -> str:
 
 
 @contextlib.contextmanager
-def progress_callback(progress, total: int, desc: str, unit: str
+def progress_callback(progress: Progress, total: int | None, desc: str, unit: str
                       ) -> Iterator[Callable[..., object] | None]:
     """The callable a long loop reports to, for a workflow's ``progress`` argument: None
     (nothing), True (a tqdm bar on stderr, shown when stderr is a terminal) or the

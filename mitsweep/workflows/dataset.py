@@ -16,7 +16,10 @@ from typing import Mapping, Sequence
 
 from .. import __version__
 from ..config import Setup, setup_to_dict
-from ._base import InputError, WorkflowResult, json_text, read_motion_file, resolve_setup
+from ..pipeline import DatasetError, DatasetOptions, Shard, dataset_inputs, item_names
+from ..pipeline import build_dataset as _build
+from ..pipeline import evaluate_dataset as _evaluate
+from ._base import (InputError, WorkflowResult, json_text, read_motion_file, resolve_setup)
 from ._paths import check_outputs
 
 __all__ = ["build_dataset", "evaluate_dataset", "scene_options", "check_dataset_outputs"]
@@ -31,7 +34,8 @@ _OPTION_OF = {"scenes": "--scenes", "seed": "--seed", "spp": "--spp",
 
 def scene_options(setup: Setup, *, scenes: int | None = None, family: str | None = None,
                   family_params: Mapping[str, object] | Sequence = (),
-                  scenes_from=None, scene_unit: str | None = None) -> dict:
+                  scenes_from: str | os.PathLike | None = None,
+                  scene_unit: str | None = None) -> dict:
     """The :class:`~mitsweep.pipeline.DatasetOptions` fields of the scene options: the
     built-in room or the procedural family (``scenes`` of them), or every ``*.xml``
     Mitsuba scene of the folder ``scenes_from``.
@@ -62,7 +66,8 @@ def scene_options(setup: Setup, *, scenes: int | None = None, family: str | None
             "scene_unit": scene_unit}
 
 
-def check_dataset_outputs(inputs: list, out: Path, opts, shard=None) -> None:
+def check_dataset_outputs(inputs: list, out: Path, opts: DatasetOptions,
+                          shard: Shard | str | None = None) -> None:
     """:func:`check_outputs` for a dataset directory: no input is the directory, nor one
     of the files a run with ``opts`` writes in it (manifest, lock, items, logs)."""
     from ..pipeline.dataset import written_paths
@@ -85,12 +90,14 @@ def check_dataset_outputs(inputs: list, out: Path, opts, shard=None) -> None:
 def build_dataset(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
                   scenes: int | None = None, family: str | None = None,
                   family_params: Mapping[str, object] | Sequence = (),
-                  scenes_from=None, scene_unit: str | None = None, seed: int = 0,
+                  scenes_from: str | os.PathLike | None = None, scene_unit: str | None = None,
+                  seed: int = 0,
                   spp: Sequence[int] = (16, 64, 128, 64),
                   lux: Sequence[float] = (50.0, 2.0, 0.5),
                   methods: Sequence[str] = ("wiener",), bank_rays: int | None = None,
-                  motion=None, executor: str | None = None, jobs: int = 2,
-                  scheduler: str | None = None, shard=None, retries: int = 2,
+                  motion: str | os.PathLike | None = None, executor: str | None = None, jobs: int = 2,
+                  scheduler: str | None = None, shard: Shard | str | None = None,
+                  retries: int = 2,
                   wait: float | None = None) -> WorkflowResult:
     """Render, trace, add noise and deconvolve a synthetic dataset, resumably
     (``mitsweep dataset``).
@@ -145,8 +152,6 @@ def build_dataset(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
     """
     from dataclasses import asdict
 
-    from ..pipeline import DatasetError, DatasetOptions, item_names
-    from ..pipeline import build_dataset as _build
 
     if os.fspath(out).strip() == "":
         raise InputError("--out: must name a directory")
@@ -187,7 +192,8 @@ def build_dataset(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
     return WorkflowResult(manifest, provenance, manifest)
 
 
-def evaluate_dataset(dataset: str | os.PathLike, *, plot=None, out=None) -> WorkflowResult:
+def evaluate_dataset(dataset: str | os.PathLike, *, plot: str | os.PathLike | None = None,
+                     out: str | os.PathLike | None = None) -> WorkflowResult:
     """PSNR and SSIM of a dataset's EDOF (every restoration method it holds), focused and
     stopped images on ground truth, inside the mirror's image, per radius and depth band
     (``mitsweep evaluate``).
@@ -223,8 +229,6 @@ def evaluate_dataset(dataset: str | os.PathLike, *, plot=None, out=None) -> Work
     """
     from ..io import write_text_atomic
     from ..io.atomic import check_writable
-    from ..pipeline import dataset_inputs
-    from ..pipeline import evaluate_dataset as _evaluate
 
     # Before the (long) evaluation: the outputs overwrite none of the dataset's files,
     # and can be written.

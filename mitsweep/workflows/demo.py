@@ -80,7 +80,13 @@ def run_demo(out: str | os.PathLike = "out/demo", *, setup: str | os.PathLike | 
     from ..io.exr import stack_channels
     from ..io.png import write_png
     from ..optics import optimal_sweep_range
-    from ..pipeline import DatasetOptions, build_dataset, evaluate_dataset, item_names, white_level
+    from ..pipeline import (
+        DatasetOptions,
+        build_dataset,
+        evaluate_dataset,
+        item_names,
+        white_level,
+    )
     from ..plots import plot_focal_surfaces, plot_per_radius
     from .dataset import check_dataset_outputs
 

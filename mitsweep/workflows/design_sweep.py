@@ -15,10 +15,10 @@ from typing import Sequence
 
 from .. import __version__
 from ..config import Setup
-from ._base import InputError, Progress, WorkflowResult, progress_callback, resolve_setup
+from ._base import (InputError, Progress, WorkflowResult, progress_callback, resolve_setup)
 from ._paths import check_outputs
 
-__all__ = ["design_motion_profile", "plot_design"]
+__all__ = ["design_motion_profile"]
 
 
 def _check_args(setup, *, kernel_size, planes, seed, brute_force_steps, out, span_mm) -> None:
@@ -53,7 +53,7 @@ def _check_args(setup, *, kernel_size, planes, seed, brute_force_steps, out, spa
                              f"({f:g} mm): both ends must be > {f:g} mm")
 
 
-def plot_design(design, path: str) -> None:
+def _plot_design(design, path: str | os.PathLike) -> None:
     """Time density w(i) of both profiles, and the predicted MSE per field point."""
     import numpy as np
 
@@ -89,7 +89,8 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
                           grid: tuple[int, int] = (5, 5),
                           depths: Sequence[float] | None = None, rays: int = 1 << 16,
                           kernel_size: int = 31, seed: int = 0, brute_force_steps: int = 16,
-                          plot=None, progress: Progress = None) -> WorkflowResult:
+                          plot: str | os.PathLike | None = None,
+                          progress: Progress = None) -> WorkflowResult:
     """Design the sensor's time profile over the sweep that minimises the predicted Wiener
     restoration error, and write it as a motion-profile file (``mitsweep design-sweep``).
 
@@ -146,7 +147,11 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
     from ..deconv import paper_fig10_settings
     from ..design import design_sweep
     from ..io.atomic import check_writable
-    from ..optics.motion_file import check_motion_file, load_motion_file, save_motion_file
+    from ..optics.motion_file import (
+        check_motion_file,
+        load_motion_file,
+        save_motion_file,
+    )
     from ..pipeline import NOISE_PIXEL_MM
     from ..tracer.kernel import TRACE_REVISION
 
@@ -187,6 +192,6 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
     check_motion_file(load_motion_file(out), setup)
     report["out"] = os.fspath(out)
     if plot:
-        plot_design(design, plot)
+        _plot_design(design, plot)
         report["plot"] = os.fspath(plot)
     return WorkflowResult(design, dict(provenance, workflow="design_motion_profile"), report)

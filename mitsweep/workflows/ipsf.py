@@ -11,8 +11,8 @@ import numpy as np
 
 from .. import __version__
 from ..config import Setup, SetupError, setup_to_dict
-from ._base import (InputError, Progress, WorkflowResult, progress_callback, read_motion_file,
-                    resolve_setup)
+from ._base import (InputError, Progress, WorkflowResult, progress_callback,
+                    read_motion_file, resolve_setup)
 from ._paths import check_outputs
 
 __all__ = ["trace_ipsf", "trace_ipsf_bank", "depth_tag", "per_depth_path"]
@@ -121,9 +121,10 @@ _TRACE_PARAMETERS = """method : {"exact", "continuous", "planes"}
 def trace_ipsf_bank(setup: Setup | str | os.PathLike, *, kind: str = "radial",
                     radii: int = 19, grid: tuple[int, int] = (9, 9),
                     depths: Sequence[float] = (500.0,), method: str = "exact",
-                    planes: int = 16, time_samples: int = 4, motion=None, motion_table=None,
-                    rays: int = 1_000_000, kernel_size: int = 31, seed: int = 0,
-                    output=None, plot=None, progress: Progress = None) -> WorkflowResult:
+                    planes: int = 16, time_samples: int = 4, motion: str | os.PathLike | None = None,
+                    motion_table: str | os.PathLike | None = None, rays: int = 1_000_000,
+                    kernel_size: int = 31, seed: int = 0, output: str | os.PathLike | None = None,
+                    plot: str | os.PathLike | None = None, progress: Progress = None) -> WorkflowResult:
     """Trace a radial or grid bank of IPSFs of a setup (``mitsweep ipsf --bank``).
 
     Parameters
@@ -237,8 +238,9 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
                radius: float | None = None, angle_deg: float = 0.0,
                depths: Sequence[float] = (500.0,), sensor_distance: float | None = None,
                method: str = "exact", planes: int = 16, time_samples: int = 4,
-               motion=None, motion_table=None, rays: int = 1_000_000, kernel_size: int = 31,
-               seed: int = 0, float64: bool = False, output=None, plot=None
+               motion: str | os.PathLike | None = None, motion_table: str | os.PathLike | None = None,
+               rays: int = 1_000_000, kernel_size: int = 31, seed: int = 0,
+               float64: bool = False, output: str | os.PathLike | None = None, plot: str | os.PathLike | None = None
                ) -> WorkflowResult:
     """Trace the IPSF (or the PSF at one sensor distance) of one image point at one or
     more depths (``mitsweep ipsf``).

@@ -9,7 +9,7 @@ from typing import Callable, Sequence
 
 from .. import __version__
 from ..config import Setup
-from ._base import InputError, Progress, WorkflowResult, progress_callback, resolve_setup
+from ._base import (InputError, Progress, WorkflowResult, progress_callback, resolve_setup)
 from ._paths import check_outputs
 
 __all__ = ["reproduce_table1", "make_paper_figures", "paper_setup_file"]
@@ -147,7 +147,14 @@ def make_paper_figures(out: str | os.PathLike, *,
     >>> from mitsweep.workflows import make_paper_figures
     >>> r = make_paper_figures("figs", setups=["sphere"], quick=True)  # doctest: +SKIP
     """
-    from ..pipeline.figures import FULL, PAPER_SETUPS, QUICK, data_dir, figure_files, make_figures
+    from ..pipeline.figures import (
+        FULL,
+        PAPER_SETUPS,
+        QUICK,
+        data_dir,
+        figure_files,
+        make_figures,
+    )
 
     if os.fspath(out).strip() == "":
         raise InputError("--out: must name a directory")

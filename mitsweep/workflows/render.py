@@ -4,7 +4,7 @@ its provenance (``mitsweep render``)."""
 from __future__ import annotations
 
 import os
-from typing import Sequence
+from typing import Any, Mapping, Sequence
 
 from ..config import MAX_RESOLUTION, Setup
 from ._base import InputError, WorkflowResult, read_motion_file, resolve_setup
@@ -27,9 +27,11 @@ def _check_out(path, suffix: str) -> None:
 def render_exr(setup: Setup | str | os.PathLike, out: str | os.PathLike, *, mode: str,
                spp: int = 64, seed: int = 0, resolution: tuple[int, int] | None = None,
                aovs: Sequence[str] = (), f_number: float | None = None,
-               sampler: str | None = None, full_frame: bool = False, preview=None,
-               preview_size: int | None = None, scene=None, scene_unit: str | None = None,
-               motion=None, progress: bool = False) -> WorkflowResult:
+               sampler: str | None = None, full_frame: bool = False,
+               preview: str | os.PathLike | None = None, preview_size: int | None = None,
+               scene: str | os.PathLike | Mapping[str, Any] | None = None,
+               scene_unit: str | None = None, motion: str | os.PathLike | None = None,
+               progress: bool = False) -> WorkflowResult:
     """Render one image of a setup through the mirror with Mitsuba 3 and write it as an
     EXR with its provenance (``mitsweep render``).
 

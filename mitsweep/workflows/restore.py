@@ -24,7 +24,7 @@ import numpy as np
 
 from .. import __version__
 from ..config import Setup, setup_from_dict, setup_to_dict
-from ._base import InputError, Progress, WorkflowResult, progress_callback, resolve_setup
+from ._base import (InputError, Progress, WorkflowResult, progress_callback, resolve_setup)
 from ._paths import check_outputs
 
 __all__ = ["restore_photo", "OPERATORS", "OUTPUT_SUFFIXES", "split_method"]
