@@ -169,6 +169,7 @@ def trace_ipsf_bank(setup: Setup | str | os.PathLike, *, kind: str = "radial",
     from ..io import write_exr
     from ..io.bank import save_bank
     from ..tracer import ipsf_bank
+    from ..tracer.settings import TraceSettings
 
     setup = _prepare(setup, inputs=[_path(setup), motion_table, motion],
                      outputs={"--output": [output], "--plot": [plot]}, plot=plot,
@@ -183,10 +184,11 @@ def trace_ipsf_bank(setup: Setup | str | os.PathLike, *, kind: str = "radial",
     _check_suffix(output, (".npz", ".exr"), "a bank")
     n_pts = radii if kind == "radial" else grid[0] * grid[1]
     with progress_callback(progress, n_pts * len(depths), "IPSF bank", "ipsf") as step:
+        settings = TraceSettings(rays=rays, kernel_size=kernel_size, seed=seed, method=method,
+                                 time_samples=time_samples, n_planes=planes)
         bank = ipsf_bank(setup, kind=kind, n_radii=radii, grid=tuple(grid), depths=depths,
-                         sweep=geometry.sweep, motion=geometry.motion, method=method,
-                         time_samples=time_samples, n_planes=planes, progress=step,
-                         rays=rays, kernel_size=kernel_size, seed=seed)
+                         sweep=geometry.sweep, motion=geometry.motion, settings=settings,
+                         progress=step)
     out: dict = {"setup": setup.name, "version": __version__, "kind": bank.kind,
                  "shape": list(bank.kernels.shape),
                  "reference_sensor_distance_mm": bank.reference_sensor_distance,
@@ -291,6 +293,7 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
     from ..io import write_exr
     from ..io.bank import IPSFBank, optics_sections, save_bank
     from ..tracer import integrated_psf, psf
+    from ..tracer.settings import TraceSettings
     from ..tracer.source import source_from_image
 
     depths = list(depths)
@@ -319,17 +322,19 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
             source_from_image(setup, u, v, depth, reference_sensor_distance=i_ref)
         except ValueError as exc:
             raise InputError(f"{where}: {exc}") from None
-    common = dict(rays=rays, kernel_size=kernel_size, seed=seed)
     entries, kernels = [], []
     setup_dict = setup_to_dict(setup)
     for depth in depths:
         if sensor_distance is not None:
             kernel, info = psf(setup, u, v, depth, sensor_distance, double=float64,
-                               reference_sensor_distance=i_ref, **common)
+                               reference_sensor_distance=i_ref, rays=rays,
+                               kernel_size=kernel_size, seed=seed)
         else:
+            settings = TraceSettings(rays=rays, kernel_size=kernel_size, seed=seed,
+                                     method=method, time_samples=time_samples,
+                                     n_planes=planes)
             kernel, info = integrated_psf(setup, u, v, depth, sweep=sweep, motion=motion,
-                                          method=method, time_samples=time_samples,
-                                          n_planes=planes, double=float64, **common)
+                                          settings=settings, double=float64)
         entry = dict(info)
         if output:
             path = per_depth_path(output, depth) if several else os.fspath(output)

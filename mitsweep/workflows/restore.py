@@ -152,6 +152,7 @@ def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir):
     from ..io.bank import bank_kernel_size
     from ..tracer.bank import BANK_RAYS
     from ..tracer.cache import cached_bank
+    from ..tracer.settings import TraceSettings
 
     H, W = shape
     photo = replace(setup, sensor=replace(setup.sensor, resolution=(W, H), pixel_pitch=pitch,
@@ -163,7 +164,8 @@ def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir):
     with progress_callback(progress, n, "IPSF bank", "ipsf") as step:
         return cached_bank(photo, motion=motion, kind=kind,
                            depths=(depth if isinstance(depth, float) else 500.0,),
-                           rays=rays or BANK_RAYS, kernel_size=bank_kernel_size(pitch),
+                           settings=TraceSettings(rays=rays or BANK_RAYS,
+                                                  kernel_size=bank_kernel_size(pitch)),
                            grid=grid, cache_dir=cache_dir, progress=step)
 
 
