@@ -23,7 +23,6 @@ Mirror kinds (all normalised to a conic of vertex radius ``radius`` and conic co
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import numbers
 from dataclasses import dataclass, field, fields
@@ -695,38 +694,29 @@ def setup_to_dict(setup: Setup) -> dict[str, Any]:
     return out
 
 
-def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, numbers.Integral):
-        return str(int(value))
-    if isinstance(value, numbers.Real):
-        x = float(value)
-        if math.isinf(x):
-            return "inf" if x > 0 else "-inf"
-        text = repr(x)
-        return text if any(c in text for c in ".en") else text + ".0"
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False)  # a TOML basic string
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, Mapping):  # an inline table (scene.placement)
-        return "{" + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + "}"
-    raise TypeError(f"cannot write {type(value).__name__} {value!r} to TOML")
-
-
 def setup_to_toml(setup: Setup, *, header: str = "") -> str:
     """The setup as TOML text that :func:`load_setup` reads back to an equal setup.
 
-    ``header`` (optional) is written first as ``#`` comment lines, e.g. provenance.
+    Written by ``tomli-w`` (the writer paired with the ``tomllib`` reader; infinite
+    depths come out as TOML's ``inf``).
+
+    Parameters
+    ----------
+    setup : Setup
+        The setup to write.
+    header : str, optional
+        Written first as ``#`` comment lines, e.g. provenance.
+
+    Returns
+    -------
+    str
+        TOML text, ending in a newline.
     """
+    import tomli_w
+
     lines = [f"# {line}".rstrip() for line in header.splitlines()]
-    data = setup_to_dict(setup)
-    lines.append(f"name = {_toml_value(data.pop('name'))}")
-    for section, table in data.items():
-        lines += ["", f"[{section}]"]
-        lines += [f"{key} = {_toml_value(value)}" for key, value in table.items()]
-    return "\n".join(lines) + "\n"
+    body = tomli_w.dumps(setup_to_dict(setup))
+    return "\n".join(lines) + ("\n" if lines else "") + body
 
 
 #: The embedded default: the paper's spherical mirror (Sec. 3.1 and 5.2).
