@@ -247,25 +247,31 @@ def _ridge_starts(gy, gx, lum_s, centre, r_lo, r_hi, predicted, shown=None):
     return sorted(strong, key=lambda r: abs(r - predicted))
 
 
+def _steps(lum_s, centre, scale, pts, nrm) -> np.ndarray:
+    """(N,) step of the mean across the circle at each outline point: outside (0.5-1.5
+    px beyond it) minus inside (as far within)."""
+    from scipy.ndimage import map_coordinates
+
+    t = np.array([-1.5, -1.0, -0.5, 0.5, 1.0, 1.5])
+    xy = np.asarray(centre)[None, None, :] + scale * pts[:, None, :] \
+        + t[None, :, None] * nrm[:, None, :]
+    prof = map_coordinates(lum_s, [xy[..., 0].ravel(), xy[..., 1].ravel()], order=1,
+                           mode="nearest").reshape(xy.shape[:2])
+    return prof[:, 3:].mean(axis=1) - prof[:, :3].mean(axis=1)
+
+
 def _step_coherence(lum_s, centre, scale, pts, nrm, good) -> float:
     """``|mean Δ| / RMS Δ`` of the steps ``Δ`` of the mean across the circle (outside,
     0.5-1.5 px beyond it, minus inside, as far within) at the outline points ``good``:
     near 0 at a limb (the step's sign is the local background's against its far
     average), near 1 at an edge (a holder, a dark ring, a rim)."""
-    from scipy.ndimage import map_coordinates
-
-    t = np.array([-1.5, -1.0, -0.5, 0.5, 1.0, 1.5])
-    xy = np.asarray(centre)[None, None, :] + scale * pts[good][:, None, :] \
-        + t[None, :, None] * nrm[good][:, None, :]
-    prof = map_coordinates(lum_s, [xy[..., 0].ravel(), xy[..., 1].ravel()], order=1,
-                           mode="nearest").reshape(xy.shape[:2])
-    d = prof[:, 3:].mean(axis=1) - prof[:, :3].mean(axis=1)
+    d = _steps(lum_s, centre, scale, pts, nrm)[good]
     return float(abs(d.mean()) / (math.sqrt(float(np.mean(d * d))) + 1e-30))
 
 
 def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
              nrm: np.ndarray, scale_range: tuple[float, float], *,
-             shown: np.ndarray | None = None) -> LimbFit | None:
+             shown: np.ndarray | None = None, iterations: int = 6) -> LimbFit | None:
     """Find a circular limb (see the module docstring) about ``centre`` (row, col; good
     to a few px), its size within ``scale_range`` times the outline ``pts`` (N, 2
     offsets from the axis, px, with outward normals ``nrm``). None where neither cue
@@ -297,24 +303,41 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     else:
         return None
     energy_c, energy_R = c0, R0
-    # The sign-agnostic step along each normal at the circle found, for the report: its
-    # inliers' scatter about the circle (the centre's uncertainty).
+    # Then the step of the mean along each normal, whatever its sign, within
+    # LIMB_HALF_WIDTH_PX of that circle, fitted as the circle plus an offset of the
+    # bright-outside steps against the dark-outside ones (0.1-0.25 px on the renders),
+    # which the centre would otherwise absorb where one sign prevails on one side (the
+    # sweep renders from 400 px: 0.3-0.4 px, 0.17-0.22 px with the offset).
     scale = R / radius0
     lum_s = smooth(lum, LIMB_SMOOTHING_PX)
-    off, _strength, _width = edge_offsets(lum_s, c, scale, pts, nrm, LIMB_HALF_WIDTH_PX)
-    good = np.isfinite(off)
-    if shown is not None:
-        at = np.rint(np.asarray(c)[None, :] + scale * pts).astype(int)
-        H, W = shown.shape
-        ins = (at[:, 0] >= 0) & (at[:, 0] < H) & (at[:, 1] >= 0) & (at[:, 1] < W)
-        good &= ins
-        good[ins] &= shown[at[ins, 0], at[ins, 1]]
-    if good.sum() < 8:
+    A3 = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])
+    good = np.zeros(len(pts), bool)
+    wts = res = np.zeros(0)
+    off = np.full(len(pts), np.nan)
+    for _ in range(iterations):
+        off, _strength, _width = edge_offsets(lum_s, c, scale, pts, nrm, LIMB_HALF_WIDTH_PX)
+        good = np.isfinite(off)
+        if shown is not None:
+            at = np.rint(np.asarray(c)[None, :] + scale * pts).astype(int)
+            H, W = shown.shape
+            ins = (at[:, 0] >= 0) & (at[:, 0] < H) & (at[:, 1] >= 0) & (at[:, 1] < W)
+            good &= ins
+            good[ins] &= shown[at[ins, 0], at[ins, 1]]
+        if good.sum() < 8:
+            return None
+        sign = np.sign(_steps(lum_s, c, scale, pts, nrm))
+        A = np.column_stack([A3, sign])[good]
+        x, wts = tukey_lstsq(A, off[good], np.ones(int(good.sum())))
+        res = off[good] - A @ x
+        c = (c[0] + float(x[0]), c[1] + float(x[1]))
+        scale += float(x[2])
+        if max(abs(x[0]), abs(x[1]), abs(x[2]) * radius0) < 1e-3:
+            break
+    R = scale * radius0
+    if not r_lo / 1.04 <= R <= r_hi * 1.04:
         return None
-    A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])
-    _, wts = tukey_lstsq(A[good], off[good], np.ones(int(good.sum())))
     inl = wts > 0
-    res = off[good][inl]
+    res = res[inl]
     rms = float(np.sqrt(np.mean(res ** 2))) if inl.any() else math.inf
     used = np.zeros(len(pts), bool)
     used[np.flatnonzero(good)[inl]] = True
