@@ -6,6 +6,8 @@ import pytest
 
 from mitsweep import deconv
 from mitsweep.deconv import SensorNoise, paper_fig10_settings
+from mitsweep.deconv.synthetic import synthetic_radial_bank
+from mitsweep.deconv.weights import model_nsr
 from mitsweep.io import bank as bank_io
 from mitsweep.io import read_exr, write_exr
 from mitsweep.pipeline import DatasetError, DatasetOptions
@@ -13,6 +15,7 @@ from mitsweep.pipeline import tasks
 from test_pipeline_dataset import TINY
 
 LUX = 2.0
+BANK = synthetic_radial_bank((32, 32), size=5)
 WHITE = 0.37          # renders' units: far from 1, so that a lost white level shows
 
 
@@ -42,7 +45,7 @@ def calls(monkeypatch):
         return np.array(image)
 
     monkeypatch.setattr(deconv, "deconvolve", spy)
-    monkeypatch.setattr(bank_io, "load_bank", lambda path: None)
+    monkeypatch.setattr(bank_io, "load_bank", lambda path: BANK)
     return seen
 
 
@@ -59,7 +62,7 @@ def test_prior_methods_get_the_noise_the_dataset_applied(noisy_sweep, calls, tmp
     level = read_exr(path)[1]["white_level"]
     assert level != pytest.approx(1.0, rel=0.1)        # the units matter here
     tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
-                  **restore_params(method))
+                  ground_truth=tmp_path / "pinhole.exr", **restore_params(method))
     (seen, kw), = calls
     assert kw["noise"] == model
     assert isinstance(kw["noise"], SensorNoise)
@@ -68,25 +71,39 @@ def test_prior_methods_get_the_noise_the_dataset_applied(noisy_sweep, calls, tmp
     np.testing.assert_allclose(seen, noisy / level, rtol=1e-6)   # float32 division
     # and its result is scaled back to the renders' units (the spy returns its input)
     np.testing.assert_allclose(tasks.read_rgb(tmp_path / "edof.exr")[0], noisy, rtol=1e-6)
-    assert kw["nsr"] >= model.nsr(0.5)
+    # their first Wiener step's NSR is the noise model's (mitsweep.deconv.weights)
+    assert kw["nsr"] == pytest.approx(model_nsr(noisy, BANK, model, level=level,
+                                                mask=np.ones((32, 32), bool)))
 
 
-def test_wiener_gets_the_noise_as_its_nsr_unchanged(noisy_sweep, calls, tmp_path):
+def test_wiener_takes_its_nsr_from_the_noise_model(noisy_sweep, calls, tmp_path):
     path, model = noisy_sweep
     params = restore_params("wiener")
-    assert params == {"method": "wiener", "nsr": model.nsr(0.5)}  # older manifests' params
+    assert params == {"method": "wiener", "noise": model.as_dict(), "weights": "model"}
     tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
-                  **params)
+                  ground_truth=tmp_path / "pinhole.exr", **params)
     (seen, kw), = calls
     assert "noise" not in kw and kw["prior"] == tasks.DECONV_PRIOR
+    noisy, _, meta = tasks.read_rgb(path)
+    assert kw["nsr"] == pytest.approx(model_nsr(noisy, BANK, model, level=meta["white_level"],
+                                                mask=np.ones((32, 32), bool)))
+    assert tasks.read_rgb(tmp_path / "edof.exr")[2]["nsr_rule"] == "model"
+    np.testing.assert_array_equal(seen, noisy)  # in the renders' units
+
+
+def test_older_manifests_wiener_tasks_keep_their_rule(noisy_sweep, calls, tmp_path):
+    """A task without ``weights`` (older manifests' params) keeps the former rule."""
+    path, model = noisy_sweep
+    tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
+                  method="wiener", nsr=model.nsr(0.5))
+    (seen, kw), = calls
     assert kw["nsr"] >= model.nsr(0.5)
-    np.testing.assert_array_equal(seen, tasks.read_rgb(path)[0])  # in the renders' units
 
 
 def test_noiseless_sweeps_are_restored_without_a_noise_model():
     opts = DatasetOptions(scenes=1, light_levels_lux=(LUX,), methods=("tv",))
     task = next(t for t in tasks.plan(opts) if t.name == "scene_000/edof_tv.exr")
-    assert task.params == {"method": "tv", "nsr": None}
+    assert task.params == {"method": "tv", "weights": "model"}
 
 
 def test_a_noise_model_the_image_does_not_carry_is_refused(noisy_sweep, calls, tmp_path):
