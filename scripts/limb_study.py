@@ -30,9 +30,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from mitsweep.config import Sensor, load_setup  # noqa: E402
-from mitsweep.optics.outline import predicted_outline  # noqa: E402
-from mitsweep.optics.pixels import optical_center_px  # noqa: E402
+from mitsweep.config import Sensor, load_setup
+from mitsweep.optics.outline import predicted_outline
+from mitsweep.optics.pixels import optical_center_px
 
 #: The bundled setup's sensor at 200 px has pitch 0.06 mm (the calibration tests' SMALL).
 BASE = (200, 0.06)

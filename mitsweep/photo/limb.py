@@ -32,9 +32,17 @@ from .edges import edge_offsets
 from .image import smooth
 from .robust import tukey_lstsq
 
-__all__ = ["LimbFit", "fit_limb", "energy_map", "LIMB_SMOOTHING_PX", "LIMB_HALF_WIDTH_PX",
-           "LIMB_ANNULUS_PX", "STRONG_ENERGY_STEP", "RIDGE_SMOOTHING_PX",
-           "MIN_RIDGE"]
+__all__ = [
+    "LIMB_ANNULUS_PX",
+    "LIMB_HALF_WIDTH_PX",
+    "LIMB_SMOOTHING_PX",
+    "MIN_RIDGE",
+    "RIDGE_SMOOTHING_PX",
+    "STRONG_ENERGY_STEP",
+    "LimbFit",
+    "energy_map",
+    "fit_limb",
+]
 
 #: Gaussian smoothing (px) of the luminance the sign-agnostic step is located on.
 LIMB_SMOOTHING_PX = 1.0
@@ -114,7 +122,7 @@ def _radial_start(e, centre, r_lo, r_hi, window, shown=None):
     """The radius in ``[r_lo, r_hi]`` where the azimuthal mean log energy drops most
     from the ``window`` px inside to the ``window`` px outside, and that drop."""
     r, prof = _radial_profile(e, centre, max(r_lo - window, 1.0), r_hi + window, 0.5, shown)
-    k = int(round(window / 0.5))
+    k = round(window / 0.5)
     best, at = -math.inf, math.nan
     for i in range(k, len(r) - k):
         if not r_lo <= r[i] <= r_hi:
@@ -157,7 +165,7 @@ def _energy_step_fit(e, centre, radius, band, shown=None):
 
     sol = least_squares(resid, [centre[0], centre[1], radius, a0, b0, 1.0], loss="soft_l1",
                         f_scale=float(np.std(s)) + 1e-12, max_nfev=200)
-    cy, cx, R, a, b, _ = sol.x
+    cy, cx, R, _a, b, _w = sol.x
     return (float(cy), float(cx)), float(R), float(-b)
 
 
@@ -231,7 +239,7 @@ def _ridge_starts(gy, gx, lum_s, centre, r_lo, r_hi, predicted, shown=None):
     with np.errstate(invalid="ignore", divide="ignore"):
         prof = np.log(np.bincount(idx, weights=s, minlength=len(bins) - 1) / n)
     rc = 0.5 * (bins[:-1] + bins[1:])
-    k = max(2, int(round(0.06 * mid / step)))
+    k = max(2, round(0.06 * mid / step))
     cand = []
     for i in range(k, len(prof) - k):
         if not r_lo <= rc[i] <= r_hi or not np.isfinite(prof[i]):

@@ -203,8 +203,8 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
             fit_roll: bool = False) -> RimFit:
     """Find the predicted outline in a photograph (see the module docstring, and for a
     limb :func:`_limb_or_edge`); parameters, result and errors as :func:`fit_edges`."""
-    kw = dict(scale_range=scale_range, max_iterations=max_iterations,
-              edge_half_width_px=edge_half_width_px, fit_roll=fit_roll)
+    kw = {"scale_range": scale_range, "max_iterations": max_iterations,
+          "edge_half_width_px": edge_half_width_px, "fit_roll": fit_roll}
     if outline.on_rim.any():
         return fit_edges(image, outline, pitch, **kw)
     return _limb_or_edge(image, outline, pitch, **kw)
