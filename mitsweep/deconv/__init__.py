@@ -32,66 +32,28 @@ __all__ = ["deconvolve", "METHODS", "wiener_deconvolve", "polar_deconvolve",
            "hqs_deconvolve", "calibrated_nsr", "noise_sigma"]
 
 
-#: Where each public name lives. The submodules are imported on first use (PEP 562), so
-#: that ``import mitsweep.deconv`` — and every command line, which reads :data:`METHODS`
-#: to build its options — does not pay for SciPy's signal and statistics modules.
-_SOURCES = {
-    "BankError": "bank", "IPSFBank": "bank",
-    "check_bank_matches": "kernels", "grid_bank_from_radial": "kernels",
-    "optical_center": "kernels", "select_depth": "kernels",
-    "per_depth_band": "metrics", "per_radius": "metrics", "psnr": "metrics",
-    "ssim": "metrics",
-    "SensorNoise": "noise", "paper_fig10_settings": "noise",
-    "BlurOperator": "operators", "polar_operator": "operators",
-    "product_convolution_operator": "operators",
-    "calibrated_nsr": "regularization", "noise_sigma": "regularization",
-    "hqs_deconvolve": "solvers", "richardson_lucy": "solvers",
-    "PolarGrid": "polar", "from_polar": "polar", "polar_deconvolve": "polar",
-    "polar_grid": "polar", "to_polar": "polar",
-    "scatter_blur": "spatial", "spatially_varying_blur": "spatial",
-    "spatially_varying_deconvolve": "spatial",
-    "estimate_nsr": "wiener", "wiener_deconvolve": "wiener",
-    "deconvolve": "restore", "blur_operator": "restore",
-}
+import lazy_loader as _lazy
 
+from ..io.bank import BankError, IPSFBank
 
-def _submodule(short: str):
-    """Import one submodule by its short name; literal imports, so that the architecture
-    check (tests/test_architecture.py) reads every edge."""
-    if short == "bank":
-        from ..io import bank as mod
-    elif short == "kernels":
-        from . import kernels as mod
-    elif short == "metrics":
-        from . import metrics as mod
-    elif short == "noise":
-        from . import noise as mod
-    elif short == "operators":
-        from . import operators as mod
-    elif short == "regularization":
-        from . import regularization as mod
-    elif short == "solvers":
-        from . import solvers as mod
-    elif short == "polar":
-        from . import polar as mod
-    elif short == "spatial":
-        from . import spatial as mod
-    elif short == "wiener":
-        from . import wiener as mod
-    else:
-        from . import restore as mod
-    return mod
-
-
-def __getattr__(name: str):
-    try:
-        short = _SOURCES[name]
-    except KeyError:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
-    value = getattr(_submodule(short), name)
-    globals()[name] = value
-    return value
+#: Where each public name lives. The submodules are imported on first use (PEP 562, through
+#: ``lazy_loader``, scikit-image's choice), so that ``import mitsweep.deconv`` (and every
+#: command line, which reads :data:`METHODS` to build its options) does not pay for SciPy's
+#: signal and statistics modules. The bank's types come from :mod:`mitsweep.io.bank`.
+__getattr__, _lazy_dir, _ = _lazy.attach(__name__, submod_attrs={
+    "kernels": ["check_bank_matches", "grid_bank_from_radial", "optical_center",
+                "select_depth"],
+    "metrics": ["per_depth_band", "per_radius", "psnr", "ssim"],
+    "noise": ["SensorNoise", "paper_fig10_settings"],
+    "operators": ["BlurOperator", "polar_operator", "product_convolution_operator"],
+    "regularization": ["calibrated_nsr", "noise_sigma"],
+    "solvers": ["hqs_deconvolve", "richardson_lucy"],
+    "polar": ["PolarGrid", "from_polar", "polar_deconvolve", "polar_grid", "to_polar"],
+    "spatial": ["scatter_blur", "spatially_varying_blur", "spatially_varying_deconvolve"],
+    "wiener": ["estimate_nsr", "wiener_deconvolve"],
+    "restore": ["deconvolve", "blur_operator"],
+})
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+    return sorted(set(_lazy_dir()) | set(__all__) | set(globals()))
