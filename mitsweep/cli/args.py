@@ -4,7 +4,8 @@ the options of every command that reads a camera file."""
 from __future__ import annotations
 
 import argparse
-from typing import Callable, TypeVar
+from typing import TypeVar
+from collections.abc import Callable
 
 from ..deconv.noise import ILLUMINANCE_RANGE_LUX
 

@@ -43,7 +43,6 @@ import logging
 import time
 
 import numpy as np
-from numpy.typing import ArrayLike
 
 __all__ = ["run_bench", "make_problem"]
 

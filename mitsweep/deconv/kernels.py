@@ -14,7 +14,8 @@ from dataclasses import replace
 
 import logging
 import math
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 import scipy.ndimage as ndi

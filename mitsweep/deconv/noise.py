@@ -241,7 +241,7 @@ class SensorNoise:
                 for k, v in asdict(self).items()}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "SensorNoise":
+    def from_dict(cls, d: dict) -> SensorNoise:
         """The model of its :meth:`as_dict` (provenance back to a model)."""
         return cls(**{("pixel_pitch" if k == "pixel_size_mm" else k): v for k, v in d.items()})
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -95,7 +95,7 @@ def synthetic_weight_bench(sizes: Sequence[int] = (512,),
             t1 = time.perf_counter()
             blind = blind_nsr(y, bank, mask=mask)
             t2 = time.perf_counter()
-            r = weight_rows(y, p["sharp"], lambda x, w: polar_deconvolve(x, bank, nsr=w),
+            r = weight_rows(y, p["sharp"], lambda x, w, bank=bank: polar_deconvolve(x, bank, nsr=w),
                             {"before": estimate_nsr(y), "model": model, "blind": blind},
                             mask=mask)
             rows.append({"case": f"independent blur {size} px, sigma {sigma:g}",

@@ -21,7 +21,7 @@ __all__ = ["available"]
 logger = logging.getLogger(__name__)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def available() -> str | None:
     """The Dr.Jit backend these kernels run on (``"llvm"`` or ``"cuda"``, as
     :func:`mitsweep.backend.select_backend` chooses), or None where there is none

@@ -18,5 +18,6 @@ from .image import luminance, photo_void
 from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit,
                   SetupMismatchError, fit_rim)
 
-__all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "Calibration", "fit_rim", "calibrate_photo",
+__all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "Calibration",
+           "fit_rim", "calibrate_photo",
            "luminance", "photo_void", "PLAUSIBLE_SCALE", "WARN_SCALE"]

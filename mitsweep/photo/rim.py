@@ -39,7 +39,8 @@ from .image import fill_void, luminance, noise_sigma, photo_void, smooth
 from .robust import EDGE_CORRELATION_PX, centre_standard_error, tukey_lstsq
 
 __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim",
-           "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION", "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
+           "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
+           "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
            "RESIDUAL_WIDTH_SHARE", "RESIDUAL_RADIUS_SHARE", "PLAUSIBLE_SCALE",
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE", "LIMB_INSIDE_SHARE",
            "MAX_LIMB_COHERENCE",
@@ -352,7 +353,7 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pitch: float, *,
     # The first window covers the coarse search's steps: a reduced pixel and a scale step.
     factor = max(1, int(radius / COARSE_RADIUS_PX))
     search = max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
-    for it in range(1, max_iterations + 1):
+    for _ in range(max_iterations):
         pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
         off, strength, width = edge_offsets(lum_s, centre, scale, pts, nrm, search,
                                          outermost=search <= half)

@@ -22,7 +22,7 @@ import asyncio
 import concurrent.futures as cf
 import contextlib
 import logging
-from typing import Iterator
+from collections.abc import Iterator
 
 from distributed import Client, LocalCluster, Worker, WorkerPlugin
 

@@ -131,8 +131,9 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
         results["scenes"][d.name] = scene_res
     names = sorted({k for s in results["scenes"].values() for k, v in s.items()
                     if isinstance(v, dict) and k != _SOURCE})
-    results["mean"] = {n: {"psnr": float(np.nanmean([s[n]["psnr"] for s in results["scenes"].values() if n in s])),
-                           "ssim": float(np.nanmean([s[n]["ssim"] for s in results["scenes"].values() if n in s]))}
+    scenes = list(results["scenes"].values())
+    results["mean"] = {n: {m: float(np.nanmean([s[n][m] for s in scenes if n in s]))
+                           for m in ("psnr", "ssim")}
                        for n in names}
     return results
 

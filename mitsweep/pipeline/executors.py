@@ -20,7 +20,7 @@ import contextlib
 import logging
 import multiprocessing
 import re
-from typing import Iterator
+from collections.abc import Iterator
 
 from .runner import DatasetError
 from .worker_setup import CONNECT_TIMEOUT_S, init_worker

@@ -102,8 +102,9 @@ class DatasetOptions:
     :func:`mitsweep.render.procedural.resolve_params`). ``xml`` takes ``scene_files``,
     one ``{"path": absolute path, "sha256": of its bytes}`` per scene (``scenes`` is
     their number), with ``"files"``, the SHA-256 of every file it loads
-    (:func:`mitsweep.io.scene_files.scene_digests`), when it loads more than itself, and ``scene_unit`` (one of :data:`SCENE_UNITS`, or None for the
-    setup's). A room dataset's options read and write as before these fields existed.
+    (:func:`mitsweep.io.scene_files.scene_digests`), when it loads more than itself, and
+    ``scene_unit`` (one of :data:`SCENE_UNITS`, or None for the setup's).
+    A room dataset's options read and write as before these fields existed.
     """
 
     scenes: int = 1

@@ -50,7 +50,8 @@ import traceback
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path, PurePosixPath
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from ..io import WriteError, write_text_atomic
 from ..io.lock import DirectoryLock, DirectoryLocked
@@ -100,7 +101,7 @@ class Shard:
                               f"{self.index!r}/{self.count!r}")
 
     @classmethod
-    def parse(cls, text: str) -> "Shard":
+    def parse(cls, text: str) -> Shard:
         """``"K/N"`` → ``Shard(K, N)``; :class:`DatasetError` naming the form otherwise."""
         k, sep, n = str(text).strip().partition("/")
         if not (sep and k.strip().isdigit() and n.strip().isdigit()):

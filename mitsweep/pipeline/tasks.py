@@ -383,7 +383,8 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
         d = f"scene_{i:03d}"
 
         def add(name: str, fn, params: dict, inputs: dict | None = None) -> None:
-            tasks.append(Task(f"{d}/{name}", fn, params, inputs or {}, group=i))
+            # called within this iteration only: d and i are the current scene's
+            tasks.append(Task(f"{d}/{name}", fn, params, inputs or {}, group=i))  # noqa: B023
 
         source = scene_source(opts, i)
         for mode in MODES:

@@ -350,7 +350,7 @@ def _search_disc(foci: _LineFoci, field: _StarField, n_rings, depths, which: int
     history = [{"stage": "grid", "evaluations": foci.evaluations, "focus_mm": sign * best[0]}]
     found = [best, best_edge]
     xtol = FIELD_TOL_MM / field.rim
-    for v, t, th, d in {best, best_edge}:
+    for _v, t, th, d in {best, best_edge}:
         if t == 1.0:
             res = minimize_scalar(lambda a, d=d: f(1.0, a, d),
                                   bounds=(max(th - dth, 0.0), min(th + dth, math.pi)),

@@ -13,8 +13,9 @@ hit spends in it, with no time samples. ``method="continuous"`` deposits each ra
 ``M`` stratified, jittered times ``t_j = (j + ξ)/M`` instead (ξ from a low-discrepancy
 sequence, different for every ray); the paper's sum over ``N`` focal planes
 (``method="planes"``) is offered for comparison. The exact method reaches a given L1
-error with 3–5× fewer rays than 4 stratified times per ray (README, IPSF convergence). Pixels are those of the sensor
-(physical positions, so magnification breathing is included), binned on the grid of the
+error with 3–5× fewer rays than 4 stratified times per ray (docs: IPSF convergence).
+Pixels are those of the sensor (physical positions, so magnification breathing is
+included), binned on the grid of the
 reference sensor distance (mid-travel) around the chief-ray image there: row = down the
 image (−v), column = right (+u), the chief-ray image at ``[K//2, K//2]``.
 

@@ -96,7 +96,8 @@ def _from_ray(ray, depth: float, reference: float, placement) -> PointSource:
     u, v = image_point(ray, reference)
     p = np.asarray(ray.surface.position, dtype=float).reshape(3)
     return PointSource(
-        mirror_point=p, local_point=placement.to_local(p), world_dir=np.asarray(ray.world_dir, dtype=float).reshape(3),
+        mirror_point=p, local_point=placement.to_local(p),
+        world_dir=np.asarray(ray.world_dir, dtype=float).reshape(3),
         normal=np.asarray(ray.surface.normal, dtype=float).reshape(3),
         depth=depth, image_uv=(float(u), float(v)), reference_sensor_distance=reference,
         cos_incidence=float(ray.cos_incidence))

@@ -9,7 +9,8 @@ import math
 import os
 import sys
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterator
+from typing import Any
+from collections.abc import Callable, Iterator
 
 from ..config import Setup, SetupError, load_setup
 from ..optics.motion_file import MotionFile

@@ -6,14 +6,14 @@ from __future__ import annotations
 import os
 import sys
 from pathlib import Path
-from typing import Iterable, Mapping, Union
+from collections.abc import Iterable, Mapping
 
 from ._errors import InputError
 
 __all__ = ["check_output_name", "check_outputs", "shown_path"]
 
 
-PathArg = Union[str, os.PathLike, None]
+PathArg = str | os.PathLike | None
 
 
 def _same_path(a: Path, b: Path) -> bool:

@@ -13,7 +13,7 @@ import os
 import resource
 import time
 from types import ModuleType, SimpleNamespace
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 from .. import __version__
 from ._base import WorkflowResult

@@ -13,7 +13,7 @@ import math
 import os
 import time
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from .. import __version__
 from ._base import InputError, WorkflowResult, resolve_setup

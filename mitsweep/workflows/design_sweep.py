@@ -11,7 +11,7 @@ around it: checks, noise model, the file and its provenance, the plot). The file
 from __future__ import annotations
 
 import os
-from typing import Sequence
+from collections.abc import Sequence
 
 from .. import __version__
 from ..config import Setup

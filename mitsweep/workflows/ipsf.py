@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import os
 from pathlib import Path
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -242,8 +242,8 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
                method: str = "exact", planes: int = 16, time_samples: int = 4,
                motion: str | os.PathLike | None = None, motion_table: str | os.PathLike | None = None,
                rays: int = 1_000_000, kernel_size: int = 31, seed: int = 0,
-               float64: bool = False, output: str | os.PathLike | None = None, plot: str | os.PathLike | None = None
-               ) -> WorkflowResult:
+               float64: bool = False, output: str | os.PathLike | None = None,
+               plot: str | os.PathLike | None = None) -> WorkflowResult:
     """Trace the IPSF (or the PSF at one sensor distance) of one image point at one or
     more depths (``mitsweep ipsf``).
 

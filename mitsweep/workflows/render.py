@@ -4,7 +4,8 @@ its provenance (``mitsweep render``)."""
 from __future__ import annotations
 
 import os
-from typing import Any, Mapping, Sequence
+from typing import Any
+from collections.abc import Mapping, Sequence
 
 from ..config import MAX_RESOLUTION, Setup
 from ._base import InputError, WorkflowResult, read_motion_file, resolve_setup
