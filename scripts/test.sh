@@ -5,7 +5,8 @@
 #
 # Runs in parallel (pytest-xdist): one worker per core plus one, at most 8, because one
 # worker spends most of its time in the rig tests' real-time waits (tests/conftest.py keeps
-# those tests together in one worker, in order, as a serial run has them). Set
+# those tests together in one worker, in order, as a serial run has them, and every other
+# module's tests together, so that its fixtures are built once). Set
 # MITSWEEP_TEST_WORKERS=N for N workers (0: serially, in this process), or pass -n /
 # -p no:xdist yourself. MITSWEEP_TEST_BUSY_CORES (see tests/conftest.py) runs serially.
 set -euo pipefail
