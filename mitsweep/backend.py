@@ -81,7 +81,7 @@ def _cuda_usable() -> bool:
         return False
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def select_backend(prefer: str | None = None) -> str:
     """``"cuda"``, ``"llvm"`` or ``"scalar"``; checked before any kernel is compiled.
 
@@ -152,7 +152,7 @@ _LOG_SYMBOLS = {
 _native_width: int | None = None
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _drjit_core() -> ctypes.CDLL | str:
     """drjit-core, loaded from the very file the drjit package loaded (same path, so the
     same process-wide state), or why it cannot be."""
@@ -169,7 +169,7 @@ def _drjit_core() -> ctypes.CDLL | str:
         return f"drjit-core cannot be loaded ({exc})"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _llvm_target_api() -> dict | None:
     """ctypes functions of drjit-core's LLVM target API, or None (logged) when the
     library or one of its symbols is missing."""
@@ -349,7 +349,7 @@ def _unroute_drjit_log() -> None:
         _drjit_route["set_stderr"](_drjit_route["stderr_before"])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _logging_appender_type():
     """An ``mi.Appender`` that forwards Mitsuba's lines to the ``mitsuba`` logger
     (defined once Mitsuba is imported: backend.py must not import it at load time)."""

@@ -35,7 +35,8 @@ from __future__ import annotations
 import logging
 import math
 from pathlib import Path, PurePosixPath
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any
+from collections.abc import Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -288,7 +289,7 @@ class MitsweepDataset:
                          "metadata": read_finite(self.root / item)[2]}
         return out
 
-    def split(self, name: str) -> "MitsweepDataset":
+    def split(self, name: str) -> MitsweepDataset:
         """The scenes of split ``name`` (``train``, ``validation`` or ``test``) of the
         whole dataset, dealt by :func:`split_scenes` with this dataset's fractions and
         seed; the same input, target and AOVs."""
@@ -449,7 +450,7 @@ class PatchSampler:
     def __len__(self) -> int:
         return len(self.dataset) * self.per_item
 
-    def with_epoch(self, epoch: int) -> "PatchSampler":
+    def with_epoch(self, epoch: int) -> PatchSampler:
         """The same sampler for another epoch."""
         return PatchSampler(self.dataset, self.size, per_item=self.per_item, seed=self.seed,
                             epoch=epoch)

@@ -33,7 +33,7 @@ import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any, Union
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -62,7 +62,7 @@ GRID_COLOR = "0.88"
 _TAGGED = frozenset({"png", "pdf", "svg", "svgz", "ps", "eps"})
 
 #: One output path, or one per format (:func:`plot_psf_planes` and the other paper figures).
-PathOrPaths = Union[str, Path, Sequence[Union[str, Path]]]
+PathOrPaths = str | Path | Sequence[str | Path]
 
 
 def _format_of(path: Path) -> str:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -88,7 +88,7 @@ class PlaneBank:
         """``Σ_k τ_k P_k`` for exposure fractions ``tau`` (n_bins,): (n_depths, n_points, K, K)."""
         return np.tensordot(self.kernels, np.asarray(tau, dtype=float), axes=([2], [0]))
 
-    def coarsened(self, groups: int) -> "PlaneBank":
+    def coarsened(self, groups: int) -> PlaneBank:
         """The same bank over ``groups`` coarser bins (consecutive bins merged).
 
         A merged bin's PSF is the width-weighted mean of its bins' (the average over its

@@ -14,7 +14,7 @@ import os
 import tempfile
 import threading
 from pathlib import Path
-from typing import Iterator
+from collections.abc import Iterator
 
 __all__ = ["WriteError", "atomic_path", "write_bytes_atomic", "write_text_atomic",
            "check_writable"]

@@ -41,7 +41,8 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -176,7 +177,7 @@ def _numbers(name: str, value: Any) -> np.ndarray:
     return a.astype(np.float64, copy=False)
 
 
-def _check_values(bank: "IPSFBank", n_depths: int, n_points: int) -> None:
+def _check_values(bank: IPSFBank, n_depths: int, n_points: int) -> None:
     """Every array of a bank holds what its layout allows (the shapes are checked)."""
     if not np.all(np.isfinite(_numbers("points_uv", bank.points_uv))):
         raise BankError("points_uv hold NaN or inf values; finite mm expected")

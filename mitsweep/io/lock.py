@@ -77,7 +77,7 @@ class DirectoryLock:
         self.taken_over: dict | None = None
 
     # -- acquiring ------------------------------------------------------------------
-    def acquire(self) -> "DirectoryLock":
+    def acquire(self) -> DirectoryLock:
         deadline = None if self.wait is None else time.monotonic() + self.wait
         told = False
         while True:
@@ -179,7 +179,7 @@ class DirectoryLock:
     def held(self) -> bool:
         return self._fd is not None
 
-    def __enter__(self) -> "DirectoryLock":
+    def __enter__(self) -> DirectoryLock:
         return self.acquire()
 
     def __exit__(self, *exc) -> None:

@@ -65,7 +65,7 @@ class Trapezoid:
 
     @classmethod
     def reaching(cls, velocity: float, acceleration: float, *,
-                 cruise_distance: float = 0.0) -> "Trapezoid":
+                 cruise_distance: float = 0.0) -> Trapezoid:
         """The move that ramps to ``velocity``, cruises ``cruise_distance`` and stops:
         its :attr:`ramp_time` and :attr:`ramp_distance` are those of a full ramp."""
         return cls(cruise_distance + velocity * velocity / acceleration, velocity,
@@ -73,7 +73,7 @@ class Trapezoid:
 
     @classmethod
     def with_accel_fraction(cls, distance: float, duration: float,
-                            accel_fraction: float) -> "Trapezoid":
+                            accel_fraction: float) -> Trapezoid:
         """The move of ``distance`` in ``duration`` whose ramps each take
         ``accel_fraction`` of it, in (0, 0.5] (0.5: triangular): peak velocity
         ``D / (T (1 − f))``, acceleration ``D / (T² f (1 − f))``."""

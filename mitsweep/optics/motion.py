@@ -80,7 +80,7 @@ class MotionProfile:
 
     # -- constructors -------------------------------------------------------------------
     @classmethod
-    def linear(cls, start: float, end: float) -> "MotionProfile":
+    def linear(cls, start: float, end: float) -> MotionProfile:
         """Constant velocity from ``start`` to ``end`` (mm); ``start == end`` is refused."""
         s, e = _check_distance(start, "start"), _check_distance(end, "end")
         if s == e:
@@ -89,7 +89,7 @@ class MotionProfile:
         return cls("linear", s, e)
 
     @classmethod
-    def trapezoidal(cls, start: float, end: float, accel_fraction: float) -> "MotionProfile":
+    def trapezoidal(cls, start: float, end: float, accel_fraction: float) -> MotionProfile:
         """Accelerate for ``accel_fraction`` of the exposure, cruise, decelerate.
 
         With ``a = accel_fraction`` and ``Δ = end − start`` the peak normalised velocity

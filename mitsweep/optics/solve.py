@@ -12,7 +12,7 @@ change of a continuous function) or of a local minimum of a unimodal function.
 from __future__ import annotations
 
 import math
-from typing import Callable
+from collections.abc import Callable
 
 __all__ = ["bracketed_root", "bounded_minimum"]
 

@@ -35,7 +35,8 @@ import math
 import time as _time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
@@ -47,7 +48,8 @@ from ..optics.pixels import image_shape, pixel_to_sensor, sensor_to_pixel
 from ..optics.reference import ReferenceGeometry, reference_geometry
 from ..resources import check_allocation
 
-__all__ = ["MODES", "SAMPLERS", "MODE_SAMPLERS", "RenderResult", "render_image", "render_to_exr", "render_point_source",
+__all__ = ["MODES", "SAMPLERS", "MODE_SAMPLERS", "RenderResult", "render_image", "render_to_exr",
+           "render_point_source",
            "camera_dict", "mode_camera", "reference_sensor_distance",
            "focus_distance_mirror_centre", "mirror_image_bbox", "AOV_NAMES",
            "FOCUS_REFERENCE_DEPTH_MM"]
@@ -362,7 +364,7 @@ def _render_loaded(scene, counts, seed, *, progress=True, desc="render"):
 
         bar = tqdm(total=spp, desc=desc, unit="spp", leave=False)
     t0 = _time.perf_counter()
-    for k, (s, c) in enumerate(zip(_pass_seeds(seed, len(counts)), counts)):
+    for s, c in zip(_pass_seeds(seed, len(counts)), counts):
         img = np.array(mi.render(scene, seed=s, spp=c), dtype=np.float64)
         acc = img * c if acc is None else acc + img * c
         if bar is not None:

@@ -16,7 +16,8 @@ exactly zero). mitsweep's ``mirrorview`` and ``mirrorpath`` pass.
 
 from __future__ import annotations
 
-from typing import Any, Iterable
+from typing import Any
+from collections.abc import Iterable
 
 from .sensor_motion import NotDifferentiableError
 

@@ -55,7 +55,7 @@ def checkerboard(size: int = 512, squares: int = 16) -> np.ndarray:
     return _rgb(0.1 + 0.8 * c)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def skimage_texture(name: str) -> np.ndarray:
     """A scikit-image bundled image as linear RGB float32 (H, W, 3)."""
     from skimage import data

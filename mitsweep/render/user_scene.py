@@ -14,8 +14,8 @@ replacement is logged), and moves every kept object into the mirror's frame in m
 with ``s`` the millimetres per scene unit (:data:`MM_PER_UNIT`) and the optional
 placement (:class:`mitsweep.config.Placement`). ``M`` is prepended to the ``to_world``
 of every top-level shape (a sphere's ``center``/``radius`` and a cylinder's ends
-compose with it; instancing, ``shapegroup``/``instance``, is refused); point-like emitters (``point``, ``spot``,
-``projector``) move with ``M`` and their intensity is multiplied by ``s²``;
+compose with it; instancing, ``shapegroup``/``instance``, is refused); point-like emitters
+(``point``, ``spot``, ``projector``) move with ``M`` and their intensity is multiplied by ``s²``;
 direction-only emitters (``directional``, ``envmap``, ``constant``) turn with the
 rotation only. Media densities are divided by ``s`` (they are per unit length) and grid
 volumes move with ``M``. Area emitters' radiance, BSDFs and textures do not depend on
@@ -44,7 +44,8 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
+from collections.abc import Mapping
 
 import numpy as np
 
