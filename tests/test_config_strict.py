@@ -1,4 +1,4 @@
-"""Strict TOML as the README promises: every value typed and named at load time."""
+"""Strict TOML as docs/reference/setups.md promises: every value typed and named at load time."""
 
 import math
 import re

@@ -161,6 +161,6 @@ def test_lengths_are_unsuffixed_attributes_with_mm_json_keys():
                                           ("paraboloid", 365.47, 387.11),
                                           ("paraboloid_tilted", 362.84, 389.52)])
 def test_sweep_ranges_stay_those_the_readme_reports(name, lo, hi):
-    """The README's ranges (two decimals) are unchanged by the renames."""
+    """The documented ranges (docs/reference/sweep-design.md) (two decimals) are unchanged by the renames."""
     r = optimal_sweep_range(load_setup(f"scenes/{name}.toml"))
     assert (round(r.focus_min, 2), round(r.focus_max, 2)) == (lo, hi)

@@ -2,7 +2,7 @@
 
 Settings are the demo's (``mitsweep.cli.demo.DEMO_SPP``): at those sample counts two
 ground-truth renders with different seeds agree to 42 dB on the sphere, so the
-differences asserted here (2–10 dB, README "Validation on ground truth") are not Monte
+differences asserted here (2–10 dB, docs/reference/datasets.md, "Measured on the paper's three setups") are not Monte
 Carlo noise.
 """
 
@@ -43,7 +43,7 @@ def test_edof_gain_is_largest_in_the_periphery(evaluated):
     beyond 2/3 of its radius) EDOF beats the focused camera in every bin, and gains more
     there than over the whole image (the focused camera is sharp at the centre, paper
     Fig. 9). Nearer the centre the focused camera can still win a bin: on the sphere,
-    by 0.5 dB at 56 % of the radius (README)."""
+    by 0.5 dB at 56 % of the radius (docs/reference/datasets.md)."""
     name, scene = evaluated
     r = np.array(scene["edof"]["per_radius"]["radius_px"])
     edof = np.array(scene["edof"]["per_radius"]["psnr"])
@@ -58,6 +58,6 @@ def test_edof_gain_is_largest_in_the_periphery(evaluated):
 def test_edof_beats_stopped_down_in_low_light(evaluated):
     """At 0.5 lux (paper Fig. 10 exposures) the F11 ISO 1600 image is noise-limited and
     the deconvolved F2.8 sweep is closer to the ground truth. (At 50 lux it is not in
-    these renders: see README, "Focal sweep against stopping down".)"""
+    these renders: see docs/reference/datasets.md, "Focal sweep against stopping down".)"""
     name, scene = evaluated
     assert scene["edof_0.5lux"]["psnr"] > scene["stopped_0.5lux"]["psnr"], name

@@ -70,7 +70,7 @@ def test_focus_comparison_resolves_small_changes():
     assert abs(base.radial_sensor_mm - base.tangential_sensor_mm) > 100 * TOL_MM
 
 
-# The paper's sweep ranges as the README gives them (mm, two decimals).
+# The paper's sweep ranges as docs/reference/sweep-design.md gives them (mm, two decimals).
 PAPER_RANGES = {"sphere": (339.00, 364.25), "paraboloid": (365.47, 387.11),
                 "paraboloid_tilted": (362.84, 389.52)}
 

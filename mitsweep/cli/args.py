@@ -67,7 +67,7 @@ def add_photo_arguments(p: argparse.ArgumentParser) -> None:
                         "as-shot multipliers)")
     p.add_argument("--transfer", choices=TRANSFERS, default=None,
                    help="force the transfer function of a TIFF, PNG or JPEG (default: "
-                        "from its metadata; see the README)")
+                        "from its metadata; see docs/reference/photos.md)")
 
 
 def photo_options(args: argparse.Namespace) -> dict:

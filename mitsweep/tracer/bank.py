@@ -33,7 +33,7 @@ __all__ = ["ipsf_bank", "field_radius", "grid_points"]
 
 logger = logging.getLogger(__name__)
 
-#: Rays per IPSF in a bank: ~0.05 s each on 2 cores; L1 error ~1e-2 (see README table).
+#: Rays per IPSF in a bank: ~0.05 s each on 2 cores; L1 error ~1e-2 (docs/reference/tracer.md).
 #: The default of :class:`~mitsweep.tracer.settings.TraceSettings` (``rays``).
 BANK_RAYS = TraceSettings().rays
 

@@ -3,7 +3,7 @@ versus seconds, for the exact sweep deposit, stratified sweep times and the pape
 N-plane sum.
 
 Run ``python -m mitsweep.tracer.convergence [--quick] [--json]`` to reproduce the table
-in the README. The reference is an exact-method IPSF with 2^28 rays and a different
+in docs/reference/tracer.md. The reference is an exact-method IPSF with 2^28 rays and a different
 seed from the runs it judges; its own Monte Carlo error is reported (the L1 between two
 such references).
 """

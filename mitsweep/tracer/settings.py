@@ -28,7 +28,7 @@ __all__ = ["TraceSettings", "settings_from_keywords", "METHODS", "DEFAULT_RAYS",
 METHODS = ("exact", "continuous", "planes")
 DEFAULT_RAYS = 1_000_000
 DEFAULT_KERNEL_SIZE = 31
-#: Stratified sweep times per ray. Measured (README convergence table): 1 and 4 reach
+#: Stratified sweep times per ray. Measured (docs/reference/tracer.md, convergence): 1 and 4 reach
 #: the same L1 error per second; 4 halves the error at a given ray count.
 DEFAULT_TIME_SAMPLES = 4
 #: Focal planes of ``method="planes"`` unless given.

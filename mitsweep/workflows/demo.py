@@ -27,7 +27,7 @@ __all__ = ["run_demo", "DEMO_SPP"]
 #: independent samples it had). The focused image's error is its blur (20 dB): 64 spp
 #: move it by 0.1 dB. The F11 image (28 dB) keeps about its old noise at 144
 #: stratified spp. The sweep keeps 512 independent spp: the EDOF image's Wiener NSR is
-#: estimated from the sweep's own noise (see README, "Validation on ground truth").
+#: estimated from the sweep's own noise (docs/reference/datasets.md, "Measured on the paper's three setups").
 DEMO_SPP = {"pinhole": 64, "focused": 64, "sweep": 512, "stopped": 144}
 #: Files the demo writes under --out besides the dataset and the images' PNGs.
 _OUTPUTS = ("focal_surfaces.png", "evaluation.json", "psnr_per_radius.png", "report.json",
