@@ -19,7 +19,8 @@ from .errors import (CaptureInterrupted, DeviceError, DeviceFault, HostTooSlow, 
 from .plan import CapturePlan, plan_capture
 from .record import CaptureRecord, load_capture_record, measured_motion
 
-__all__ = ["RigPorts", "capture", "run_capture", "safety_summary", "CaptureInterrupted", "CapturePlan", "plan_capture",
+__all__ = ["RigPorts", "capture", "run_capture", "safety_summary", "CaptureInterrupted", "CapturePlan",
+           "plan_capture",
            "CaptureRecord", "load_capture_record", "measured_motion", "PlanError",
            "PortUnavailable", "RigError", "ProtocolError", "ReplyTimeout", "PortLost",
            "DeviceError", "DeviceFault", "HostTooSlow"]

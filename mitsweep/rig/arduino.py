@@ -77,7 +77,7 @@ import logging
 import re
 import time
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout, RigError
 from .interfaces import Shutter, Stage, StageState

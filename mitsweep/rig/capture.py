@@ -184,7 +184,7 @@ class _SignalGuard:
         self.during_safety: list[str] = []
         self._previous: dict[int, object] = {}
 
-    def install(self) -> "_SignalGuard":
+    def install(self) -> _SignalGuard:
         if threading.current_thread() is threading.main_thread():
             for name in CAPTURE_SIGNALS:
                 signum = getattr(signal, name)

@@ -401,7 +401,8 @@ def plan_capture(setup: Setup, *, stage: str = "arduino",
         soft_limit_min_mm=lo, soft_limit_max_mm=hi,
         approach_steps=approach_steps, open_steps=open_steps, close_steps=close_steps,
         end_steps=end_steps, planned_exposure_s=planned_exposure,
-        ramp_time_s=sweep.ramp_time, sweep_duration_s=sweep.duration, positioning_velocity_mm_s=rig.max_velocity,
+        ramp_time_s=sweep.ramp_time, sweep_duration_s=sweep.duration,
+        positioning_velocity_mm_s=rig.max_velocity,
         positioning_acceleration_mm_s2=rig.acceleration)
 
 

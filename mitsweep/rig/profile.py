@@ -241,8 +241,8 @@ def quantise_table(times_s: np.ndarray, travel_steps: np.ndarray, *, stage: str,
     crosses a whole step next to each knot (the one crossed nearest in time: the
     profile's own step times), so every segment's rate is the profile's mean velocity
     between two of its step crossings, at most its peak: quantisation never asks for
-    more than the profile does. The last boundary is the exposure's end. Returns (steps, durations s, driver values, the
-    table's time at the last knot).
+    more than the profile does. The last boundary is the exposure's end. Returns (steps,
+    durations s, driver values, the table's time at the last knot).
 
     Arduino durations are whole µs (cumulative rounding), at least the firmware's
     ``max_rate`` allows for their steps; Zaber segments get the ``maxspeed`` data value

@@ -47,7 +47,8 @@ import json
 import logging
 import platform
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 

@@ -24,7 +24,8 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
+from collections.abc import Callable
 
 from .errors import PortLost, PortUnavailable, ProtocolError, ReplyTimeout  # noqa: F401
 

@@ -28,7 +28,7 @@ import logging
 import re
 import time
 from dataclasses import dataclass
-from typing import Iterable
+from collections.abc import Iterable
 
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
 from .interfaces import Stage, StageState

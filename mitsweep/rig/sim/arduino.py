@@ -11,7 +11,7 @@ after the shutter was released and the motor stopped).
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
 from ...optics.kinematics import Trapezoid
 from ..arduino import (FIRMWARE_NAME, MAX_SEGMENT_STEPS, MAX_STEP_RATE, MAX_TABLE_SEGMENTS,

@@ -73,7 +73,7 @@ class PtyDevice:
         self._thread = threading.Thread(target=self._run, name=f"sim-{self.port}", daemon=True)
         self._lock = threading.Lock()
 
-    def __enter__(self) -> "PtyDevice":
+    def __enter__(self) -> PtyDevice:
         self.start()
         return self
 

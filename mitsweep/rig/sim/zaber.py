@@ -19,7 +19,7 @@ Speeds and accelerations are held as the protocol's data values (``maxspeed``,
 from __future__ import annotations
 
 import re
-from typing import Iterable
+from collections.abc import Iterable
 
 from ..transport import ZaberChecksum
 from ..zaber import ACCEL_UNIT, SPEED_UNIT
