@@ -81,7 +81,10 @@ SETUP_KNOWN_FAILURES = {
 #: where the rim is at 1.54; paraboloid_mei_2 at +9% and +35%: 9 px off).
 GUESS_FAILURES = {("paraboloid_mei.jpg", -0.35): "the mount's inner edge is nearer",
                   ("paraboloid_mei_2.jpg", 0.09): "the mount's inner edge is nearer",
-                  ("paraboloid_mei_2.jpg", 0.35): "the mount's inner edge is nearer"}
+                  ("paraboloid_mei_2.jpg", 0.35): "the mount's inner edge is nearer",
+                  # found at +9% only: the draped Mylar hides the limb's top
+                  ("sphere_pageos_nasa.png", -0.35): "prominence 2.67 < 3 (Mylar hides the top)",
+                  ("sphere_pageos_nasa.png", 0.35): "prominence 2.57 < 3 (Mylar hides the top)"}
 
 
 def _rough_cases():
