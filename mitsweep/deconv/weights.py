@@ -47,12 +47,14 @@ independent blur it lands within 0.05 dB of the oracle (:mod:`mitsweep.deconv.we
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Callable
 
 import numpy as np
 import scipy.fft as sfft
+from threadpoolctl import threadpool_limits
 
 from ..io.bank import BankError, IPSFBank
 from ..optics.pixels import optical_center_px
@@ -125,6 +127,19 @@ def noise_variance(image: np.ndarray, noise: SensorNoise | float | None = None, 
     return float(np.mean([noise.variance(x) for x in xs])) * lv * lv
 
 
+def _one_blas_thread(fn):
+    """Run ``fn`` on one BLAS thread: its sums (``einsum``, ``tensordot``, ``dot``) then
+    add in one order, so the NSR is the same to the bit in a serial run, a process pool
+    and a Dask worker (measured: 1 and 2 OpenBLAS threads differ in the 9th digit, which
+    changed a dataset's EDOF bytes between executors)."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with threadpool_limits(limits=1, user_api="blas"):
+            return fn(*args, **kwargs)
+    return wrapper
+
+
+@_one_blas_thread
 def kernel_shares(bank: IPSFBank, image_shape: tuple[int, ...], *,
                   mask: np.ndarray | None = None,
                   center: tuple[float, float] | None = None) -> np.ndarray:
@@ -198,6 +213,7 @@ def _kernel_power(kernels: np.ndarray, L: int) -> np.ndarray:
     return np.abs(sfft.fft2(big, axes=(-2, -1), workers=-1)) ** 2
 
 
+@_one_blas_thread
 def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
                 floor_var: float | None = None, mask: np.ndarray | None = None,
                 depth_mm: float | str | None = None,
@@ -263,6 +279,7 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
     return math.exp(t), (lambda nsr: risk_log(math.log(float(nsr))))
 
 
+@_one_blas_thread
 def unexplained_variance(image: np.ndarray, bank: IPSFBank, *,
                          mask: np.ndarray | None = None, depth_mm: float | str | None = None,
                          center: tuple[float, float] | None = None,
@@ -319,6 +336,7 @@ def high_frequency_floor(image: np.ndarray, *, band: float = 0.45) -> float:
     return float(np.mean(p[sel])) if sel.any() else float(p[-1])
 
 
+@_one_blas_thread
 def model_nsr(image: np.ndarray, bank: IPSFBank,
               noise: SensorNoise | float | None = None, *, mask: np.ndarray | None = None,
               level: float = 1.0, extra_variance: float = 0.0,
@@ -386,6 +404,7 @@ def blind_noise_variance(image: np.ndarray) -> float:
     return min(float(estimate_noise_sigma(image)) ** 2, high_frequency_floor(image))
 
 
+@_one_blas_thread
 def blind_nsr(image: np.ndarray, bank: IPSFBank, *, mask: np.ndarray | None = None,
               depth_mm: float | str | None = None,
               center: tuple[float, float] | None = None, n_px: float | None = None) -> float:
