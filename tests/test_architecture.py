@@ -26,7 +26,7 @@ TOP = "mitsweep"
 
 # The base every unit may import: the package itself (its __version__), the setup
 # dataclasses and the resource guard.
-BASE = {TOP, "config", "resources"}
+BASE = {TOP, "config", "resources", "deprecation"}
 ANY = None  # marks a unit that may import every other unit
 
 # First-party units (subpackages and top-level modules) → the units each may import
@@ -34,6 +34,7 @@ ANY = None  # marks a unit that may import every other unit
 LAYERS = {
     "config": set(),
     "resources": set(),
+    "deprecation": set(),   # renamed names kept for one release (the vocabulary rule)
     "io": set(),
     "optics": set(),
     "backend": set(),
