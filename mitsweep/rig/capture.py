@@ -57,7 +57,10 @@ import signal
 import threading
 import time
 from dataclasses import dataclass, field
+from collections.abc import Callable
 from pathlib import Path
+from types import FrameType
+from typing import Any
 
 import numpy as np
 
@@ -94,6 +97,9 @@ POLL_PERIOD_S = 0.01
 #: on two cores); three in a row is a host that cannot run this capture.
 SHUTTER_ATTEMPTS = 3
 #: Signals that run the safety path (those that exist on this platform).
+#: What :func:`signal.signal` returns and takes: a handler, SIG_DFL/SIG_IGN, or None (one
+#: not installed from Python).
+_Handler = Callable[[int, FrameType | None], Any] | int | signal.Handlers | None
 CAPTURE_SIGNALS = tuple(name for name in ("SIGINT", "SIGTERM", "SIGHUP")
                         if hasattr(signal, name))
 
@@ -182,7 +188,7 @@ class _SignalGuard:
     def __init__(self) -> None:
         self.armed = True
         self.during_safety: list[str] = []
-        self._previous: dict[int, object] = {}
+        self._previous: dict[int, _Handler] = {}
 
     def install(self) -> _SignalGuard:
         if threading.current_thread() is threading.main_thread():
@@ -208,10 +214,11 @@ class _SignalGuard:
 
 def _safe_stop(dev: _Devices, record: CaptureRecord) -> None:
     """Release the shutter, then stop the stage; every step is recorded, none raises."""
-    if dev.zaber is not None:
+    zaber = dev.zaber
+    if zaber is not None:
         steps = [("arduino", "release shutter (STOP)", "shutter released",
                   lambda: dev.arduino.safe_stop()),
-                 ("zaber", "stop stage", "stage stopped", lambda: dev.zaber.safe_stop())]
+                 ("zaber", "stop stage", "stage stopped", lambda: zaber.safe_stop())]
     else:
         steps = [("arduino", "release shutter and stop stage (STOP)",
                   "shutter released and stage stopped", lambda: dev.arduino.safe_stop())]
@@ -337,7 +344,7 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
     """The host-timed sweep, attempted up to :data:`SHUTTER_ATTEMPTS` times: an attempt
     whose shutter timing the host cannot vouch for is abandoned (shutter released, stage
     stopped and sent back to the approach position) before its exposure counts."""
-    a, z = dev.arduino, dev.zaber
+    a, z = dev.arduino, _zaber_of(dev)
     allowed_s = _shutter_timing_allowance_s(plan)
     if plan.profile is not None:
         z.load_stream(_stream_lines(plan), accel=accel_data(plan.acceleration_mm_s2,
@@ -384,11 +391,20 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
     record.set_stage_samples(z.samples)
 
 
+def _zaber_of(dev: _Devices) -> ZaberStage:
+    """The Zaber stage of a rig in ``zaber`` mode (a :class:`ValueError` without one)."""
+    if dev.zaber is None:
+        raise ValueError("a Zaber sweep needs a Zaber stage (RigPorts.zaber)")
+    return dev.zaber
+
+
 def _stream_lines(plan: CapturePlan) -> list[tuple[int, int]]:
     """A profile's Zaber stream: ``(target microsteps, maxspeed data)`` of each line —
     to the open position at the entry speed, one line per table segment, and on to the
     end position at the exit speed."""
     p = plan.profile
+    if p is None:
+        raise ValueError("a Zaber stream needs a plan with a motion profile")
     knots = plan.open_steps + plan.direction * np.cumsum(p.steps)
     return ([(plan.open_steps, p.driver[0])]
             + [(int(x), v) for x, v in zip(knots, p.driver)]
@@ -400,7 +416,7 @@ def _time_to_open_s(plan: CapturePlan) -> float:
     if plan.profile is None:
         move = Trapezoid(abs(plan.end_mm - plan.approach_mm), plan.velocity_actual_mm_s,
                          plan.acceleration_mm_s2)
-        return move.time_at(abs(plan.open_mm - plan.approach_mm))
+        return float(move.time_at(abs(plan.open_mm - plan.approach_mm)))
     # the stream's first line: ramp from rest at tanaccel, then the entry speed
     v = speed_mm_s(plan.profile.driver[0], plan.steps_per_mm)
     a = accel_mm_s2(accel_data(plan.acceleration_mm_s2, plan.steps_per_mm), plan.steps_per_mm)
@@ -417,7 +433,7 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
     """Start the move and time the shutter; returns the placement uncertainty (s): the
     host's time from sending the move to the SHUTTER reply, which bounds how far from
     ``t_to_open`` after the move's start the shutter opens."""
-    a, z = dev.arduino, dev.zaber
+    a, z = dev.arduino, _zaber_of(dev)
     if plan.profile is None:
         z.set_motion(plan.velocity_actual_mm_s, plan.acceleration_mm_s2)
     # time from the start of the move to the open position: ramp, then cruise
@@ -508,7 +524,7 @@ def run_capture(setup: Setup, ports: RigPorts, *, out: str | Path | None = None,
         except BaseException as exc:
             guard.armed = False                    # nothing may cut the safety path short
             _stop_and_record(dev, record, exc, guard)
-            exc.capture_record = record
+            exc.capture_record = record  # type: ignore[attr-defined]  # any exception carries it
             raise
         record.save()
         if guard.during_safety:

@@ -38,11 +38,12 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import asdict, dataclass
+from typing import overload
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
-from ..config import Setup
+from ..config import Rig, Setup
 from ..optics.kinematics import Trapezoid
 from ..optics.motion import MotionProfile
 from ..optics.sweep import SweepRange
@@ -177,7 +178,14 @@ class CapturePlan:
     def end_mm(self) -> float:
         return self.mm(self.end_steps)
 
-    def sensor_distance(self, position_mm: ArrayLike) -> float | NDArray[np.float64]:
+    @overload
+    def sensor_distance(self, position_mm: float) -> float: ...
+
+    @overload
+    def sensor_distance(self, position_mm: NDArray[np.float64]) -> NDArray[np.float64]: ...
+
+    def sensor_distance(self, position_mm: float | NDArray[np.float64]
+                        ) -> float | NDArray[np.float64]:
         """Sensor distance (mm) at stage position(s) ``position_mm``."""
         return self.sensor_distance_at_zero_mm + self.sensor_direction * position_mm
 
@@ -372,7 +380,7 @@ def plan_capture(setup: Setup, *, stage: str = "arduino",
                         f"{rig.min_exposure_s:g} .. {rig.max_exposure_s:g} s "
                         f"(rig.min_exposure_s, rig.max_exposure_s); change sweep.velocity")
 
-    lo, hi = rig.soft_limit_min, rig.soft_limit_max
+    lo, hi = _soft_limits(rig)
     span = (travel_steps + 2 * margin) / spm
     if span > hi - lo + 1e-9:
         raise PlanError(f"the sweep needs {span:.4f} mm of stage travel (sensor travel "
@@ -406,12 +414,19 @@ def plan_capture(setup: Setup, *, stage: str = "arduino",
         positioning_acceleration_mm_s2=rig.acceleration)
 
 
-def _sensor_mapping(rig, lo_s: float, hi_s: float) -> tuple[float, str]:
+def _soft_limits(rig: Rig) -> tuple[float, float]:
+    """The rig's soft limits, mm (stage coordinates); an absent upper one is the travel,
+    as :class:`~mitsweep.config.Rig` resolves it."""
+    hi = rig.travel if rig.soft_limit_max is None else rig.soft_limit_max
+    return rig.soft_limit_min, hi
+
+
+def _sensor_mapping(rig: Rig, lo_s: float, hi_s: float) -> tuple[float, str]:
     """``s_0`` of ``s = s_0 + δ x`` and how it was found: the rig's calibration, or the
     sensor span ``lo_s .. hi_s`` centred within the soft limits."""
     if rig.sensor_distance_at_zero is not None:
         return rig.sensor_distance_at_zero, "calibrated"
-    lo, hi = rig.soft_limit_min, rig.soft_limit_max
+    lo, hi = _soft_limits(rig)
     return 0.5 * (lo_s + hi_s) - rig.sensor_direction * 0.5 * (lo + hi), \
         "centred (uncalibrated rig)"
 
@@ -486,7 +501,7 @@ def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> Captur
     close_steps = open_steps + direction * table.total_steps
     approach_steps = open_steps - direction * (entry_ramp + settle)
     end_steps = close_steps + direction * (settle + exit_ramp)
-    lo, hi = rig.soft_limit_min, rig.soft_limit_max
+    lo, hi = _soft_limits(rig)
     span = abs(end_steps - approach_steps) / spm
     if span > hi - lo + 1e-9:
         raise PlanError(f"the profile needs {span:.4f} mm of stage travel (sensor travel "

@@ -345,7 +345,7 @@ def measured_motion(record: Mapping[str, Any] | str | Path, *, require_complete:
     >>> from mitsweep.optics.motion import MotionProfile        # doctest: +SKIP
     >>> profile = MotionProfile.tabulated(*measured_motion("capture.json"))  # doctest: +SKIP
     """
-    if not isinstance(record, dict):
+    if not isinstance(record, Mapping):
         record = load_capture_record(record)
     if require_complete and not record.get("complete"):
         raise ValueError(f"capture record marked incomplete (status {record.get('status')!r}: "

@@ -71,13 +71,13 @@ class Move:
         self.duration = self.profile.duration
 
     def distance(self, t: float) -> float:
-        return self.profile.position_at(t - self.t0)
+        return float(self.profile.position_at(t - self.t0))
 
     def position(self, t: float) -> float:
         return self.x0 + self.sign * self.distance(t)
 
     def time_at(self, d: float) -> float:
-        return self.t0 + self.profile.time_at(d)
+        return self.t0 + float(self.profile.time_at(d))
 
     @property
     def end_time(self) -> float:
