@@ -33,17 +33,22 @@ import logging
 import math
 import re
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal
 from pathlib import Path
 
 import numpy as np
-from matplotlib.figure import Figure
+from matplotlib.figure import Figure, SubFigure
+from matplotlib.layout_engine import ConstrainedLayoutEngine
 from numpy.typing import ArrayLike
 
 from .config import Setup
 from .io.atomic import atomic_path
 from .io.bank import IPSFBank
 from .optics.sweep import SweepRange
+
+if TYPE_CHECKING:
+    from matplotlib.image import AxesImage
+    from matplotlib.typing import HashableList, LineStyleType
 
 __all__ = ["check_figure_path", "new_figure", "save_figure", "plot_focal_surfaces",
            "plot_ipsf", "plot_bank", "plot_table1", "plot_per_radius", "plot_psf_planes",
@@ -103,7 +108,8 @@ def check_figure_path(path: str | Path, flag: str | None = None) -> Path:
 
 
 def new_figure(*args: int, figsize: tuple[float, float] = (7.0, 4.5),
-               layout: str | None = "constrained", **kwargs: Any) -> tuple[Figure, Any]:
+               layout: Literal["constrained", "compressed", "tight"] | None = "constrained",
+               **kwargs: Any) -> tuple[Figure, Any]:
     """A new figure and its axes: ``Figure(figsize, layout).subplots(*args, **kwargs)``.
 
     Parameters
@@ -140,11 +146,19 @@ def save_figure(fig: Figure, path: str | Path, dpi: int = DPI) -> Path:
 
     p = Path(path)
     fmt = _format_of(p)
-    extra = {"metadata": {"Creator": f"mitsweep {__version__}"}} if fmt in _TAGGED else {}
+    extra: dict[str, Any] = ({"metadata": {"Creator": f"mitsweep {__version__}"}}
+                             if fmt in _TAGGED else {})
     with atomic_path(p) as tmp:
         fig.savefig(tmp, dpi=dpi, bbox_inches="tight", format=fmt, **extra)
     logger.info("wrote %s", p)
     return p
+
+
+def _subfigures(fig: Figure, nrows: int, ncols: int, **kwargs: Any) -> list[SubFigure]:
+    """``fig.subfigures(nrows, ncols, **kwargs)`` as a flat list in row-major order, one
+    subfigure included (matplotlib returns that one bare)."""
+    found = fig.subfigures(nrows, ncols, squeeze=False, **kwargs)
+    return [found] if isinstance(found, SubFigure) else list(found.flat)
 
 
 def _legend_outside(ax) -> None:
@@ -207,7 +221,7 @@ def plot_focal_surfaces(setup: Setup, sweep: SweepRange, path: str | Path,
     return _save_all(fig, path)
 
 
-def _thumbnail(ax, kernel, pitch_um: float, title: str):
+def _thumbnail(ax, kernel, pitch_um: float, title: str) -> AxesImage:
     """Draw a kernel normalised to its maximum on ``ax``, in µm about its centre pixel;
     return the image (for a colour bar, 0 to 1)."""
     k = np.asarray(kernel, dtype=np.float64)
@@ -286,18 +300,18 @@ def plot_bank(bank: IPSFBank, path: str | Path, *,
     idx = np.unique(np.linspace(0, n - 1, min(n, max_thumbs)).round().astype(int))
     cols = max(len(idx), 2)
     pitch_um = bank.pixel_pitch * 1e3
-    fig = Figure(figsize=(max(1.6 * cols + 1.2, 8.0), 6.4), layout="constrained")
-    fig.get_layout_engine().set(h_pad=0.1)   # inches; room between the rows' titles
-    top, bottom = fig.subfigures(2, 1, height_ratios=(1.0, 1.35))
+    # h_pad in inches: room between the rows' titles
+    fig = Figure(figsize=(max(1.6 * cols + 1.2, 8.0), 6.4),
+                 layout=ConstrainedLayoutEngine(h_pad=0.1))
+    top, bottom = _subfigures(fig, 2, 1, height_ratios=(1.0, 1.35))
     thumbs = top.subplots(1, cols, sharex=True, sharey=True, squeeze=False)[0]
-    im = None
-    for j, i in enumerate(idx):
-        u, v = bank.points_uv[i]
-        im = _thumbnail(thumbs[j], kernels[0, i], pitch_um, f"({u:.2f}, {v:.2f}) mm")
+    images = [_thumbnail(thumbs[j], kernels[0, i], pitch_um,
+                         "({:.2f}, {:.2f}) mm".format(*bank.points_uv[i]))
+              for j, i in enumerate(idx)]
     for ax in thumbs[len(idx):]:
         ax.set_visible(False)
     thumbs[0].set_ylabel("v (µm)", fontsize=7)
-    top.colorbar(im, ax=list(thumbs), label="intensity / maximum", shrink=0.9)
+    top.colorbar(images[-1], ax=list(thumbs), label="intensity / maximum", shrink=0.9)
     top.suptitle(f"IPSFs across the field, depth {_depth_text(bank.depths_mm[0])}",
                  fontsize=9)
     panels = bottom.subplots(1, max(len(sections), 1), squeeze=False)[0]
@@ -381,11 +395,11 @@ OTHER_IMAGE_COLOR = "tab:purple"
 #: Entries per column of the per-radius key (more light levels: more columns).
 LEGEND_ROWS = 20
 #: Line style and marker of the noise-free images in :func:`plot_per_radius`.
-CLEAN_STYLE = ("-", "o")
+CLEAN_STYLE: tuple[LineStyleType, str] = ("-", "o")
 #: Line styles and markers of the light levels, brightest first: level k gets style
 #: k mod 3 and marker k mod 11, so 33 levels (3 × 11, coprime) get distinct pairs, more
 #: than a dataset holds (mitsweep.pipeline.MAX_LIGHT_LEVELS).
-LIGHT_DASHES = ("--", "-.", ":")
+LIGHT_DASHES: tuple[LineStyleType, ...] = ("--", "-.", ":")
 LIGHT_MARKERS = ("s", "^", "v", "D", "P", "X", "*", "p", "h", "<", ">")
 _LUX_NAME = re.compile(r"(?P<base>.+)_(?P<lux>[0-9.e+-]+)lux")
 
@@ -420,14 +434,15 @@ def plot_per_radius(results: dict, path: str | Path) -> Path:
     entries = {name: e for name, e in first.items() if isinstance(e, dict)}
     levels = sorted({lux for lux in (_image_kind(n)[1] for n in entries) if lux is not None},
                     reverse=True)
-    style_of = {None: CLEAN_STYLE}
+    style_of: dict[float | None, tuple[LineStyleType, str]] = {None: CLEAN_STYLE}
     style_of.update({lux: (LIGHT_DASHES[k % len(LIGHT_DASHES)],
                            LIGHT_MARKERS[k % len(LIGHT_MARKERS)])
                      for k, lux in enumerate(levels)})
     from matplotlib.lines import Line2D
 
     fig, ax = new_figure(figsize=(8.5, 4.8))
-    kinds, lights = {}, {}
+    kinds: dict[str, str] = {}
+    lights: dict[float | None, str] = {}
     for base, lux, entry in sorted(((*_image_kind(n), e) for n, e in entries.items()),
                                    key=lambda t: (t[0], -math.inf if t[1] is None else -t[1])):
         ls, marker = style_of[lux]
@@ -532,7 +547,8 @@ def plot_error_budget(budget: dict, path: str | Path, *, title: str | None = Non
 # -- the paper's figures (mitsweep figures: mitsweep.pipeline.figures) ------------------
 
 #: Line style and marker of each depth's cross-section in Figs. 4 and 5, nearest first.
-DEPTH_STYLES = (("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"))
+DEPTH_STYLES: tuple[tuple[LineStyleType, str], ...] = (
+    ("-", "o"), ("--", "s"), (":", "^"), ("-.", "D"), ((0, (5, 1, 1, 1)), "v"))
 #: Colours of the radial and tangential cross-sections (the paper's blue and red).
 DIRECTION_COLORS = {"radial": "tab:blue", "tangential": "tab:red"}
 #: Colour of the rectangles marking the magnified regions of Figs. 9 and 10.
@@ -669,15 +685,13 @@ def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
                              f"got {len(per_depth)}")
     pitch_um = pitch_mm * 1e3
     fig = Figure(figsize=(max(1.7 * n + 1.4, 9.0), 7.0), layout="constrained")
-    top, bottom = fig.subfigures(2, 1, height_ratios=(1.0, 1.5))
+    top, bottom = _subfigures(fig, 2, 1, height_ratios=(1.0, 1.5))
     thumbs = top.subplots(1, n, sharex=True, sharey=True, squeeze=False)[0]
-    im = None
-    for j in range(n):
-        im = _thumbnail(thumbs[j], k[0, j], pitch_um, positions[j])
+    images = [_thumbnail(thumbs[j], k[0, j], pitch_um, positions[j]) for j in range(n)]
     half = _energy_half_extent(k, pitch_um)
     _set_window(thumbs, half)
     thumbs[0].set_ylabel("v (µm)", fontsize=7)
-    top.colorbar(im, ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
+    top.colorbar(images[-1], ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
     top.suptitle(f"{title}: IPSFs across the mirror, {_depth_label(depths_mm[0])}",
                  fontsize=10)
     _section_panels(bottom, sections, depths_mm, pitch_um, half_um=half,
@@ -803,16 +817,15 @@ def plot_pipeline(steps: Sequence[dict], path: PathOrPaths, *,
     rows = [list(steps[i:i + 3]) for i in range(0, len(steps), 3)]
     kernels = np.asarray(bank_kernels, dtype=np.float64)
     fig = Figure(figsize=(12.0, 1.9 + 3.9 * len(rows)), layout="constrained")
-    top, bottom = fig.subfigures(2, 1, height_ratios=(1.6, 3.9 * len(rows)))
+    top, bottom = _subfigures(fig, 2, 1, height_ratios=(1.6, 3.9 * len(rows)))
     thumbs = top.subplots(1, len(kernels), sharex=True, sharey=True, squeeze=False)[0]
-    im = None
-    for j, k in enumerate(kernels):
-        im = _thumbnail(thumbs[j], k, pitch_mm * 1e3, bank_positions[j])
+    images = [_thumbnail(thumbs[j], k, pitch_mm * 1e3, bank_positions[j])
+              for j, k in enumerate(kernels)]
     _set_window(thumbs, _energy_half_extent(kernels, pitch_mm * 1e3))
     thumbs[0].set_ylabel("v (µm)", fontsize=7)
-    top.colorbar(im, ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
+    top.colorbar(images[-1], ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
     top.suptitle("(a) the IPSF bank the deconvolution uses (depth 50 cm)", fontsize=9)
-    mosaic = [[f"{r}:{j}" for j, _ in enumerate(row) for _ in range(6 // len(row))]
+    mosaic: list[HashableList[str]] = [[f"{r}:{j}" for j, _ in enumerate(row) for _ in range(6 // len(row))]
               for r, row in enumerate(rows)]
     axes = bottom.subplot_mosaic(mosaic)
     for r, row in enumerate(rows):
@@ -860,8 +873,7 @@ def plot_insets(images: Sequence[tuple[str, np.ndarray]], path: PathOrPaths, *,
 
     n_img, n_reg = len(images), len(regions)
     fig = Figure(figsize=(5.0 * n_img, 5.0 + 5.0 / n_reg + 0.6), layout="constrained")
-    cols = fig.subfigures(1, n_img, wspace=0.02)
-    cols = np.atleast_1d(cols)
+    cols = _subfigures(fig, 1, n_img, wspace=0.02)
     x0, y0, w, h = crop if crop is not None else (0, 0, images[0][1].shape[1],
                                                   images[0][1].shape[0])
     for sub, (name, image) in zip(cols, images):

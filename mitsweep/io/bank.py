@@ -211,7 +211,7 @@ def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = True) ->
     p = Path(path)
     if p.suffix != ".npz":
         raise BankError(f"{p}: a bank file must end in .npz")
-    arrays = {
+    arrays: dict[str, np.ndarray] = {
         "kernels": np.asarray(bank.kernels, dtype=np.float32),
         "points_uv": np.asarray(bank.points_uv, dtype=np.float64),
         "depths_mm": np.asarray(bank.depths_mm, dtype=np.float64),
@@ -238,7 +238,8 @@ def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = True) ->
             if reproducible:
                 _savez_fixed_time(f, arrays)
             else:
-                np.savez_compressed(f, **arrays)
+                # numpy's stub reads a ** mapping as possibly holding allow_pickle (a bool)
+                np.savez_compressed(f, **arrays)  # type: ignore[arg-type]
     return p
 
 

@@ -61,7 +61,7 @@ import threading
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 from collections.abc import Mapping
 
 import numpy as np
@@ -271,9 +271,10 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
 
     if transfer not in (None, "linear"):
         raise CameraFileError(f"{p}: a RAW file is linear; transfer {transfer!r} does not apply")
-    wb_args = {"camera": dict(use_camera_wb=True), "daylight": dict(use_camera_wb=False),
-               "auto": dict(use_auto_wb=True),
-               "none": dict(user_wb=[1.0, 1.0, 1.0, 1.0])}[white_balance]
+    wb_choices: dict[str, dict[str, Any]] = {
+        "camera": dict(use_camera_wb=True), "daylight": dict(use_camera_wb=False),
+        "auto": dict(use_auto_wb=True), "none": dict(user_wb=[1.0, 1.0, 1.0, 1.0])}
+    wb_args = wb_choices[white_balance]
     try:
         with _library_chatter() as said:
             with rawpy.imread(str(p)) as raw:
@@ -460,7 +461,8 @@ def _read_tiff(p: Path, *, warnings, white_balance, transfer):
     try:
         with _library_chatter() as said:
             with tifffile.TiffFile(str(p)) as tf:
-                page = tf.pages[0]
+                # the first page is always a whole TiffPage (only later ones may be frames)
+                page = cast("tifffile.TiffPage", tf.pages[0])
                 if page.photometric == 32803:
                     raise CameraFileError(f"{p}: a raw CFA (Bayer) TIFF; give it a .dng "
                                           f"suffix to read it through LibRaw")

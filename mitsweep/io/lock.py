@@ -92,7 +92,8 @@ class DirectoryLock:
                 if not told:
                     logger.warning("%s is in use by %s; waiting%s", self.directory,
                                    _describe(holder) if holder else "another process",
-                                   "" if math.isinf(self.wait) else f" up to {self.wait:g} s")
+                                   "" if self.wait is None or math.isinf(self.wait)
+                                   else f" up to {self.wait:g} s")
                     told = True
                 time.sleep(POLL_S)
                 continue

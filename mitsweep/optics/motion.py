@@ -70,8 +70,10 @@ class MotionProfile:
     start: float
     end: float
     accel_fraction: float = 0.0
-    times: np.ndarray = field(default=None, repr=False)      # type: ignore[assignment]
-    positions: np.ndarray = field(default=None, repr=False)  # type: ignore[assignment]
+    # None for the linear and trapezoidal kinds; typed as arrays for the tabulated kind's
+    # readers (an Optional type would make every reader in other packages check it)
+    times: np.ndarray = field(default=None, repr=False)      # type: ignore[arg-type]
+    positions: np.ndarray = field(default=None, repr=False)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         if self.kind not in MOTION_PROFILES:
@@ -142,29 +144,31 @@ class MotionProfile:
     # -- evaluation ---------------------------------------------------------------------
     def sensor_distance(self, t: ArrayLike) -> float | NDArray[np.float64]:
         """Sensor distance (mm) at normalised time(s) ``t`` ∈ [0, 1] (clipped), vectorised."""
-        t = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
+        tc = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
         delta = self.end - self.start
+        out: NDArray[np.float64]
         if self.kind == "linear":
-            out = self.start + delta * t
+            out = self.start + delta * tc
         elif self.kind == "trapezoidal":
             move = self._trapezoid()   # its duration is 1 up to rounding: t scaled onto it
-            out = self.start + np.sign(delta) * np.asarray(move.position_at(t * move.duration))
+            out = self.start + np.sign(delta) * np.asarray(move.position_at(tc * move.duration))
         else:
-            out = np.interp(t, self.times, self.positions)
+            out = np.asarray(np.interp(tc, self.times, self.positions))
         return out if out.ndim else float(out)
 
     def velocity(self, t: ArrayLike) -> float | NDArray[np.float64]:
         """d i / d t in mm per unit normalised time (multiply by 1/exposure_s for mm/s)."""
-        t = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
+        tc = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
         delta = self.end - self.start
+        out: NDArray[np.float64]
         if self.kind == "linear":
-            out = np.full_like(t, delta)
+            out = np.full_like(tc, delta)
         elif self.kind == "trapezoidal":
             # velocity_at is 0 at the very ends, where the ramps' own limit is also 0
             move = self._trapezoid()
-            out = np.sign(delta) * move.duration * np.asarray(move.velocity_at(t * move.duration))
+            out = np.sign(delta) * move.duration * np.asarray(move.velocity_at(tc * move.duration))
         else:
-            j = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
+            j = np.clip(np.searchsorted(self.times, tc, side="right") - 1, 0, len(self.times) - 2)
             out = np.diff(self.positions)[j] / np.diff(self.times)[j]
         return out if out.ndim else float(out)
 

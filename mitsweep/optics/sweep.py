@@ -271,10 +271,10 @@ def mirror_zone(setup: Setup, fov_deg: float | None = None, *, reach_only: bool 
     return MirrorZone(start, float(end_fov), fov, reach)
 
 
-def _extreme(setup, zone: MirrorZone, depths, sign: float):
+def _extreme(setup, zone: MirrorZone, depths, sign: float) -> tuple[float, dict[str, object]]:
     """Min (sign=+1) or max (sign=−1) of D_m, D_s over the zone and the end depths."""
     xs = zone.grid()
-    best = None
+    best: tuple[float, dict[str, object]] | None = None
     for depth in depths:
         d_m, d_s = focal_image_axial_distances(setup, xs, depth)
         for name, dd in (("meridional", d_m), ("sagittal", d_s)):
@@ -290,6 +290,8 @@ def _extreme(setup, zone: MirrorZone, depths, sign: float):
             cand = (v_best, {"surface": name, "rho_mm": x_best, "depth_mm": float(depth)})
             if best is None or cand[0] < best[0]:
                 best = cand
+    if best is None:
+        raise ValueError("_extreme: no depth to evaluate")
     return sign * best[0], best[1]
 
 
@@ -327,7 +329,12 @@ def optimal_sweep_range(setup: Setup, *, fov_deg: float | None = None,
         raise SetupError(f"sweep.fov_deg: must be in (0, 360), got {fov_deg:g}")
     zone = mirror_zone(setup, fov_deg)
     depths = (dmin, dmax) if dmin != dmax else (dmin,)
-    if setup.sweep.focus_min is not None:
+    fmin: float
+    fmax: float
+    at_min: dict[str, object]
+    at_max: dict[str, object]
+    if setup.sweep.focus_min is not None and setup.sweep.focus_max is not None:
+        # both or neither (mitsweep.config.Sweep checks it)
         fmin, fmax = setup.sweep.focus_min, setup.sweep.focus_max
         at_min = at_max = {"surface": "given", "rho_mm": float("nan"), "depth_mm": float("nan")}
         source = "setup"
@@ -340,8 +347,8 @@ def optimal_sweep_range(setup: Setup, *, fov_deg: float | None = None,
         raise SetupError(f"sweep: the nearest focal image lies at {fmin:.3f} mm from the lens, "
                          f"at or inside the lens focal length ({f:g} mm); move the mirror "
                          f"farther than {f:g} mm plus its depth")
-    i_start = image_distance(f, fmin)
-    i_end = image_distance(f, fmax)
+    i_start = float(image_distance(f, fmin))
+    i_end = float(image_distance(f, fmax))
     translation = abs(i_start - i_end)
     return SweepRange(
         focus_min=float(fmin), focus_max=float(fmax),
