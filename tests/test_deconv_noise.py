@@ -117,7 +117,7 @@ def test_pixel_pitch_keeps_its_former_name_as_a_deprecated_alias():
     assert old == new
     with pytest.warns(DeprecationWarning, match="pixel_pitch"):
         assert new.pixel_size_mm == 0.0064
-    with pytest.warns(DeprecationWarning), pytest.raises(ValueError, match="not both"):
+    with pytest.warns(DeprecationWarning), pytest.raises(TypeError, match="not both"):
         SensorNoise(illuminance_lux=50.0, exposure_s=0.6, f_number=2.8, pixel_pitch=0.0064,
                     pixel_size_mm=0.0064)
     with pytest.warns(DeprecationWarning):

@@ -42,7 +42,7 @@ def case():
     """Truth, a two-depth synthetic bank (the 3 m kernels wider), a depth map with a near
     disc on a far wall, the mirror's disc as mask."""
     bank = synthetic_radial_bank(SHAPE, n_radii=9, size=11, extent_px=24.0,
-                                 depths_mm=(500.0, 3000.0))
+                                 depths=(500.0, 3000.0))
     k = np.asarray(bank.kernels).copy()
     from scipy.ndimage import gaussian_filter
 

@@ -102,7 +102,7 @@ def _mse_map(x: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 def _digest(a: np.ndarray) -> str:
     a = np.ascontiguousarray(a)
-    return hashlib.sha1(a.view(np.uint8).ravel()).hexdigest() + str(a.dtype) + str(a.shape)
+    return hashlib.sha1(a.view(np.uint8).ravel().data).hexdigest() + str(a.dtype) + str(a.shape)
 
 
 def oracle_weight(image: np.ndarray, truth: np.ndarray,
@@ -486,9 +486,9 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
         logger.info("budget step %s: oracle weight %.3g, MSE %.4g", name, w,
                     float(maps[-1][m].mean()))
     if restored is None:
+        wiener_kw: dict[str, Any] = {"noise": noise} if method == "wiener" else {}
         restored = deconvolve(np.asarray(observed, dtype=dt), bank, method=method,
-                              weight=weight, **({"noise": noise} if method == "wiener"
-                                                else {}), **kw)
+                              weight=weight, **wiener_kw, **kw)
     weights["weight"] = None if weight is None else float(weight)
     maps.append(_mse_map(restored, t))
     names = tuple(n for n, _ in steps) + ("weight",)

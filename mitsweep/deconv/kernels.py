@@ -146,7 +146,7 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
     for y in ys:
         for x in xs:
             u, v = pixel_to_sensor(y, x, (H, W), pitch)
-            r, th = np.hypot(u, v) / pitch, np.arctan2(v, u)
+            r, th = float(np.hypot(u, v)) / pitch, float(np.arctan2(v, u))
             pts[n] = (u, v)
             for d in range(kernels.shape[0]):
                 out[d, n] = rotate_kernel(interpolate_radial(kernels[d], rad, r), th)
@@ -188,7 +188,7 @@ def fill_invalid_nodes(bank: IPSFBank) -> IPSFBank:
 
 
 def _setup_resolution(meta: dict[str, Any]) -> tuple[int, int] | None:
-    setup = meta.get("setup") if isinstance(meta, dict) else None
+    setup: Any = meta.get("setup") if isinstance(meta, dict) else None
     try:
         w, h = setup["sensor"]["resolution"]
         return int(w), int(h)

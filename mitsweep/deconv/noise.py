@@ -31,14 +31,14 @@ References
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
-import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
+
+from ..deprecation import renamed_fields, renamed_keywords
 
 __all__ = ["SensorNoise", "PHOTONS_PER_LUX_S_M2", "paper_fig10_settings"]
 
@@ -63,6 +63,7 @@ def _check(name, value, lo=0.0, lo_open=True, hi=math.inf):
 ILLUMINANCE_RANGE_LUX = (1e-4, 1e6)
 
 
+@renamed_fields(pixel_size_mm="pixel_pitch")
 @dataclass(frozen=True, kw_only=True)
 class SensorNoise:
     """Sensor and exposure settings that fix the noise of an image.
@@ -246,47 +247,25 @@ class SensorNoise:
         return cls(**{("pixel_pitch" if k == "pixel_size_mm" else k): v for k, v in d.items()})
 
 
-_dataclass_init = SensorNoise.__init__
-
-
-@functools.wraps(_dataclass_init)
-def _init_accepting_pixel_size_mm(self, *args, pixel_size_mm=None, **kwargs):
-    if pixel_size_mm is not None:
-        warnings.warn("SensorNoise(pixel_size_mm=...) is deprecated: use pixel_pitch",
-                      DeprecationWarning, stacklevel=2)
-        if "pixel_pitch" in kwargs:
-            raise ValueError("noise: give pixel_pitch or the deprecated pixel_size_mm, "
-                             "not both")
-        kwargs["pixel_pitch"] = pixel_size_mm
-    _dataclass_init(self, *args, **kwargs)
-
-
-def _pixel_size_mm(self) -> float:
-    warnings.warn("SensorNoise.pixel_size_mm is deprecated: use pixel_pitch (mm)",
-                  DeprecationWarning, stacklevel=2)
-    return self.pixel_pitch
-
-
-# The former name of ``pixel_pitch`` keeps working as a keyword and a read-only
-# attribute, with a DeprecationWarning (it is not a field: replace() never sees it).
-SensorNoise.__init__ = _init_accepting_pixel_size_mm
-SensorNoise.pixel_size_mm = property(_pixel_size_mm, doc="Deprecated alias of pixel_pitch.")
-
-
-def paper_fig10_settings(pixel_pitch: float | None = None, illuminance_lux: float = 50.0, *,
-                         pixel_size_mm: float | None = None) -> dict:
+@renamed_keywords(pixel_size_mm="pixel_pitch")
+def paper_fig10_settings(pixel_pitch: float, illuminance_lux: float = 50.0) -> dict:
     """The paper's Fig. 10 comparison: focal sweep F2.8, 0.6 s, ISO 100 against a
-    stopped-down F11, 0.6 s, ISO 1600 exposure, both at ``illuminance_lux``, for pixels
-    of pitch ``pixel_pitch`` mm (``pixel_size_mm``: its deprecated keyword).
+    stopped-down F11, 0.6 s, ISO 1600 exposure.
 
-    Returns ``{"sweep": SensorNoise, "stopped": SensorNoise}``.
+    Parameters
+    ----------
+    pixel_pitch : float
+        Pixel pitch of the sensor, mm (the paper's Fig. 10: 0.0064). The former keyword
+        ``pixel_size_mm`` is still accepted, with a :class:`DeprecationWarning`.
+    illuminance_lux : float
+        Scene illuminance of both exposures, lux (default 50, the paper's).
+
+    Returns
+    -------
+    dict
+        ``{"sweep": SensorNoise, "stopped": SensorNoise}``.
     """
-    if pixel_size_mm is not None:
-        warnings.warn("paper_fig10_settings(pixel_size_mm=...) is deprecated: use pixel_pitch",
-                      DeprecationWarning, stacklevel=2)
-        if pixel_pitch is not None:
-            raise ValueError("give pixel_pitch or the deprecated pixel_size_mm, not both")
-        pixel_pitch = pixel_size_mm
-    common = dict(illuminance_lux=illuminance_lux, exposure_s=0.6, pixel_pitch=pixel_pitch)
-    return {"sweep": SensorNoise(f_number=2.8, iso=100.0, **common),
-            "stopped": SensorNoise(f_number=11.0, iso=1600.0, **common)}
+    return {"sweep": SensorNoise(f_number=2.8, iso=100.0, illuminance_lux=illuminance_lux,
+                                 exposure_s=0.6, pixel_pitch=pixel_pitch),
+            "stopped": SensorNoise(f_number=11.0, iso=1600.0, illuminance_lux=illuminance_lux,
+                                   exposure_s=0.6, pixel_pitch=pixel_pitch)}

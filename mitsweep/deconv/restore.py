@@ -28,7 +28,7 @@ def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
     """The bank's blur on (H, W) images: polar for a radial bank, product-convolution
     for a grid bank. ``dtype`` is the polar operator's working precision (the
     product-convolution operator works in its input's)."""
-    shape = tuple(int(n) for n in image_shape[:2])
+    shape = (int(image_shape[0]), int(image_shape[1]))
     if bank.kind == "radial":
         return polar_operator(bank, shape, depth_mm=depth_mm, center=center, dtype=dtype)
     if bank.kind == "grid":

@@ -532,9 +532,9 @@ def hqs_deconvolve(image: np.ndarray, bank: IPSFBank, *, prior: str = "hyperlapl
                         x0, x1 = _support(wx[j])
                         tiles.append((y0, y1, x0, x1, wy[i, y0:y1, None] * wx[j, None, x0:x1],
                                       kernels[i * n_c + j]))
-                prob = _TileProblem(y, tiles, 3 * K, dt)
-                res, lam, done = _run_hqs(prob, variance=None if rel is None else
-                                          prob.sample(rel), **kw)
+                tile_prob = _TileProblem(y, tiles, 3 * K, dt)
+                res, lam, done = _run_hqs(tile_prob, variance=None if rel is None else
+                                          tile_prob.sample(rel), **kw)
             out[..., c] = res
             record = dict(sigma=sigma, nsr=nsr_c, weight=lam, steps=done, data_term=data_term)
             logger.info("%s: sigma %.3g, start NSR %.3g, weight %.3g, %d steps", prior,
@@ -737,7 +737,7 @@ def richardson_lucy(image: np.ndarray, op: BlurOperator, *, iterations: int | No
             x_new *= x
             x_new *= inv_norm
             np.maximum(x_new, 0, out=x_new)
-            change = float(np.linalg.norm(x_new - x) / max(np.linalg.norm(x), 1e-30))
+            change = float(np.linalg.norm(x_new - x)) / max(float(np.linalg.norm(x)), 1e-30)
             x = x_new
             done = k + 1
             costs.append(time.perf_counter() - t_it)

@@ -106,6 +106,8 @@ def grid_axes_px(bank: IPSFBank, image_shape: tuple[int, int]) -> tuple[np.ndarr
     """Row and column pixel coordinates of a grid bank's grid lines."""
     if bank.kind != "grid":
         raise BankError(f"a grid bank is needed here, got a {bank.kind!r} bank")
+    if bank.grid_shape is None:
+        raise BankError("a grid bank without its grid_shape")
     rows_n, cols_n = bank.grid_shape
     pitch = float(bank.pixel_pitch)
     pts = np.asarray(bank.points_uv, dtype=np.float64).reshape(rows_n, cols_n, 2)
@@ -116,7 +118,7 @@ def grid_axes_px(bank: IPSFBank, image_shape: tuple[int, int]) -> tuple[np.ndarr
     if not (np.allclose(uv[:, :, 0], uv[0:1, :, 0], atol=1e-3)
             and np.allclose(uv[:, :, 1], uv[:, 0:1, 1], atol=1e-3)):
         raise BankError("grid bank points are not on a regular (rows x cols) grid")
-    return rows, cols
+    return np.asarray(rows), np.asarray(cols)
 
 
 def grid_windows(rows: np.ndarray, cols: np.ndarray, image_shape: tuple[int, int]
@@ -277,8 +279,8 @@ def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
         y0, y1 = _support(wy[i])
         for j in range(n_c):
             x0, x1 = _support(wx[j])
-            tile = padded[y0:y1 + 2 * m, x0:x1 + 2 * m]
-            rest = wiener_deconvolve(tile, kernels[i * n_c + j], nsr=nsr, prior=prior, pad=0,
+            patch = padded[y0:y1 + 2 * m, x0:x1 + 2 * m]
+            rest = wiener_deconvolve(patch, kernels[i * n_c + j], nsr=nsr, prior=prior, pad=0,
                                      n_px=float(np.sqrt(H * W)))
             win = (wy[i, y0:y1, None] * wx[j, None, x0:x1]).astype(dt)
             if img.ndim == 3:

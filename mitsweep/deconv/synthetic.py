@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..deprecation import renamed_keywords
 from ..io.bank import IPSFBank
 from ..optics.pixels import pixel_to_sensor
 
@@ -62,9 +63,10 @@ def _bank_meta(shape, **kw):
             **kw}
 
 
+@renamed_keywords(depths_mm="depths")
 def synthetic_radial_bank(image_shape: tuple[int, int], *, n_radii: int = 19, size: int = 21,
                           r_max_px: float | None = None, extent_px: float | None = None,
-                          pixel_pitch: float = 0.018, depths_mm: ArrayLike = (500.0,),
+                          pixel_pitch: float = 0.018, depths: ArrayLike = (500.0,),
                           **kw: float) -> IPSFBank:
     """Radial bank of :func:`synthetic_ipsf` kernels at ``n_radii`` radii from 0 to
     ``extent_px`` (default ``r_max_px``, itself default half the smaller image side)."""
@@ -72,16 +74,18 @@ def synthetic_radial_bank(image_shape: tuple[int, int], *, n_radii: int = 19, si
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)
     radii = np.linspace(0, r_max if extent_px is None else float(extent_px), n_radii)
     k = synthetic_ipsf(radii, np.zeros_like(radii), size, r_max, **kw)
-    kernels = np.repeat(k[None], len(depths_mm), axis=0).astype(np.float32)
+    depths = np.asarray(depths, float)
+    kernels = np.repeat(k[None], len(depths), axis=0).astype(np.float32)
     pts = np.stack([radii * pixel_pitch, np.zeros_like(radii)], axis=1)
-    return IPSFBank(kernels=kernels, points_uv=pts, depths_mm=np.asarray(depths_mm, float),
+    return IPSFBank(kernels=kernels, points_uv=pts, depths_mm=depths,
                     pixel_pitch=pixel_pitch, reference_sensor_distance=30.0, kind="radial",
                     radii_mm=radii * pixel_pitch, metadata=_bank_meta(image_shape, r_max_px=r_max))
 
 
+@renamed_keywords(depths_mm="depths")
 def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int], *,
                         size: int = 21, r_max_px: float | None = None,
-                        pixel_pitch: float = 0.018, depths_mm: ArrayLike = (500.0,),
+                        pixel_pitch: float = 0.018, depths: ArrayLike = (500.0,),
                         **kw: float) -> IPSFBank:
     """Grid bank of :func:`synthetic_ipsf` kernels at a (rows × cols) grid of pixels.
 
@@ -94,11 +98,13 @@ def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int
     yy, xx = np.meshgrid(ys, xs, indexing="ij")
     u, v = pixel_to_sensor(yy.ravel(), xx.ravel(), (H, W), pixel_pitch)
     k = synthetic_ipsf(np.hypot(u, v) / pixel_pitch, np.arctan2(v, u), size, r_max, **kw)
-    kernels = np.repeat(k[None], len(depths_mm), axis=0).astype(np.float32)
+    depths = np.asarray(depths, float)
+    kernels = np.repeat(k[None], len(depths), axis=0).astype(np.float32)
     pts = np.stack([u, v], axis=1)
-    return IPSFBank(kernels=kernels, points_uv=pts, depths_mm=np.asarray(depths_mm, float),
+    return IPSFBank(kernels=kernels, points_uv=pts, depths_mm=depths,
                     pixel_pitch=pixel_pitch, reference_sensor_distance=30.0, kind="grid",
-                    grid_shape=tuple(grid_shape), metadata=_bank_meta(image_shape, r_max_px=r_max))
+                    grid_shape=(grid_shape[0], grid_shape[1]),
+                    metadata=_bank_meta(image_shape, r_max_px=r_max))
 
 
 def synthetic_kernel_field(image_shape: tuple[int, int], size: int = 21,

@@ -95,7 +95,11 @@ def synthetic_weight_bench(sizes: Sequence[int] = (512,),
             t1 = time.perf_counter()
             blind = blind_nsr(y, bank, mask=mask)
             t2 = time.perf_counter()
-            r = weight_rows(y, p["sharp"], lambda x, w, bank=bank: polar_deconvolve(x, bank, nsr=w),
+
+            def restore(x: np.ndarray, w: float, bank=bank) -> np.ndarray:
+                return polar_deconvolve(x, bank, nsr=w)
+
+            r = weight_rows(y, p["sharp"], restore,
                             {"before": estimate_nsr(y), "model": model, "blind": blind},
                             mask=mask)
             rows.append({"case": f"independent blur {size} px, sigma {sigma:g}",

@@ -153,7 +153,7 @@ def kernel_shares(bank: IPSFBank, image_shape: tuple[int, ...], *,
     """
     from .spatial import grid_axes_px, hat_weights
 
-    shape = tuple(int(n) for n in image_shape[:2])
+    shape = (int(image_shape[0]), int(image_shape[1]))
     m = np.ones(shape, bool) if mask is None else np.asarray(mask, bool)
     ys, xs = np.nonzero(m)
     if bank.kind == "radial":
@@ -184,7 +184,7 @@ def ring_spectrum(image: np.ndarray, *, n_rings: int = 48) -> tuple[np.ndarray, 
     planes = _planes(image)
     H, W = planes[0].shape
     M, N = fast_shape((H, W), (0, 0))
-    P = 0.0
+    P = np.zeros((M, N // 2 + 1))
     for p in planes:
         P = P + np.abs(sfft.rfft2(p - p.mean(), s=(M, N), workers=-1)) ** 2 / (H * W)
     P = P / len(planes)

@@ -10,6 +10,7 @@ float32 and never clips.
 from __future__ import annotations
 
 import logging
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, DTypeLike
@@ -37,6 +38,10 @@ MAX_NSR = 1e6
 #: ``|values|`` (<= 2^31 pixels of a padded 32768² image: 2e29 at 1e20), which leaves the
 #: filter's gain a factor 1e9 below float32's 3.4e38; beyond, float32 FFTs overflow.
 MAX_ABS_VALUE = 1e20
+
+#: The :func:`numpy.pad` modes (its ``mode`` argument).
+PadMode = Literal["constant", "edge", "linear_ramp", "maximum", "mean", "median", "minimum",
+                  "reflect", "symmetric", "wrap", "empty"]
 
 
 def check_image_values(image: np.ndarray) -> None:
@@ -216,7 +221,7 @@ def estimate_nsr(image: np.ndarray, *, floor: float = DEFAULT_NSR_FLOOR,
 
 def wiener_deconvolve(image: np.ndarray, psf: np.ndarray, *, nsr: float | None = None,
                       prior: str = "natural", pad: int | str = "auto",
-                      pad_mode: str = "symmetric", n_px: float | None = None) -> np.ndarray:
+                      pad_mode: PadMode = "symmetric", n_px: float | None = None) -> np.ndarray:
     r"""Deconvolve ``image`` by the shift-invariant ``psf`` with a Wiener filter.
 
     Parameters

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import DTypeLike
 import scipy.fft as sfft
 
 from ..spatial import hat_weights
@@ -35,7 +36,7 @@ def band_length(n: int, step: float) -> int:
 
 
 def band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
-                  cdt: type) -> np.ndarray:
+                  cdt: DTypeLike) -> np.ndarray:
     """Transfer function (L, M) of pixel kernel ``k`` at radius ``r_band`` on the polar grid.
 
     Axis 0: the radial frequencies of an L-point FFT over rows spaced ``step`` px,
@@ -47,8 +48,8 @@ def band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
     counter-clockwise) is an angle t / r, so harmonic m sees the phase exp(−i m t / r).
     """
     K0, K1 = k.shape
-    rdt = np.float32 if cdt == np.complex64 else np.float64
-    kt = k.astype(rdt)
+    rdt: type[np.floating] = np.float32 if np.dtype(cdt) == np.complex64 else np.float64
+    kt: np.ndarray = k.astype(rdt)
     h0 = K0 // 2
     if K0 % 2:
         # rows h0 ∓ t hold offsets ±t: cos is even and sin odd in t, so the sums run over
@@ -62,7 +63,7 @@ def band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
         k_even = k_odd = kt
         t = -(np.arange(K0) - h0).astype(rdt)                # tangential offset, px
     phase = np.outer(t, np.arange(M, dtype=rdt) / rdt(max(r_band, 1e-9)))   # (t, M)
-    T = np.empty((K1, M), dtype=cdt)                         # radial offset s × harmonic m
+    T: np.ndarray = np.empty((K1, M), dtype=cdt)             # radial offset s × harmonic m
     # einsum, not BLAS: for these thin products a threaded BLAS on a busy machine costs
     # 3-5x more in thread start-up than the arithmetic (measured)
     T.real = np.einsum("ts,tm->sm", k_even, np.cos(phase), optimize=False)
@@ -72,7 +73,7 @@ def band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
     if L_px < K1:
         raise ValueError(f"band of {L} rows is shorter than the kernel ({K1} px)")
     T /= T[:, 0].real.sum()                                  # H = 1 at DC
-    big = np.zeros((L_px, M), dtype=cdt)
+    big: np.ndarray = np.zeros((L_px, M), dtype=cdt)
     h = K1 // 2
     big[:h + 1] = T[h:]
     if h:
@@ -82,7 +83,7 @@ def band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
     # pixel Nyquist: the rows in reach are slices of H_px, the others its end rows
     hp, hn = (L_px - 1) // 2, L_px // 2          # highest positive, negative numerators
     n_pos = (L + 1) // 2                         # rows with p >= 0
-    out = np.empty((L, M), dtype=cdt)
+    out: np.ndarray = np.empty((L, M), dtype=cdt)
     out[:hp + 1] = H_px[:hp + 1]
     out[hp + 1:n_pos] = H_px[hp]
     out[n_pos:L - hn] = H_px[L_px - hn]
@@ -204,11 +205,11 @@ def band_plan(grid: PolarGrid, kernel_size: int, *, band_spacing: float = 0.25,
     K = int(kernel_size)
     step = grid.radial_step
     r_in = max(2.0 * K, 8.0)                   # Cartesian disk around the pole
-    centres = [r_in / 2]
-    while centres[-1] < grid.r_max:
-        centres.append(centres[-1] + max(band_spacing * centres[-1], float(K)))
-    centres[-1] = max(min(centres[-1], grid.r_max), centres[-2] + 1.0)
-    centres = np.asarray(centres)
+    spaced = [r_in / 2]
+    while spaced[-1] < grid.r_max:
+        spaced.append(spaced[-1] + max(band_spacing * spaced[-1], float(K)))
+    spaced[-1] = max(min(spaced[-1], grid.r_max), spaced[-2] + 1.0)
+    centres = np.asarray(spaced)
     weights = hat_weights(grid.radii, centres)                         # (n_b, n_r)
     m_px = int(math.ceil(1.5 * K)) if margin is None else int(margin)
     m_rows = int(math.ceil(m_px / step))

@@ -240,7 +240,8 @@ def from_angle_spectrum(spec: np.ndarray, grid: PolarGrid, shape: tuple[int, int
     # each level's rows (a spline's reach on either side of its pixels' radii) and its
     # angles, periodically padded, one after another in one flat array
     lead, trail = _ANGLE_PAD
-    levels, offset = [], 0
+    levels: list[tuple[int, int, int, int, tuple]] = []
+    offset = 0
     for q, nq, lo, hi in _pixel_levels(grid, n2):
         r0 = max(0, int(math.floor(grid.row_of(lo - _SPLINE_PX))))
         r1 = min(grid.n_radii, int(math.ceil(grid.row_of(hi + _SPLINE_PX))) + 1)
