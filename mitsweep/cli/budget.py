@@ -24,6 +24,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--second-seed", type=int, metavar="SEED",
                    help="render each scene's sweep again with this Monte Carlo seed (into "
                         "--out) to measure the Monte Carlo term")
+    p.add_argument("--rim-bank", action="store_true",
+                   help="restore with the dataset's bank extended to the mirror's rim (radial: "
+                        "traced out to the rim's image; grid: off-mirror nodes filled) instead "
+                        "of its own")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--out", metavar="DIR",
                    help="write budget.json, budget.txt and one budget_*.png per item here")
@@ -31,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     result = error_budget(args.dataset, items=args.item, second_seed=args.second_seed,
-                          out=args.out)
+                          out=args.out, rim_bank=args.rim_bank)
     if args.json:
         print_json(result.summary)
     else:

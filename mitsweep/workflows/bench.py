@@ -1,8 +1,10 @@
 """Reproducible benchmarks, every target in one process (``mitsweep bench``).
 
 Each target is a module ``mitsweep.<pkg>.bench`` exposing ``run_bench(options) -> dict``
-(``options.quick``: smaller problem sizes). Baselines run in the same process as what
-they are compared with, so that ratios survive a noisy machine.
+(``options.quick``: smaller problem sizes), or a study module without one whose runner
+is here (:data:`RUNNERS`: ``weights``, the weight choice against the oracle,
+:func:`weight_bench`). Baselines run in the same process as what they are compared
+with, so that ratios survive a noisy machine.
 """
 
 from __future__ import annotations
@@ -18,8 +20,8 @@ from collections.abc import Callable, Iterable
 from .. import __version__
 from ._base import WorkflowResult
 
-__all__ = ["run_benchmarks", "BENCH_TARGETS", "TargetMissing", "reset_peak_rss",
-           "peak_rss_mib"]
+__all__ = ["run_benchmarks", "BENCH_TARGETS", "RUNNERS", "TargetMissing", "reset_peak_rss",
+           "peak_rss_mib", "weight_bench"]
 
 logger = logging.getLogger(__name__)
 
@@ -30,6 +32,7 @@ BENCH_TARGETS = {
     "deconv": "mitsweep.deconv.bench",
     "dataset": "mitsweep.pipeline.bench",
     "calibrate": "mitsweep.photo.bench",
+    "weights": "mitsweep.deconv.weight_bench",
 }
 # Each module imported by its literal name (the layering check reads every import).
 _IMPORTERS: dict[str, Callable[[], ModuleType]] = {
@@ -38,7 +41,69 @@ _IMPORTERS: dict[str, Callable[[], ModuleType]] = {
     "deconv": lambda: importlib.import_module("mitsweep.deconv.bench"),
     "dataset": lambda: importlib.import_module("mitsweep.pipeline.bench"),
     "calibrate": lambda: importlib.import_module("mitsweep.photo.bench"),
+    "weights": lambda: importlib.import_module("mitsweep.deconv.weight_bench"),
 }
+
+#: The sizes (px) and noise levels σ of ``bench weights``: quick, and full (the
+#: independent blur of docs/guide/weights.md at 512 px).
+WEIGHT_BENCH_QUICK = {"sizes": (256,), "sigmas": (0.005, 0.001)}
+WEIGHT_BENCH_FULL = {"sizes": (512,), "sigmas": (0.005, 0.001)}
+
+
+def weight_bench(options: SimpleNamespace) -> dict:
+    """The ``weights`` target: Wiener's chosen NSR against the oracle NSR (the best, by
+    search against the truth) on the independent spatially varying blur
+    (:func:`mitsweep.deconv.weight_bench.synthetic_weight_bench`), one process.
+
+    Parameters
+    ----------
+    options : namespace
+        ``options.quick``: 256 px instead of 512 px (both at σ = 0.005 and 0.001,
+        :data:`WEIGHT_BENCH_QUICK`, :data:`WEIGHT_BENCH_FULL`).
+
+    Returns
+    -------
+    dict
+        ``sizes_px``, ``sigmas`` and ``rules`` (what each chosen NSR is), and ``cases``:
+        per case (``"256px_sigma_0.005"``) the ``oracle``'s ``nsr`` and ``psnr_db``, and
+        for each rule (``before``: the former blind estimate, the baseline; ``model``:
+        :func:`~mitsweep.deconv.weights.model_nsr` with the known σ; ``blind``:
+        :func:`~mitsweep.deconv.weights.blind_nsr`) its ``nsr``, ``psnr_db`` and
+        ``loss_db`` (oracle − chosen), and ``model_seconds``, ``blind_seconds``.
+    """
+    from ..deconv.weight_bench import synthetic_weight_bench
+
+    sizes = WEIGHT_BENCH_QUICK if getattr(options, "quick", False) else WEIGHT_BENCH_FULL
+    rows = synthetic_weight_bench(sizes["sizes"], sizes["sigmas"])
+    cases = {}
+    for (size, sigma), row in zip([(n, g) for n in sizes["sizes"] for g in sizes["sigmas"]],
+                                  rows, strict=True):
+        case: dict = {"oracle": {"nsr": row["oracle"]["weight"],
+                                 "psnr_db": row["oracle"]["psnr_db"]}}
+        for rule in ("before", "model", "blind"):
+            case[rule] = {"nsr": row[rule]["weight"], "psnr_db": row[rule]["psnr_db"],
+                          "loss_db": row[rule]["loss_db"]}
+        case["model_seconds"] = row["model_seconds"]
+        case["blind_seconds"] = row["blind_seconds"]
+        cases[f"{size}px_sigma_{sigma:g}"] = case
+    return {"sizes_px": list(sizes["sizes"]), "sigmas": list(sizes["sigmas"]),
+            "rules": {"before": "polar Wiener's nsr=None: sigma^2 over the image variance "
+                                "(the former rule, the baseline)",
+                      "model": "deconv.weights.model_nsr with the known sigma",
+                      "blind": "deconv.weights.blind_nsr (nothing known)"},
+            "cases": cases}
+
+
+#: Targets whose module has no ``run_bench``: the runner that benchmarks it.
+RUNNERS: dict[str, Callable[[SimpleNamespace], dict]] = {"weights": weight_bench}
+
+
+def _runner(name: str, module: ModuleType) -> Callable[[SimpleNamespace], dict]:
+    """The function that runs target ``name`` whose module is ``module``."""
+    runner = RUNNERS.get(name)
+    if runner is not None and not hasattr(module, "run_bench"):
+        return runner
+    return module.run_bench
 
 
 class TargetMissing(Exception):
@@ -134,7 +199,7 @@ def run_benchmarks(target: str = "all", *, quick: bool = False,
     load = load or _import_target
     options = SimpleNamespace(quick=bool(quick))
     if target != "all":
-        result = load(target).run_bench(options)
+        result = _runner(target, load(target))(options)
         return WorkflowResult(result, {"workflow": "run_benchmarks", "version": __version__,
                                        "target": target, "quick": bool(quick), "status": 0},
                               result)
@@ -157,7 +222,7 @@ def run_benchmarks(target: str = "all", *, quick: bool = False,
         t0 = time.perf_counter()
         logger.info("bench %s ...", name)
         try:
-            entry["result"] = mod.run_bench(options)
+            entry["result"] = _runner(name, mod)(options)
         except Exception as exc:  # one broken target must not hide the others' figures
             logger.debug("bench %s failed", name, exc_info=True)
             entry["error"] = f"{type(exc).__name__}: {exc}"

@@ -5,19 +5,43 @@ depth band (:func:`mitsweep.pipeline.budget.dataset_budget`)."""
 from __future__ import annotations
 
 import os
-from pathlib import Path
 from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .. import __version__
 from ._base import InputError, WorkflowResult, json_text
 from ._paths import check_outputs
 
+if TYPE_CHECKING:
+    from ..io.bank import IPSFBank
+
 __all__ = ["error_budget"]
+
+
+def _rim_bank(dataset: str | os.PathLike) -> tuple[IPSFBank, str]:
+    """The dataset's bank extended to the mirror's rim, and what was done to it: a radial
+    bank traced to the rim's image (:func:`mitsweep.pipeline.rim.rim_bank`), a grid bank
+    with its off-mirror nodes given the nearest traced kernel
+    (:func:`mitsweep.deconv.kernels.fill_invalid_nodes`)."""
+    from ..config import setup_from_dict
+    from ..deconv.kernels import fill_invalid_nodes
+    from ..io.bank import load_bank
+    from ..pipeline import load_manifest
+    from ..pipeline.rim import rim_bank
+    from ..pipeline.tasks import BANK
+
+    bank = load_bank(Path(dataset) / BANK)
+    if bank.kind == "radial":
+        setup = setup_from_dict(load_manifest(dataset)["setup"])
+        return rim_bank(setup, bank), "radial bank traced to the mirror's rim"
+    return fill_invalid_nodes(bank), "grid bank, off-mirror nodes filled"
 
 
 def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = None,
                  second_seed: int | None = None,
-                 out: str | os.PathLike | None = None) -> WorkflowResult:
+                 out: str | os.PathLike | None = None,
+                 rim_bank: bool = False) -> WorkflowResult:
     """The error budget of a dataset's EDOF images (``mitsweep budget``).
 
     Parameters
@@ -32,14 +56,25 @@ def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = No
         measure the Monte Carlo term; needs ``out``.
     out : path-like, optional
         Write ``budget.json``, ``budget.txt`` and one ``budget_*.png`` per item here.
+    rim_bank : bool
+        Budget the restoration with the dataset's bank extended to the mirror's rim
+        instead of its own (``mitsweep budget --rim-bank``): a radial bank traced out to
+        the image of the rim (:func:`mitsweep.pipeline.rim.rim_bank`: the same trace
+        settings, the next seeds), a grid bank with its off-mirror nodes given the
+        nearest traced kernel (:func:`mitsweep.deconv.kernels.fill_invalid_nodes`). Each
+        EDOF image is restored again from its input with that bank and the dataset's
+        weight rule (:func:`mitsweep.pipeline.budget.dataset_budget`'s ``bank``); the
+        ``beyond_fov`` region stays the design FOV's. Default False: the dataset's bank.
 
     Returns
     -------
     WorkflowResult
         ``value``: :func:`mitsweep.pipeline.budget.dataset_budget`'s result (``budgets``:
         item → budget). ``summary``: its JSON form (what ``mitsweep budget --json``
-        prints). ``provenance``: ``dataset``, ``items``, ``second_seed``, ``out``, ``text``
-        (the tables ``budget.txt`` holds), ``version``.
+        prints; with ``rim_bank``, ``bank`` says how the bank was extended).
+        ``provenance``: ``dataset``, ``items``, ``second_seed``, ``out``, ``rim_bank``,
+        ``bank`` (None, or how the bank was extended), ``text`` (the tables ``budget.txt``
+        holds), ``version``.
 
     Raises
     ------
@@ -63,11 +98,16 @@ def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = No
         if out.exists() and not out.is_dir():
             raise InputError(f"--out {out}: not a directory")
         check_outputs(dataset_inputs(dataset), [out / "budget.json", out / "budget.txt"])
+    bank, how = _rim_bank(dataset) if rim_bank else (None, None)
     result = dataset_budget(dataset, items=items, second_seed=second_seed,
-                            work_dir=out / "renders" if out is not None else None)
-    text = "".join(f"{name} (restored from {b.info['restored_from']})\n{b.table()}\n"
+                            work_dir=out / "renders" if out is not None else None,
+                            bank=bank)
+    text = "" if how is None else f"bank: {how}\n"
+    text += "".join(f"{name} (restored from {b.info['restored_from']})\n{b.table()}\n"
                    for name, b in result["budgets"].items())
     data = budget_json(result)
+    if how is not None:
+        data["bank"] = how
     if out is not None:
         from ..plots import plot_error_budget
 
@@ -80,5 +120,5 @@ def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = No
     provenance = {"workflow": "error_budget", "version": __version__,
                   "dataset": os.fspath(dataset), "items": None if items is None else list(items),
                   "second_seed": second_seed, "out": None if out is None else str(out),
-                  "text": text}
+                  "rim_bank": bool(rim_bank), "bank": how, "text": text}
     return WorkflowResult(result, provenance, data)

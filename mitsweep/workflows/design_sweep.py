@@ -10,6 +10,7 @@ around it: checks, noise model, the file and its provenance, the plot). The file
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Sequence
 
@@ -21,8 +22,23 @@ from ._paths import check_outputs
 __all__ = ["design_motion_profile"]
 
 
-def _check_args(setup, *, kernel_size, planes, seed, brute_force_steps, out, span_mm) -> None:
+def _check_args(setup, *, kernel_size, planes, seed, brute_force_steps, out, span_mm,
+                restoration, deploy_depth, deploy_nsr) -> None:
     from ..design.objective import DEFAULT_FFT_SIZE
+    from ..design.sweep import RESTORATIONS
+
+    if restoration not in RESTORATIONS:
+        raise InputError(f"--restoration: must be one of {', '.join(RESTORATIONS)}, got "
+                         f"{restoration!r}")
+    if restoration != "deployed":
+        given = [name for name, v in (("--deploy-depth", deploy_depth),
+                                      ("--deploy-nsr", deploy_nsr)) if v is not None]
+        if given:
+            raise InputError(f"{' and '.join(given)}: only with --restoration deployed")
+    if deploy_depth is not None and not deploy_depth > 0:
+        raise InputError(f"--deploy-depth: must be > 0 mm (inf allowed), got {deploy_depth:g}")
+    if deploy_nsr is not None and not (math.isfinite(deploy_nsr) and deploy_nsr > 0):
+        raise InputError(f"--deploy-nsr: must be a finite NSR > 0, got {deploy_nsr:g}")
 
     K = kernel_size
     W, H = setup.sensor.resolution
@@ -90,6 +106,8 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
                           depths: Sequence[float] | None = None, rays: int = 1 << 16,
                           kernel_size: int = 31, seed: int = 0, brute_force_steps: int = 16,
                           plot: str | os.PathLike | None = None,
+                          restoration: str = "matched", deploy_depth: float | None = None,
+                          deploy_nsr: float | None = None,
                           progress: Progress = None) -> WorkflowResult:
     """Design the sensor's time profile over the sweep that minimises the predicted Wiener
     restoration error, and write it as a motion-profile file (``mitsweep design-sweep``).
@@ -121,6 +139,19 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
         Lattice resolution of the brute-force check on 6 bins, in [0, 32] (0 skips it).
     plot : path-like, optional
         A PNG of w(i) of both profiles and the predicted error per radius.
+    restoration : {"matched", "deployed"}
+        The restoration whose predicted error is minimised: ``"matched"``, each depth
+        restored with its own IPSF and the sensor's NSR (with a certified bound);
+        ``"deployed"``, as the datasets restore: every depth with the kernels at
+        ``deploy_depth`` and the NSR ``deploy_nsr`` (no certified bound, no brute-force
+        check; where no profile beats the linear sweep the design returns it and says so,
+        ``summary["returns_linear"]``). See :func:`mitsweep.design.design_sweep`.
+    deploy_depth : float, optional
+        ``"deployed"`` only: the depth whose kernels restore every depth, mm (``inf``
+        allowed; default 500 mm, the datasets' bank depth).
+    deploy_nsr : float, optional
+        ``"deployed"`` only: the restoration's NSR, finite and > 0 (default the sensor's
+        at this light level).
     progress : None, True or callable
         Progress per traced field point.
 
@@ -135,7 +166,9 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
     Raises
     ------
     InputError
-        A kernel size, plane count, seed, span or output name out of range.
+        A kernel size, plane count, seed, span or output name out of range; an unknown
+        restoration, a deploy depth ≤ 0 or an NSR not finite and > 0, or either deploy
+        option without ``restoration="deployed"``.
 
     Examples
     --------
@@ -164,14 +197,19 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
         check_figure_path(plot, "--plot")
     setup = resolve_setup(setup)
     _check_args(setup, kernel_size=kernel_size, planes=planes, seed=seed,
-                brute_force_steps=brute_force_steps, out=out, span_mm=span_mm)
+                brute_force_steps=brute_force_steps, out=out, span_mm=span_mm,
+                restoration=restoration, deploy_depth=deploy_depth, deploy_nsr=deploy_nsr)
+    deploy = {} if restoration != "deployed" else {
+        "deploy_depth_mm": 500.0 if deploy_depth is None else float(deploy_depth),
+        "deploy_nsr": None if deploy_nsr is None else float(deploy_nsr)}
     noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
     with progress_callback(progress, None, "plane banks", "point") as step:
         design = design_sweep(setup, noise=noise, objective=objective, n_planes=planes,
                               span_mm=None if span_mm is None else tuple(span_mm),
                               n_radii=radii, grid=tuple(grid), depths=depths, rays=rays,
                               kernel_size=kernel_size, seed=seed,
-                              brute_force_steps=brute_force_steps, progress=step)
+                              brute_force_steps=brute_force_steps, progress=step,
+                              restoration=restoration, **deploy)
     # the plane banks are traced: their tracer revision says which results are comparable
     report = dict(design.report, lux=lux, version=__version__, trace_revision=TRACE_REVISION)
     provenance = {"generator": "mitsweep design-sweep", "version": __version__,
@@ -179,6 +217,8 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
                   "setup_file": str(setup_path) if setup_path is not None else None,
                   "setup": setup.name, "lux": lux,
                   "objective": objective, "planes": planes,
+                  "restoration": restoration, "deploy": report["deploy"],
+                  "returns_linear": report["returns_linear"],
                   "span_mm": report["span_mm"], "seed": seed, "rays": rays,
                   "noise": report["noise"],
                   "predicted": {k: report[k] for k in (
