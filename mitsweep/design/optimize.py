@@ -76,13 +76,38 @@ class StageLimits:
 
     def tau_min(self, widths: np.ndarray) -> np.ndarray:
         """Smallest exposure fraction per bin: the bin crossed at ``max_velocity`` (a bound
-        that SLSQP holds exactly, so it needs no margin)."""
+        that SLSQP holds exactly, so it needs no margin).
+
+        Parameters
+        ----------
+        widths : (N,) ndarray
+            Widths ``Δi_k`` of the sweep's bins, mm.
+
+        Returns
+        -------
+        (N,) ndarray
+            ``Δi_k / (v_max T)``, a fraction of the exposure per bin.
+        """
         return widths / (self.max_velocity * self.exposure_s)
 
 
 @dataclass(frozen=True)
 class Solution:
-    """A τ and what it achieves."""
+    """A τ and what it achieves.
+
+    Attributes
+    ----------
+    tau : (N,) ndarray
+        Exposure fraction per bin, summing to 1.
+    value : float
+        The objective reached: the largest (``"worst"``) or mean (``"mean"``) predicted
+        MSE over field points × depths.
+    mse : (J,) ndarray
+        The predicted MSE at each of the model's J (depth, point) pairs.
+    info : dict
+        How it was found (:func:`local_optimum`: ``starts``, ``best_start``,
+        ``iterations``, ``seconds``).
+    """
 
     tau: np.ndarray
     value: float
@@ -104,7 +129,27 @@ def _velocity_accel(tau, widths, limits: StageLimits):
 def stage_feasible(tau: ArrayLike, widths: ArrayLike, limits: StageLimits, *, rtol: float = 1e-6,
                    acceleration: bool = True) -> bool:
     """Whether τ sums to 1 and the stage can follow it (velocity, and acceleration
-    unless ``acceleration`` is False)."""
+    unless ``acceleration`` is False).
+
+    Parameters
+    ----------
+    tau : array_like
+        (N,) exposure fraction per bin; every one must be > 0 and they must sum to 1
+        (within 1e-9).
+    widths : array_like
+        (N,) widths of the sweep's bins, mm.
+    limits : StageLimits
+        The exposure and the stage's limits.
+    rtol : float, optional
+        Relative tolerance on the velocity and acceleration limits (default 1e-6).
+    acceleration : bool, optional
+        Check the acceleration limit too (default True); False checks the velocity only.
+
+    Returns
+    -------
+    bool
+        True when the stage can follow ``tau``.
+    """
     tau = np.asarray(tau, dtype=float)
     if np.any(tau <= 0) or abs(tau.sum() - 1.0) > 1e-9:
         return False
@@ -161,16 +206,15 @@ def _solve(value_grad, tau_lin, widths, limits, objective, x0, *, accel: bool,
     """SLSQP from ``x0``; returns (x, result). ``value_grad(tau) -> (J,), (J, N)``."""
     n = tau_lin.size
     x_lo = limits.tau_min(widths) / tau_lin
-    raw = value_grad
     memo: dict = {}
 
-    def value_grad(tau):  # SLSQP asks for a constraint and its Jacobian at the same point
+    def memo_value_grad(tau):  # SLSQP asks for a constraint and its Jacobian at the same point
         key = tau.tobytes()
         if memo.get("key") != key:
-            memo["key"], memo["value"] = key, raw(tau)
+            memo["key"], memo["value"] = key, value_grad(tau)
         return memo["value"]
 
-    v0, _ = value_grad(tau_lin)
+    v0, _ = memo_value_grad(tau_lin)
     scale = _reduce(v0, objective)
     cons = [{"type": "eq", "fun": lambda z: np.array([tau_lin @ z[:n] - 1.0]),
              "jac": lambda z: np.concatenate([tau_lin, np.zeros(z.size - n)])[None, :]}]
@@ -186,26 +230,26 @@ def _solve(value_grad, tau_lin, widths, limits, objective, x0, *, accel: bool,
             return g
 
         def c(z):
-            val, _ = value_grad(tau_lin * z[:n])
+            val, _ = memo_value_grad(tau_lin * z[:n])
             return z[n] - val / scale
 
         def cj(z):
-            _, grad = value_grad(tau_lin * z[:n])
+            _, grad = memo_value_grad(tau_lin * z[:n])
             J = np.zeros((grad.shape[0], z.size))
             J[:, :n] = -grad * tau_lin / scale
             J[:, n] = 1.0
             return J
 
         cons.append({"type": "ineq", "fun": c, "jac": cj})
-        z0 = np.concatenate([x0, [_reduce(value_grad(tau_lin * x0)[0], "worst") / scale]])
+        z0 = np.concatenate([x0, [_reduce(memo_value_grad(tau_lin * x0)[0], "worst") / scale]])
         bounds = [(lo, None) for lo in x_lo] + [(None, None)]
     else:
         def f(z):
-            val, _ = value_grad(tau_lin * z)
+            val, _ = memo_value_grad(tau_lin * z)
             return float(val.mean() / scale)
 
         def fj(z):
-            _, grad = value_grad(tau_lin * z)
+            _, grad = memo_value_grad(tau_lin * z)
             return grad.mean(axis=0) * tau_lin / scale
 
         z0 = np.asarray(x0, dtype=float)

@@ -85,7 +85,18 @@ class PlaneBank:
         return np.abs(np.diff(self.edges_mm))
 
     def ipsf(self, tau: ArrayLike) -> np.ndarray:
-        """``Σ_k τ_k P_k`` for exposure fractions ``tau`` (n_bins,): (n_depths, n_points, K, K)."""
+        """``Σ_k τ_k P_k``: the IPSF of every point and depth for exposure fractions ``tau``.
+
+        Parameters
+        ----------
+        tau : array_like
+            (n_bins,) fraction of the exposure spent in each bin (a motion's τ; summing
+            to 1 for a whole exposure).
+
+        Returns
+        -------
+        (n_depths, n_points, K, K) ndarray
+        """
         return np.tensordot(self.kernels, np.asarray(tau, dtype=float), axes=([2], [0]))
 
     def coarsened(self, groups: int) -> PlaneBank:
@@ -93,6 +104,19 @@ class PlaneBank:
 
         A merged bin's PSF is the width-weighted mean of its bins' (the average over its
         distances); used for the brute-force check of the optimiser on a small problem.
+
+        Parameters
+        ----------
+        groups : int
+            Number of bins of the result, in [1, n_bins]; the bins are split into
+            ``groups`` runs of consecutive bins as evenly as :func:`numpy.array_split`
+            does.
+
+        Returns
+        -------
+        PlaneBank
+            The same points, depths and pitch; ``metadata["coarsened_from"]`` the former
+            number of bins.
         """
         n = self.kernels.shape[2]
         if not 1 <= groups <= n:

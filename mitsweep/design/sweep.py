@@ -3,6 +3,7 @@ predicted restoration error (the objective is stated in :mod:`mitsweep.design`).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -242,11 +243,10 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     geom = reference_geometry(setup, sweep=sweep, motion=motion_lin)
     i_ref = geom.sensor_distance
     points = design_points(setup, i_ref, geom, n_radii=n_radii, grid=grid)
-    common = dict(rays=rays, kernel_size=kernel_size, seed=seed, sub_planes=sub_planes,
-                  progress=progress)
+    trace_bank = functools.partial(plane_bank, rays=rays, kernel_size=kernel_size, seed=seed,
+                                   sub_planes=sub_planes, progress=progress)
     if bank is None:
-        bank = plane_bank(setup, points, depths, edges, reference_sensor_distance=i_ref,
-                          **common)
+        bank = trace_bank(setup, points, depths, edges, reference_sensor_distance=i_ref)
     elif not (np.array_equal(bank.edges_mm, edges) and np.array_equal(bank.points_uv, points)
               and np.array_equal(bank.depths_mm, np.asarray(depths, dtype=float))):
         raise ValueError("bank: traced for other planes, points or depths than this design")
@@ -277,8 +277,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         lin_geom = reference_geometry(setup, sweep=sweep)
         lin_points = design_points(setup, lin_geom.sensor_distance, lin_geom,
                                    n_radii=n_radii, grid=grid)
-        lin_bank = plane_bank(setup, lin_points, depths, lin_edges,
-                              reference_sensor_distance=lin_geom.sensor_distance, **common)
+        lin_bank = trace_bank(setup, lin_points, depths, lin_edges,
+                              reference_sensor_distance=lin_geom.sensor_distance)
         lw = lin_bank.widths_mm
         lin_model = predictor(lin_bank)
         mse_lin = lin_model.mse(lw / lw.sum()).reshape(shape)
@@ -319,6 +319,16 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     velocity = widths / (tau * T)
     accel = np.diff(velocity) / (np.minimum(tau[:-1], tau[1:]) * T)
     gap = None if bound is None else value - bound
+    if returns_linear:
+        says = ("no profile found beats the linear sweep under the deployed restoration: "
+                "the design is the linear sweep")
+    elif bound is None or gap is None:  # the deployed restoration
+        says = ("the deployed restoration's objective has no certified bound; the "
+                f"profile found predicts {value:.6g} against linear {lin_value:.6g}")
+    else:
+        says = (f"the optimum of this objective (worst/mean predicted MSE over the "
+                f"bank, these stage limits) lies in [{bound:.6g}, {value:.6g}]: the "
+                f"profile found is within {100 * gap / value:.3g} % of it")
     report = {
         "setup": setup.name, "objective": objective, "planes": N,
         "restoration": restoration,
@@ -352,14 +362,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
             "without_acceleration_value": free.value,
             "starts": sol.info["starts"], "best_start": sol.info["best_start"],
             "iterations": sol.info["iterations"],
-            "says": (("no profile found beats the linear sweep under the deployed "
-                      "restoration: the design is the linear sweep") if returns_linear else
-                     ("the deployed restoration's objective has no certified bound; the "
-                      f"profile found predicts {value:.6g} against linear {lin_value:.6g}")
-                     if deployed else
-                     (f"the optimum of this objective (worst/mean predicted MSE over the "
-                      f"bank, these stage limits) lies in [{bound:.6g}, {value:.6g}]: the "
-                      f"profile found is within {100 * gap / value:.3g} % of it")),
+            "says": says,
             "brute_force": brute,
         },
         "seconds": {"plane_bank": bank.metadata["seconds"], "optimise_and_bound": t_opt,

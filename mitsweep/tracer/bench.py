@@ -147,8 +147,9 @@ def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: 
     and useful rays per second. Empty off the LLVM backend or when both widths agree."""
     if backend.select_backend() != "llvm":
         return []
-    widths = sorted({backend.native_llvm_vector_width(), backend._auto_width(),
-                     backend.llvm_vector_width()} - {None})
+    candidates = {backend.native_llvm_vector_width(), backend._auto_width(),
+                  backend.llvm_vector_width()}
+    widths = sorted(w for w in candidates if w is not None)
     if len(widths) < 2:
         return []
     rows = {w: {"width": w, "cpu_seconds_per_ray": math.inf, "rays_per_s": 0.0}
@@ -169,7 +170,7 @@ def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: 
 
 #: Deposit strategies timed side by side (:func:`_strategy_comparison`): label and
 #: :class:`mitsweep.tracer.kernel.DepositStrategy` fields (absent: the default).
-DEPOSIT_STRATEGIES = (
+DEPOSIT_STRATEGIES: tuple[tuple[str, dict[str, Any]], ...] = (
     ("one shared buffer, direct atomics, lanes in sample order (before)",
      {"copies": 1, "mode": "Direct", "coherent": False}),
     ("Dr.Jit's per-thread copies (ReduceMode.Expand), lanes in sample order",
@@ -185,9 +186,10 @@ def _strategy_comparison(setup, u: float, depth: float, sweep, rays: int, repeat
     kernels agree to the float64 summation order (tests/test_tracer_deposit.py)."""
     methods = (("continuous, 1 time/ray", {"method": "continuous", "time_samples": 1}),
                ("exact", {"method": "exact"}))
-    rows = {(label, m): {"strategy": label, "method": m, "rays_per_s": 0.0,
-                         "cpu_seconds_per_ray": math.inf}
-            for label, _ in DEPOSIT_STRATEGIES for m, _ in methods}
+    rows: dict[tuple[str, str], dict[str, Any]] = {
+        (label, m): {"strategy": label, "method": m, "rays_per_s": 0.0,
+                     "cpu_seconds_per_ray": math.inf}
+        for label, _ in DEPOSIT_STRATEGIES for m, _ in methods}
     for rep in range(-1, repeats):  # rep -1: each strategy's kernels compiled, not timed
         for m, kw in methods:
             for label, strategy in DEPOSIT_STRATEGIES:
@@ -238,6 +240,24 @@ def bank_error_per_second(setup: Setup, *, n_radii: int = 19,
     Banks are traced batched (:func:`mitsweep.tracer.ipsf_bank`'s default); the exact
     row also gives ``seconds_one_ipsf_at_a_time``, the same bank traced with
     ``batched=False``.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        A rotationally symmetric setup (the bank is radial).
+    n_radii : int, optional
+        Field points of the bank, on the +u half-axis (default 19).
+    depths : sequence of float, optional
+        Depths of the point sources, mm.
+    reference_rays : int, optional
+        Rays per kernel of the exact-method reference bank (default 2^21).
+    max_rays : int, optional
+        Largest rays per kernel tried; the counts double from 2^12 up to it (default 2^19).
+    target : float, optional
+        L1 error every kernel must meet (default :data:`BANK_L1_TARGET`).
+    methods : sequence of (str, mapping), optional
+        Label and :class:`mitsweep.tracer.settings.TraceSettings` fields of each method
+        timed (default :data:`BANK_METHODS`).
 
     Returns
     -------
@@ -305,7 +325,14 @@ def bank_error_per_second(setup: Setup, *, n_radii: int = 19,
 
 
 def run_bench(args: argparse.Namespace) -> dict:
-    """Run the benchmark; ``args.quick`` shrinks the problem. Returns a flat-ish dict."""
+    """Run the benchmark; ``args.quick`` shrinks the problem. Returns a flat-ish dict.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command line's; only ``quick`` (bool, absent: False) is read: 2^23 rays per
+        measurement instead of 2^26 and fewer repeats.
+    """
     quick = bool(getattr(args, "quick", False))
     setup = _setup()
     geometry = reference_geometry(setup)

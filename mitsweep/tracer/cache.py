@@ -60,7 +60,18 @@ DEFAULT_METHOD = TraceSettings().method
 @dataclass(frozen=True)
 class CachedBank:
     """A bank from the cache: the bank, its file (None: traced without the cache), and
-    whether this call traced it."""
+    whether this call traced it.
+
+    Attributes
+    ----------
+    bank : mitsweep.io.bank.IPSFBank
+        The bank.
+    path : pathlib.Path or None
+        Its ``bank.npz`` in the cache; None where it was traced without the cache (off,
+        unusable, or the file could not be written).
+    traced : bool
+        True when this call traced it, False when it was loaded from the cache.
+    """
 
     bank: IPSFBank
     path: Path | None
@@ -68,7 +79,18 @@ class CachedBank:
 
 
 def bank_cache_dir(cache_dir: str | Path | None = None) -> Path:
-    """``cache_dir`` or ``cache_root()/banks``."""
+    """``cache_dir`` or ``cache_root()/banks``.
+
+    Parameters
+    ----------
+    cache_dir : str or path, optional
+        The bank cache's directory; default ``banks`` under
+        :func:`mitsweep.io.cache.cache_root`.
+
+    Returns
+    -------
+    pathlib.Path
+    """
     return Path(cache_dir) if cache_dir is not None else cache_root() / "banks"
 
 
@@ -95,6 +117,23 @@ def bank_cache_key(setup: Setup, *, motion: MotionProfile | None = None,
 
     The key holds the optics' fingerprint and ``settings`` but its ``deposit`` strategy
     (which changes the speed, not the bank); ``**deprecated`` as :func:`cached_bank`.
+
+    Parameters
+    ----------
+    setup, motion, kind, depths, settings, n_radii, grid
+        As :func:`cached_bank`.
+    **deprecated
+        As :func:`cached_bank`.
+
+    Returns
+    -------
+    name : str
+        The entry's directory name, ``{kind}-{optics16}-{trace12}``.
+    optics : dict
+        The optics sections the fingerprint is taken of
+        (:func:`mitsweep.io.bank.optics_sections`).
+    trace : dict
+        The trace settings hashed into the name (file keys: ``depths_mm``, ``rays``, ...).
     """
     settings = settings_from_keywords(settings, deprecated, caller="bank_cache_key",
                                       allowed=_CACHE_KEYWORDS)

@@ -37,6 +37,25 @@ def convergence_table(setup: Setup, *, u: float | None = None, depth: float = 50
                           ("planes", 16), ("planes", 26), ("planes", 64))) -> dict:
     """L1 errors and run times of IPSF estimates (see the module docstring).
 
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The optics.
+    u : float, optional
+        Image point on the +u axis, mm at the reference sensor distance; default 0.9 of
+        the field radius.
+    depth : float, optional
+        Depth of the point source, mm (default 500).
+    rays : sequence of int, optional
+        Ray counts of the estimates judged.
+    reference_rays : int, optional
+        Rays of each of the two exact-method references (default 2^28).
+    kernel_size : int, optional
+        Kernel side, px (odd; default 31).
+    variants : sequence of (str, int or None), optional
+        ``(method, samples)``: ``("exact", None)``, ``("continuous", time samples per
+        ray)`` or ``("planes", number of planes)``.
+
     Returns
     -------
     dict
@@ -73,6 +92,19 @@ def convergence_table(setup: Setup, *, u: float | None = None, depth: float = 50
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Print the convergence table (Markdown, or JSON with ``--json``).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments (default ``sys.argv[1:]``): a setup file (default
+        ``scenes/sphere.toml``), ``--quick`` (smaller reference and ray counts), ``--json``.
+
+    Returns
+    -------
+    int
+        The exit status, 0.
+    """
     p = argparse.ArgumentParser(prog="python -m mitsweep.tracer.convergence")
     p.add_argument("setup", nargs="?", default="scenes/sphere.toml")
     p.add_argument("--quick", action="store_true", help="smaller reference and ray counts")

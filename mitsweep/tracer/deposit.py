@@ -108,6 +108,16 @@ def deposit_copies(strategy: DepositStrategy | None = None) -> int:
     threads (at most 64), so that the blocks the threads run at the same time seldom write
     the same copy. A buffer keeps its copies across launches; :func:`fold_buffer` sums
     them.
+
+    Parameters
+    ----------
+    strategy : DepositStrategy, optional
+        Its ``copies``, where set, is the answer.
+
+    Returns
+    -------
+    int
+        A power of two from 1 to :data:`MAX_COPIES`.
     """
     import drjit as dr
 
@@ -120,7 +130,21 @@ def deposit_copies(strategy: DepositStrategy | None = None) -> int:
 
 
 def fold_buffer(buffer: DrJitArray, sources: int, kernel_size: int) -> NDArray[np.float64]:
-    """A deposit buffer as NumPy: the ``(sources, K·K + 2)`` float64 sum of its copies."""
+    """A deposit buffer as NumPy: the ``(sources, K·K + 2)`` float64 sum of its copies.
+
+    Parameters
+    ----------
+    buffer : drjit Float64
+        ``copies · sources · (K·K + 2)`` cells, copy-major (:func:`new_buffer`).
+    sources : int
+        Sources deposited into it.
+    kernel_size : int
+        K, px.
+
+    Returns
+    -------
+    (sources, K·K + 2) ndarray of float64
+    """
     cells = int(kernel_size) ** 2 + 2
     arr = np.asarray(buffer.numpy(), dtype=np.float64)
     return arr.reshape(-1, int(sources), cells).sum(axis=0)
@@ -129,6 +153,23 @@ def fold_buffer(buffer: DrJitArray, sources: int, kernel_size: int) -> NDArray[n
 def new_buffer(buffer: DrJitArray | None, sources: int, cells: int, copies: int
                ) -> tuple[DrJitArray, int]:
     """``buffer`` (or a float64 zero one of ``copies`` copies) and its copy count.
+
+    Parameters
+    ----------
+    buffer : drjit Float64, optional
+        A buffer to keep depositing into; None makes a zero one.
+    sources : int
+        Sources per copy.
+    cells : int
+        Cells per source, ``K·K + 2``.
+    copies : int
+        Copies of a new buffer (a power of two); a given buffer keeps its own count.
+
+    Returns
+    -------
+    buffer : drjit Float64
+    copies : int
+        Its number of copies.
 
     Raises
     ------
@@ -188,6 +229,27 @@ def sensor_distances(xi: DrJitArray | None, *, times: Sequence[float] | None = N
     else ``M = time_samples`` stratified times ``t_j = (j + ξ)/M`` per ray (``xi`` its
     third lattice coordinate) mapped by the motion: ``linear = (start, end)`` exactly, or
     by linear interpolation in ``sensor_table`` (distances at uniform times).
+
+    Parameters
+    ----------
+    xi : drjit Float, optional
+        The rays' third lattice coordinate in [0, 1); needed unless ``times`` is given.
+    times : sequence of float, optional
+        Fixed sensor distances, mm; when given the other parameters are not used.
+    time_samples : int, optional
+        M >= 1, stratified times per ray (default 1).
+    linear : (float, float), optional
+        ``(start, end)`` sensor distances of a linear motion, mm.
+    sensor_table : ndarray, optional
+        Sensor distances at uniform times from 0 to 1, mm (a tabulated motion); used when
+        ``linear`` is None.
+    Float : type
+        The Dr.Jit float type of the launch (keyword only).
+
+    Returns
+    -------
+    list of drjit Float
+        One sensor distance per time sample (per ray), mm.
     """
     import drjit as dr
 
@@ -198,7 +260,13 @@ def sensor_distances(xi: DrJitArray | None, *, times: Sequence[float] | None = N
         return [op(x) for x in times]
     M = int(time_samples)
     assert M >= 1
-    lookup = None if linear is not None else _table_lookup(sensor_table, Float, clip=False)
+    if xi is None:
+        raise ValueError("sensor_distances: xi (the rays' time coordinate) is needed "
+                         "unless times are given")
+    if linear is None:
+        if sensor_table is None:
+            raise ValueError("sensor_distances: give times, linear or sensor_table")
+        lookup = _table_lookup(sensor_table, Float, clip=False)
     dists = []
     for j in range(M):
         tt = (xi + j) * (1.0 / M)
@@ -300,6 +368,24 @@ def deposit_sweeps(buffer: DrJitArray, hits: dict, *, center: Sequence[DrJitArra
     segment is clipped to the window (slab test) and walked pixel by pixel (a 2-D DDA,
     Amanatides & Woo 1987). Cells ``K·K`` and ``K·K+1`` and the other parameters as in
     :func:`deposit_time_samples`.
+
+    Parameters
+    ----------
+    buffer, hits, center, pitch, kernel_size
+        As :func:`deposit_time_samples`.
+    span : (float, float)
+        ``(i_lo, i_hi)``: the sensor distances at the sweep's ends, mm.
+    cdf_table : ndarray, optional
+        ``F`` at uniform ``s`` in [0, 1] (a tabulated motion); None: linear motion.
+    base : drjit UInt32, optional
+        Per-lane index of the first cell (None: 0 for every lane).
+    mode : drjit.ReduceMode, optional
+        Scatter reduction mode (default ``Auto``).
+
+    Returns
+    -------
+    buffer
+        With each landed ray's sweep added.
 
     References
     ----------

@@ -91,6 +91,20 @@ class FocusResult:
     ``line_foci_sensor_mm`` is (nearer, farther) sensor distance of the two line foci;
     ``line_foci_focus_mm`` their focus distances (nearer, farther) — the farther sensor
     distance focuses nearer.
+
+    Attributes
+    ----------
+    radial_sensor_mm, tangential_sensor_mm : float
+        Sensor distance of least spread along / across the image radius, mm.
+    line_foci_sensor_mm : (float, float)
+        Sensor distances of the two line foci, mm, nearer first.
+    radial_focus_mm, tangential_focus_mm : float
+        Focus distances of the radial and tangential foci, mm (inf where the sensor
+        distance is not beyond the focal length).
+    line_foci_focus_mm : (float, float)
+        Focus distances of the line foci, mm, nearer first.
+    rays_landed : int
+        Traced rays that reached the sensor.
     """
 
     radial_sensor_mm: float
@@ -292,7 +306,7 @@ class _StarField:
         self.p0 = np.asarray(p0, dtype=float)
         self.angle = angle
         self.limit = limit
-        self._s = {}
+        self._s: dict[float, float] = {}
 
     def _s_rim(self, u) -> float:
         b = float(self.p0 @ u)
@@ -317,7 +331,7 @@ class _StarField:
             self._s[theta] = s_b
         return self._s[theta]
 
-    def point(self, t: float, theta: float) -> tuple:
+    def point(self, t: float, theta: float) -> tuple[float, float]:
         u = np.array([math.cos(theta), math.sin(theta)])
         x, y = self.p0 + t * self.boundary_distance(theta) * u
         h = math.hypot(x, y)

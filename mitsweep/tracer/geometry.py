@@ -67,6 +67,19 @@ class TraceParams:
     bounding box. The polar map keeps the rank-1 lattice's quality (periodic in ``v``;
     measured: the same or lower L1 per ray than the box, where Shirley & Chiu's
     concentric map, with its kinks on the diagonals, gave 1.3–1.5× higher).
+
+    Attributes
+    ----------
+    a0, a1 : float
+        The box's extent along the aim plane's first axis (``e1``), mm, ``a0 < a1``.
+    b0, b1 : float
+        Its extent along the second axis (``e2``), mm, ``b0 < b1``. With an ellipse the
+        box is its bounding box.
+    seed : int
+        Seed of the lattice's Cranley-Patterson shifts (default 0).
+    ellipse : tuple of 6 float, optional
+        ``(ca, cb, m00, m01, m10, m11)``: centre (mm) and matrix (mm) of the sampling
+        ellipse; None samples the box.
     """
 
     a0: float

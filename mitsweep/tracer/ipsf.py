@@ -90,6 +90,17 @@ def fit_sampling_box(geom: Geometry, *, seed: int = 0, double: bool = False,
     drawn in the ellipse instead (:func:`_fit_ellipse`): ~90 % of them then land, against
     ~71 % (an ellipse fills π/4 of its bounding box).
 
+    Parameters
+    ----------
+    geom : Geometry
+        The source's geometry (:meth:`mitsweep.tracer.source.PointSource.geometry`).
+    seed : int, optional
+        Seed of the pilot passes' lattice, and of the returned ``params`` (default 0).
+    double : bool, optional
+        Trace the pilot passes in float64 (default float32).
+    max_rounds : int, optional
+        Pilot passes at most (default 40).
+
     Returns
     -------
     params : TraceParams
@@ -123,6 +134,15 @@ def fit_sampling_boxes(geoms: Iterable[Geometry], *, seeds: Iterable[int],
     trace_arrays_batch` launch, so a bank pays the launch and read-back cost once per
     round instead of once per source and round. Every source gets the box (and ellipse)
     :func:`fit_sampling_box` gives it: the pilot rays are the same, bit for bit.
+
+    Parameters
+    ----------
+    geoms : iterable of Geometry
+        The sources' geometries.
+    seeds : iterable of int
+        One seed per source, as :func:`fit_sampling_box`'s ``seed``.
+    double, max_rounds
+        As :func:`fit_sampling_box`.
 
     Returns
     -------
@@ -295,6 +315,19 @@ def sweep_cdf(motion: MotionProfile, n: int = _SENSOR_TABLE) -> np.ndarray | Non
     the sensor distance is ≤ ``i``. Built from the motion's piecewise-linear knots
     (:meth:`MotionProfile.segments`), each chord adding its duration spread uniformly over
     the distances it covers, so non-monotonic (measured) motions are handled too.
+
+    Parameters
+    ----------
+    motion : MotionProfile
+        The stage's motion.
+    n : int, optional
+        Table size: values of ``F`` at ``n`` uniform ``s`` from 0 to 1.
+
+    Returns
+    -------
+    (n,) ndarray or None
+        ``F``, from 0 to 1; None for a linear motion (``F(s) = s``) and for a sensor that
+        stands still.
     """
     if motion.kind == "linear":
         return None
@@ -404,6 +437,40 @@ def render_source(setup: Setup, source: PointSource, *, times: ArrayLike | None 
     sweep deposited as its segment (:func:`mitsweep.tracer.kernel.deposit_segments`),
     the way ``deposit`` says (default :class:`~mitsweep.tracer.kernel.DepositStrategy`).
     Returns ``(kernel, info)`` as :func:`integrated_psf`.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The optics; the kernel's pixels are ``setup.sensor.pixel_pitch`` wide.
+    source : PointSource
+        The point source, with its chief-ray image ``image_uv`` (the window's centre).
+    times : array_like, optional
+        Fixed sensor distances, mm, each weighted equally (a PSF, or the paper's plane
+        sum).
+    motion : MotionProfile, optional
+        The stage's motion, used when ``times`` is None.
+    time_samples : int, optional
+        Stratified times per ray along ``motion`` (without ``exact``).
+    exact : bool, optional
+        Deposit each ray's whole sweep segment instead of time samples.
+    rays : int, optional
+        Rays traced, >= 1.
+    kernel_size : int, optional
+        K, px: odd, >= 3.
+    seed : int, optional
+        Seed of the sample stream (default 0).
+    double : bool, optional
+        Trace in float64 (default float32).
+    aperture_radius : float, optional
+        Override the lens aperture radius, mm.
+    deposit : DepositStrategy, optional
+        How the weights are added (the speed, not the result).
+
+    Returns
+    -------
+    kernel : (K, K) float32 ndarray
+    info : dict
+        As :func:`integrated_psf`.
     """
     K, rays = _check_sizes(kernel_size, rays)
     t_start = time.perf_counter()
@@ -487,7 +554,8 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
                          time_samples=time_samples, double=double, deposit=strategy)
     geoms = [s.geometry(setup, aperture_radius=aperture_radius) for s in sources]
     fits = fit_sampling_boxes(geoms, seeds=seeds, double=double)
-    ok = [j for j, f in enumerate(fits) if not isinstance(f, Exception)]
+    fitted = {j: f for j, f in enumerate(fits) if not isinstance(f, Exception)}
+    ok = list(fitted)
     results: list = list(fits)
     if progress is not None:
         for _ in range(len(sources) - len(ok)):
@@ -500,19 +568,19 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
         # one-source launch are cheaper than the batch's per-lane table reads.
         buf = np.empty((len(ok), K * K + 2))
         for row, j in enumerate(ok):
-            buf[row] = _deposit_source(geoms[j], fits[j][0], sources[j].image_uv, rays, K,
+            buf[row] = _deposit_source(geoms[j], fitted[j][0], sources[j].image_uv, rays, K,
                                        pitch, args)
             if progress is not None:
                 progress()
     else:
-        buf = _deposit_batch(SourceBatch([geoms[j] for j in ok], [fits[j][0] for j in ok],
+        buf = _deposit_batch(SourceBatch([geoms[j] for j in ok], [fitted[j][0] for j in ok],
                                          center_uv=[sources[j].image_uv for j in ok],
                                          double=double),
                              rays, K, pitch, args, progress=progress)
     seconds = (time.perf_counter() - t_start) / len(sources)
     for row, j in enumerate(ok):
         try:
-            kernel, info = _kernel_and_info(buf[row], K, rays, sources[j], fits[j][1],
+            kernel, info = _kernel_and_info(buf[row], K, rays, sources[j], fitted[j][1],
                                             seed=seeds[j], double=double, seconds=seconds,
                                             pitch=pitch)
             info["batch_size"] = len(sources)
@@ -756,6 +824,28 @@ def psf(setup: Setup, u: float, v: float, depth: float, sensor_distance: float, 
     """The PSF at one sensor distance (mm), on the reference grid (default: that distance).
 
     Same conventions and ``info`` as :func:`integrated_psf`.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The optics.
+    u, v : float
+        Upright image coordinates of the chief-ray image at the reference sensor
+        distance, mm.
+    depth : float
+        Depth l of the source, mm (inf allowed).
+    sensor_distance : float
+        The sensor's distance from the lens, mm.
+    rays, kernel_size, seed, double, aperture_radius
+        As :func:`render_source`.
+    reference_sensor_distance : float, optional
+        Pixel grid and centring distance, mm (default ``sensor_distance``).
+
+    Returns
+    -------
+    kernel : (K, K) float32 ndarray
+    info : dict
+        As :func:`integrated_psf`, with ``sensor_distance_mm`` and ``image_uv_mm``.
     """
     ref = float(sensor_distance) if reference_sensor_distance is None \
         else float(reference_sensor_distance)

@@ -98,7 +98,17 @@ _SCOPED_STRATEGY: contextvars.ContextVar[DepositStrategy | None] = contextvars.C
 
 def resolve_strategy(strategy: DepositStrategy | None = None) -> DepositStrategy:
     """``strategy``, else that of an enclosing :func:`deposit_strategy_scope`
-    (deprecated), else the default :class:`DepositStrategy`."""
+    (deprecated), else the default :class:`DepositStrategy`.
+
+    Parameters
+    ----------
+    strategy : DepositStrategy, optional
+        A strategy given explicitly; it wins.
+
+    Returns
+    -------
+    DepositStrategy
+    """
     if strategy is not None:
         return strategy
     return _SCOPED_STRATEGY.get() or DepositStrategy()
@@ -107,7 +117,18 @@ def resolve_strategy(strategy: DepositStrategy | None = None) -> DepositStrategy
 def deposit_copies(strategy: DepositStrategy | None = None) -> int:
     """Copies of a new deposit buffer (:func:`mitsweep.tracer.deposit.deposit_copies`) for
     ``strategy`` resolved by :func:`resolve_strategy` (so an enclosing deprecated
-    :func:`deposit_strategy_scope` still sets the count)."""
+    :func:`deposit_strategy_scope` still sets the count).
+
+    Parameters
+    ----------
+    strategy : DepositStrategy, optional
+        As :func:`resolve_strategy`.
+
+    Returns
+    -------
+    int
+        A power of two from 1 to 64.
+    """
     return _deposit.deposit_copies(resolve_strategy(strategy))
 
 
@@ -122,6 +143,31 @@ def trace_arrays(geom: Geometry, params: TraceParams, n: int, *, offset: int = 0
     Keys as in the kernel: ``landed``, ``landed_free`` (bool), ``weight``, ``Au``,
     ``Av``, ``Bu``, ``Bv``, ``a``, ``b`` (float64 copies of the traced values); ``keys``
     selects some (the pilot passes need three: each array read back costs ~0.3 ms).
+
+    Parameters
+    ----------
+    geom : Geometry
+        The source and the optics.
+    params : TraceParams
+        Sampling domain and seed.
+    n : int
+        Rays traced.
+    offset : int, optional
+        Index of the first sample in ``params``'s stream (default 0).
+    double : bool, optional
+        Trace in float64 (default float32).
+    keys : sequence of str, optional
+        The arrays to read back (default all).
+
+    Returns
+    -------
+    dict of str to (n,) ndarray
+        bool for ``landed*``, float64 otherwise.
+
+    Raises
+    ------
+    ValueError
+        An unknown key.
     """
     return _read_arrays(geom, single_lanes(geom, params, n, offset, double), double, keys)
 
@@ -129,7 +175,24 @@ def trace_arrays(geom: Geometry, params: TraceParams, n: int, *, offset: int = 0
 def trace_arrays_batch(batch: SourceBatch, log2_count: int, *, offset: int = 0,
                        keys: Sequence[str] = _ARRAY_KEYS) -> list[dict[str, np.ndarray]]:
     """Trace samples ``offset … offset + 2^log2_count − 1`` of every source of ``batch``
-    in one launch; one dict per source, as :func:`trace_arrays` returns."""
+    in one launch; one dict per source, as :func:`trace_arrays` returns.
+
+    Parameters
+    ----------
+    batch : SourceBatch
+        The sources, with their sampling domains and seeds.
+    log2_count : int
+        Base-2 logarithm of the samples per source.
+    offset : int, optional
+        Index of each source's first sample (default 0).
+    keys : sequence of str, optional
+        As :func:`trace_arrays`.
+
+    Returns
+    -------
+    list of dict
+        One per source, in the batch's order.
+    """
     lanes = Lanes(batch.double, 0, offset, batch=batch, log2_count=int(log2_count))
     res = _read_arrays(batch.geometry, lanes, batch.double, keys)
     count = 1 << int(log2_count)
@@ -174,6 +237,42 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
     The buffer holds :func:`deposit_copies` copies of those cells (``strategy.copies``;
     a given ``buffer`` keeps its own count); ``fold_buffer(buffer, 1, K)`` sums them.
     ``strategy`` (default :class:`DepositStrategy`) says how the weights are added.
+
+    Parameters
+    ----------
+    geom : Geometry
+        The source and the optics.
+    params : TraceParams
+        Sampling domain and seed.
+    n : int
+        Rays traced in this launch.
+    offset : int
+        Index of the launch's first sample in ``params``'s stream.
+    kernel_size : int
+        K, px.
+    pitch : float
+        Pixel pitch, mm.
+    center_uv : (float, float)
+        Window centre (u, v), upright image mm at the reference sensor distance.
+    times : list of float or None
+        Fixed sensor distances, mm; None: time samples along the motion.
+    sensor_table : ndarray or None
+        Sensor distances at uniform times, mm (a tabulated motion).
+    linear : (float, float) or None
+        ``(start, end)`` sensor distances of a linear motion, mm.
+    time_samples : int
+        M, stratified times per ray (without ``times``).
+    buffer : drjit Float64, optional
+        A buffer to add to (None: a new zero one).
+    double : bool, optional
+        Trace in float64 (default float32).
+    strategy : DepositStrategy, optional
+        How the weights are added (:func:`resolve_strategy`).
+
+    Returns
+    -------
+    drjit Float64
+        The buffer.
     """
     lanes = single_lanes(geom, params, n, offset, double, center_uv)
     return _deposit_samples(geom, lanes, kernel_size=kernel_size, pitch=pitch, times=times,
@@ -213,6 +312,20 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
     its span) is linear for a linear motion (``cdf_table=None``: exact); otherwise
     ``cdf_table`` holds ``F`` at uniform ``s = (i − i_lo)/(i_hi − i_lo)``. Cells ``K·K``,
     ``K·K+1``, the buffer's copies and ``strategy`` as in :func:`deposit`.
+
+    Parameters
+    ----------
+    geom, params, n, offset, kernel_size, pitch, center_uv, buffer, double, strategy
+        As :func:`deposit`.
+    span : (float, float)
+        ``(i_lo, i_hi)``, the sensor distances at the sweep's ends, mm.
+    cdf_table : ndarray or None
+        ``F`` at uniform ``s`` (:func:`mitsweep.tracer.ipsf.sweep_cdf`); None: linear.
+
+    Returns
+    -------
+    drjit Float64
+        The buffer.
     """
     strategy = resolve_strategy(strategy)
     lanes = single_lanes(geom, params, n, offset, double, center_uv,
@@ -251,6 +364,26 @@ def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_si
     one-source buffer of :func:`deposit_segments` (``exact``: ``span``, ``cdf_table``) or
     :func:`deposit` (``times``, ``sensor_table``, ``linear``, ``time_samples``); the window
     of source ``j`` is centred on the batch's ``center_uv[j]``.
+
+    Parameters
+    ----------
+    batch : SourceBatch
+        The sources, with their sampling domains, seeds and window centres.
+    log2_count : int
+        Base-2 logarithm of the samples per source.
+    offset, kernel_size, pitch, buffer, strategy
+        As :func:`deposit`.
+    exact : bool
+        Deposit whole sweeps (:func:`deposit_segments`) instead of time samples.
+    times, sensor_table, linear, time_samples
+        As :func:`deposit` (without ``exact``).
+    span, cdf_table
+        As :func:`deposit_segments` (with ``exact``).
+
+    Returns
+    -------
+    drjit Float64
+        The buffer.
     """
     strategy = resolve_strategy(strategy)
     lanes = Lanes(batch.double, 0, offset, batch=batch, log2_count=int(log2_count),
@@ -275,6 +408,15 @@ def deposit_strategy_scope(*, copies: int | None = None, mode: Any = None,
     reduction ``mode`` (a ``drjit.ReduceMode``, for both deposits) and the segment
     deposit's lanes ordered ``coherent`` ly or not (None: the default). The setting is
     context-local (:mod:`contextvars`), not a module global.
+
+    Parameters
+    ----------
+    copies : int, optional
+        Copies of a new buffer, a power of two from 1 to 64 (None: the default).
+    mode : str or drjit.ReduceMode, optional
+        Scatter reduction mode (None: the default).
+    coherent : bool, optional
+        Order the segment deposit's lanes coherently (None: True).
     """
     warnings.warn("deposit_strategy_scope is deprecated: pass strategy=DepositStrategy(...) "
                   "(or TraceSettings(deposit=...)) instead", DeprecationWarning, stacklevel=3)

@@ -46,7 +46,18 @@ EPSILON = 1e-3
 
 
 def centroid(kernel: ArrayLike) -> tuple[float, float]:
-    """(row, col) intensity centroid of a (K, K) kernel, pixels."""
+    """(row, col) intensity centroid of a (K, K) kernel, pixels.
+
+    Parameters
+    ----------
+    kernel : (K, K) array_like
+        A kernel with a positive sum.
+
+    Returns
+    -------
+    (float, float)
+        Row and column of the centroid, px from the first pixel's centre.
+    """
     k = np.asarray(kernel, dtype=np.float64)
     s = k.sum()
     if not s > 0:
@@ -96,6 +107,15 @@ def cross_sections(kernel: ArrayLike, angle: float = 0.0, **kw: Any
     """Radial and tangential cross-sections of an IPSF at polar angle ``angle`` (rad).
 
     Returns ``(x, radial, tangential)``; see :func:`cross_section`.
+
+    Parameters
+    ----------
+    kernel : (K, K) array_like
+        The IPSF.
+    angle : float, optional
+        Polar angle of the image radius, rad, counter-clockwise from +u (default 0).
+    **kw
+        ``through``, ``half_length``: as :func:`cross_section`.
     """
     e_r = (math.cos(angle), math.sin(angle))
     e_t = (-math.sin(angle), math.cos(angle))

@@ -154,6 +154,33 @@ class Lanes:
     batch's table. With ``coherent``, ``k`` (mod ``2^p``) is first reordered by
     :func:`coherent_order`: the same samples, in an order where neighbouring lanes
     trace neighbouring rays.
+
+    Parameters
+    ----------
+    double : bool
+        float64 lanes (default float32 of the backend).
+    n : int
+        Lanes of a one-source launch (ignored with ``batch``: ``S · 2^log2_count``).
+    offset : int
+        Sample index of the first lane (of each source, with ``batch``).
+    columns : dict, optional
+        The one source's values by name (:data:`_COLUMNS`); required without ``batch``.
+    seed : int, optional
+        The one source's lattice seed (default 0).
+    ellipse : bool, optional
+        The one source samples an ellipse (default: a box).
+    batch : SourceBatch, optional
+        Sources traced together; their values are gathered from its table.
+    log2_count : int, optional
+        Base-2 logarithm of the samples per source of ``batch`` (at most 2^32 from
+        ``offset``).
+    coherent : bool, optional
+        Reorder the samples by :func:`coherent_order` (default False).
+
+    Raises
+    ------
+    ValueError
+        A one-source launch without ``columns``, or a batch beyond 2^32 samples.
     """
 
     def __init__(self, double: bool, n: int, offset: int, *, columns: dict | None = None,
@@ -164,14 +191,18 @@ class Lanes:
         m, Float, _ = array_types(double)
         UInt32 = m.UInt32
         self._float = Float
-        self._cache = {}
+        self._cache: dict[str | int, Any] = {}
         self.batch = batch
+        #: True / False when every lane samples an ellipse / a box, None when mixed.
+        self.ellipse: bool | None
         if batch is None:
             self.n = int(n)
             self.lane = dr.arange(UInt32, self.n)
             local = coherent_order(self.lane, self.n) if coherent else self.lane
             self.index = local + dr.opaque(UInt32, offset & 0xFFFFFFFF)
             self.source = None
+            if columns is None:
+                raise ValueError("Lanes: one source (no batch) needs its columns")
             self._columns = columns
             self.shifts = [dr.opaque(UInt32, int(x)) for x in _lattice_shifts(seed, offset)]
             self.ellipse = bool(ellipse)
@@ -197,7 +228,18 @@ class Lanes:
             self.infinite_depth = False
 
     def value(self, name: str) -> Any:
-        """The lanes' source value ``name`` (one of :data:`_COLUMNS`)."""
+        """The lanes' source value ``name`` (one of :data:`_COLUMNS`).
+
+        Parameters
+        ----------
+        name : str
+            A column of the source table, e.g. ``"depth"``, ``"cu"`` (mm).
+
+        Returns
+        -------
+        drjit Float
+            An opaque literal for one source; per lane, gathered, for a batch (cached).
+        """
         import drjit as dr
 
         v = self._cache.get(name)
@@ -222,6 +264,17 @@ class Lanes:
         The buffer holds ``copies`` (a power of two) copies of the ``S`` sources' cells;
         a lane writes copy ``(lane >> 14) mod copies``, so the lanes of one work unit
         (a thread's block) share a copy and concurrent blocks write different ones.
+
+        Parameters
+        ----------
+        cells : int
+            Cells per source (``K·K + 2``).
+        copies : int, optional
+            Copies of the buffer, a power of two (default 1).
+
+        Returns
+        -------
+        drjit UInt32 or None
         """
         import drjit as dr
 
@@ -239,20 +292,43 @@ def single_lanes(geom: Geometry, params: TraceParams, n: int, offset: int, doubl
                  center_uv: tuple[float, float] | None = None, coherent: bool = False
                  ) -> Lanes:
     """The lanes of a one-source launch: ``n`` samples from ``offset`` of ``params``'s
-    stream, the source's values as opaque literals."""
+    stream, the source's values as opaque literals.
+
+    Parameters
+    ----------
+    geom : Geometry
+        The source and the optics.
+    params : TraceParams
+        Sampling domain and seed.
+    n : int
+        Lanes.
+    offset : int
+        Sample index of the first lane.
+    double : bool
+        float64 lanes.
+    center_uv : (float, float), optional
+        Window centre of a deposit, upright image mm (None: unused, zeros).
+    coherent : bool, optional
+        As :class:`Lanes`.
+
+    Returns
+    -------
+    Lanes
+    """
     return Lanes(double, n, offset, columns=_source_columns(geom, params, center_uv),
                  seed=params.seed, ellipse=params.ellipse is not None, coherent=coherent)
 
 
 @functools.lru_cache(maxsize=256)
-def coherent_segments(count: int) -> tuple:
+def coherent_segments(count: int) -> tuple[tuple[int, int], ...]:
     """Segments ``(start, h)`` of ``[0, count)`` for :func:`coherent_order`.
 
     Greedy: each segment is ``16 h`` lanes long, ``h`` the largest of
     :data:`R2_STEPS` that fits what is left; at most :data:`SEGMENTS` segments, the
     lanes after them keep their order. Padded with empty segments ``(end, 1)``.
     """
-    segments, start = [], 0
+    segments: list[tuple[int, int]] = []
+    start = 0
     while len(segments) < SEGMENTS:
         fits = [h for h in R2_STEPS if GROUP * h <= count - start]
         if not fits:
@@ -273,6 +349,18 @@ def coherent_order(local: Any, count: int) -> Any:
     scatters then pre-reduce within the packet (``ReduceMode.Local``), one atomic per
     distinct pixel instead of one per lane. The set of samples, and so the estimate, is
     unchanged. The segment bounds are opaque: one kernel serves every ``count``.
+
+    Parameters
+    ----------
+    local : drjit UInt32
+        Lane indices in ``[0, count)``.
+    count : int
+        Lanes per source (segments of :func:`coherent_segments`).
+
+    Returns
+    -------
+    drjit UInt32
+        The sample index of each lane.
     """
     import drjit as dr
 
@@ -287,7 +375,13 @@ def coherent_order(local: Any, count: int) -> Any:
 
 
 def array_types(double: bool) -> tuple[Any, type, type]:
-    """``(module, Float, Array3)`` of the selected backend, float64 with ``double``."""
+    """``(module, Float, Array3)`` of the selected backend, float64 with ``double``.
+
+    Parameters
+    ----------
+    double : bool
+        float64 types (else float32).
+    """
     m = drjit_module()
     if double:
         return m, m.Float64, m.Array3f64

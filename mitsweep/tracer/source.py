@@ -20,7 +20,22 @@ __all__ = ["PointSource", "source_from_image", "source_from_mirror", "check_dept
 
 
 def check_depth(depth: float) -> float:
-    """Validate a depth l (mm, > 0, inf allowed) and return it as float."""
+    """Validate a depth l (mm, > 0, inf allowed) and return it as float.
+
+    Parameters
+    ----------
+    depth : float
+        Depth l of a point source along its reflected chief ray, mm.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    ValueError
+        Not a number, NaN, or not > 0.
+    """
     try:
         d = float(depth)
     except (TypeError, ValueError):
@@ -42,6 +57,8 @@ class PointSource:
         p_r in the mirror's local frame, mm.
     world_dir : (3,) ndarray
         w, the world-bound reflected chief direction (unit, world).
+    normal : (3,) ndarray
+        The mirror's unit normal at p_r, world.
     depth : float
         l, mm (inf allowed).
     position : (3,) ndarray
@@ -69,7 +86,22 @@ class PointSource:
 
     def geometry(self, setup: Setup, *, rim: bool = True,
                  aperture_radius: float | None = None) -> Geometry:
-        """The kernel's :class:`Geometry` for this source (local frame, float64)."""
+        """The kernel's :class:`Geometry` for this source (local frame, float64).
+
+        Parameters
+        ----------
+        setup : mitsweep.config.Setup
+            The mirror and lens this source was found with.
+        rim : bool, optional
+            Keep the mirror's rim (default True); False sets an infinite rim (to measure
+            vignetting).
+        aperture_radius : float, optional
+            Override the lens aperture radius, mm.
+
+        Returns
+        -------
+        Geometry
+        """
         m = setup.mirror
         pl = placement_of(m)
         rot = pl.rotation
@@ -107,6 +139,21 @@ def source_from_image(setup: Setup, u: float, v: float, depth: float, *,
                       reference_sensor_distance: float) -> PointSource:
     """The source seen at upright image point (u, v) mm on a sensor at the reference distance.
 
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror and lens.
+    u, v : float
+        Upright image coordinates of the chief-ray image, mm.
+    depth : float
+        Depth l along the reflected chief ray, mm (> 0, inf allowed).
+    reference_sensor_distance : float
+        The sensor distance (u, v) are measured at, mm.
+
+    Returns
+    -------
+    PointSource
+
     Raises
     ------
     ValueError
@@ -131,7 +178,29 @@ def source_from_image(setup: Setup, u: float, v: float, depth: float, *,
 
 def source_from_mirror(setup: Setup, x: float, y: float, depth: float, *,
                        reference_sensor_distance: float) -> PointSource:
-    """The source seen at the mirror point of local coordinates (x, y), mm."""
+    """The source seen at the mirror point of local coordinates (x, y), mm.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror and lens.
+    x, y : float
+        The mirror point in the mirror's local frame, mm, within the rim.
+    depth : float
+        Depth l along the reflected chief ray, mm (> 0, inf allowed).
+    reference_sensor_distance : float
+        The sensor distance at which ``image_uv`` is given, mm.
+
+    Returns
+    -------
+    PointSource
+
+    Raises
+    ------
+    ValueError
+        The point lies outside the rim or faces away from the lens, or the depth is not
+        > 0.
+    """
     depth = check_depth(depth)
     pl = placement_of(setup.mirror)
     if math.hypot(x, y) > setup.mirror.rim_radius:

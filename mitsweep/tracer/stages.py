@@ -59,7 +59,20 @@ DrJitArray = Any
 def aim_box(ua: DrJitArray, ub: DrJitArray, a0: DrJitArray, a1: DrJitArray,
             b0: DrJitArray, b1: DrJitArray) -> tuple[DrJitArray, DrJitArray]:
     """Aim-plane point ``(a, b)`` uniform in the box ``[a0, a1] × [b0, b1]`` (mm) from
-    unit-square coordinates ``(ua, ub)`` (stage *sample*)."""
+    unit-square coordinates ``(ua, ub)`` (stage *sample*).
+
+    Parameters
+    ----------
+    ua, ub : Float
+        Unit-square coordinates in [0, 1).
+    a0, a1, b0, b1 : Float
+        The box's bounds along ``e1`` and ``e2``, mm.
+
+    Returns
+    -------
+    a, b : Float
+        Aim-plane coordinates, mm.
+    """
     import drjit as dr
 
     return dr.fma(a1 - a0, ua, a0), dr.fma(b1 - b0, ub, b0)
@@ -72,6 +85,20 @@ def aim_ellipse(ua: DrJitArray, ub: DrJitArray, centre: Sequence[DrJitArray],
     ``x = √ua (cos 2π ub, sin 2π ub)`` is the area-preserving polar map of the unit
     square onto the unit disc; ``centre = (ca, cb)`` and ``matrix = (m00, m01, m10,
     m11)`` (row-major) in mm.
+
+    Parameters
+    ----------
+    ua, ub : Float
+        Unit-square coordinates in [0, 1).
+    centre : (Float, Float)
+        The ellipse's centre ``(ca, cb)``, mm.
+    matrix : sequence of 4 Float
+        ``M`` row-major, mm.
+
+    Returns
+    -------
+    a, b : Float
+        Aim-plane coordinates, mm.
     """
     import drjit as dr
 
@@ -205,6 +232,22 @@ def intersect_asphere(o: DrJitArray, d: DrJitArray, t: DrJitArray, R: DrJitArray
     Four Newton steps on ``G(t) = z + s(ρ)`` with ``s(ρ) = ρ²/(R + √(R² − (1+k) ρ²)) +
     Σ c_j ρ^(2j+4)`` (``coeffs`` = a4, a6, ...); ``t`` unchanged when every coefficient
     is 0.
+
+    Parameters
+    ----------
+    o, d : Array3
+        Ray origin and unit direction, mirror's local frame.
+    t : Float
+        The conic root (:func:`intersect_conic`).
+    R, ok : Float
+        Vertex radius R (mm) and ``1 + k``.
+    coeffs : sequence of float
+        Aspheric coefficients a4, a6, ... (mm^-3, mm^-5, ...).
+
+    Returns
+    -------
+    Float
+        The distance along the ray to the asphere.
     """
     import drjit as dr
 
@@ -229,6 +272,22 @@ def surface_normal(p: DrJitArray, r2: DrJitArray, R: DrJitArray, ok: DrJitArray,
     Conic: ``∇F/2 = (x, y, (1+k) z + R)``. Even asphere: ``(x (1 + q P), y (1 + q P),
     q)`` with ``q = √(R² − (1+k) ρ²)`` and ``P = s_asph'/ρ``, finite on the axis and at
     ``q = 0``.
+
+    Parameters
+    ----------
+    p : Array3
+        Point on the mirror, local frame, mm.
+    r2 : Float
+        ``x² + y²`` of ``p``, mm².
+    R, ok : Float
+        Vertex radius R (mm) and ``1 + k``.
+    coeffs : sequence of float
+        Aspheric coefficients a4, a6, ... (none or all zero: the conic).
+
+    Returns
+    -------
+    Array3
+        The normal, not normalised.
     """
     import drjit as dr
 
@@ -242,7 +301,21 @@ def surface_normal(p: DrJitArray, r2: DrJitArray, R: DrJitArray, ok: DrJitArray,
 
 def reflect(d: DrJitArray, n: DrJitArray) -> tuple[DrJitArray, DrJitArray]:
     """Mirror reflection of ``d`` about the unnormalised normal ``n`` (stage *reflect*):
-    ``(d − 2 (d·n) n / |n|², d·n)``."""
+    ``(d − 2 (d·n) n / |n|², d·n)``.
+
+    Parameters
+    ----------
+    d : Array3
+        Incident direction.
+    n : Array3
+        Surface normal, any length.
+
+    Returns
+    -------
+    reflected : Array3
+    d_dot_n : Float
+        ``d·n`` (negative on the side ``n`` points to).
+    """
     import drjit as dr
 
     d_dot_n = dr.dot(d, n)
@@ -255,6 +328,20 @@ def rotate(v: DrJitArray, rotation: np.ndarray, Float: type) -> DrJitArray:
     Zero entries (an untilted mirror: the identity; a tilt about one axis: four) are
     left out and unit ones multiply nothing: the same values, fewer operations. Other
     entries are opaque ``Float`` values (one kernel for every tilt).
+
+    Parameters
+    ----------
+    v : Array3
+        A local-frame vector (or point).
+    rotation : (3, 3) ndarray
+        Local-to-world rotation.
+    Float : type
+        The Dr.Jit float type of the launch.
+
+    Returns
+    -------
+    Array3
+        ``v`` in the world frame.
     """
     import drjit as dr
 
@@ -333,6 +420,21 @@ def trace_lanes(geom: Geometry, lanes: Lanes, double: bool, time_dim: bool = Fal
     upright image mm), ``a, b`` (aim-plane sample) and, with ``time_dim``, ``xi_t`` (a
     third low-discrepancy coordinate in [0, 1) for time: the samples are then R3's, else
     R2's).
+
+    Parameters
+    ----------
+    geom : Geometry
+        The optics (the first source's geometry, for a batch).
+    lanes : Lanes
+        The samples and their sources' values.
+    double : bool
+        Trace in float64.
+    time_dim : bool, optional
+        Draw the time coordinate ``xi_t`` too (default False: ``xi_t`` is None).
+
+    Returns
+    -------
+    dict of str to Dr.Jit array
     """
     import drjit as dr
 

@@ -37,7 +37,19 @@ PAPER_RANGE_FRACTIONS = (9.0 / 25.25, 18.0 / 25.25, 35.0 / 25.25)
 
 
 def default_ranges(setup: Setup) -> list[tuple[float, float]]:
-    """The paper's three ranges scaled to the setup, then the optimal range itself."""
+    """The paper's three ranges scaled to the setup, then the optimal range itself.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its optimal sweep range (:func:`mitsweep.optics.optimal_sweep_range`) is scaled
+        by :data:`PAPER_RANGE_FRACTIONS` from its near end.
+
+    Returns
+    -------
+    list of (float, float)
+        ``(focus_min, focus_max)`` of each range, mm.
+    """
     sr = optimal_sweep_range(setup)
     lo, span = sr.focus_min, sr.focus_max - sr.focus_min
     rows = [(lo, lo + frac * span) for frac in PAPER_RANGE_FRACTIONS]
@@ -54,10 +66,27 @@ def conventional_psf(setup: Setup, distance: float, focus_distance: float, *, ke
     aperture radius, ``i_o`` the point's image distance, ``i_s`` the sensor's), integrated
     over pixels by ``supersample²`` sub-pixel samples. A disk narrower than a pixel
     falls into the central pixel.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its lens (focal length, aperture radius) and pixel pitch.
+    distance : float
+        The point's distance from the lens, mm.
+    focus_distance : float
+        The distance the camera focuses at, mm.
+    kernel_size : int
+        K, px.
+    supersample : int, optional
+        Sub-pixel samples per pixel side (default 16).
+
+    Returns
+    -------
+    (K, K) float32 ndarray
     """
     f, a = setup.lens.focal_length, setup.lens.aperture_radius
-    i_s = image_distance(f, focus_distance)
-    i_o = image_distance(f, distance)
+    i_s = float(image_distance(f, focus_distance))
+    i_o = float(image_distance(f, distance))
     r_px = a * abs(1.0 - i_s / i_o) / setup.sensor.pixel_pitch
     K = int(kernel_size)
     s = int(supersample)
@@ -75,6 +104,23 @@ def conventional_v_avg(setup: Setup, depths: ArrayLike = PAPER_DEPTHS_MM, *,
 
     The camera focuses at the dioptric middle ``2 / (1/d_min + 1/d_max)``; its defocus
     PSF does not depend on the field point, so the average over points is one term.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its lens and pixel pitch.
+    depths : array_like, optional
+        Depths of Eq. 3, mm (default :data:`PAPER_DEPTHS_MM`).
+    kernel_size : int, optional
+        K, px (default 63).
+    epsilon : float, optional
+        Regulariser of Eq. 3 (default :data:`mitsweep.tracer.metrics.EPSILON`).
+
+    Returns
+    -------
+    v_avg : float
+    focus_distance : float
+        mm.
     """
     d = np.asarray(depths, dtype=float)
     focus = 2.0 / (1.0 / d.min() + 1.0 / d.max())
@@ -98,8 +144,20 @@ def table1_banks(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None =
                  progress: Callable[[], object] | None = None) -> list[IPSFBank]:
     """The radial IPSF banks Table 1 measures, one per sweep range (parameters as
     :func:`table1`): to reuse them elsewhere (Fig. 5) and pass them back as its
-    ``banks``."""
-    ranges = default_ranges(setup) if ranges is None else [tuple(map(float, r)) for r in ranges]
+    ``banks``.
+
+    Parameters
+    ----------
+    setup, ranges, depths, n_radii, rays, kernel_size, seed, progress
+        As :func:`table1`.
+
+    Returns
+    -------
+    list of mitsweep.io.bank.IPSFBank
+        One radial bank per range.
+    """
+    ranges = (default_ranges(setup) if ranges is None
+              else [(float(lo), float(hi)) for lo, hi in ranges])
     banks = []
     for fmin, fmax in ranges:
         s, sr = _range_setup(setup, fmin, fmax)
@@ -141,7 +199,8 @@ def table1(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None = None,
     if not setup.mirror.is_symmetric:
         raise ValueError("table1: needs a rotationally symmetric setup (radial IPSF bank); "
                          f"this mirror is tilted by {setup.mirror.tilt_deg:g} deg")
-    ranges = default_ranges(setup) if ranges is None else [tuple(map(float, r)) for r in ranges]
+    ranges = (default_ranges(setup) if ranges is None
+              else [(float(lo), float(hi)) for lo, hi in ranges])
     if banks is None:
         banks = table1_banks(setup, ranges=ranges, depths=depths, n_radii=n_radii, rays=rays,
                              kernel_size=kernel_size, seed=seed, progress=progress)
@@ -151,14 +210,15 @@ def table1(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None = None,
     for (fmin, fmax), bank in zip(ranges, banks):
         _, sr = _range_setup(setup, fmin, fmax)
         swept = bank.metadata["sweep_range"]
-        if (bank.kind != "radial" or len(bank.radii_mm) != int(n_radii)
+        radii = bank.radii_mm
+        if (bank.kind != "radial" or radii is None or len(radii) != int(n_radii)
                 or not np.allclose(bank.depths_mm, depths)
                 or not np.allclose((swept["focus_min_mm"], swept["focus_max_mm"]), (fmin, fmax))):
             raise ValueError(f"banks: the bank for {fmin:g}-{fmax:g} mm is not Table 1's "
                              f"(radial, {int(n_radii)} radii, depths {list(depths)} mm, that "
                              f"range)")
         kz = {}
-        for where, idx in (("center", 0), ("periphery", len(bank.radii_mm) - 1)):
+        for where, idx in (("center", 0), ("periphery", len(radii) - 1)):
             tan, rad = [], []
             for j in range(len(depths)):
                 _, r_cs, t_cs = cross_sections(bank.kernels[j, idx], 0.0)
@@ -169,7 +229,7 @@ def table1(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None = None,
             "focus_min_mm": fmin, "focus_max_mm": fmax,
             "sensor_travel_mm": sr.translation,
             "v_avg": v_avg(bank.kernels, epsilon=epsilon), "kurtosis": kz,
-            "periphery_radius_mm": float(bank.radii_mm[-1]),
+            "periphery_radius_mm": float(radii[-1]),
             "max_outside_kernel": float(np.max(bank.metadata["outside_kernel"])),
         })
         logger.info("table1 range %.1f-%.1f: V_avg %.3g", fmin, fmax, rows[-1]["v_avg"])
