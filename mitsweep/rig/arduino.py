@@ -107,12 +107,38 @@ MAX_SEGMENT_STEPS = 65535
 
 
 def step_rate(mm_s: float, steps_per_mm: float) -> int:
-    """A velocity (mm/s) as the firmware's integer step rate (steps/s), unchecked."""
+    """A velocity (mm/s) as the firmware's integer step rate (steps/s), unchecked.
+
+    Parameters
+    ----------
+    mm_s : float
+        Velocity, mm/s.
+    steps_per_mm : float
+        Stepper steps per stage millimetre.
+
+    Returns
+    -------
+    int
+        The nearest whole number of steps/s (not checked against :data:`MAX_STEP_RATE`).
+    """
     return int(round(mm_s * steps_per_mm))
 
 
 def step_accel(mm_s2: float, steps_per_mm: float) -> int:
-    """An acceleration (mm/s²) as the firmware's integer steps/s² (at least 1)."""
+    """An acceleration (mm/s²) as the firmware's integer steps/s² (at least 1).
+
+    Parameters
+    ----------
+    mm_s2 : float
+        Acceleration, mm/s².
+    steps_per_mm : float
+        Stepper steps per stage millimetre.
+
+    Returns
+    -------
+    int
+        The nearest whole number of steps/s², at least 1.
+    """
     return max(1, int(round(mm_s2 * steps_per_mm)))
 #: Period of ``EV POS`` samples during a SWEEP, µs.
 POS_EVENT_PERIOD_US = 50_000
@@ -137,6 +163,24 @@ class BoardClock:
         self._offset = 0
 
     def unwrap(self, raw: int) -> int:
+        """The 64-bit board time of a raw ``micros()`` reading.
+
+        Parameters
+        ----------
+        raw : int
+            A time the board sent, µs, in ``0 .. 2**32 - 1``; readings are given in the
+            order they arrived (a drop of more than half the range is a wrap).
+
+        Returns
+        -------
+        int
+            The unwrapped time, µs.
+
+        Raises
+        ------
+        ProtocolError
+            ``raw`` is outside the 32-bit range.
+        """
         if not 0 <= raw < 2**32:
             raise ProtocolError(f"board time {raw} outside 32-bit micros() range")
         if self._last is not None and raw < self._last and self._last - raw > 2**31:
@@ -147,8 +191,21 @@ class BoardClock:
 
 @dataclass(frozen=True)
 class BoardEvent:
-    """An event from the board: ``name``, ``t_us`` (unwrapped board time), ``position``
-    (steps), ``detail`` (fault code or ""), ``host_t_s`` (log time of arrival)."""
+    """An event from the board (``EV <NAME> <t_us> <pos> [<detail>]``).
+
+    Attributes
+    ----------
+    name : str
+        One of :data:`EVENT_NAMES` (``START``, ``OPEN``, ``POS``, ``CLOSE``, ...).
+    t_us : int
+        Board time, µs (unwrapped: :class:`BoardClock`).
+    position : int
+        Stage position, steps.
+    detail : str
+        The fault code of a ``FAULT`` event (e.g. ``WATCHDOG``), else ``""``.
+    host_t_s : float
+        When the line arrived, s on the command log's clock.
+    """
 
     name: str
     t_us: int
@@ -194,6 +251,16 @@ class ArduinoSweepController(Stage, Shutter):
 
         Returns False (and logs) if none arrives: boards with auto-reset disabled print
         nothing; :meth:`identify` then checks the firmware anyway.
+
+        Parameters
+        ----------
+        timeout_s : float
+            How long to wait for the line, s.
+
+        Raises
+        ------
+        ProtocolError
+            A line other than ``READY``, or the ``READY`` line of another firmware.
         """
         deadline = time.monotonic() + timeout_s
         while True:
@@ -269,7 +336,20 @@ class ArduinoSweepController(Stage, Shutter):
                     open_at: int, close_at: int) -> None:
         """Send ``SWEEP`` to step ``target`` with the shutter open from step ``open_at``
         to ``close_at`` (exact step positions: the board triggers on them); velocity and
-        acceleration are converted to the board's steps/s and steps/s². Events follow."""
+        acceleration are converted to the board's steps/s and steps/s². Events follow.
+
+        Parameters
+        ----------
+        target : int
+            Where the sweep ends at rest, steps.
+        velocity_mm_s : float
+            Sweep velocity, mm/s (1 .. :data:`MAX_STEP_RATE` steps/s).
+        acceleration_mm_s2 : float
+            Acceleration of the ramps, mm/s².
+        open_at, close_at : int
+            Steps at which the shutter opens and closes; both in the constant-velocity
+            part of the move (else ``ERR RANGE``).
+        """
         self._query(f"SWEEP {target} {self.rate(velocity_mm_s)} "
                     f"{self.accel(acceleration_mm_s2)} {open_at} {close_at}", n_fields=0)
 
@@ -277,7 +357,23 @@ class ArduinoSweepController(Stage, Shutter):
         """Upload a step-rate table: ``TABLE <n>``, then ``SEG <i> <steps> <us>`` for each
         segment; the board acknowledges every segment with its running totals of steps
         and µs, which must be the host's (a lost, repeated or altered segment fails here,
-        before any motion)."""
+        before any motion).
+
+        Parameters
+        ----------
+        steps : iterable of int
+            Steps of each segment (>= 0, at most :data:`MAX_SEGMENT_STEPS`);
+            1 .. :data:`MAX_TABLE_SEGMENTS` segments.
+        durations_us : iterable of int
+            Duration of each segment, µs (>= 1), as many as ``steps``.
+
+        Raises
+        ------
+        DeviceError
+            A board without tables, a wrong number of segments, or a segment refused.
+        ProtocolError
+            An acknowledgement whose totals differ from the host's.
+        """
         self.require_tables()
         steps, durations_us = list(steps), list(durations_us)
         n = len(steps)
@@ -300,13 +396,32 @@ class ArduinoSweepController(Stage, Shutter):
                           close_at: int) -> None:
         """``TSWEEP``: ramp to the loaded table's entry rate, run the table from step
         ``open_at`` (shutter opens) to ``close_at`` (shutter closes, its last step), then
-        ramp down to rest at ``target``. Events as for :meth:`start_sweep`."""
+        ramp down to rest at ``target``. Events as for :meth:`start_sweep`.
+
+        Parameters
+        ----------
+        target : int
+            Where the sweep ends at rest, steps.
+        acceleration_mm_s2 : float
+            Acceleration of the two ramps, mm/s².
+        open_at, close_at : int
+            Steps of the table's first and last step: ``close_at`` is ``open_at`` ± the
+            table's total steps.
+        """
         self._query(f"TSWEEP {target} {self.accel(acceleration_mm_s2)} {open_at} "
                     f"{close_at}", n_fields=0)
 
     def fire(self, *, delay_us: int, duration_us: int) -> int:
         """``SHUTTER``: open after ``delay_us`` for ``duration_us``; returns the board time
-        (unwrapped µs) at which the board received the command."""
+        (unwrapped µs) at which the board received the command.
+
+        Parameters
+        ----------
+        delay_us : int
+            Time from the command's arrival to the shutter's opening, µs.
+        duration_us : int
+            How long the shutter is held open, µs.
+        """
         (t,) = self._ints(self._query(f"SHUTTER {int(delay_us)} {int(duration_us)}",
                                       n_fields=1), "SHUTTER")
         return self.clock.unwrap(t)
@@ -314,7 +429,13 @@ class ArduinoSweepController(Stage, Shutter):
     def set_watchdog(self, timeout_s: float) -> None:
         """``WATCHDOG <ms>``: the board stops and releases the shutter when the host is
         silent for ``timeout_s`` during motion or an exposure (0 turns it off). From now
-        on :meth:`wait_event` and :meth:`keep_alive` send heartbeats."""
+        on :meth:`wait_event` and :meth:`keep_alive` send heartbeats.
+
+        Parameters
+        ----------
+        timeout_s : float
+            The watchdog's timeout, s: 0 (off) or 0.1 .. ``MAX_WATCHDOG_MS / 1000``.
+        """
         ms = int(round(timeout_s * 1000))
         if not 0 <= ms <= MAX_WATCHDOG_MS or (ms and timeout_s < 0.1):
             raise DeviceError(f"{self.name}: watchdog {timeout_s:g} s outside 0 (off) or "
@@ -343,7 +464,24 @@ class ArduinoSweepController(Stage, Shutter):
     def wait_event(self, name: str, *, timeout_s: float | None = None,
                    deadline: float | None = None,
                    on_event: Callable[[BoardEvent], None] | None = None) -> BoardEvent:
-        """Consume events until ``name`` arrives; ``EV FAULT`` raises :class:`DeviceFault`."""
+        """Consume events until ``name`` arrives; ``EV FAULT`` raises :class:`DeviceFault`.
+
+        Parameters
+        ----------
+        name : str
+            The event awaited, one of :data:`EVENT_NAMES`.
+        timeout_s : float, optional
+            How long to wait, s (default 1 s); ignored when ``deadline`` is given.
+        deadline : float, optional
+            The :func:`time.monotonic` time to wait until.
+        on_event : callable, optional
+            Called with every event consumed, the awaited one included.
+
+        Returns
+        -------
+        BoardEvent
+            The awaited event.
+        """
         if deadline is None:
             deadline = time.monotonic() + (timeout_s if timeout_s is not None else 1.0)
         while True:
@@ -377,7 +515,18 @@ class ArduinoSweepController(Stage, Shutter):
     def safe_stop(self, *, timeout_s: float = SAFETY_REPLY_TIMEOUT_S) -> int | None:
         """Safety path: ``STOP`` (the board releases the shutter first, then stops the
         motor), tolerant of stray lines from an interrupted exchange. Returns the step
-        position the board stopped at."""
+        position the board stopped at.
+
+        Parameters
+        ----------
+        timeout_s : float
+            How long to wait for ``OK STOP``, s.
+
+        Returns
+        -------
+        int or None
+            The step position the board stopped at (None: no reply).
+        """
         def stopped_at(line: str):
             # the reply may follow the remains of a line the interruption cut short
             i = line.find("OK STOP ")
@@ -400,9 +549,28 @@ class ArduinoSweepController(Stage, Shutter):
 
     # -- units --------------------------------------------------------------------------
     def steps(self, mm: float) -> int:
+        """A position in whole steps.
+
+        Parameters
+        ----------
+        mm : float
+            Position, mm (stage coordinates).
+        """
         return int(round(mm * self.steps_per_mm))
 
     def rate(self, mm_s: float) -> int:
+        """A velocity as the board's step rate, checked against what it can run.
+
+        Parameters
+        ----------
+        mm_s : float
+            Velocity, mm/s.
+
+        Raises
+        ------
+        DeviceError
+            The rate is outside 1 .. :data:`MAX_STEP_RATE` steps/s.
+        """
         r = step_rate(mm_s, self.steps_per_mm)
         if not 1 <= r <= MAX_STEP_RATE:
             raise DeviceError(f"{self.name}: {mm_s:g} mm/s is {r} steps/s, outside the "
@@ -410,6 +578,13 @@ class ArduinoSweepController(Stage, Shutter):
         return r
 
     def accel(self, mm_s2: float) -> int:
+        """An acceleration as the board's steps/s² (:func:`step_accel`).
+
+        Parameters
+        ----------
+        mm_s2 : float
+            Acceleration, mm/s².
+        """
         return step_accel(mm_s2, self.steps_per_mm)
 
     # -- internals ----------------------------------------------------------------------

@@ -259,6 +259,19 @@ def safety_summary(record: CaptureRecord) -> tuple[bool, str]:
 
 
 def status_of(exc: BaseException) -> str:
+    """The record's status for the exception that ended a capture.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception that ended it.
+
+    Returns
+    -------
+    str
+        ``"interrupted"``, ``"port lost"``, ``"timeout"``, ``"fault"``,
+        ``"host too slow"`` or ``"error"``.
+    """
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted"
     if isinstance(exc, PortLost):
@@ -467,6 +480,7 @@ def run_capture(setup: Setup, ports: RigPorts, *, out: str | Path | None = None,
     Parameters
     ----------
     setup : mitsweep.config.Setup
+        The setup to capture: its sweep and ``[rig]`` (limits, motion, serial links).
     ports : RigPorts
         ``ports.zaber`` given: Zaber stage + Arduino shutter; else the Arduino does both.
     out : path, optional

@@ -18,8 +18,17 @@ __all__ = ["StageState", "Stage", "Shutter"]
 class StageState:
     """What a stage reports about itself.
 
-    ``position_mm`` is None when the stage does not know where it is (not homed).
-    ``fault`` is a short device code (e.g. ``"FS"`` stall) or None.
+    Attributes
+    ----------
+    position_mm : float or None
+        Position in stage coordinates, mm; None when the stage does not know where it is
+        (not homed).
+    homed : bool
+        Whether the stage has a reference position.
+    moving : bool
+        Whether a motion is under way.
+    fault : str or None
+        A short device code (e.g. ``"FS"`` stall), or None.
     """
 
     position_mm: float | None
@@ -43,16 +52,47 @@ class Stage(abc.ABC):
 
     @abc.abstractmethod
     def set_soft_limits(self, lo_mm: float, hi_mm: float) -> None:
-        """Make the device itself refuse positions outside ``[lo_mm, hi_mm]``."""
+        """Make the device itself refuse positions outside ``[lo_mm, hi_mm]``.
+
+        Parameters
+        ----------
+        lo_mm, hi_mm : float
+            The lowest and highest position allowed, mm (stage coordinates).
+        """
 
     @abc.abstractmethod
     def home(self, *, velocity_mm_s: float, timeout_s: float) -> None:
-        """Find the reference position; blocks until done."""
+        """Find the reference position; blocks until done.
+
+        Parameters
+        ----------
+        velocity_mm_s : float
+            Homing velocity, mm/s (a stage that homes at its own speed ignores it).
+        timeout_s : float
+            How long homing may take before :class:`~mitsweep.rig.errors.ReplyTimeout`, s.
+        """
 
     @abc.abstractmethod
     def move_to(self, position_mm: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
                 timeout_s: float) -> float:
-        """Move (shutter closed) and wait until idle; returns the final position, mm."""
+        """Move (shutter closed) and wait until idle; returns the final position, mm.
+
+        Parameters
+        ----------
+        position_mm : float
+            Target position, mm (stage coordinates).
+        velocity_mm_s : float
+            Cruise velocity, mm/s.
+        acceleration_mm_s2 : float
+            Acceleration and deceleration, mm/s².
+        timeout_s : float
+            How long the move may take before :class:`~mitsweep.rig.errors.ReplyTimeout`, s.
+
+        Returns
+        -------
+        float
+            The position the stage reports at the end, mm (the target, to a step).
+        """
 
     @abc.abstractmethod
     def stop(self) -> None:

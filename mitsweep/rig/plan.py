@@ -160,6 +160,13 @@ class CapturePlan:
 
     # -- derived ------------------------------------------------------------------------
     def mm(self, steps: float) -> float:
+        """A position in controller steps, in mm.
+
+        Parameters
+        ----------
+        steps : float
+            Position, steps (or microsteps).
+        """
         return steps / self.steps_per_mm
 
     @property
@@ -186,7 +193,13 @@ class CapturePlan:
 
     def sensor_distance(self, position_mm: float | NDArray[np.float64]
                         ) -> float | NDArray[np.float64]:
-        """Sensor distance (mm) at stage position(s) ``position_mm``."""
+        """Sensor distance (mm) at stage position(s) ``position_mm``.
+
+        Parameters
+        ----------
+        position_mm : float or ndarray
+            Stage position(s), mm (stage coordinates).
+        """
         return self.sensor_distance_at_zero_mm + self.sensor_direction * position_mm
 
     def driver_units(self) -> dict:

@@ -92,6 +92,37 @@ class ProfileTable:
     ``offset_steps`` (the first knot's travel, in [-0.5, 0.5]) is where the profile
     starts relative to the open step, and ``max_deviation_steps`` the table's largest
     difference from the profile's shape (``knot_travel_steps - offset_steps``).
+
+    Attributes
+    ----------
+    stage : str
+        ``"arduino"`` or ``"zaber"``: whose units ``driver`` is in.
+    steps : tuple of int
+        Steps (or microsteps) of each segment, >= 0.
+    durations_s : tuple of float
+        Duration of each segment as the controller runs it, s.
+    driver : tuple of int
+        Each segment in the controller's units: Arduino ``duration_us``, Zaber
+        ``maxspeed`` data values.
+    knot_times_s : tuple of float
+        The profile's knots: time from the shutter's opening, s.
+    knot_travel_steps : tuple of float
+        The profile's travel at its knots from the open step, steps (unrounded).
+    offset_steps : float
+        The first knot's travel: where the profile starts relative to the open step, in
+        [-0.5, 0.5] steps.
+    max_deviation_steps : float
+        The table's largest difference from the profile's shape, steps.
+    ramp_deviation_mm : float
+        Bound on how far a stage that ramps between rates (centred on each knot) leaves
+        the profile, mm (``|Δv|² / (8 A)``).
+    resample_deviation_mm : float
+        Chord error of re-knotting a profile with more knots than a table holds, mm (0:
+        not re-knotted).
+    max_velocity_mm_s : float
+        The profile's largest velocity, mm/s.
+    max_acceleration_mm_s2 : float
+        Its largest acceleration as the followability rule measures it, mm/s².
     """
 
     stage: str
@@ -133,7 +164,18 @@ class ProfileTable:
 
     def travel_at(self, t_s: ArrayLike) -> NDArray[np.float64]:
         """Commanded travel (steps, continuous) ``t_s`` seconds after the shutter opened;
-        the stepper stands at its floor."""
+        the stepper stands at its floor.
+
+        Parameters
+        ----------
+        t_s : array_like
+            Times from the shutter's opening, s (clamped to the table's span).
+
+        Returns
+        -------
+        ndarray
+            Travel from the open step, steps, of the shape of ``t_s``.
+        """
         t, x = self.cumulative()
         return np.interp(np.asarray(t_s, dtype=float), t, x)
 
@@ -157,7 +199,32 @@ def profile_knots(motion: MotionProfile, *, max_segments: int, focal_length_mm: 
                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """The profile's knots ``(t ∈ [0, 1], sensor distance mm)``, checked: monotonic,
     moving, beyond the focal length; re-knotted at ``max_segments`` evenly spaced times
-    when it has more. Returns the knots and the re-knotting's chord error (mm)."""
+    when it has more. Returns the knots and the re-knotting's chord error (mm).
+
+    Parameters
+    ----------
+    motion : mitsweep.optics.motion.MotionProfile
+        The profile (its ramps as :data:`KNOTS_PER_RAMP` chords each).
+    max_segments : int
+        Most segments a table holds: a profile with more is re-knotted.
+    focal_length_mm : float
+        The lens's focal length, mm: every sensor distance must exceed it.
+
+    Returns
+    -------
+    t : (n,) ndarray
+        Knot times, normalised to the exposure (0 .. 1).
+    p : (n,) ndarray
+        Sensor distances at the knots, mm.
+    chord : float
+        The re-knotting's chord error, mm (0: not re-knotted).
+
+    Raises
+    ------
+    PlanError
+        Fewer than two finite knots, no motion, a profile that turns back, or one that
+        reaches the focal length.
+    """
     t, p = motion.segments(KNOTS_PER_RAMP)
     t, p = np.asarray(t, dtype=float), np.asarray(p, dtype=float)
     if t.size < 2 or not (np.all(np.isfinite(t)) and np.all(np.isfinite(p))):
@@ -191,7 +258,27 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
 
     ``travel_mm`` is the stage travel from the shutter's opening along the motion,
     non-decreasing. Returns (largest velocity mm/s, largest acceleration mm/s² as the
-    rule measures it, the centred-ramp deviation bound mm)."""
+    rule measures it, the centred-ramp deviation bound mm).
+
+    Parameters
+    ----------
+    times_s : (n,) ndarray
+        Knot times from the shutter's opening, s (strictly increasing).
+    travel_mm : (n,) ndarray
+        Stage travel at the knots from the shutter's opening, mm, non-decreasing.
+    max_velocity : float
+        The stage's top velocity, mm/s (``rig.max_velocity``).
+    acceleration : float
+        The stage's acceleration, mm/s² (``rig.acceleration``).
+    sensor_mm : (n,) ndarray
+        Sensor distances at the knots, mm (for the messages).
+
+    Raises
+    ------
+    PlanError
+        Times not increasing, a velocity above the limit, a dwell, or a velocity change
+        the stage cannot make within the shorter of its two intervals.
+    """
     dt = np.diff(times_s)
     if np.any(dt <= 0):
         raise PlanError("motion profile: knot times must be strictly increasing")
@@ -248,6 +335,28 @@ def quantise_table(times_s: np.ndarray, travel_steps: np.ndarray, *, stage: str,
     ``max_rate`` allows for their steps; Zaber segments get the ``maxspeed`` data value
     (``speed_unit`` per microstep/s) that brings each boundary nearest its time given
     the time the earlier segments took (no accumulated drift).
+
+    Parameters
+    ----------
+    times_s : (n,) ndarray
+        Knot times from the shutter's opening, s.
+    travel_steps : (n,) ndarray
+        The profile's travel at those times, steps (unrounded, increasing).
+    stage : {"arduino", "zaber"}
+        Which controller runs the table (how its times are quantised).
+    max_rate : float
+        The highest step rate allowed, steps/s.
+    speed_unit : float
+        Zaber ``maxspeed`` data value per microstep/s (unused for the Arduino).
+    max_segment_steps : int
+        Most steps one segment holds.
+    max_segments : int
+        Most segments a table holds.
+
+    Raises
+    ------
+    PlanError
+        Less than one step of travel, too many segments, or a segment too long.
     """
     shape = np.asarray(travel_steps, dtype=float) - float(travel_steps[0])
     t = np.asarray(times_s, dtype=float)
@@ -306,12 +415,33 @@ def quantise_table(times_s: np.ndarray, travel_steps: np.ndarray, *, stage: str,
 def max_deviation(table_t: np.ndarray, table_x: np.ndarray, knot_t: np.ndarray,
                   knot_x: np.ndarray) -> float:
     """Largest ``|table − profile|`` of two piecewise-linear travels (steps), exact: at every
-    knot of either (each is linear between the union of the knots)."""
+    knot of either (each is linear between the union of the knots).
+
+    Parameters
+    ----------
+    table_t, table_x : (n,) ndarray
+        The table's boundaries: times, s, and travel, steps.
+    knot_t, knot_x : (m,) ndarray
+        The profile's knots: times, s, and travel, steps.
+
+    Returns
+    -------
+    float
+        The largest difference, steps, over the span both cover.
+    """
     t = np.union1d(table_t, knot_t)
     t = t[(t >= 0) & (t <= min(table_t[-1], knot_t[-1]))]
     return float(np.max(np.abs(np.interp(t, table_t, table_x) - np.interp(t, knot_t, knot_x))))
 
 
 def ramp_steps(rate: float, accel: float) -> int:
-    """Steps to ramp from rest to ``rate`` at ``accel`` (ceil, as the firmware checks)."""
+    """Steps to ramp from rest to ``rate`` at ``accel`` (ceil, as the firmware checks).
+
+    Parameters
+    ----------
+    rate : float
+        The rate reached, steps/s.
+    accel : float
+        The acceleration, steps/s².
+    """
     return math.ceil(rate * rate / (2.0 * accel) - 1e-9)

@@ -106,21 +106,71 @@ class CaptureRecord:
 
     # -- accumulate ---------------------------------------------------------------------
     def mark(self, what: str) -> None:
+        """Note a milestone at the log's present time.
+
+        Parameters
+        ----------
+        what : str
+            What happened, e.g. ``"at approach position"``.
+        """
         self.marks.append({"t_s": round(self.log.now(), 6), "what": what})
 
     def safety(self, device: str, action: str, *, ok: bool, confirms: str, detail: str = "",
                reason: str = "") -> None:
+        """Record one step of the safety path.
+
+        Parameters
+        ----------
+        device : str
+            ``"arduino"`` or ``"zaber"``.
+        action : str
+            What was sent, e.g. ``"stop stage"``.
+        ok : bool
+            Whether the device confirmed it.
+        confirms : str
+            What the step makes safe, e.g. ``"shutter released"``.
+        detail : str
+            The error's text, when not confirmed.
+        reason : str
+            Why not, briefly (``"port lost"``, ``"no reply"``, ...).
+        """
         self.safety_actions.append({"t_s": round(self.log.now(), 6), "device": device,
                                     "action": action, "confirms": confirms, "ok": ok,
                                     "reason": reason, "detail": detail})
 
     def set_board_events(self, events: Iterable[Any]) -> None:
+        """Keep the board's events (replacing those kept before).
+
+        Parameters
+        ----------
+        events : iterable of BoardEvent
+            Every event the Arduino sent, in order.
+        """
         self.board_events = list(events)
 
     def set_stage_samples(self, samples: Iterable[tuple[float, int, float]]) -> None:
+        """Keep the Zaber stage's position polls (replacing those kept before).
+
+        Parameters
+        ----------
+        samples : iterable of (float, int, float)
+            ``(host time s, microsteps, ± s)`` of each poll.
+        """
         self.stage_samples = list(samples)
 
     def finish(self, *, complete: bool, status: str, error: str | None = None) -> None:
+        """Mark the capture finished.
+
+        Parameters
+        ----------
+        complete : bool
+            The sweep ran to its end: the measurement must then be whole (else
+            :class:`~mitsweep.rig.errors.RigError`).
+        status : str
+            The record's status (``"complete"``, ``"interrupted"``, ``"timeout"``, ...).
+        error : str, optional
+            The reason, one line (None when complete).
+        """
         if complete:
             self.measurement(strict=True)   # a complete record has its measurement
         self.complete, self.status, self.error = complete, status, error
@@ -140,7 +190,19 @@ class CaptureRecord:
 
     def measurement(self, *, strict: bool = False) -> dict | None:
         """Measured exposure and motion, or None (``strict``: raise) when the shutter
-        cycle was not seen whole."""
+        cycle was not seen whole.
+
+        Parameters
+        ----------
+        strict : bool
+            Raise :class:`~mitsweep.rig.errors.RigError` instead of returning None.
+
+        Returns
+        -------
+        dict or None
+            ``exposure``, ``motion`` and, for a motion profile, ``profile``: the record's
+            ``measured`` (module docstring).
+        """
         plan = self.plan
         evs, ev_open, ev_close = self._sweep_events()
         if ev_open is None or ev_close is None or ev_close.t_us <= ev_open.t_us:
@@ -238,7 +300,13 @@ class CaptureRecord:
         (:func:`mitsweep.optics.reference.reference_geometry` with the tabulated measured
         profile), as a dict, so that a PSF bank traced for this capture uses the same
         grid (reference sensor distance: the measured span's midpoint); None without a
-        measurement."""
+        measurement.
+
+        Parameters
+        ----------
+        measured : dict, optional
+            The measurement (:meth:`measurement`), when already computed.
+        """
         if measured is None:
             measured = self.measurement()
         if measured is None:
@@ -269,7 +337,24 @@ def planned_versus_measured(plan, time_s, position_mm, timing_uncertainty_s: flo
     planned|; ``tolerance_steps`` what the measurement allows: one step (the stepper's
     floor) plus the table's peak rate over the timing uncertainty of a sample (the
     simulator's 1 µs stamps, or the Zaber polls' half round trip and the host-timed
-    shutter's placement)."""
+    shutter's placement).
+
+    Parameters
+    ----------
+    plan : CapturePlan
+        A motion profile's plan (``plan.profile`` set).
+    time_s : array_like
+        Measured times from the shutter's opening, s.
+    position_mm : array_like
+        Measured stage positions at those times, mm.
+    timing_uncertainty_s : float
+        How far a sample's time may be off, s.
+
+    Returns
+    -------
+    dict
+        The record's ``measured.profile`` (JSON-ready lists and numbers).
+    """
     table = plan.profile
     spm = plan.steps_per_mm
     t = np.asarray(time_s, dtype=float)

@@ -24,7 +24,14 @@ __all__ = ["ScriptedSerial", "expected_protocol"]
 
 
 class ScriptedSerial:
-    """A pyserial-like object that plays a script of ``(write, reply)`` byte pairs."""
+    """A pyserial-like object that plays a script of ``(write, reply)`` byte pairs.
+
+    Parameters
+    ----------
+    exchanges : iterable of (bytes or None, bytes or None)
+        In order, each write expected and the bytes it is answered with; a write of
+        None is unsolicited output, delivered after the previous reply (or at once).
+    """
 
     def __init__(self, exchanges: Iterable[tuple[bytes | None, bytes | None]]) -> None:
         self.exchanges = list(exchanges)
@@ -41,6 +48,18 @@ class ScriptedSerial:
 
     # -- pyserial surface ---------------------------------------------------------------
     def write(self, data: bytes) -> int:
+        """Take a write, which must be the next expected one, and queue its reply.
+
+        Parameters
+        ----------
+        data : bytes
+            What the driver sends.
+
+        Raises
+        ------
+        AssertionError
+            ``data`` is not the next exchange's write, or none is left.
+        """
         if self.index >= len(self.exchanges):
             raise AssertionError(f"unexpected write {bytes(data)!r}: no exchange left")
         expected, reply = self.exchanges[self.index]
@@ -57,6 +76,14 @@ class ScriptedSerial:
         return len(self._rx)
 
     def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes of the queued replies (waiting up to :attr:`timeout`,
+        at most 10 ms, when none is queued).
+
+        Parameters
+        ----------
+        size : int
+            Most bytes to return.
+        """
         if not self._rx and self.timeout:
             time.sleep(min(self.timeout, 0.01))   # nothing will ever come: honour the wait
         out = bytes(self._rx[:size])
@@ -82,7 +109,19 @@ class ScriptedSerial:
 def expected_protocol(factory: Callable[[LineTransport], object],
                       exchanges: Iterable[tuple[bytes | None, bytes | None]], *,
                       timeout_s: float = 0.05, name: str = "device") -> Iterator[object]:
-    """Yield ``factory(transport)`` on a scripted stream; fail on unused exchanges."""
+    """Yield ``factory(transport)`` on a scripted stream; fail on unused exchanges.
+
+    Parameters
+    ----------
+    factory : callable
+        Builds the driver under test from a :class:`~mitsweep.rig.transport.LineTransport`.
+    exchanges : iterable of (bytes or None, bytes or None)
+        The script (:class:`ScriptedSerial`): exact bytes written and replied.
+    timeout_s : float
+        The transport's read deadline, s.
+    name : str
+        The transport's device name.
+    """
     ser = ScriptedSerial(exchanges)
     transport = LineTransport(ser, name=name, timeout_s=timeout_s)
     driver = factory(transport)
@@ -94,7 +133,15 @@ def expected_protocol(factory: Callable[[LineTransport], object],
 
 def fast_rig_setup(setup, *, steps_per_mm: float = 400.0):
     """``setup`` with a rig that positions quickly (10 mm/s, 100 mm/s²), for tests and
-    demos against the simulator; the sweep itself keeps the setup's velocity."""
+    demos against the simulator; the sweep itself keeps the setup's velocity.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The setup to adapt.
+    steps_per_mm : float
+        The rig's steps (or microsteps) per mm.
+    """
     import dataclasses
 
     rig = dataclasses.replace(setup.rig, max_velocity=10.0, acceleration=100.0,

@@ -55,9 +55,19 @@ except ImportError:  # pragma: no cover - Windows
 
 @dataclass(frozen=True)
 class LogEntry:
-    """One line on a link: ``t_s`` seconds since the log started, ``device``,
-    ``direction`` (``"tx"`` host → device, ``"rx"`` device → host), ``text`` (without
-    the line terminator, with any checksum as it went over the wire)."""
+    """One line on a link.
+
+    Attributes
+    ----------
+    t_s : float
+        Seconds since the log started (monotonic clock).
+    device : str
+        The link's device name (e.g. ``"arduino"``).
+    direction : str
+        ``"tx"`` host → device, ``"rx"`` device → host.
+    text : str
+        The line without its terminator, with any checksum as it went over the wire.
+    """
 
     t_s: float
     device: str
@@ -73,8 +83,14 @@ class LogEntry:
 class CommandLog:
     """Thread-safe, append-only log of every line exchanged on one or more links.
 
-    ``t0`` is the ``time.monotonic()`` origin of the entries' ``t_s``; ``wall_t0`` the
-    matching UNIX time, for provenance.
+    Attributes
+    ----------
+    t0 : float
+        The :func:`time.monotonic` origin of the entries' ``t_s`` (default: now).
+    wall_t0 : float
+        The matching UNIX time, s, for provenance.
+    entries : list of LogEntry
+        The lines, in the order they were added.
     """
 
     t0: float = field(default_factory=time.monotonic)
@@ -87,6 +103,19 @@ class CommandLog:
         return time.monotonic() - self.t0
 
     def add(self, device: str, direction: str, text: str, t_s: float | None = None) -> LogEntry:
+        """Append one line and return its entry.
+
+        Parameters
+        ----------
+        device : str
+            The link's device name.
+        direction : str
+            ``"tx"`` (sent) or ``"rx"`` (received).
+        text : str
+            The line, without its terminator.
+        t_s : float, optional
+            Its time, s since the log's origin (default: now).
+        """
         entry = LogEntry(self.now() if t_s is None else t_s, device, direction, text)
         with self._lock:
             self.entries.append(entry)
@@ -100,11 +129,39 @@ class CommandLog:
 
 class Checksum(Protocol):
     """A line checksum: ``append(text) -> text_with_checksum``, ``strip(text) -> text``
-    (raises :class:`ProtocolError` when the checksum is missing or wrong)."""
+    (raises :class:`ProtocolError` when the checksum is missing or wrong).
 
-    def append(self, text: str) -> str: ...
+    Parameters
+    ----------
+    text : str
+        The argument of both methods: a line without its terminator (with its checksum,
+        for :meth:`strip`).
+    """
 
-    def strip(self, text: str) -> str: ...
+    def append(self, text: str) -> str:
+        """The line with its checksum appended.
+
+        Parameters
+        ----------
+        text : str
+            A line without its terminator.
+        """
+        ...
+
+    def strip(self, text: str) -> str:
+        """The line without its checksum, once checked.
+
+        Parameters
+        ----------
+        text : str
+            A line as received, without its terminator.
+
+        Raises
+        ------
+        ProtocolError
+            The checksum is missing, malformed or wrong.
+        """
+        ...
 
 
 class _HexSuffixChecksum:
@@ -143,6 +200,13 @@ class XorChecksum(_HexSuffixChecksum):
 
     @staticmethod
     def value(text: str) -> int:
+        """The checksum of a line: the XOR of its bytes (0..255).
+
+        Parameters
+        ----------
+        text : str
+            The line's ASCII text, without terminator or checksum.
+        """
         x = 0
         for b in text.encode("ascii"):
             x ^= b
@@ -164,11 +228,33 @@ class ZaberChecksum(_HexSuffixChecksum):
 
     @staticmethod
     def value(text: str) -> int:
+        """The checksum of a message: minus the sum of its bytes after the first, mod 256.
+
+        Parameters
+        ----------
+        text : str
+            The message's ASCII text, type character included, without terminator or
+            checksum.
+        """
         return (-sum(text[1:].encode("ascii"))) & 0xFF
 
 
 def open_port(port: str, *, baudrate: int = 115200, name: str | None = None) -> Any:
     """Open a serial port with pyserial (8N1, no flow control), non-blocking reads.
+
+    Parameters
+    ----------
+    port : str
+        A device (``/dev/ttyACM0``, ``COM3``) or a pyserial URL (``loop://``).
+    baudrate : int
+        Line speed, baud.
+    name : str, optional
+        What the port is, for the error message (default ``"serial port"``).
+
+    Returns
+    -------
+    serial.Serial
+        The open port (exclusive access, 1 s write timeout).
 
     Raises
     ------
@@ -222,7 +308,13 @@ class LineTransport:
 
     # -- output -------------------------------------------------------------------------
     def write_line(self, text: str) -> None:
-        """Send ``text`` (+ checksum) + eol. Raises :class:`PortLost` on a dead port."""
+        """Send ``text`` (+ checksum) + eol. Raises :class:`PortLost` on a dead port.
+
+        Parameters
+        ----------
+        text : str
+            The line, printable ASCII, without terminator or checksum.
+        """
         wire = self.checksum.append(text) if self.checksum is not None else text
         data = wire.encode("ascii") + self.eol
         self._check_alive()
@@ -246,6 +338,24 @@ class LineTransport:
         ``keepalive = (period_s, send)``: while waiting, call ``send()`` (which writes a
         line) whenever nothing was sent for ``period_s`` — a heartbeat for a device's
         watchdog.
+
+        Parameters
+        ----------
+        timeout_s : float, optional
+            How long to wait, s (default :attr:`timeout_s`); ignored with ``deadline``.
+        deadline : float, optional
+            The :func:`time.monotonic` time to wait until.
+        keepalive : (float, callable), optional
+            ``(period_s, send)``: the heartbeat while waiting (None: none).
+
+        Raises
+        ------
+        ReplyTimeout
+            Nothing arrived by the deadline.
+        ProtocolError
+            A partial line at the deadline, garbage, or a bad checksum.
+        PortLost
+            The port disappeared.
         """
         if deadline is None:
             deadline = time.monotonic() + (self.timeout_s if timeout_s is None else timeout_s)
@@ -290,6 +400,19 @@ class LineTransport:
         discarded before sending, so it cannot prefix the reply. Without the awaited
         reply within ``timeout_s`` the line is sent again (stop commands are idempotent),
         ``attempts`` times in all; then ``ReplyTimeout``.
+
+        Parameters
+        ----------
+        line : str
+            The command to send (idempotent: it may be sent ``attempts`` times).
+        until : callable
+            ``until(reply)``: the parsed awaited reply, or None for any other line.
+        timeout_s : float
+            How long each attempt waits for the reply, s.
+        on_other : callable, optional
+            Called with each line that is not the awaited reply.
+        attempts : int
+            How many times the line is sent at most.
         """
         for attempt in range(1, attempts + 1):
             try:

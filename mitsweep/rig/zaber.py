@@ -57,28 +57,90 @@ _REPLY_RE = re.compile(r"^@(\d{2}) (\d+) (?:(\d{1,2}) )?(OK|RJ) (IDLE|BUSY) ([A-
 
 
 def speed_data(mm_s: float, steps_per_mm: float) -> int:
-    """A velocity (mm/s) as a ``maxspeed`` data value."""
+    """A velocity (mm/s) as a ``maxspeed`` data value.
+
+    Parameters
+    ----------
+    mm_s : float
+        Velocity, mm/s.
+    steps_per_mm : float
+        The stage's microsteps per mm.
+
+    Returns
+    -------
+    int
+        The nearest data value (microsteps/s × :data:`SPEED_UNIT`).
+    """
     return int(round(mm_s * steps_per_mm * SPEED_UNIT))
 
 
 def accel_data(mm_s2: float, steps_per_mm: float) -> int:
-    """An acceleration (mm/s²) as an ``accel`` data value."""
+    """An acceleration (mm/s²) as an ``accel`` data value.
+
+    Parameters
+    ----------
+    mm_s2 : float
+        Acceleration, mm/s².
+    steps_per_mm : float
+        The stage's microsteps per mm.
+
+    Returns
+    -------
+    int
+        The nearest data value (microsteps/s² × :data:`ACCEL_UNIT`).
+    """
     return int(round(mm_s2 * steps_per_mm * ACCEL_UNIT))
 
 
 def speed_mm_s(data: int, steps_per_mm: float) -> float:
-    """A ``maxspeed`` data value as a velocity (mm/s): the inverse of :func:`speed_data`."""
+    """A ``maxspeed`` data value as a velocity (mm/s): the inverse of :func:`speed_data`.
+
+    Parameters
+    ----------
+    data : int
+        A ``maxspeed`` data value.
+    steps_per_mm : float
+        The stage's microsteps per mm.
+    """
     return data / SPEED_UNIT / steps_per_mm
 
 
 def accel_mm_s2(data: int, steps_per_mm: float) -> float:
     """An ``accel`` data value as an acceleration (mm/s²): the inverse of
-    :func:`accel_data`."""
+    :func:`accel_data`.
+
+    Parameters
+    ----------
+    data : int
+        An ``accel`` data value.
+    steps_per_mm : float
+        The stage's microsteps per mm.
+    """
     return data / ACCEL_UNIT / steps_per_mm
 
 
 @dataclass(frozen=True)
 class ZaberReply:
+    """A reply line, parsed (:func:`parse_reply`).
+
+    Attributes
+    ----------
+    device : int
+        Device address on the chain (1..99).
+    axis : int
+        Axis number (0: the device as a whole).
+    message_id : int or None
+        The message id echoed (None: commands sent without ids).
+    ok : bool
+        ``OK`` (True) or ``RJ``, rejected (False).
+    busy : bool
+        ``BUSY`` (True) or ``IDLE``.
+    flag : str
+        The warning flag: ``--`` or the highest-priority one (``FS``, ``WR``, ``NI``, ...).
+    data : str
+        The reply's data (a value, or the reason of a rejection).
+    """
+
     device: int
     axis: int
     message_id: int | None
@@ -90,7 +152,14 @@ class ZaberReply:
 
 def parse_reply(line: str) -> ZaberReply:
     """Parse a reply line (checksum already stripped); :class:`ProtocolError` if it is
-    not one."""
+    not one.
+
+    Parameters
+    ----------
+    line : str
+        One line from the stage, without its end of line and checksum, e.g.
+        ``"@01 1 OK IDLE -- 0"``.
+    """
     m = _REPLY_RE.match(line)
     if not m:
         raise ProtocolError(f"zaber: not a reply: {line!r}")
@@ -138,6 +207,23 @@ class ZaberStage(Stage):
     def command(self, text: str, *, axis: int | None = None, allow_rejection: bool = False,
                 check_faults: bool = True) -> ZaberReply:
         """Send one command and return its reply.
+
+        Parameters
+        ----------
+        text : str
+            The command and its data, e.g. ``"move abs 1000"``.
+        axis : int, optional
+            Axis to address (default: this stage's; 0: the whole device).
+        allow_rejection : bool
+            Return an ``RJ`` reply instead of raising.
+        check_faults : bool
+            Raise on a fault flag (``F*``) in the reply.
+
+        Returns
+        -------
+        ZaberReply
+            The reply to this command (alerts and info lines read meanwhile are kept in
+            :attr:`alerts`).
 
         Raises
         ------
@@ -202,6 +288,20 @@ class ZaberStage(Stage):
         self.command(f"set limit.max {self.steps(hi_mm)}")
 
     def set_motion(self, velocity_mm_s: float, acceleration_mm_s2: float) -> None:
+        """Set ``maxspeed`` and ``accel`` for the next moves.
+
+        Parameters
+        ----------
+        velocity_mm_s : float
+            Cruise velocity, mm/s.
+        acceleration_mm_s2 : float
+            Acceleration, mm/s².
+
+        Raises
+        ------
+        DeviceError
+            Either is below one data unit at this stage's resolution.
+        """
         v = speed_data(velocity_mm_s, self.steps_per_mm)
         a = accel_data(acceleration_mm_s2, self.steps_per_mm)
         if v < 1 or a < 1:
@@ -215,6 +315,18 @@ class ZaberStage(Stage):
         self.wait_idle(timeout_s=timeout_s)
 
     def start_move(self, position_mm: float) -> int:
+        """``move abs``: start a move at the set motion, without waiting for it.
+
+        Parameters
+        ----------
+        position_mm : float
+            Target position, mm (stage coordinates).
+
+        Returns
+        -------
+        int
+            The target, microsteps.
+        """
         target = self.steps(position_mm)
         self.command(f"move abs {target}")
         return target
@@ -234,6 +346,13 @@ class ZaberStage(Stage):
             /1 0 stream 1 line abs <target>
             /1 0 stream 1 setup disable
             /1 0 stream 1 setup live 1
+
+        Parameters
+        ----------
+        lines : iterable of (int, int)
+            ``(target microsteps, maxspeed data value)`` of each line, in order.
+        accel : int
+            The stream's ``tanaccel``, an ``accel`` data value (:func:`accel_data`).
         """
         s, b = STREAM_ID, STREAM_BUFFER
         # a stream left live (or in error) by an earlier capture: disable it first
@@ -262,7 +381,15 @@ class ZaberStage(Stage):
 
     def wait_idle(self, *, timeout_s: float, poll_s: float = 0.0) -> int:
         """Poll ``get pos`` until IDLE; returns the final position (microsteps). Every poll
-        is kept in :attr:`samples` (the measured motion)."""
+        is kept in :attr:`samples` (the measured motion).
+
+        Parameters
+        ----------
+        timeout_s : float
+            How long the stage may stay busy, s (judged at each poll's send time).
+        poll_s : float
+            Pause between polls, s (0: poll back to back).
+        """
         deadline = time.monotonic() + timeout_s
         while True:
             t_poll = time.monotonic()
@@ -280,7 +407,13 @@ class ZaberStage(Stage):
         self.command("stop", check_faults=False, allow_rejection=True)
 
     def safe_stop(self, *, timeout_s: float = SAFETY_REPLY_TIMEOUT_S) -> None:
-        """Safety path: ``stop``, tolerant of stray lines from an interrupted exchange."""
+        """Safety path: ``stop``, tolerant of stray lines from an interrupted exchange.
+
+        Parameters
+        ----------
+        timeout_s : float
+            How long to wait for the stage's reply, s.
+        """
         prefix = f"@{self.device:02d} {self.axis} "
         self.transport.send_on_safety_path(
             f"/{self.device} {self.axis} stop", lambda line: True if prefix in line else None,
@@ -300,4 +433,11 @@ class ZaberStage(Stage):
         return parts[1:]
 
     def steps(self, mm: float) -> int:
+        """A position in whole microsteps.
+
+        Parameters
+        ----------
+        mm : float
+            Position, mm (stage coordinates).
+        """
         return int(round(mm * self.steps_per_mm))

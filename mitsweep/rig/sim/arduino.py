@@ -30,12 +30,17 @@ class ArduinoModel(Model):
     Parameters
     ----------
     faults : iterable of Fault
+        Faults to inject, each used once.
     homed : bool
         Whether the board starts knowing its position (a real board never does).
+    position : int
+        Start position, steps.
     micros_start : int
         ``micros()`` at boot (set near 2**32 to exercise the wrap).
     home_time_s : float
-        How long homing takes.
+        How long homing takes, s.
+    boot_time_s : float
+        From a reset to the ``READY`` line, s (the bootloader's wait).
     """
 
     reset_on_open = True
@@ -67,9 +72,23 @@ class ArduinoModel(Model):
 
     # -- clock, position ----------------------------------------------------------------
     def micros(self, t: float) -> int:
+        """The board's 32-bit ``micros()`` at server time ``t``.
+
+        Parameters
+        ----------
+        t : float
+            The server's time, s.
+        """
         return (self.micros_start + int(round((t - self.boot_t) * 1e6))) % 2**32
 
     def position(self, now: float) -> int:
+        """The stepper's position at ``now``, whole steps (the floor of the travel).
+
+        Parameters
+        ----------
+        now : float
+            The server's present time, s.
+        """
         if self.move is not None:
             d = self.move.distance(now)
             return int(round(self.move.x0 + self.move.sign * math.floor(d + 1e-9)))
@@ -95,7 +114,13 @@ class ArduinoModel(Model):
     def reset(self, now: float) -> None:
         """Opening the port pulses DTR, which resets an Uno: the sketch restarts with
         its constructor state (``homed=True`` thus models a board that keeps its
-        reference across resets, which a real one does not), shutter released."""
+        reference across resets, which a real one does not), shutter released.
+
+        Parameters
+        ----------
+        now : float
+            The server's present time, s.
+        """
         self.cancel_scheduled()
         self.homed, self._pos = self._boot_state
         self.limits = None
@@ -170,7 +195,13 @@ class ArduinoModel(Model):
         return [self._line(f"OK WATCHDOG {nums[0]}")]
 
     def watchdog_armed(self, now: float) -> bool:
-        """Motion, or an exposure pending or open: what the watchdog guards."""
+        """Motion, or an exposure pending or open: what the watchdog guards.
+
+        Parameters
+        ----------
+        now : float
+            The server's present time, s.
+        """
         return (self.moving(now) or self._shutter_plan is not None or self.shutter_open
                 or any(tag == "homing" for _, _, tag in self._scheduled))
 
@@ -363,7 +394,13 @@ class ArduinoModel(Model):
 
     def tick(self, now: float) -> list[bytes]:
         """Advance the shutter and faults to ``now``; scheduled lines are emitted by the
-        server."""
+        server.
+
+        Parameters
+        ----------
+        now : float
+            The server's present time, s.
+        """
         if self._restart_at is not None and now >= self._restart_at:
             # a brown-out: the sketch restarts where the motor stopped, its position lost
             t, self._restart_at = self._restart_at, None

@@ -36,7 +36,15 @@ logger = logging.getLogger(__name__)
 
 def raise_priority(tid: int | None = None, nice: int = DEVICE_NICE) -> bool:
     """Set thread (or process) ``tid`` (default: the calling thread) to ``nice`` if the
-    OS allows it; True if it did. Never raises: the priority is a help, not a need."""
+    OS allows it; True if it did. Never raises: the priority is a help, not a need.
+
+    Parameters
+    ----------
+    tid : int, optional
+        A native thread id, or a process id (default: the calling thread).
+    nice : int
+        The niceness to set (negative: higher priority; needs the privilege).
+    """
     try:
         tid = threading.get_native_id() if tid is None else tid
         os.setpriority(os.PRIO_PROCESS, tid, nice)

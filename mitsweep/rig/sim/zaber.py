@@ -36,6 +36,7 @@ class ZaberModel(Model):
     Parameters
     ----------
     faults : iterable of Fault
+        Faults to inject, each used once (no ``brownout``: an Arduino fault).
     device : int
         Address on the chain.
     device_id : int
@@ -71,6 +72,13 @@ class ZaberModel(Model):
         self.stream_mode: tuple[str, int | None] = ("disabled", None)
 
     def position(self, now: float) -> int:
+        """The axis's position at ``now``, microsteps.
+
+        Parameters
+        ----------
+        now : float
+            The server's present time, s.
+        """
         if self.move is not None:
             return int(round(self.move.position(now)))
         return self._pos
