@@ -40,7 +40,19 @@ def _write_error(path: Path, exc: OSError) -> WriteError:
 
 
 def check_writable(path: str | Path) -> Path:
-    """Raise :class:`WriteError` with a clear cause unless ``path`` can be created."""
+    """Raise :class:`WriteError` with a clear cause unless ``path`` can be created.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to be written: its folder must exist and be writable, and it must not
+        be a directory itself (an existing file is fine: it will be replaced).
+
+    Returns
+    -------
+    Path
+        ``path`` as a :class:`~pathlib.Path`.
+    """
     p = Path(path)
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():

@@ -98,7 +98,14 @@ def optics_sections(setup_dict: Mapping[str, Any], motion: Mapping[str, Any] | N
 
 def optics_fingerprint(optics: Mapping[str, Any]) -> str:
     """SHA-256 (hex) of the canonical JSON of :func:`optics_sections` (sorted keys, no
-    spaces): equal for equal optics, whatever the dict order or tuple/list spelling."""
+    spaces): equal for equal optics, whatever the dict order or tuple/list spelling.
+
+    Parameters
+    ----------
+    optics : mapping
+        The optics as :func:`optics_sections` returns them (or as a bank header holds
+        them).
+    """
     text = json.dumps(_plain(optics), sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -114,6 +121,34 @@ class IPSFBank:
     ``optics`` is the dict of :func:`optics_sections` the bank was traced for (``None``:
     no optics, or a format-1 file that predates fingerprints: ``fingerprinted`` is then
     False).
+
+    Attributes
+    ----------
+    kernels : (n_depths, n_points, K, K) ndarray
+        Unit-sum IPSFs, K odd (float32 on disk), the chief-ray image at [K//2, K//2].
+    points_uv : (n_points, 2) ndarray
+        Upright image coordinates (u, v) of the points, mm, at the reference sensor
+        distance.
+    depths_mm : (n_depths,) ndarray
+        Depth l of the point source of each row of kernels, mm, > 0 (``inf`` allowed).
+    pixel_pitch : float
+        Pixel pitch of the kernels' grid, mm.
+    reference_sensor_distance : float
+        The sensor distance whose pixel grid the kernels are on, mm.
+    kind : {"radial", "grid"}
+        Points on the +u half-axis (rotated for other angles) or on a regular grid.
+    radii_mm : (n_points,) ndarray, optional
+        Radial banks: the points' distances from the centre, mm, strictly increasing.
+    grid_shape : (int, int), optional
+        Grid banks: (rows, cols), rows * cols = n_points.
+    vignetted : (n_depths, n_points) ndarray, optional
+        Fraction in [0, 1] of each source's traced energy lost.
+    metadata : dict
+        Provenance (setup, sweep range, rays, seed, version, motion), JSON-ready.
+    optics : dict, optional
+        :func:`optics_sections` of the optics the bank was traced for.
+    fingerprinted : bool
+        False for a format-1 file, which predates optics fingerprints.
     """
 
     kernels: np.ndarray           # (n_depths, n_points, K, K) float32
@@ -203,10 +238,22 @@ def _check_values(bank: IPSFBank, n_depths: int, n_points: int) -> None:
 def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = True) -> Path:
     """Write ``bank`` to ``path`` (.npz) atomically.
 
-    ``reproducible`` (default) stores every archive member with one fixed timestamp
-    (1980-01-01, the ZIP epoch) instead of the time of writing, so that one bank always
-    gives the same bytes (datasets and caches compare files by SHA-256); False keeps
-    NumPy's timestamps.
+    Parameters
+    ----------
+    path : str or Path
+        The bank file; must end in ``.npz``.
+    bank : IPSFBank
+        The bank; a format-1 bank (``fingerprinted`` False) is refused.
+    reproducible : bool, optional
+        Store every archive member with one fixed timestamp (1980-01-01, the ZIP epoch)
+        instead of the time of writing, so that one bank always gives the same bytes
+        (datasets and caches compare files by SHA-256); default True. False keeps
+        NumPy's timestamps.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     p = Path(path)
     if p.suffix != ".npz":
@@ -270,7 +317,13 @@ def _default(o):
 
 
 def load_bank(path: str | Path) -> IPSFBank:
-    """Read a bank written by :func:`save_bank`; raises :class:`BankError` if malformed."""
+    """Read a bank written by :func:`save_bank`; raises :class:`BankError` if malformed.
+
+    Parameters
+    ----------
+    path : str or Path
+        A ``.npz`` bank of a format in :data:`READABLE_FORMATS`.
+    """
     p = require_regular_file(path, "IPSF bank")
     if not p.is_file():
         raise BankError(f"{p}: no such bank file")
@@ -387,6 +440,11 @@ def bank_kernel_size(pixel_pitch: float) -> int:
     31 px at the demo's 18 µm pixels (the largest peripheral IPSF spans ~0.5 mm on the
     sensor), scaled inversely with the pitch (mm) so finer pixels do not truncate the
     kernels; never below 31.
+
+    Parameters
+    ----------
+    pixel_pitch : float
+        Pixel pitch of the kernels' grid, mm (> 0).
     """
     half = int(math.ceil(15 * 0.018 / pixel_pitch))
     return 2 * max(half, 15) + 1

@@ -122,7 +122,16 @@ def cache_root() -> Path:
 
 
 def warn_unusable(folder: Path | str | None, exc: BaseException) -> None:
-    """Log that the cache at ``folder`` is not used, once per folder and process."""
+    """Log that the cache at ``folder`` is not used, once per folder and process.
+
+    Parameters
+    ----------
+    folder : Path or str or None
+        The cache folder that could not be used; None where no folder could even be
+        chosen (the message then names no folder).
+    exc : BaseException
+        Why: its ``strerror`` (an :class:`OSError`'s) or its text goes in the message.
+    """
     key = str(folder)
     if key in _warned:
         return

@@ -150,7 +150,18 @@ class CameraImage:
 
 
 def srgb_to_linear(x: ArrayLike) -> np.ndarray:
-    """The sRGB transfer function inverted (IEC 61966-2-1), float32, on [0, 1]."""
+    """The sRGB transfer function inverted (IEC 61966-2-1), float32, on [0, 1].
+
+    Parameters
+    ----------
+    x : array_like
+        sRGB-encoded values, 1 = full white; computed in float32, not clipped.
+
+    Returns
+    -------
+    ndarray
+        Linear values, float32, of ``x``'s shape.
+    """
     x = np.asarray(x, dtype=np.float32)
     return np.where(x <= 0.04045, x / np.float32(12.92),
                     ((x + np.float32(0.055)) / np.float32(1.055)) ** np.float32(2.4)
@@ -426,6 +437,14 @@ def _icc_transfer(icc: bytes | None) -> tuple[str, float | None] | None:
 
 def tiff_transfer(page: Any, forced: str | None = None) -> tuple[str, float | None, str]:
     """The transfer function of a TIFF page by the module's rule.
+
+    Parameters
+    ----------
+    page : tifffile.TiffPage
+        The page read: its sample format, ``ImageDescription`` and ICC profile (tag
+        34675) decide, in that order.
+    forced : {"linear", "srgb"}, optional
+        The transfer the caller imposes; it wins over the page (default: the rule).
 
     Returns
     -------

@@ -37,6 +37,19 @@ class ExrError(ValueError):
 
 
 def channel_names_for(n: int) -> list[str]:
+    """The EXR channel names of an image with ``n`` channels.
+
+    Parameters
+    ----------
+    n : int
+        Number of channels (the last axis of an (H, W, C) image; 1 for (H, W)).
+
+    Returns
+    -------
+    list of str
+        ``Y`` for 1; ``R, G, B`` for 3; ``R, G, B, A`` for 4; ``C0`` … ``C{n-1}``
+        otherwise.
+    """
     return {1: ["Y"], 3: ["R", "G", "B"], 4: ["R", "G", "B", "A"]}.get(
         n, [f"C{i}" for i in range(n)])
 

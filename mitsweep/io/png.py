@@ -13,7 +13,18 @@ __all__ = ["linear_to_srgb", "write_png"]
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 sRGB encoding of linear values in [0, 1] (clipped)."""
+    """IEC 61966-2-1 sRGB encoding of linear values in [0, 1] (clipped).
+
+    Parameters
+    ----------
+    x : ndarray
+        Linear values, 1 = full white; clipped to [0, 1] and computed in float64.
+
+    Returns
+    -------
+    ndarray
+        sRGB-encoded values in [0, 1], float64, of ``x``'s shape.
+    """
     x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
@@ -22,10 +33,25 @@ def write_png(path: str | Path, image: np.ndarray, *, white: float | None = None
               max_width: int | None = None) -> Path:
     """Write a linear (H, W) or (H, W, 3) image as an 8-bit sRGB PNG.
 
-    ``white`` is the linear value shown as full white (default: the 99.5th percentile,
-    so that a few bright pixels do not darken the preview). ``max_width`` shrinks the
-    image by the smallest integer factor that fits (box average of the linear values,
-    before encoding).
+    Parameters
+    ----------
+    path : str or Path
+        The PNG file, written atomically.
+    image : (H, W), (H, W, 1), (H, W, 3) or (H, W, 4) ndarray
+        Linear values; NaN is written black.
+    white : float, optional
+        The linear value shown as full white (default: the 99.5th percentile of the
+        finite values, so that a few bright pixels do not darken the preview; a value
+        <= 0 means 1).
+    max_width : int, optional
+        Widest image written, px: a wider one is shrunk by the smallest integer factor
+        that fits (box average of the linear values, before encoding). Default: no
+        limit.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     from PIL import Image
 

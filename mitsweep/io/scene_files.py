@@ -47,7 +47,18 @@ class SceneFileError(ValueError):
 
 
 def file_sha256(path: str | os.PathLike) -> str:
-    """The SHA-256 of a file's bytes, read in 1 MiB chunks."""
+    """The SHA-256 of a file's bytes, read in 1 MiB chunks.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    str
+        The digest, 64 lowercase hexadecimal digits.
+    """
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
@@ -164,6 +175,16 @@ def scene_files(path: str | os.PathLike) -> list[Path]:
     exist are left out (Mitsuba's own message names them); each file appears once, in
     the order the parser meets it (the scene first).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The top-level XML scene file.
+
+    Returns
+    -------
+    list of Path
+        The files, as resolved (not made absolute).
+
     Raises
     ------
     FileNotFoundError
@@ -191,7 +212,13 @@ def _name(p: Path, folder: Path) -> str:
 
 def scene_digests(path: str | os.PathLike) -> dict[str, str]:
     """``{name: SHA-256}`` of every file of :func:`scene_files`, sorted by name; names
-    are relative to the scene's folder (symlinks resolved), or absolute outside it."""
+    are relative to the scene's folder (symlinks resolved), or absolute outside it.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The top-level XML scene file.
+    """
     files = scene_files(path)
     folder = Path(path).resolve().parent
     return dict(sorted((_name(p, folder), file_sha256(p)) for p in files))
@@ -199,6 +226,14 @@ def scene_digests(path: str | os.PathLike) -> dict[str, str]:
 
 def changed_files(recorded: dict[str, str], path: str | os.PathLike) -> list[str]:
     """Names whose content differs between ``recorded`` (:func:`scene_digests` of an
-    earlier time) and the scene now: changed, gone or new, sorted."""
+    earlier time) and the scene now: changed, gone or new, sorted.
+
+    Parameters
+    ----------
+    recorded : dict of str to str
+        ``{name: SHA-256}`` as :func:`scene_digests` gave it earlier.
+    path : str or os.PathLike
+        The top-level XML scene file, digested again now.
+    """
     now = scene_digests(path)
     return sorted(n for n in set(recorded) | set(now) if recorded.get(n) != now.get(n))

@@ -67,7 +67,18 @@ class Trapezoid:
     def reaching(cls, velocity: float, acceleration: float, *,
                  cruise_distance: float = 0.0) -> Trapezoid:
         """The move that ramps to ``velocity``, cruises ``cruise_distance`` and stops:
-        its :attr:`ramp_time` and :attr:`ramp_distance` are those of a full ramp."""
+        its :attr:`ramp_time` and :attr:`ramp_distance` are those of a full ramp.
+
+        Parameters
+        ----------
+        velocity : float
+            Top speed, > 0 (length/s).
+        acceleration : float
+            Acceleration and deceleration, > 0 (length/s²).
+        cruise_distance : float, optional
+            Length covered at ``velocity`` between the ramps, >= 0 (default 0: the
+            ramps meet at the top speed).
+        """
         return cls(cruise_distance + velocity * velocity / acceleration, velocity,
                    acceleration)
 
@@ -76,7 +87,17 @@ class Trapezoid:
                             accel_fraction: float) -> Trapezoid:
         """The move of ``distance`` in ``duration`` whose ramps each take
         ``accel_fraction`` of it, in (0, 0.5] (0.5: triangular): peak velocity
-        ``D / (T (1 − f))``, acceleration ``D / (T² f (1 − f))``."""
+        ``D / (T (1 − f))``, acceleration ``D / (T² f (1 − f))``.
+
+        Parameters
+        ----------
+        distance : float
+            Length of the move D, >= 0 (a length unit: mm, steps).
+        duration : float
+            Time of the move T, > 0 (s, or 1 for a normalised exposure).
+        accel_fraction : float
+            Fraction f of ``duration`` spent in each ramp, in (0, 0.5].
+        """
         f = accel_fraction
         if not 0.0 < f <= 0.5:
             raise ValueError(f"Trapezoid: accel_fraction must be in (0, 0.5], got {f!r}")
@@ -134,14 +155,26 @@ class Trapezoid:
 
     # -- motion (scalars or arrays: a float in, a float out) ------------------------------
     def velocity_at(self, t: ArrayLike) -> float | NDArray[np.float64]:
-        """Speed ``t`` seconds after the start (0 before and after the move)."""
+        """Speed ``t`` seconds after the start (0 before and after the move).
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s) since the start, s; a float gives a float.
+        """
         t = np.asarray(t, dtype=float)
         ramps = self.acceleration * np.minimum(np.minimum(t, self.ramp_time), self.duration - t)
         return _out(np.where((t <= 0.0) | (t >= self.duration), 0.0, ramps))
 
     def position_at(self, t: ArrayLike) -> float | NDArray[np.float64]:
         """Distance covered ``t`` seconds after the start, in [0, :attr:`distance`]
-        (``t`` is clipped to the move)."""
+        (``t`` is clipped to the move).
+
+        Parameters
+        ----------
+        t : float or array_like
+            Time(s) since the start, s; a float gives a float.
+        """
         tau = np.clip(np.asarray(t, dtype=float), 0.0, self.duration)
         t_r, a = self.ramp_time, self.acceleration
         rest = self.duration - tau
@@ -153,7 +186,14 @@ class Trapezoid:
 
     def time_at(self, position: ArrayLike) -> float | NDArray[np.float64]:
         """When the move has covered ``position`` (clipped to [0, :attr:`distance`]):
-        the inverse of :meth:`position_at`, s."""
+        the inverse of :meth:`position_at`, s.
+
+        Parameters
+        ----------
+        position : float or array_like
+            Distance(s) covered since the start, in the move's length unit; a float
+            gives a float.
+        """
         d = np.clip(np.asarray(position, dtype=float), 0.0, self.distance)
         if self.distance == 0.0:        # no cruise velocity to divide by: it is over at once
             return _out(np.zeros_like(d))

@@ -83,7 +83,15 @@ class MotionProfile:
     # -- constructors -------------------------------------------------------------------
     @classmethod
     def linear(cls, start: float, end: float) -> MotionProfile:
-        """Constant velocity from ``start`` to ``end`` (mm); ``start == end`` is refused."""
+        """Constant velocity from ``start`` to ``end`` (mm); ``start == end`` is refused.
+
+        Parameters
+        ----------
+        start : float
+            Sensor distance when the shutter opens, mm (finite, > 0).
+        end : float
+            Sensor distance when it closes, mm (finite, > 0, != ``start``).
+        """
         s, e = _check_distance(start, "start"), _check_distance(end, "end")
         if s == e:
             raise SetupError(f"motion: empty sweep (start = end = {s:g} mm); a focal sweep "
@@ -97,6 +105,16 @@ class MotionProfile:
         With ``a = accel_fraction`` and ``Δ = end − start`` the peak normalised velocity
         is ``Δ / (1 − a)``; ``i(t) = start + Δ t² / (2 a (1 − a))`` for ``t < a``,
         ``start + Δ (t − a/2) / (1 − a)`` in the cruise, symmetric at the end.
+
+        Parameters
+        ----------
+        start : float
+            Sensor distance when the shutter opens, mm (finite, > 0).
+        end : float
+            Sensor distance when it closes, mm (finite, > 0, != ``start``).
+        accel_fraction : float
+            Fraction ``a`` of the exposure spent in each ramp, in (0, 0.5] (0.5: a
+            triangular velocity profile).
         """
         s, e = _check_distance(start, "start"), _check_distance(end, "end")
         if s == e:
@@ -143,7 +161,14 @@ class MotionProfile:
 
     # -- evaluation ---------------------------------------------------------------------
     def sensor_distance(self, t: ArrayLike) -> float | NDArray[np.float64]:
-        """Sensor distance (mm) at normalised time(s) ``t`` ∈ [0, 1] (clipped), vectorised."""
+        """Sensor distance (mm) at normalised time(s) ``t`` ∈ [0, 1] (clipped), vectorised.
+
+        Parameters
+        ----------
+        t : float or array_like
+            Normalised exposure time(s): 0 = shutter opens, 1 = closes; a float gives a
+            float.
+        """
         tc = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
         delta = self.end - self.start
         out: NDArray[np.float64]
@@ -157,7 +182,13 @@ class MotionProfile:
         return out if out.ndim else float(out)
 
     def velocity(self, t: ArrayLike) -> float | NDArray[np.float64]:
-        """d i / d t in mm per unit normalised time (multiply by 1/exposure_s for mm/s)."""
+        """d i / d t in mm per unit normalised time (multiply by 1/exposure_s for mm/s).
+
+        Parameters
+        ----------
+        t : float or array_like
+            Normalised exposure time(s) in [0, 1] (clipped); a float gives a float.
+        """
         tc = np.clip(np.asarray(t, dtype=float), 0.0, 1.0)
         delta = self.end - self.start
         out: NDArray[np.float64]
@@ -188,6 +219,12 @@ class MotionProfile:
     def segments(self, n: int = 32) -> tuple[np.ndarray, np.ndarray]:
         """A piecewise-linear description of ``i(t)`` for exact segment deposition.
 
+        Parameters
+        ----------
+        n : int, optional
+            Trapezoidal only: chords per ramp, >= 1 (default 32); ignored by the other
+            kinds, whose description is exact.
+
         Returns
         -------
         times, positions : (m + 1,) ndarray
@@ -214,7 +251,16 @@ class MotionProfile:
 
     def sample(self, n: int, *, rng: np.random.Generator | None = None) -> np.ndarray:
         """``n`` stratified times' sensor distances (mm): one jittered sample per stratum,
-        or stratum centres when ``rng`` is None."""
+        or stratum centres when ``rng`` is None.
+
+        Parameters
+        ----------
+        n : int
+            Number of strata of [0, 1], >= 1.
+        rng : numpy.random.Generator, optional
+            Draws each time uniformly within its stratum; None (default) takes the
+            centres, deterministic.
+        """
         if n < 1:
             raise ValueError(f"sample: n must be >= 1, got {n}")
         u = 0.5 if rng is None else rng.random(n)

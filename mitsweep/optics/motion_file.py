@@ -168,6 +168,15 @@ def motion_file_text(profile: MotionProfile, *, exposure_s: float | None,
     A linear profile is written as its 2 knots, a tabulated one as its knots, a
     trapezoidal one as 256 chords per ramp (:meth:`MotionProfile.segments`).
 
+    Parameters
+    ----------
+    profile : MotionProfile
+        The motion, any kind (it is written tabulated).
+    exposure_s : float or None
+        The exposure it was designed for, s (finite, > 0), or None for a shape only.
+    provenance : dict
+        What made it, JSON-serialisable with finite numbers.
+
     Raises
     ------
     SetupError
@@ -201,6 +210,14 @@ def _reject_constant(name: str):
 
 def parse_motion_file(text: str, *, source: str | None = None) -> MotionFile:
     """Validate the JSON text of a motion file (format in the module docstring).
+
+    Parameters
+    ----------
+    text : str
+        The file's JSON text.
+    source : str, optional
+        Where it came from (a path), named by the messages and kept as
+        :attr:`MotionFile.source`.
 
     Raises
     ------
@@ -256,6 +273,11 @@ def parse_motion_file(text: str, *, source: str | None = None) -> MotionFile:
 def load_motion_file(path: str | os.PathLike) -> MotionFile:
     """Read and validate a motion-profile file.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The JSON file (UTF-8), a regular file.
+
     Raises
     ------
     SetupError
@@ -279,6 +301,17 @@ def save_motion_file(path: str | os.PathLike, profile: MotionProfile, *,
     it: an interrupted write never leaves a partial file or removes an earlier one.
     Whether ``path`` may be replaced is the caller's decision (the command line refuses
     an output that names one of its inputs, :func:`mitsweep.cli.common.check_outputs`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write; its folder must exist.
+    profile : MotionProfile
+        The motion, any kind (it is written tabulated).
+    exposure_s : float or None
+        The exposure it was designed for, s (finite, > 0), or None for a shape only.
+    provenance : dict
+        What made it, JSON-serialisable with finite numbers.
 
     Returns
     -------
@@ -341,6 +374,17 @@ def check_motion_file(mf: MotionFile, setup: Setup, *, exposure_s: float | None 
     ``rig.min_exposure_s .. rig.max_exposure_s`` and that the stage can follow the
     profile: ``|v_j| <= rig.max_velocity`` and ``|a_j| <= rig.acceleration``
     (:func:`stage_kinematics`).
+
+    Parameters
+    ----------
+    mf : MotionFile
+        The motion file, as read.
+    setup : mitsweep.config.Setup
+        Its lens focal length and rig limits (``travel``, ``max_velocity``,
+        ``acceleration``, ``min_exposure_s``, ``max_exposure_s``).
+    exposure_s : float, optional
+        The exposure it will run at, s (default: the file's own; with neither, the
+        exposure and stage-following checks are skipped).
 
     Returns
     -------

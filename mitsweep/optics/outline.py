@@ -46,13 +46,25 @@ class RimOutline:
     on_rim: np.ndarray
 
     def offsets_px(self, pitch: float) -> tuple[np.ndarray, np.ndarray]:
-        """Points and outward normals as ``(drow, dcol)`` pixels from the axis, (N, 2)."""
+        """Points and outward normals as ``(drow, dcol)`` pixels from the axis, (N, 2).
+
+        Parameters
+        ----------
+        pitch : float
+            Pixel pitch, mm (the points are divided by it; the unit normals are not).
+        """
         pts = np.stack([-self.uv[:, 1], self.uv[:, 0]], axis=-1) / pitch
         nrm = np.stack([-self.normal_uv[:, 1], self.normal_uv[:, 0]], axis=-1)
         return pts, nrm
 
     def equivalent_radius_px(self, pitch: float) -> float:
-        """Radius (px) of the circle of the outline's area (the radius, for a circle)."""
+        """Radius (px) of the circle of the outline's area (the radius, for a circle).
+
+        Parameters
+        ----------
+        pitch : float
+            Pixel pitch, mm.
+        """
         u, v = self.uv[:, 0], self.uv[:, 1]
         area = 0.5 * abs(np.dot(u, np.roll(v, -1)) - np.dot(v, np.roll(u, -1)))
         return math.sqrt(area / math.pi) / pitch

@@ -69,14 +69,29 @@ _SEED_RADII, _SEED_AZIMUTHS = 160, 320
 
 
 def angles_to_directions(azimuth: ArrayLike, elevation: ArrayLike) -> np.ndarray:
-    """Unit world directions (..., 3) of azimuth φ and elevation ε, radians."""
+    """Unit world directions (..., 3) of azimuth φ and elevation ε, radians.
+
+    Parameters
+    ----------
+    azimuth : array_like
+        φ, radians, from world +x toward +y.
+    elevation : array_like
+        ε, radians, above the plane z = 0 (toward the camera); broadcast with
+        ``azimuth``.
+    """
     az, el = np.broadcast_arrays(np.asarray(azimuth, float), np.asarray(elevation, float))
     ce = np.cos(el)
     return np.stack([ce * np.cos(az), ce * np.sin(az), np.sin(el)], axis=-1)
 
 
 def directions_to_angles(directions: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(azimuth φ in (−π, π], elevation ε in [−π/2, π/2]), radians, of directions (..., 3)."""
+    """(azimuth φ in (−π, π], elevation ε in [−π/2, π/2]), radians, of directions (..., 3).
+
+    Parameters
+    ----------
+    directions : (..., 3) array_like
+        World directions (need not be unit).
+    """
     d = np.asarray(directions, dtype=float)
     return (np.arctan2(d[..., 1], d[..., 0]),
             np.arctan2(d[..., 2], np.hypot(d[..., 0], d[..., 1])))
@@ -85,6 +100,16 @@ def directions_to_angles(directions: ArrayLike) -> tuple[NDArray[np.float64], ND
 def image_to_direction(placement: Placement, u: ArrayLike, v: ArrayLike, sensor_distance: float
                        ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """World directions seen at upright image points (u, v), mm, on a sensor at ``i``.
+
+    Parameters
+    ----------
+    placement : Placement
+        The mirror in front of the lens.
+    u, v : array_like
+        Upright image coordinates, mm from the optical axis (u right, v up), broadcast
+        together.
+    sensor_distance : float
+        Lens-to-sensor distance ``i`` of the image, mm.
 
     Returns
     -------
@@ -272,7 +297,14 @@ class PanoramaMap:
         return np.arctan(height) if self.projection == "cylindrical" else height
 
     def directions(self, prow: ArrayLike, pcol: ArrayLike) -> np.ndarray:
-        """Unit world directions (..., 3) of panorama pixels (row, col), centres at integers."""
+        """Unit world directions (..., 3) of panorama pixels (row, col), centres at integers.
+
+        Parameters
+        ----------
+        prow, pcol : array_like
+            Panorama row(s) and column(s), pixel centres at integers (broadcast
+            together).
+        """
         W, H = self.size
         lo, hi = (self._height(e) for e in self.elevation_range)
         prow, pcol = np.asarray(prow, float), np.asarray(pcol, float)
@@ -284,7 +316,14 @@ class PanoramaMap:
 
     def panorama_coords(self, directions: ArrayLike
                        ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Panorama (row, col) of world directions; columns wrap into [−½, W_p − ½)."""
+        """Panorama (row, col) of world directions; columns wrap into [−½, W_p − ½).
+
+        Parameters
+        ----------
+        directions : (..., 3) array_like
+            World directions (need not be unit). Rows are not clipped: a direction
+            outside the elevation range gets a row outside the panorama.
+        """
         W, H = self.size
         lo, hi = (self._height(e) for e in self.elevation_range)
         az, el = directions_to_angles(directions)
@@ -317,6 +356,12 @@ class PanoramaMap:
 
         Returns ``(row, col, valid)``; ``valid`` is False (and row, col NaN) where the
         mirror does not show the direction or its image falls outside the frame.
+
+        Parameters
+        ----------
+        prow, pcol : array_like
+            Panorama row(s) and column(s), pixel centres at integers (broadcast
+            together).
         """
         d = self.directions(prow, pcol)
         if self.placement.tilt == 0.0:
@@ -345,6 +390,11 @@ class PanoramaMap:
 
         Returns ``(prow, pcol, valid)``; ``valid`` is False where the pixel does not see
         the mirror's front or its direction is outside the panorama's elevations.
+
+        Parameters
+        ----------
+        row, col : array_like
+            Image row(s) and column(s), pixel centres at integers (broadcast together).
         """
         u, v = self._to_sensor(row, col)
         d, ok = image_to_direction(self.placement, u, v, self.sensor_distance)
@@ -476,6 +526,17 @@ def panorama_bytes(size: tuple[int, int], image_shape: tuple[int, ...], channels
     (float64, padded) and one block's work.
 
     A float (sizes from the command line can exceed any integer type NumPy uses).
+
+    Parameters
+    ----------
+    size : (int, int)
+        Panorama columns and rows, ``(W_p, H_p)``.
+    image_shape : tuple of int
+        Shape of the image unwarped, ``(H, W[, C])`` (only ``H, W`` are used).
+    channels : int
+        Samples per pixel (1 for an (H, W) image).
+    itemsize : int
+        Bytes per sample of the panorama (4 for float32).
     """
     W_p, H_p = (float(n) for n in size)
     H, W = (float(n) + 2 * _SPLINE_PAD for n in image_shape[:2])

@@ -32,13 +32,25 @@ __all__ = ["image_shape", "center_offset_of", "optical_center_px", "pixel_to_sen
 
 
 def image_shape(setup: Setup) -> tuple[int, int]:
-    """``(H, W)`` of a setup's images (its ``sensor.resolution`` is ``(W, H)``)."""
+    """``(H, W)`` of a setup's images (its ``sensor.resolution`` is ``(W, H)``).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``sensor.resolution``, ``(W, H)`` pixels.
+    """
     W, H = setup.sensor.resolution
     return int(H), int(W)
 
 
 def center_offset_of(setup: Setup) -> tuple[float, float] | None:
-    """A setup's ``sensor.center_offset_px`` (``(drow, dcol)`` px), or None: the centre."""
+    """A setup's ``sensor.center_offset_px`` (``(drow, dcol)`` px), or None: the centre.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``sensor`` section (one without ``center_offset_px`` gives None).
+    """
     return getattr(setup.sensor, "center_offset_px", None)
 
 

@@ -77,14 +77,36 @@ class Placement:
         return self.rotation[:, 2]
 
     def to_local(self, p: ArrayLike) -> np.ndarray:
-        """World points (..., 3) to the mirror's local frame."""
+        """World points (..., 3) to the mirror's local frame.
+
+        Parameters
+        ----------
+        p : (..., 3) array_like
+            World coordinates, mm (or directions: the map is a rotation about the
+            vertex, the origin of both frames).
+        """
         return np.asarray(p, dtype=float) @ self.rotation
 
     def to_world(self, p: ArrayLike) -> np.ndarray:
+        """Local points (..., 3) to world coordinates, the inverse of :meth:`to_local`.
+
+        Parameters
+        ----------
+        p : (..., 3) array_like
+            Coordinates in the mirror's frame (vertex at the origin, axis +z), mm (or
+            directions).
+        """
         return np.asarray(p, dtype=float) @ self.rotation.T
 
     def surface(self, x: ArrayLike, y: ArrayLike) -> SurfacePoints:
-        """World points and normals at local coordinates (x, y), mm (broadcast)."""
+        """World points and normals at local coordinates (x, y), mm (broadcast).
+
+        Parameters
+        ----------
+        x, y : array_like
+            Local coordinates across the mirror's axis, mm; the point is on the surface
+            at ``z = −sag(ρ)``, ``ρ = hypot(x, y)``.
+        """
         x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
         rho = np.hypot(x, y)
         z = -self.profile.sag(rho)

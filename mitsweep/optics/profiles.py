@@ -77,22 +77,46 @@ class Profile:
         return sag, g, d2
 
     def sag(self, rho: ArrayLike) -> NDArray[np.float64]:
-        """s(ρ), mm (positive, away from the camera)."""
+        """s(ρ), mm (positive, away from the camera).
+
+        Parameters
+        ----------
+        rho : array_like
+            Radial coordinate ρ, mm, >= 0 (inside :meth:`max_rho`).
+        """
         rho = np.asarray(rho, dtype=float)
         return rho * rho / (self.radius + self._q(rho)) + self._poly(rho)[0]
 
     def slope_over_rho(self, rho: ArrayLike) -> NDArray[np.float64]:
-        """s'(ρ)/ρ, mm⁻¹: finite on the axis, where it equals 1/R (+ 2 a2 if any)."""
+        """s'(ρ)/ρ, mm⁻¹: finite on the axis, where it equals 1/R (+ 2 a2 if any).
+
+        Parameters
+        ----------
+        rho : array_like
+            Radial coordinate ρ, mm, >= 0 (inside :meth:`max_rho`).
+        """
         rho = np.asarray(rho, dtype=float)
         return 1.0 / self._q(rho) + self._poly(rho)[1]
 
     def slope(self, rho: ArrayLike) -> NDArray[np.float64]:
-        """s'(ρ), dimensionless."""
+        """s'(ρ), dimensionless.
+
+        Parameters
+        ----------
+        rho : array_like
+            Radial coordinate ρ, mm, >= 0 (inside :meth:`max_rho`).
+        """
         rho = np.asarray(rho, dtype=float)
         return rho * self.slope_over_rho(rho)
 
     def curvature(self, rho: ArrayLike) -> NDArray[np.float64]:
-        """s''(ρ), mm⁻¹."""
+        """s''(ρ), mm⁻¹.
+
+        Parameters
+        ----------
+        rho : array_like
+            Radial coordinate ρ, mm, >= 0 (inside :meth:`max_rho`).
+        """
         rho = np.asarray(rho, dtype=float)
         q = self._q(rho)
         return self.radius ** 2 / q ** 3 + self._poly(rho)[2]
@@ -102,6 +126,11 @@ class Profile:
 
         ``n ∝ (s', 1)`` written as ``(ρ (1 + q p), q)`` with ``p`` the asphere's
         s'/ρ: finite at the axis and at a hemisphere's rim.
+
+        Parameters
+        ----------
+        rho : array_like
+            Radial coordinate ρ, mm, >= 0 (inside :meth:`max_rho`).
         """
         rho = np.asarray(rho, dtype=float)
         q = self._q(rho)
@@ -119,6 +148,11 @@ class Profile:
         surface to the axis. (The seed's Eq. 5 prints R_s = ρ (1+s'²)^{3/2}/s'', which
         is not a length.) Written through q: for a pure conic
         R_s = sqrt(R² − kρ²) and R_m = R_s³ / R²; both tend to R on the axis.
+
+        Parameters
+        ----------
+        rho : array_like
+            Radial coordinate ρ, mm, >= 0 (inside :meth:`max_rho`).
         """
         rho = np.asarray(rho, dtype=float)
         q = self._q(rho)

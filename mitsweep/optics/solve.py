@@ -24,7 +24,23 @@ def bracketed_root(f: Callable[[float], float], a: float, b: float, *,
     """A root of continuous ``f`` in ``[a, b]``, where ``f(a)`` and ``f(b)`` differ in
     sign (or one is zero), to within ``xtol`` (bisection: ``⌈log2(|b − a| / xtol)⌉`` steps).
 
-    Raises ``ValueError`` when ``[a, b]`` does not bracket a sign change.
+    Parameters
+    ----------
+    f : callable
+        ``f(x) -> float``, continuous on ``[a, b]``.
+    a, b : float
+        The bracket's ends (either order).
+    xtol : float, optional
+        Absolute tolerance on the root, in ``x``'s unit (default 1e-12).
+    max_iter : int, optional
+        Most bisections (default 200); the bracket's midpoint is returned if they run
+        out.
+
+    Raises
+    ------
+    ValueError
+        When ``[a, b]`` does not bracket a sign change (or ``f`` is not finite at an
+        end).
     """
     fa, fb = float(f(a)), float(f(b))
     if fa == 0.0:
@@ -52,7 +68,19 @@ def bounded_minimum(f: Callable[[float], float], lo: float, hi: float, *,
                     xatol: float = 1e-10, max_iter: int = 500) -> tuple[float, float]:
     """``(x, f(x))`` at a local minimum of ``f`` on ``[lo, hi]``, ``x`` within ``xatol``
     (golden-section search; exact for a unimodal ``f``). The ends are candidates too, so
-    a minimum at a bound is found."""
+    a minimum at a bound is found.
+
+    Parameters
+    ----------
+    f : callable
+        ``f(x) -> float`` on ``[lo, hi]``.
+    lo, hi : float
+        The interval's ends (either order).
+    xatol : float, optional
+        Absolute tolerance on ``x`` (default 1e-10).
+    max_iter : int, optional
+        Most golden-section steps (default 500).
+    """
     lo, hi = float(min(lo, hi)), float(max(lo, hi))
     a, b = lo, hi
     c = b - _INV_PHI * (b - a)

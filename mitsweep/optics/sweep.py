@@ -60,6 +60,14 @@ class MirrorZone:
         return max(abs(self.rho_start), abs(self.rho_end))
 
     def grid(self, n: int = _GRID) -> np.ndarray:
+        """``n`` evenly spaced tilt-plane coordinates from :attr:`rho_start` to
+        :attr:`rho_end`, mm, both included.
+
+        Parameters
+        ----------
+        n : int, optional
+            Number of points (default 4097, the zone's search grid).
+        """
         return np.linspace(self.rho_start, self.rho_end, n)
 
 
