@@ -189,6 +189,25 @@ def layered_blur(truth: np.ndarray, bank: IPSFBank, depth: np.ndarray, *,
     (:func:`~mitsweep.deconv.restore.blur_operator`). Occlusion is not modelled: a near
     layer's blur spreads over the far one's pixels, as in a layered scene without
     visibility.
+
+    Parameters
+    ----------
+    truth : (H, W) or (H, W, C) ndarray
+        The sharp image.
+    bank : IPSFBank
+        The IPSF bank whose kernels at each of its depths blur the layers.
+    depth : (H, W) ndarray
+        Scene depth per pixel, mm; not finite or <= 0 where unknown (no hit).
+    depth_mm : float, optional
+        Depth, mm, whose nearest bank depth takes the pixels of unknown depth (default
+        :data:`~mitsweep.deconv.kernels.PAPER_DECONV_DEPTH_MM`, the deconvolution's).
+    dtype : dtype
+        Working and output precision (default float64).
+
+    Returns
+    -------
+    ndarray
+        The blurred image, the shape of ``truth``.
     """
     from .restore import blur_operator
 

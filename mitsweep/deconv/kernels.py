@@ -40,7 +40,18 @@ optical_center = optical_center_px
 
 
 def normalise(k: np.ndarray) -> np.ndarray:
-    """Kernel(s) scaled to unit sum over the last two axes (float64)."""
+    """Kernel(s) scaled to unit sum over the last two axes (float64).
+
+    Parameters
+    ----------
+    k : (..., K0, K1) array_like
+        One kernel or a stack of kernels.
+
+    Raises
+    ------
+    BankError
+        A kernel's sum is zero, negative or not a number.
+    """
     k = np.asarray(k, dtype=np.float64)
     s = k.sum(axis=(-2, -1), keepdims=True)
     if np.any(~(s > 0)):
@@ -53,6 +64,8 @@ def select_depth(bank: IPSFBank, depth_mm: float | str | None = None) -> np.ndar
 
     Parameters
     ----------
+    bank : IPSFBank
+        The bank whose kernels (n_depths, n_points, K, K) are selected from.
     depth_mm : float, "mean" or None
         A depth in mm picks the bank depth nearest to it (in 1/depth, so ``inf`` works);
         ``"mean"`` averages the kernels over all depths (the IPSF is quasi
@@ -74,7 +87,13 @@ def select_depth(bank: IPSFBank, depth_mm: float | str | None = None) -> np.ndar
 
 
 def radii_px(bank: IPSFBank) -> np.ndarray:
-    """Radii of a radial bank's points, in pixels of the reference sensor distance."""
+    """Radii of a radial bank's points, in pixels of the reference sensor distance.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        A radial bank (:class:`BankError` otherwise).
+    """
     if bank.kind != "radial":
         raise BankError(f"a radial bank is needed here, got a {bank.kind!r} bank")
     return np.asarray(bank.radii_mm, dtype=np.float64) / float(bank.pixel_pitch)
@@ -85,6 +104,15 @@ def interpolate_radial(kernels: np.ndarray, radii: np.ndarray, r: float) -> np.n
 
     Kernels are aligned at their chief-ray centre, so a linear blend is the standard
     interpolated-PSF model (Nagy & O'Leary 1998); beyond the ends the end kernels hold.
+
+    Parameters
+    ----------
+    kernels : (n, K0, K1) ndarray
+        One kernel per radius, in the order of ``radii``.
+    radii : (n,) ndarray
+        The kernels' radii, any order (typically px, :func:`radii_px`).
+    r : float
+        Radius of the kernel wanted, in the unit of ``radii``.
     """
     order = np.argsort(radii)
     radii = np.asarray(radii)[order]
@@ -103,6 +131,13 @@ def rotate_kernel(kernel: np.ndarray, theta: float) -> np.ndarray:
 
     Cubic-spline resampling about the centre pixel, clamped at 0 and renormalised to
     the input's sum (a rotation keeps energy).
+
+    Parameters
+    ----------
+    kernel : (K0, K1) array_like
+        The kernel, its centre at pixel (K0 // 2, K1 // 2).
+    theta : float
+        Rotation angle, radians, counter-clockwise.
     """
     k = np.asarray(kernel, dtype=np.float64)
     K0, K1 = k.shape
@@ -125,6 +160,16 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
     each kernel is the radial bank interpolated at the point's radius and rotated to its
     polar angle. Used to deconvolve rotationally symmetric setups in Cartesian
     coordinates (and to cross-check the polar path).
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        A radial bank.
+    grid_shape : (int, int)
+        Grid points (rows, cols), each at least 1 (a single row or column sits on the
+        optical centre).
+    image_shape : tuple of int
+        The image's (H, W[, C]).
     """
     rows_n, cols_n = (int(grid_shape[0]), int(grid_shape[1]))
     if rows_n < 1 or cols_n < 1:
@@ -171,6 +216,11 @@ def fill_invalid_nodes(bank: IPSFBank) -> IPSFBank:
     that straddle the rim get the rim's blur. Radial banks and grid banks with every
     node valid are returned unchanged; ``metadata["filled_nodes"]`` lists the nodes
     filled and ``metadata["filled_from"]`` the node each copies.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        The bank; its ``metadata["valid"]`` (one flag per point) marks the traced nodes.
     """
     valid = np.asarray((bank.metadata or {}).get("valid", []), dtype=bool)
     if bank.kind != "grid" or valid.size != len(bank.points_uv) or valid.all() \
@@ -204,6 +254,17 @@ def check_bank_matches(bank: IPSFBank, image_shape: tuple[int, ...], *,
     ``pixel_pitch`` (when known, e.g. from the image's metadata); the sensor resolution
     recorded in the bank's setup (when present) equals (W, H); the kernel is smaller
     than the image.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        The bank to check.
+    image_shape : tuple of int
+        The image's shape, (H, W) or (H, W, C).
+    pixel_pitch : float, optional
+        The image's pixel pitch, mm, when known; None skips that check.
+    rtol : float
+        Relative tolerance of the pitch comparison (default 1e-6).
     """
     if len(image_shape) not in (2, 3):
         raise BankError(f"image must be (H, W) or (H, W, C), got shape {tuple(image_shape)}")
@@ -268,6 +329,7 @@ def bank_identity_problem(bank: IPSFBank, optics: Mapping[str, Any] | None, *,
     Parameters
     ----------
     bank : IPSFBank
+        The bank to check.
     optics : mapping or None
         :func:`mitsweep.io.bank.optics_sections` of the image's setup (from its
         provenance, or the setup it was captured with); sections it lacks (``motion``
@@ -314,7 +376,18 @@ def bank_identity_problem(bank: IPSFBank, optics: Mapping[str, Any] | None, *,
 
 def check_bank_identity(bank: IPSFBank, optics: Mapping[str, Any] | None, *,
                         image: str = "the image") -> None:
-    """Raise :class:`BankError` with :func:`bank_identity_problem`'s sentence, if any."""
+    """Raise :class:`BankError` with :func:`bank_identity_problem`'s sentence, if any.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        The bank to check.
+    optics : mapping or None
+        The image's optics sections, as for :func:`bank_identity_problem`; None when
+        unknown.
+    image : str
+        How to name the image in the message.
+    """
     problem = bank_identity_problem(bank, optics, image=image)
     if problem is not None:
         raise BankError(problem)

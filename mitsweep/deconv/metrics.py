@@ -50,6 +50,17 @@ def psnr(image: np.ndarray, reference: np.ndarray, *, mask: np.ndarray | None = 
 
     All channels of masked pixels count. Returns ``inf`` for identical images and
     ``nan`` for an empty mask.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) array_like
+        The image to score.
+    reference : array_like
+        The reference (ground truth), the shape of ``image``.
+    mask : (H, W) bool ndarray, optional
+        Pixels that count (default all).
+    data_range : float
+        The peak value: the images' range (default 1.0, relative exposure).
     """
     a, b, m = _pair(image, reference, mask)
     if not m.any():
@@ -59,7 +70,17 @@ def psnr(image: np.ndarray, reference: np.ndarray, *, mask: np.ndarray | None = 
 
 
 def ssim_map(image: np.ndarray, reference: np.ndarray, *, data_range: float = 1.0) -> np.ndarray:
-    """Per-pixel SSIM map (H, W) with Wang et al.'s settings (channels averaged)."""
+    """Per-pixel SSIM map (H, W) with Wang et al.'s settings (channels averaged).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) array_like
+        The image to score.
+    reference : array_like
+        The reference (ground truth), the shape of ``image``.
+    data_range : float
+        The images' range (default 1.0, relative exposure).
+    """
     from skimage.metrics import structural_similarity
 
     a, b, _ = _pair(image, reference, None)
@@ -76,14 +97,38 @@ def _masked_mean(values: np.ndarray, mask: np.ndarray) -> float:
 
 def ssim(image: np.ndarray, reference: np.ndarray, *, mask: np.ndarray | None = None,
          data_range: float = 1.0) -> float:
-    """Mean SSIM over ``mask`` (Wang et al. 2004 settings)."""
+    """Mean SSIM over ``mask`` (Wang et al. 2004 settings); nan for an empty mask.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) array_like
+        The image to score.
+    reference : array_like
+        The reference (ground truth), the shape of ``image``.
+    mask : (H, W) bool ndarray, optional
+        Pixels whose SSIM is averaged (default all); the SSIM map itself is computed on
+        the whole image.
+    data_range : float
+        The images' range (default 1.0, relative exposure).
+    """
     a, b, m = _pair(image, reference, mask)
     return _masked_mean(ssim_map(a, b, data_range=data_range), m)
 
 
 def disk_mask(shape: tuple[int, ...], radius_px: float, *,
               center: tuple[float, float] | None = None) -> np.ndarray:
-    """(H, W) bool: pixels whose centre lies within ``radius_px`` of ``center``."""
+    """(H, W) bool: pixels whose centre lies within ``radius_px`` of ``center``.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The image's shape, (H, W[, C]).
+    radius_px : float
+        The disk's radius, px.
+    center : (float, float), optional
+        The disk's centre (row, col), px (default the optical axis,
+        :func:`~mitsweep.optics.pixels.optical_center_px`).
+    """
     cy, cx = optical_center_px(shape) if center is None else center
     yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
     return np.hypot(yy - cy, xx - cx) <= radius_px
@@ -91,7 +136,17 @@ def disk_mask(shape: tuple[int, ...], radius_px: float, *,
 
 def radial_bins(shape: tuple[int, ...], edges_px: ArrayLike, *,
                 center: tuple[float, float] | None = None) -> np.ndarray:
-    """(H, W) int: radial bin ``[edges[i], edges[i+1])`` of each pixel; −1 outside."""
+    """(H, W) int: radial bin ``[edges[i], edges[i+1])`` of each pixel; −1 outside.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The image's shape, (H, W[, C]).
+    edges_px : sequence of float
+        At least two increasing bin edges, px from ``center``.
+    center : (float, float), optional
+        The centre (row, col), px (default the optical axis).
+    """
     edges = np.asarray(edges_px, dtype=np.float64)
     if edges.ndim != 1 or len(edges) < 2 or np.any(np.diff(edges) <= 0):
         raise ValueError("edges_px must be at least two increasing radii")
@@ -120,6 +175,21 @@ def per_radius(image: np.ndarray, reference: np.ndarray, edges_px: ArrayLike, *,
                data_range: float = 1.0) -> dict:
     """PSNR and SSIM in radial bins around ``center`` (default the optical axis).
 
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) array_like
+        The image to score.
+    reference : array_like
+        The reference (ground truth), the shape of ``image``.
+    edges_px : sequence of float
+        At least two increasing bin edges, px from ``center``.
+    center : (float, float), optional
+        The centre (row, col), px (default the optical axis).
+    mask : (H, W) bool ndarray, optional
+        Pixels that count (default all).
+    data_range : float
+        The images' range (default 1.0, relative exposure).
+
     Returns
     -------
     dict
@@ -140,11 +210,19 @@ def per_depth_band(image: np.ndarray, reference: np.ndarray, depth: np.ndarray,
 
     Parameters
     ----------
+    image : (H, W) or (H, W, C) array_like
+        The image to score.
+    reference : array_like
+        The reference (ground truth), the shape of ``image``.
     depth : (H, W) ndarray
         Depth of each pixel, mm (e.g. the renderer's depth AOV); non-finite pixels
         (no hit) are in no band.
     edges_mm : sequence of float
         Increasing band edges, mm (the last may be ``inf``).
+    mask : (H, W) bool ndarray, optional
+        Pixels that count (default all).
+    data_range : float
+        The images' range (default 1.0, relative exposure).
 
     Returns
     -------

@@ -158,6 +158,17 @@ class SensorNoise:
         """Noise variance of relative exposure ``x`` (no saturation), in x units².
 
         ``(x J + σ_r² + (σ_adc² + 1/12) / g²) / J²``: shot, read, ADC and quantisation.
+
+        Parameters
+        ----------
+        x : float or array_like
+            Relative exposure (1.0: the reference surface); negative values count as 0.
+
+        Returns
+        -------
+        ndarray
+            The variance, the shape of ``x``; inf everywhere when no light reaches the
+            sensor.
         """
         J = self.electrons_per_unit
         if J == 0:
@@ -168,7 +179,13 @@ class SensorNoise:
         return e_var / J ** 2
 
     def snr(self, x: float = 1.0) -> float:
-        """Signal-to-noise ratio (linear) of a pixel at relative exposure ``x``."""
+        """Signal-to-noise ratio (linear) of a pixel at relative exposure ``x``.
+
+        Parameters
+        ----------
+        x : float
+            Relative exposure (default 1.0, the reference surface).
+        """
         return float(x / math.sqrt(float(self.variance(x))))
 
     def nsr(self, mean_level: float = 0.5, signal_std: float | None = None) -> float:
@@ -177,6 +194,14 @@ class SensorNoise:
         ``variance(mean_level) / signal_std²``; ``signal_std`` defaults to
         ``mean_level``, the rms contrast of natural images being about their mean
         (pass the measured standard deviation of a clean image when known).
+
+        Parameters
+        ----------
+        mean_level : float
+            Mean relative exposure of the image (default 0.5).
+        signal_std : float, optional
+            Standard deviation of the clean image, relative exposure (> 0; default
+            ``mean_level``).
         """
         s = mean_level if signal_std is None else signal_std
         if not s > 0:
@@ -243,7 +268,14 @@ class SensorNoise:
 
     @classmethod
     def from_dict(cls, d: dict) -> SensorNoise:
-        """The model of its :meth:`as_dict` (provenance back to a model)."""
+        """The model of its :meth:`as_dict` (provenance back to a model).
+
+        Parameters
+        ----------
+        d : dict
+            An :meth:`as_dict` output: the fields by name, the pitch under
+            ``pixel_size_mm`` (``pixel_pitch`` is read too).
+        """
         return cls(**{("pixel_pitch" if k == "pixel_size_mm" else k): v for k, v in d.items()})
 
 

@@ -82,6 +82,12 @@ class BlurOperator:
 
         pylops is optional for mitsweep; ImportError (with the install command) when it
         is absent.
+
+        Parameters
+        ----------
+        dtype : dtype
+            The linear operator's dtype; vectors are cast to it before and after each
+            product (default float64).
         """
         try:
             import pylops
@@ -120,7 +126,18 @@ def _as_image(x: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 def product_convolution_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
                                  depth_mm: float | str | None = None) -> BlurOperator:
-    """The blur of a ``kind="grid"`` bank as a :class:`BlurOperator` (zero boundary)."""
+    """The blur of a ``kind="grid"`` bank as a :class:`BlurOperator` (zero boundary).
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        A grid bank matching the image (:func:`~mitsweep.deconv.kernels.check_bank_matches`).
+    image_shape : (H, W)
+        The shape of the images the operator acts on.
+    depth_mm : float, "mean" or None
+        The bank depth whose kernels blur, as in
+        :func:`~mitsweep.deconv.kernels.select_depth` (default 500 mm).
+    """
     shape = (int(image_shape[0]), int(image_shape[1]))
     check_bank_matches(bank, shape)
     if bank.kind != "grid":
@@ -175,6 +192,17 @@ def bilinear_matrix(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], 
     (``wrap_cols``: columns are periodic, as the angle axis of a polar image).
     Its transpose is the exact adjoint (the spreading of each sample onto its four
     neighbours).
+
+    Parameters
+    ----------
+    rows, cols : ndarray
+        Fractional pixel coordinates of the points (any shape, flattened in C order).
+    shape : (H, W)
+        The image's shape.
+    wrap_cols : bool
+        Columns are periodic (default False: beyond the edges, zero).
+    dtype : dtype
+        The matrix's precision (default float64).
     """
     r = np.asarray(rows, dtype=np.float64).ravel()
     c = np.asarray(cols, dtype=np.float64).ravel()
@@ -205,9 +233,26 @@ def bilinear_matrix(rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], 
 
 @dataclass(frozen=True)
 class PolarBand:
-    """One radial band of the polar blur: rows ``lo:hi`` of window ``weights``, context
-    rows ``s0:s1``, FFT length ``L`` along radius, ``mc`` angular harmonics filtered and
-    the band's transfer function ``H`` (L, mc)."""
+    """One radial band of the polar blur (:func:`polar_bands`).
+
+    Attributes
+    ----------
+    radius : float
+        The band's centre radius, px.
+    lo, hi : int
+        Polar-grid rows ``lo:hi`` where the band's window is non-zero.
+    s0, s1 : int
+        Context rows ``s0:s1`` the band's convolution reads (the window's support plus
+        the kernel's reach).
+    L : int
+        FFT length along radius.
+    mc : int
+        Angular harmonics filtered (the higher ones pass unchanged).
+    weights : (hi - lo,) ndarray
+        The band's hat window on rows ``lo:hi``.
+    H : (L, mc) complex ndarray
+        The band's transfer function.
+    """
 
     radius: float
     lo: int
@@ -231,6 +276,23 @@ def polar_bands(kernels: np.ndarray, radii: np.ndarray, grid: PolarGrid, *,
     Each band's rows ``s0:s1`` are its window's support plus ``margin_px`` (default
     K / 2 + 2: the kernel's reach, for a zero-boundary convolution), and ``L`` a fast
     FFT length of at least those rows plus the reach again.
+
+    Parameters
+    ----------
+    kernels : (n, K, K) ndarray
+        Unit-sum kernels of a radial bank, one per radius.
+    radii : (n,) ndarray
+        The kernels' radii, px.
+    grid : PolarGrid
+        The polar grid the blur acts on.
+    band_spacing : float
+        Distance between band centres as a fraction of their radius (default 0.25).
+    margin_px : float, optional
+        Context rows beyond each window's support, px (default K / 2 + 2).
+    r_in : float, optional
+        Radius, px, inside which no band is centred (default ``max(2 K, 8)``).
+    dtype : float32 or float64
+        Precision of the windows and transfer functions.
     """
     K = kernels.shape[-1]
     step = grid.radial_step
@@ -307,6 +369,7 @@ def polar_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
     bank : IPSFBank
         Radial bank (kernels on the +u axis).
     image_shape : (H, W)
+        The shape of the images the operator acts on.
     depth_mm, center, r_max, radial_oversampling, angular_oversampling, band_spacing
         As in :func:`~mitsweep.deconv.polar.polar_deconvolve`.
     dtype : float32 or float64
@@ -387,7 +450,13 @@ def polar_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
 
 def dense_matrix(op: BlurOperator) -> np.ndarray:
     """(H·W, H·W) matrix of ``op`` (column j = forward of the j-th unit image); small
-    images only."""
+    images only.
+
+    Parameters
+    ----------
+    op : BlurOperator
+        An operator on images of at most 4096 pixels.
+    """
     H, W = op.shape
     n = H * W
     if n > 4096:
@@ -404,7 +473,17 @@ def dense_matrix(op: BlurOperator) -> np.ndarray:
 def dot_product_error(op: BlurOperator, rng: np.random.Generator | int = 0,
                       dtype: DTypeLike = np.float64) -> float:
     """Relative error of the dot-product test ``|<A x, y> − <x, Aᵀ y>| / (|A x| |y|)``
-    for random x, y."""
+    for random x, y.
+
+    Parameters
+    ----------
+    op : BlurOperator
+        The operator whose adjoint is tested.
+    rng : numpy.random.Generator or int
+        Source of x and y (an int seeds ``numpy.random.default_rng``; default 0).
+    dtype : dtype
+        Precision of x and y, and so of the operator's products (default float64).
+    """
     gen = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(int(rng))
     x = gen.standard_normal(op.shape).astype(dtype)
     y = gen.standard_normal(op.shape).astype(dtype)

@@ -144,6 +144,16 @@ def gcv_noise(image: np.ndarray, psf: np.ndarray, *,
     Carlo noise and a kernel that does not quite fit included.
 
     Returns ``(nsr, sigma)``; NSR in [DEFAULT_NSR_FLOOR, MAX_NSR].
+
+    Parameters
+    ----------
+    image : (H, W) ndarray
+        The blurred image.
+    psf : (K0, K1) ndarray
+        The shift-invariant kernel standing for the blur (:func:`surrogate_kernel`).
+    mask : (H, W) bool ndarray, optional
+        Region that counts (the mirror's disk); outside, the image is set to its mean
+        there (default the whole image).
     """
     return _gcv(_residual_spectrum(image, psf, mask))
 
@@ -190,6 +200,20 @@ def discrepancy_nsr(image: np.ndarray, psf: np.ndarray, sigma: float, *,
     r"""Natural-prior Wiener NSR whose residual power equals ``tau · σ²`` per pixel.
 
     See :func:`discrepancy`, which also returns the residual's level.
+
+    Parameters
+    ----------
+    image : (H, W) ndarray
+        The blurred image.
+    psf : (K0, K1) ndarray
+        The shift-invariant kernel standing for the blur (:func:`surrogate_kernel`).
+    sigma : float
+        Noise standard deviation, in the image's units.
+    tau : float
+        Residual power per pixel over σ² (default :data:`DISCREPANCY_TAU`, 1).
+    mask : (H, W) bool ndarray, optional
+        Region that counts (the mirror's disk); outside, the image is set to its mean
+        there (default the whole image).
     """
     return discrepancy(image, psf, sigma, tau=tau, mask=mask)[0]
 
@@ -212,6 +236,20 @@ def discrepancy(image: np.ndarray, psf: np.ndarray, sigma: float, *,
     the image's own estimate (:func:`~mitsweep.deconv.wiener.estimate_nsr`) is
     returned with its residual, larger than σ: the level of what the model does not
     explain, which the prior-based solvers then take as the noise.
+
+    Parameters
+    ----------
+    image : (H, W) ndarray
+        The blurred image.
+    psf : (K0, K1) ndarray
+        The shift-invariant kernel standing for the blur (:func:`surrogate_kernel`).
+    sigma : float
+        Noise standard deviation, in the image's units (<= 0: the NSR floor).
+    tau : float
+        Residual power per pixel over σ² (default :data:`DISCREPANCY_TAU`, 1).
+    mask : (H, W) bool ndarray, optional
+        Region that counts (the mirror's disk); outside, the image is set to its mean
+        there (default the whole image).
     """
     return _discrepancy(_residual_spectrum(image, psf, mask), sigma, tau, image, mask)
 
@@ -259,6 +297,18 @@ def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,
     area (r_max the bank's largest radius plus a kernel, capped at the image's farthest
     corner, as in :func:`~mitsweep.deconv.polar.polar_deconvolve`); grid bank: the
     middle grid point's kernel.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        A radial or grid bank.
+    image_shape : tuple of int
+        The image's (H, W[, C]).
+    depth_mm : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis).
     """
     from .polar import polar_grid
 
@@ -278,7 +328,23 @@ def calibrated_nsr(image: np.ndarray, bank: IPSFBank, *, noise: SensorNoise | fl
                    center: tuple[float, float] | None = None) -> float:
     """Wiener NSR (natural prior) for ``image`` by the discrepancy principle: the median
     over channels of :func:`discrepancy_nsr` with σ from :func:`noise_sigma` and the
-    bank's :func:`surrogate_kernel`."""
+    bank's :func:`surrogate_kernel`.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The blurred image.
+    bank : IPSFBank
+        The bank it will be deconvolved with.
+    noise : SensorNoise, float or None
+        A sensor model, a σ, or None to estimate σ from each channel
+        (:func:`noise_sigma`).
+    depth_mm : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis).
+    """
     img = np.asarray(image)
     chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
     k = surrogate_kernel(bank, img.shape, depth_mm=depth_mm, center=center)
@@ -293,6 +359,15 @@ def prior_weight(gradient_moment: float, sigma: float, alpha: float) -> float:
     has :math:`E|g|^\alpha = m`, so its MAP weight is :math:`\sigma^2 / (\alpha m)`;
     ``gradient_moment`` is m measured on a first estimate, and the MAP weight is scaled
     by :data:`PRIOR_WEIGHT_SCALE` (MAP weights are not the PSNR-optimal ones).
+
+    Parameters
+    ----------
+    gradient_moment : float
+        m, the mean of :math:`|\nabla x|^\alpha` on a first estimate (floored at 1e-12).
+    sigma : float
+        Noise standard deviation, in the image's units.
+    alpha : float
+        The prior's exponent; one of those in :data:`PRIOR_WEIGHT_SCALE`.
     """
     key = min(PRIOR_WEIGHT_SCALE, key=lambda a: abs(a - alpha))
     if abs(key - alpha) > 1e-6:

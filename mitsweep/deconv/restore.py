@@ -26,8 +26,24 @@ def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
                   center: tuple[float, float] | None = None,
                   dtype: DTypeLike = np.float64) -> BlurOperator:
     """The bank's blur on (H, W) images: polar for a radial bank, product-convolution
-    for a grid bank. ``dtype`` is the polar operator's working precision (the
-    product-convolution operator works in its input's)."""
+    for a grid bank.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        A radial or grid bank.
+    image_shape : tuple of int
+        The image's (H, W[, C]); the operator acts on (H, W).
+    depth_mm : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis); a grid
+        bank takes none.
+    dtype : float32 or float64
+        The polar operator's working precision (the product-convolution operator works
+        in its input's).
+    """
     shape = (int(image_shape[0]), int(image_shape[1]))
     if bank.kind == "radial":
         return polar_operator(bank, shape, depth_mm=depth_mm, center=center, dtype=dtype)

@@ -93,7 +93,20 @@ def _bar(total, desc, enabled):
 # -- shrinkage -----------------------------------------------------------------------
 
 def shrink_tv(g1: np.ndarray, g2: np.ndarray, tau: float) -> tuple[np.ndarray, np.ndarray]:
-    r"""Isotropic soft threshold: :math:`\arg\min_z \tau |z| + \tfrac12 |z - g|^2`."""
+    r"""Isotropic soft threshold: :math:`\arg\min_z \tau |z| + \tfrac12 |z - g|^2`.
+
+    Parameters
+    ----------
+    g1, g2 : ndarray
+        The two components of the gradient g (same shape and dtype).
+    tau : float or ndarray
+        The threshold τ, a scalar or one per element.
+
+    Returns
+    -------
+    (ndarray, ndarray)
+        The two components of z, in the dtype of ``g1``.
+    """
     dt = g1.dtype.type
     t = np.asarray(tau, dtype=g1.dtype) if np.ndim(tau) else dt(tau)   # scalar or per pixel
     s = np.hypot(g1, g2)
@@ -136,6 +149,15 @@ def shrink_hyper_laplacian(g: np.ndarray, tau: float, alpha: float = 2.0 / 3.0) 
     τ = 1 minimiser w, tabulated once on a uniform grid (Newton on the stationarity
     condition, checked against z = 0) and read by linear interpolation at an index
     computed directly (Krishnan and Fergus's lookup table).
+
+    Parameters
+    ----------
+    g : ndarray
+        The values to shrink (float32 stays float32).
+    tau : float or ndarray
+        The weight τ > 0, a scalar or one per element.
+    alpha : float
+        The exponent α, in (0, 1) (default 2/3; a table is built per α).
     """
     if alpha not in _HL_TABLES:
         _HL_TABLES[alpha] = _hl_table(alpha).astype(g.dtype if g.dtype == np.float32

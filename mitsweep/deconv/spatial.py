@@ -85,6 +85,13 @@ def hat_weights(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
 
     ``w_j(nodes[j]) = 1``, falling linearly to 0 at the neighbouring nodes; the first and
     last hats stay 1 beyond the end nodes. ``nodes`` must increase strictly.
+
+    Parameters
+    ----------
+    x : array_like
+        Positions to weigh (any shape, flattened).
+    nodes : (n_nodes,) array_like
+        The hats' centres, strictly increasing, in the unit of ``x``.
     """
     x = np.asarray(x, dtype=np.float64)
     nodes = np.asarray(nodes, dtype=np.float64)
@@ -103,7 +110,15 @@ def hat_weights(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:
 
 
 def grid_axes_px(bank: IPSFBank, image_shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column pixel coordinates of a grid bank's grid lines."""
+    """Row and column pixel coordinates of a grid bank's grid lines.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        A grid bank whose points lie on a regular (rows × cols) grid.
+    image_shape : (H, W)
+        The image's shape (fixes where the optical axis lies).
+    """
     if bank.kind != "grid":
         raise BankError(f"a grid bank is needed here, got a {bank.kind!r} bank")
     if bank.grid_shape is None:
@@ -123,7 +138,15 @@ def grid_axes_px(bank: IPSFBank, image_shape: tuple[int, int]) -> tuple[np.ndarr
 
 def grid_windows(rows: np.ndarray, cols: np.ndarray, image_shape: tuple[int, int]
                 ) -> tuple[np.ndarray, np.ndarray]:
-    """Separable hat windows: (wy (n_rows, H), wx (n_cols, W)); w_ij = wy[i] ⊗ wx[j]."""
+    """Separable hat windows: (wy (n_rows, H), wx (n_cols, W)); w_ij = wy[i] ⊗ wx[j].
+
+    Parameters
+    ----------
+    rows, cols : ndarray
+        Pixel coordinates of the grid lines, increasing (:func:`grid_axes_px`).
+    image_shape : (H, W)
+        The image's shape.
+    """
     H, W = image_shape[:2]
     return hat_weights(np.arange(H), rows), hat_weights(np.arange(W), cols)
 
@@ -190,7 +213,15 @@ def scatter_blur(image: np.ndarray, kernel_field: np.ndarray) -> np.ndarray:
 
 
 def grid_kernel_field(kernels: np.ndarray, wy: np.ndarray, wx: np.ndarray) -> np.ndarray:
-    """(H, W, K, K) per-pixel kernels ``k_p = Σ_ij w_ij(p) k_ij`` (small images only)."""
+    """(H, W, K, K) per-pixel kernels ``k_p = Σ_ij w_ij(p) k_ij`` (small images only).
+
+    Parameters
+    ----------
+    kernels : (n_rows · n_cols, K, K) ndarray
+        The grid's kernels, row-major.
+    wy, wx : ndarray
+        The hat windows (n_rows, H) and (n_cols, W) of :func:`grid_windows`.
+    """
     n_r, n_c = wy.shape[0], wx.shape[0]
     k = np.asarray(kernels, dtype=np.float64).reshape(n_r, n_c, *kernels.shape[-2:])
     return np.einsum("iy,jx,ijab->yxab", wy, wx, k)
@@ -209,7 +240,18 @@ def _grid_setup(image, bank, depth_mm):
 
 def spatially_varying_blur(image: np.ndarray, bank: IPSFBank, *,
                            depth_mm: float | str | None = None) -> np.ndarray:
-    """Blur ``image`` by a grid bank's interpolated IPSFs (:func:`product_convolve`)."""
+    """Blur ``image`` by a grid bank's interpolated IPSFs (:func:`product_convolve`).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The sharp image, on the bank's reference pixel grid.
+    bank : IPSFBank
+        A grid bank.
+    depth_mm : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    """
     img, kernels, wy, wx = _grid_setup(image, bank, depth_mm)
     return product_convolve(img, kernels, wy, wx)
 

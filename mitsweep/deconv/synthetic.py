@@ -69,7 +69,31 @@ def synthetic_radial_bank(image_shape: tuple[int, int], *, n_radii: int = 19, si
                           pixel_pitch: float = 0.018, depths: ArrayLike = (500.0,),
                           **kw: float) -> IPSFBank:
     """Radial bank of :func:`synthetic_ipsf` kernels at ``n_radii`` radii from 0 to
-    ``extent_px`` (default ``r_max_px``, itself default half the smaller image side)."""
+    ``extent_px`` (default ``r_max_px``, itself default half the smaller image side).
+
+    Parameters
+    ----------
+    image_shape : (H, W)
+        The image the bank is for (recorded as the sensor's resolution).
+    n_radii : int
+        Kernels, evenly spaced in radius (default 19).
+    size : int
+        Odd kernel size K, px (default 21).
+    r_max_px : float, optional
+        Radius where the kernels reach their full width, px (default half the smaller
+        image side).
+    extent_px : float, optional
+        Largest radius of the bank, px (default ``r_max_px``).
+    pixel_pitch : float
+        Pixel pitch, mm (default 0.018).
+    depths : array_like
+        The bank's depths, mm; every depth gets the same kernels (default one, 500 mm).
+        The former keyword ``depths_mm`` is still accepted, with a
+        :class:`DeprecationWarning`.
+    **kw : float
+        ``core``, ``radial``, ``tangential``: the kernel widths of :func:`synthetic_ipsf`,
+        px.
+    """
     H, W = image_shape[:2]
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)
     radii = np.linspace(0, r_max if extent_px is None else float(extent_px), n_radii)
@@ -90,6 +114,27 @@ def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int
     """Grid bank of :func:`synthetic_ipsf` kernels at a (rows × cols) grid of pixels.
 
     Points run evenly from the first to the last pixel centre in each direction.
+
+    Parameters
+    ----------
+    image_shape : (H, W)
+        The image the bank is for (recorded as the sensor's resolution).
+    grid_shape : (int, int)
+        Grid points (rows, cols).
+    size : int
+        Odd kernel size K, px (default 21).
+    r_max_px : float, optional
+        Radius where the kernels reach their full width, px (default half the smaller
+        image side).
+    pixel_pitch : float
+        Pixel pitch, mm (default 0.018).
+    depths : array_like
+        The bank's depths, mm; every depth gets the same kernels (default one, 500 mm).
+        The former keyword ``depths_mm`` is still accepted, with a
+        :class:`DeprecationWarning`.
+    **kw : float
+        ``core``, ``radial``, ``tangential``: the kernel widths of :func:`synthetic_ipsf`,
+        px.
     """
     H, W = image_shape[:2]
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)
@@ -109,7 +154,21 @@ def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int
 
 def synthetic_kernel_field(image_shape: tuple[int, int], size: int = 21,
                            r_max_px: float | None = None, **kw: float) -> np.ndarray:
-    """(H, W, K, K) exact per-pixel kernels of the synthetic model (small images only)."""
+    """(H, W, K, K) exact per-pixel kernels of the synthetic model (small images only).
+
+    Parameters
+    ----------
+    image_shape : (H, W)
+        The image's shape; the pole is the optical axis.
+    size : int
+        Odd kernel size K, px (default 21).
+    r_max_px : float, optional
+        Radius where the kernels reach their full width, px (default half the smaller
+        image side).
+    **kw : float
+        ``core``, ``radial``, ``tangential``: the kernel widths of :func:`synthetic_ipsf`,
+        px.
+    """
     H, W = image_shape[:2]
     r_max = float(min(H, W) / 2) if r_max_px is None else float(r_max_px)
     yy, xx = np.mgrid[0:H, 0:W].astype(np.float64)

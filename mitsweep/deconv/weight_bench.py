@@ -37,6 +37,21 @@ def weight_rows(image: np.ndarray, truth: np.ndarray,
     Returns ``{"oracle": {"weight", "psnr_db"}, name: {"weight", "psnr_db",
     "loss_db"}, ...}`` (PSNR over ``mask``, data range 1; ``loss_db`` = oracle −
     candidate, ≥ 0 up to the oracle search's tolerance).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The blurred, noisy image.
+    truth : ndarray
+        The sharp image, the shape of ``image``.
+    restore : callable
+        ``restore(image, weight) -> restored image``.
+    candidates : dict of str to float
+        The weights to score, by name.
+    mask : (H, W) bool ndarray, optional
+        Pixels that count (default all).
+    bounds : (float, float)
+        Range of the oracle's weight search (default 1e-10 to 1).
     """
     from .budget import _mse_map, oracle_weight
 
@@ -56,7 +71,19 @@ def independent_blur_problem(size: int = 512, sigma: float = 0.005, *, seed: int
     product-convolution of the synthetic IPSF field (independent of the polar
     deconvolver's own model), plus white Gaussian noise ``sigma``; the 19-radius radial
     bank to restore it with. Returns ``sharp``, ``blurred``, ``mask``, ``bank``,
-    ``sigma``."""
+    ``sigma``.
+
+    Parameters
+    ----------
+    size : int
+        Side of the square image, px (default 512).
+    sigma : float
+        Standard deviation of the noise, relative exposure (default 0.005).
+    seed : int
+        Seed of the noise.
+    kernel_size : int, optional
+        Kernel side, px (default 15 up to 256 px, 21 up to 1024 px, 31 beyond).
+    """
     from .bench import mosaic
     from .metrics import disk_mask
     from .spatial import spatially_varying_blur
@@ -80,7 +107,17 @@ def synthetic_weight_bench(sizes: Sequence[int] = (512,),
     """:func:`weight_rows` on :func:`independent_blur_problem` for each size and σ:
     ``before`` (polar Wiener's ``nsr=None``, the variance-based estimate), ``model``
     (the known σ) and ``blind`` (nothing known). One row per case, with ``seconds``
-    of each new rule's NSR choice."""
+    of each new rule's NSR choice.
+
+    Parameters
+    ----------
+    sizes : sequence of int
+        Image sides, px (default 512).
+    sigmas : sequence of float
+        Noise standard deviations, relative exposure (default 0.005 and 0.001).
+    seed : int
+        Seed of the noise of every case.
+    """
     from .polar import polar_deconvolve
     from .wiener import estimate_nsr
     from .weights import blind_nsr, model_nsr
@@ -109,7 +146,15 @@ def synthetic_weight_bench(sizes: Sequence[int] = (512,),
 
 def format_rows(rows: list[dict], names: tuple[str, ...]) -> str:
     """A text table: per case the oracle's NSR and PSNR, then each named rule's NSR
-    and its loss against the oracle (dB)."""
+    and its loss against the oracle (dB).
+
+    Parameters
+    ----------
+    rows : list of dict
+        :func:`weight_rows` outputs, each with its ``case`` name.
+    names : tuple of str
+        The rules to show, as columns; a rule a row lacks shows ``-``.
+    """
     head = f"{'case':<44s} {'oracle NSR':>10s} {'dB':>6s}" + "".join(
         f" {n + ' NSR':>12s} {'loss dB':>7s}" for n in names)
     lines = [head]

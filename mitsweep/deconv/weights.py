@@ -150,6 +150,17 @@ def kernel_shares(bank: IPSFBank, image_shape: tuple[int, ...], *,
     holding beyond (as :func:`~mitsweep.deconv.polar.polar_deconvolve` does); grid bank:
     the product-convolution's hat windows (a node whose chief ray misses the mirror
     keeps its share: the deconvolution applies its stand-in delta kernel there).
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        A radial or grid bank.
+    image_shape : tuple of int
+        The image's (H, W[, C]).
+    mask : (H, W) bool ndarray, optional
+        The pixels restored (default all).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis).
     """
     from .spatial import grid_axes_px, hat_weights
 
@@ -180,6 +191,13 @@ def ring_spectrum(image: np.ndarray, *, n_rings: int = 48) -> tuple[np.ndarray, 
     Returns ``(f, power)``: each non-empty ring's mean frequency (cycles/pixel) and
     mean ``|FFT|² / (H W)`` (channels averaged), so that white noise of variance σ²
     reads σ² at every ring.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The image.
+    n_rings : int
+        Rings of equal width from 0 to the highest ``|f|`` (default 48).
     """
     planes = _planes(image)
     H, W = planes[0].shape
@@ -226,12 +244,22 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
     Parameters
     ----------
     image : (H, W) or (H, W, C) ndarray
+        The image to restore (linear values).
     bank : IPSFBank
         The image's bank; its kernels at ``depth_mm`` (default 500 mm), weighted by
         :func:`kernel_shares` over ``mask`` (the pixels restored; default all).
+    noise_var : float
+        Noise variance over the mask, image units².
     floor_var : float, optional
         The noise variance over the whole frame, subtracted from its periodogram
         (default ``noise_var``).
+    mask : (H, W) bool ndarray, optional
+        The pixels restored (default all).
+    depth_mm : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis).
     n_px : float, optional
         The deconvolver's size for the prior's scale (default √(HW)).
     bounds : (float, float)
@@ -294,6 +322,27 @@ def unexplained_variance(image: np.ndarray, bank: IPSFBank, *,
     bank's mismatch with the image (kernel sampling, depth, occlusion) act on a Wiener
     filter as more noise, and this measures them with it. See
     :func:`mitsweep.deconv.regularization.gcv_noise` for the same rule with one kernel.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The image (linear values).
+    bank : IPSFBank
+        Its bank; the kernels weighted by :func:`kernel_shares` over ``mask``.
+    mask : (H, W) bool ndarray, optional
+        The pixels restored (default all).
+    depth_mm : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis).
+    n_px : float, optional
+        The deconvolver's size for the prior's scale (default √(HW)).
+
+    Returns
+    -------
+    float
+        σ², image units².
     """
     from scipy.optimize import minimize_scalar
 
@@ -330,7 +379,16 @@ def unexplained_variance(image: np.ndarray, bank: IPSFBank, *,
 
 def high_frequency_floor(image: np.ndarray, *, band: float = 0.45) -> float:
     """The mean periodogram of the rings beyond ``band`` cycles/pixel (the corners of
-    the spectrum): noise plus what the blur leaves there, an upper bound of σ²."""
+    the spectrum): noise plus what the blur leaves there, an upper bound of σ².
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The image.
+    band : float
+        Lowest frequency counted, cycles/px (default 0.45; with no ring beyond it, the
+        highest ring).
+    """
     f, p = ring_spectrum(image)
     sel = f >= band
     return float(np.mean(p[sel])) if sel.any() else float(p[-1])
@@ -400,7 +458,13 @@ def blind_noise_variance(image: np.ndarray) -> float:
     """σ² of an image with no noise model: the wavelet estimate
     (:func:`~mitsweep.deconv.wiener.estimate_noise_sigma`), at most the periodogram's
     floor (:func:`high_frequency_floor`): at low noise the finest wavelet band also
-    holds the sharpest detail (0.0019 read for σ = 0.001 on the bench mosaic)."""
+    holds the sharpest detail (0.0019 read for σ = 0.001 on the bench mosaic).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The image.
+    """
     return min(float(estimate_noise_sigma(image)) ** 2, high_frequency_floor(image))
 
 
@@ -410,6 +474,23 @@ def blind_nsr(image: np.ndarray, bank: IPSFBank, *, mask: np.ndarray | None = No
               center: tuple[float, float] | None = None, n_px: float | None = None) -> float:
     """:func:`model_nsr` with nothing known (σ² by :func:`blind_noise_variance`), at
     least :data:`~mitsweep.deconv.wiener.DEFAULT_NSR_FLOOR` (a noiseless render still
-    carries ~1e-4 relative error)."""
+    carries ~1e-4 relative error).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The image to restore (linear values).
+    bank : IPSFBank
+        Its bank.
+    mask : (H, W) bool ndarray, optional
+        The pixels restored (default all).
+    depth_mm : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis).
+    n_px : float, optional
+        The deconvolver's size for the prior's scale (default √(HW)).
+    """
     nsr = model_nsr(image, bank, None, mask=mask, depth_mm=depth_mm, center=center, n_px=n_px)
     return max(nsr, DEFAULT_NSR_FLOOR)

@@ -45,7 +45,13 @@ PadMode = Literal["constant", "edge", "linear_ramp", "maximum", "mean", "median"
 
 
 def check_image_values(image: np.ndarray) -> None:
-    """Raise ValueError if ``image`` holds NaN, inf, or values beyond :data:`MAX_ABS_VALUE`."""
+    """Raise ValueError if ``image`` holds NaN, inf, or values beyond :data:`MAX_ABS_VALUE`.
+
+    Parameters
+    ----------
+    image : ndarray
+        The image, any shape (an empty one passes).
+    """
     if not np.all(np.isfinite(image)):
         raise ValueError("image holds NaN or inf values")
     peak = float(np.max(np.abs(image))) if np.size(image) else 0.0
@@ -56,7 +62,13 @@ def check_image_values(image: np.ndarray) -> None:
 
 
 def check_nsr(nsr: float) -> float:
-    """``nsr`` as a float in [0, :data:`MAX_NSR`]; ValueError otherwise."""
+    """``nsr`` as a float in [0, :data:`MAX_NSR`]; ValueError otherwise.
+
+    Parameters
+    ----------
+    nsr : float
+        A noise-to-signal ratio (σ_n² / σ_s²).
+    """
     x = float(nsr)
     if not (np.isfinite(x) and 0 <= x <= MAX_NSR):
         raise ValueError(f"nsr must be a number in [0, {MAX_NSR:g}], got {nsr!r}")
@@ -66,7 +78,17 @@ def check_nsr(nsr: float) -> float:
 def wiener_memory_bytes(shape: tuple[int, int], channels: int, dtype: DTypeLike) -> float:
     """Peak bytes of one :func:`wiener_deconvolve` on an FFT grid of ``shape``: the padded
     image, its spectrum and the filtered product (complex, half-length), the filter,
-    the regulariser's frequency grid and the inverse transform."""
+    the regulariser's frequency grid and the inverse transform.
+
+    Parameters
+    ----------
+    shape : (M, N)
+        The FFT grid (:func:`fast_shape`).
+    channels : int
+        Channels of the image.
+    dtype : float32 or float64
+        The working precision.
+    """
     M, N = (float(x) for x in shape)
     it = np.dtype(dtype).itemsize
     half = M * (N / 2 + 1)
@@ -79,17 +101,36 @@ def natural_prior_scale(n_px: float) -> float:
     A power spectrum ``S(f) = A / |f|²`` between the lowest frequency 1/n_px and the Nyquist
     1/2 (cycles/pixel) holds the variance σ_s² = 2π A ln(n_px / 2); so with
     nsr = σ_n² / σ_s² the noise-to-signal ratio at frequency f is ``nsr · 2π ln(n_px/2) |f|²``.
+
+    Parameters
+    ----------
+    n_px : float
+        Size of the image, px (its geometric mean side); below 4 it counts as 4.
     """
     return 2 * np.pi * np.log(max(float(n_px) / 2, 2.0))
 
 
 def working_dtype(image: np.ndarray) -> np.dtype:
-    """float32 stays float32; everything else (float64, integers, bool) is float64."""
+    """float32 stays float32; everything else (float64, integers, bool) is float64.
+
+    Parameters
+    ----------
+    image : array_like
+        The image whose dtype decides.
+    """
     return np.dtype(np.float32) if np.asarray(image).dtype == np.float32 else np.dtype(np.float64)
 
 
 def fast_shape(shape: tuple[int, int], pad: tuple[int, int]) -> tuple[int, int]:
-    """Padded (H, W) rounded up to fast real-FFT lengths (``scipy.fft.next_fast_len``)."""
+    """Padded (H, W) rounded up to fast real-FFT lengths (``scipy.fft.next_fast_len``).
+
+    Parameters
+    ----------
+    shape : (H, W)
+        The image's shape.
+    pad : (int, int)
+        Padding on each side of each axis, px.
+    """
     return tuple(sfft.next_fast_len(int(n) + 2 * int(p), real=True) for n, p in zip(shape, pad))
 
 
@@ -145,6 +186,22 @@ def regulariser(shape: tuple[int, int], nsr: float, prior: str, dtype: DTypeLike
     ``freqs`` optionally gives the two frequency arrays (cycles/pixel), broadcastable;
     ``n_px`` the image size that sets the spectrum's lowest frequency (default the
     geometric mean of ``shape``).
+
+    Parameters
+    ----------
+    shape : (M, N)
+        The FFT grid; R is (M, N // 2 + 1).
+    nsr : float
+        Noise variance over signal variance, in [0, :data:`MAX_NSR`].
+    prior : {"natural", "constant"}
+        How the signal's variance spreads over frequency (above).
+    dtype : dtype
+        The output's precision (default float64).
+    freqs : (ndarray, ndarray), optional
+        Vertical and horizontal frequencies, cycles/px, broadcastable (default those of
+        the rfft2 grid of ``shape``).
+    n_px : float, optional
+        Image size for the natural prior's scale, px.
     """
     if prior not in PRIORS:
         raise ValueError(f"prior must be one of {PRIORS}, got {prior!r}")
@@ -167,6 +224,13 @@ def wiener_filter(H: np.ndarray, R: ArrayLike) -> np.ndarray:
     Where ``|H|² + R`` is exactly zero (a kernel spectral zero with no regularisation) G is
     set to 0: nothing can be recovered there, and 0 is the Wiener limit for R → 0⁺
     taken jointly with H → 0.
+
+    Parameters
+    ----------
+    H : complex ndarray
+        The kernel's transfer function (:func:`kernel_spectrum`).
+    R : float or array_like
+        The regulariser (:func:`regulariser`), >= 0.
     """
     den = H.real * H.real + H.imag * H.imag
     den += R
@@ -187,6 +251,11 @@ def estimate_noise_sigma(image: np.ndarray) -> float:
     std σ those coefficients have std σ, and image structure barely reaches them.
     (scikit-image's ``estimate_sigma`` does the same with Daubechies wavelets but needs
     PyWavelets, which this package does not depend on.) Channels are pooled.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) array_like
+        The image; below 2 × 2 pixels σ is 0.
     """
     x = np.asarray(image, dtype=np.float64)
     if x.ndim == 2:
@@ -208,6 +277,15 @@ def estimate_nsr(image: np.ndarray, *, floor: float = DEFAULT_NSR_FLOOR,
     variance is the image variance minus σ² (inside ``mask`` if given). The result is
     clamped to ``[floor, 1]``: a noiseless image still gets ``floor``, a black image
     gets 1.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) array_like
+        The image.
+    floor : float
+        The smallest NSR returned (default :data:`DEFAULT_NSR_FLOOR`).
+    mask : (H, W) bool ndarray, optional
+        Pixels whose variance counts (default all); σ is taken on the whole image.
     """
     img = np.asarray(image, dtype=np.float64)
     sigma = estimate_noise_sigma(img)

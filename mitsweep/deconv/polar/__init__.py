@@ -81,6 +81,15 @@ def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype: DTy
     image; nothing is kept between calls. For 2048² float32 with the benchmark's bank
     this says 446 MiB; measured (tracemalloc and Dr.Jit's allocator watermark) 257 MiB
     at the first call of a process and 191 MiB at a later one.
+
+    Parameters
+    ----------
+    grid : PolarGrid
+        The polar grid of the deconvolution.
+    image_shape : tuple of int
+        The image's (H, W[, C]).
+    dtype : float32 or float64
+        The working precision.
     """
     it = np.dtype(dtype).itemsize
     C = image_shape[2] if len(image_shape) == 3 else 1

@@ -25,7 +25,20 @@ __all__ = ["Band", "BandPlan", "band_plan", "band_length", "band_transfer", "ban
 
 
 def band_length(n: int, step: float) -> int:
-    """Smallest fast FFT length L >= n with L * step an integer (see band_transfer)."""
+    """Smallest fast FFT length L >= n with L * step an integer (see band_transfer).
+
+    Parameters
+    ----------
+    n : int
+        Rows to hold at least.
+    step : float
+        Radial step of the polar grid, px per row.
+
+    Raises
+    ------
+    ValueError
+        No L below 4 n + 64 fits the step.
+    """
     L = sfft.next_fast_len(n)
     while L < 4 * n + 64:
         if abs(L * step - round(L * step)) < 1e-9 * L:
@@ -46,6 +59,26 @@ def band_transfer(k: np.ndarray, r_band: float, step: float, L: int, M: int,
     polar grid is oversampled; only interpolation residue lives there) the value at
     ν = ±1/2 is held. Tangential pixel offset t (kernel rows, upward =
     counter-clockwise) is an angle t / r, so harmonic m sees the phase exp(−i m t / r).
+
+    Parameters
+    ----------
+    k : (K0, K1) ndarray
+        The pixel kernel at the band's radius: axis 0 tangential, axis 1 radial.
+    r_band : float
+        The band's radius, px.
+    step : float
+        Radial step of the polar grid, px per row.
+    L : int
+        Radial FFT length (:func:`band_length`: L · step an integer, at least K1 px).
+    M : int
+        Angular harmonics to compute (0..M-1).
+    cdt : complex64 or complex128
+        The output's dtype (and, by its real part, the arithmetic's precision).
+
+    Returns
+    -------
+    (L, M) ndarray
+        The transfer function, 1 at DC.
     """
     K0, K1 = k.shape
     rdt: type[np.floating] = np.float32 if np.dtype(cdt) == np.complex64 else np.float64
@@ -97,6 +130,21 @@ def band_wiener(Hb: np.ndarray, nu: np.ndarray, ft: np.ndarray, nsr: float, prio
     (L, mc): what ``wiener_filter(Hb, regulariser(..., freqs=(nu, ft)))`` gives, in
     fewer passes over the band. ``nu`` (L,) radial and ``ft`` (mc,) tangential
     frequencies, cycles/px; R = 0 at DC (where H = 1), so a constant passes unchanged.
+
+    Parameters
+    ----------
+    Hb : (L, mc) complex ndarray
+        The band's transfer function (:func:`band_transfer`); overwritten with the filter.
+    nu : (L,) ndarray
+        Radial frequencies of the rows, cycles/px.
+    ft : (mc,) ndarray
+        Tangential frequencies of the harmonics, cycles/px.
+    nsr : float
+        Noise-to-signal ratio, >= 0.
+    prior : {"natural", "constant"}
+        The regulariser, as in :func:`~mitsweep.deconv.wiener.regulariser`.
+    n_px : float
+        Size of the whole image, px, for the natural prior's scale.
     """
     if not nsr > 0 or prior not in ("natural", "constant"):
         return wiener_filter(Hb, regulariser(Hb.shape, nsr, prior, dtype=Hb.real.dtype,
@@ -122,7 +170,15 @@ def band_wiener(Hb: np.ndarray, nu: np.ndarray, ft: np.ndarray, nsr: float, prio
 
 def symmetric_extension(x: np.ndarray, before: int, after: int) -> np.ndarray:
     """``np.pad(x, [(before, after), (0, 0), ...], mode="symmetric")`` along axis 0,
-    written into one new array (np.pad's general path costs several extra passes)."""
+    written into one new array (np.pad's general path costs several extra passes).
+
+    Parameters
+    ----------
+    x : ndarray
+        The array to extend along axis 0.
+    before, after : int
+        Rows added before and after, >= 0.
+    """
     n = x.shape[0]
     if before > n or after > n:
         return np.pad(x, [(before, after)] + [(0, 0)] * (x.ndim - 1), mode="symmetric")
@@ -196,6 +252,17 @@ def band_plan(grid: PolarGrid, kernel_size: int, *, band_spacing: float = 0.25,
     (tangential frequency up to the diagonal Nyquist 1/√2 cycles/px, plus 8).
 
     Pure: no image, no kernel values; the same plan for the same grid and arguments.
+
+    Parameters
+    ----------
+    grid : PolarGrid
+        The polar grid of the image.
+    kernel_size : int
+        Side K of the kernels, px.
+    band_spacing : float
+        Distance between band centres as a fraction of their radius (default 0.25).
+    margin : int, optional
+        Context on either side of a band's rows, px (default ``ceil(1.5 K)``).
 
     Raises
     ------

@@ -66,7 +66,13 @@ class PolarGrid:
         return np.arange(self.n_angles) * self.angle_step
 
     def row_of(self, r: ArrayLike) -> np.ndarray:
-        """Fractional row index of radius ``r`` (pixels)."""
+        """Fractional row index of radius ``r`` (pixels).
+
+        Parameters
+        ----------
+        r : float or array_like
+            Radius or radii, px (negative below the pole: the inner rows).
+        """
         return np.asarray(r) / self.radial_step + self.n_inner
 
 

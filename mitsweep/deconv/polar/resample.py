@@ -92,6 +92,15 @@ def polar_resampling(grid: PolarGrid, shape: tuple[int, int], *,
                      dtype: DTypeLike = np.float64) -> tuple[sp.csr_array, sp.csr_array]:
     """The two cubic B-spline resamplings of ``grid`` as sparse matrices.
 
+    Parameters
+    ----------
+    grid : PolarGrid
+        The polar grid.
+    shape : (H, W)
+        The Cartesian image's shape.
+    dtype : float32 or float64
+        Precision of the matrices' weights (default float64).
+
     Returns
     -------
     to_polar : (n_radii·n_angles, H·W) csr_array
@@ -129,7 +138,13 @@ def polar_resampling(grid: PolarGrid, shape: tuple[int, int], *,
 
 def polar_spline_coefficients(polar: np.ndarray) -> np.ndarray:
     """Cubic B-spline coefficients of a polar image (n_radii, n_angles[, C]): periodic
-    along angle (exact, in the Fourier domain), mirrored along radius."""
+    along angle (exact, in the Fourier domain), mirrored along radius.
+
+    Parameters
+    ----------
+    polar : (n_radii, n_angles[, C]) ndarray
+        The polar image, radius on axis 0; float32 stays float32.
+    """
     pol, squeeze = _channels(polar)
     dt = working_dtype(pol)
     n = pol.shape[1]
@@ -146,6 +161,13 @@ def to_polar(image: np.ndarray, grid: PolarGrid) -> np.ndarray:
 
     Cubic B-spline interpolation; outside the image the image is mirrored
     (``mode="mirror"``). float32 stays float32.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The Cartesian image.
+    grid : PolarGrid
+        The polar grid (:func:`~mitsweep.deconv.polar.grid.polar_grid` of its shape).
     """
     img, squeeze = _channels(image)
     dt = working_dtype(img)
@@ -163,6 +185,11 @@ def from_polar(polar: np.ndarray, grid: PolarGrid, shape: tuple[int, int], *,
     Parameters
     ----------
     polar : (n_radii, n_angles[, C]) ndarray
+        The polar image, radius on axis 0.
+    grid : PolarGrid
+        The grid it lies on.
+    shape : (H, W)
+        The Cartesian image's shape.
     upsample : float
         Angle samples are first multiplied by this factor by zero-padding their FFT
         (exact for the band-limited periodic signal), which lowers the spline's error in
@@ -192,6 +219,15 @@ def angle_spectrum(img: np.ndarray, grid: PolarGrid, cdt: DTypeLike) -> np.ndarr
     a quarter (a half) of ``n_angles`` are sampled at ``n_angles / 4`` (``/ 2``) angles
     and their spectra zero-padded, which is exact for such band-limited rows and saves
     about a quarter of the spline evaluations. Returns (n_radii, n_angles//2 + 1, C).
+
+    Parameters
+    ----------
+    img : (H, W, C) ndarray
+        The Cartesian image, channels last (one channel: C = 1).
+    grid : PolarGrid
+        The polar grid.
+    cdt : complex64 or complex128
+        The spectrum's dtype.
     """
     C = img.shape[2]
     dt = working_dtype(img)
@@ -219,6 +255,25 @@ def from_angle_spectrum(spec: np.ndarray, grid: PolarGrid, shape: tuple[int, int
     (:func:`angle_spectrum`), pixels near the centre use rows rebuilt at a quarter or
     half of the angles, keeping the harmonics a pixel image can hold there
     (2π r · 0.75 at radius r) and dropping the rest.
+
+    Parameters
+    ----------
+    spec : (n_radii, n_angles // 2 + 1, C) complex ndarray
+        The polar image's rfft along angle (:func:`angle_spectrum`).
+    grid : PolarGrid
+        The polar grid.
+    shape : (H, W)
+        The Cartesian image's shape.
+    upsample : float
+        Angle upsampling factor before the spline, as in :func:`from_polar`.
+    outside : (H, W[, C]) ndarray or None
+        Values of the pixels beyond ``grid.r_max`` (None: 0).
+    dtype : float32 or float64
+        The output's precision.
+
+    Returns
+    -------
+    (H, W, C) ndarray
     """
     H, W = int(shape[0]), int(shape[1])
     C = spec.shape[2]

@@ -67,7 +67,9 @@ def restore_bands(spec: np.ndarray, plan: BandPlan, grid: PolarGrid, kernels: np
         rfft along angle of the polar image
         (:func:`~mitsweep.deconv.polar.resample.angle_spectrum`).
     plan : BandPlan
+        Where the bands lie (:func:`~mitsweep.deconv.polar.bands.band_plan`).
     grid : PolarGrid
+        The polar grid of ``spec``.
     kernels, rad : ndarray
         The bank's kernels at one depth (n_radii_bank, K, K) and their radii (pixels).
     nsr, prior, n_px
@@ -115,7 +117,24 @@ def restore_centre(out: np.ndarray, img: np.ndarray, plan: BandPlan, grid: Polar
     """Blend into ``out`` (H, W, C), in place, the disk around the pole restored in
     Cartesian coordinates with the centre IPSF (Wiener), where a polar grid cannot
     describe a kernel: weight 1 inside ``plan.centres[0]``, falling linearly to 0 at
-    ``plan.inner_radius``."""
+    ``plan.inner_radius``.
+
+    Parameters
+    ----------
+    out : (H, W, C) ndarray
+        The polar restoration, overwritten around the pole.
+    img : (H, W, C) ndarray
+        The blurred image.
+    plan : BandPlan
+        The band plan (its inner radius and first centre fix the blend).
+    grid : PolarGrid
+        The polar grid (its pole is the disk's centre).
+    kernels, rad : ndarray
+        The bank's kernels at one depth (n_radii_bank, K, K) and their radii (pixels);
+        the kernel at radius 0 restores the disk.
+    nsr, prior, n_px
+        The Wiener regulariser (:func:`~mitsweep.deconv.wiener.regulariser`).
+    """
     H, W = img.shape[:2]
     K = kernels.shape[-1]
     dt = out.dtype
