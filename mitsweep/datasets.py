@@ -189,7 +189,27 @@ class MitsweepDataset:
         return int(index) % n
 
     def item_path(self, index: int, name: str) -> Path:
-        """The file of image ``name`` (one of :attr:`inputs`) of item ``index``."""
+        """The file of an image of an item.
+
+        Parameters
+        ----------
+        index : int
+            The item (negative counts from the end).
+        name : str
+            The image, one of :attr:`inputs` (``sweep``, ``pinhole``...).
+
+        Returns
+        -------
+        Path
+            ``root/scene_NNN/name.exr``.
+
+        Raises
+        ------
+        IndexError
+            ``index`` out of range.
+        TypeError
+            ``index`` not an integer.
+        """
         return self.root / self.scenes[self._index(index)] / f"{name}.exr"
 
     def __getitem__(self, index: int) -> dict[str, Any]:
@@ -275,10 +295,26 @@ class MitsweepDataset:
         return meta
 
     def provenance(self, index: int) -> dict[str, Any]:
-        """Everything recorded about item ``index``: the manifest entries (parameters,
-        SHA-256, size) of its input and target, their EXR metadata, and the dataset's
-        setup, options and package versions (nested, with lists and None: not for
-        batching)."""
+        """Everything recorded about an item.
+
+        Parameters
+        ----------
+        index : int
+            The item (negative counts from the end).
+
+        Returns
+        -------
+        dict
+            ``setup``, ``options`` and ``versions`` of the dataset, and per role
+            (``input``, ``target``) the item's name, its manifest entry (parameters,
+            SHA-256, size) and its EXR ``metadata``: nested, with lists and None (not
+            for batching).
+
+        Raises
+        ------
+        DatasetError
+            An image holds NaN or inf pixels.
+        """
         scene = self.scenes[self._index(index)]
         out: dict[str, Any] = {"setup": self.manifest["setup"],
                                "options": self.manifest["options"],
@@ -290,9 +326,24 @@ class MitsweepDataset:
         return out
 
     def split(self, name: str) -> MitsweepDataset:
-        """The scenes of split ``name`` (``train``, ``validation`` or ``test``) of the
-        whole dataset, dealt by :func:`split_scenes` with this dataset's fractions and
-        seed; the same input, target and AOVs."""
+        """One split of the whole dataset.
+
+        Parameters
+        ----------
+        name : {"train", "validation", "test"}
+            The split.
+
+        Returns
+        -------
+        MitsweepDataset
+            Its scenes, dealt by :func:`split_scenes` with this dataset's fractions and
+            seed; the same input, target, AOVs and normalisation.
+
+        Raises
+        ------
+        DatasetError
+            An unknown split name.
+        """
         if name not in SPLITS:
             raise DatasetError(f"split: {name!r} is not a split (one of {', '.join(SPLITS)})")
         scenes = split_scenes(self._all_scenes, self._fractions, seed=self._seed)[name]
@@ -451,7 +502,18 @@ class PatchSampler:
         return len(self.dataset) * self.per_item
 
     def with_epoch(self, epoch: int) -> PatchSampler:
-        """The same sampler for another epoch."""
+        """The same sampler for another epoch.
+
+        Parameters
+        ----------
+        epoch : int
+            The epoch, >= 0.
+
+        Returns
+        -------
+        PatchSampler
+            Same dataset, size, ``per_item`` and seed.
+        """
         return PatchSampler(self.dataset, self.size, per_item=self.per_item, seed=self.seed,
                             epoch=epoch)
 

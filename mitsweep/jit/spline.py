@@ -164,15 +164,31 @@ _LEVELS = 3
 class PolarLevel(NamedTuple):
     """One angle level of a polar image's spline coefficients, stored C-order at
     ``offset`` of a flat array: ``rows`` x ``cols``, the columns being ``n_angles``
-    angles periodically padded by ``col_offset`` in front (and enough behind)."""
+    angles periodically padded by ``col_offset`` in front (and enough behind).
+
+    Attributes
+    ----------
+    offset : int
+        Index of the level's first coefficient in the flat array.
+    rows, cols : int
+        The level's shape: radii, and angles with their padding.
+    row_offset : float
+        The fractional row of radius r is ``r / radial_step + row_offset``.
+    n_angles : int
+        Angles over the full turn.
+    col_offset : float
+        The fractional column of angle θ is ``θ n_angles / 2π + col_offset``.
+    r_from : float
+        Pixels at radius >= this (and below the next level's) read this level, px.
+    """
 
     offset: int
     rows: int
     cols: int
-    row_offset: float     #: fractional row = r / radial_step + row_offset
+    row_offset: float
     n_angles: int
-    col_offset: float     #: fractional column = θ n_angles / 2π + col_offset
-    r_from: float         #: pixels at radius >= this (and below the next level's) read it
+    col_offset: float
+    r_from: float
 
 
 def pixels_from_polar(coefficients: np.ndarray, levels: Sequence[PolarLevel], *,

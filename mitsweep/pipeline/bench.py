@@ -36,6 +36,13 @@ PROJECTION_MACHINES = (1, 8, 64)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the benchmark's own options to the ``mitsweep bench`` parser.
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The parser of ``mitsweep bench``; gains ``--scenes``.
+    """
     p.add_argument("--scenes", type=int, default=None,
                    help="scenes of the benchmark dataset (default 4; 2 with --quick)")
 
@@ -70,10 +77,39 @@ def _files(root: Path) -> dict:
             if p.is_file() and LOG_DIR not in p.relative_to(root).parts}
 
 
+def _task_log(root: Path, name: str) -> dict:
+    """The task log of an item the run has just made (every item of a finished run has
+    one)."""
+    from .runner import read_task_log
+
+    record = read_task_log(root, name)
+    if record is None:
+        raise RuntimeError(f"{root}: no task log for {name} after the run")
+    return record
+
+
 def run_bench(args: argparse.Namespace) -> dict:
+    """Build the benchmark dataset with each executor of :data:`CONFIGS` and compare them.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The ``mitsweep bench`` options: ``scenes`` (the dataset's scenes; None: 4, or 2
+        with ``quick``) and ``quick`` (a smaller run for a smoke test). Either may be
+        absent (the defaults then).
+
+    Returns
+    -------
+    dict
+        ``dataset`` (scenes, items, resolution in px, spp, bank rays),
+        ``load_average_1min``, ``executors`` (per configuration: ``workers``,
+        ``startup_s``, ``run_s``, ``items_per_s``, ``task_s_total``,
+        ``overhead_per_task_s``, ``speedup_vs_serial``, ``identical_to_serial``),
+        ``per_item_s`` (mean seconds per item kind, serial run) and ``projection``
+        (scenes and items per hour on N machines of W workers, with its formula).
+    """
     from . import build_dataset, item_names
     from .executors import open_executor
-    from .runner import read_task_log
 
     scenes = getattr(args, "scenes", None) or (2 if getattr(args, "quick", False) else 4)
     setup, opts = _setup_and_options(scenes)
@@ -91,7 +127,7 @@ def run_bench(args: argparse.Namespace) -> dict:
                 t1 = time.perf_counter()
                 build_dataset(setup, root, opts, executor=pool or "serial", progress=False)
                 t2 = time.perf_counter()
-            logs = {n: read_task_log(root, n) for n in names}
+            logs = {n: _task_log(root, n) for n in names}
             task_s = sum(r["seconds"] for r in logs.values())
             run_s = t2 - t1
             files = _files(root)

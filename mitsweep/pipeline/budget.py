@@ -35,15 +35,40 @@ _EDOF = re.compile(r"edof(?:_(?P<method>[a-z]+))?(?:_(?P<lux>[0-9.e+-]+)lux)?")
 _WEIGHTED = ("wiener", "tv", "hyperlaplacian")
 
 
+def _edof_method(name: str) -> str:
+    """The restoration method an EDOF item's name says (``edof_tv_2lux.exr``: ``tv``;
+    ``wiener`` when it names none)."""
+    match = _EDOF.fullmatch(Path(name).stem)
+    if match is None:
+        raise DatasetError(f"{name}: not an EDOF item")
+    return match["method"] or "wiener"
+
+
 def budget_items(manifest: dict, items: list[str] | None = None) -> list[str]:
-    """The EDOF items (``scene_000/edof_2lux.exr``) a budget covers: ``items`` as named
-    (with or without ``.exr``; a bare stem such as ``edof_2lux`` names it in every
-    scene), default every Wiener EDOF item. Unknown names raise :class:`DatasetError`."""
+    """The EDOF items (``scene_000/edof_2lux.exr``) a budget covers.
+
+    Parameters
+    ----------
+    manifest : dict
+        The dataset's manifest (:func:`~mitsweep.pipeline.load_manifest`).
+    items : list of str, optional
+        Items as named, with or without ``.exr``; a bare stem such as ``edof_2lux``
+        names it in every scene. Default: every Wiener EDOF item.
+
+    Returns
+    -------
+    list of str
+        The items' names in the manifest, each once.
+
+    Raises
+    ------
+    DatasetError
+        An unknown name, or (by default) a dataset with no Wiener EDOF item.
+    """
     edofs = sorted(n for n in manifest["items"]
                    if n.endswith(".exr") and _EDOF.fullmatch(Path(n).stem))
     if items is None:
-        chosen = [n for n in edofs if (_EDOF.fullmatch(Path(n).stem)["method"] or "wiener")
-                  in ("wiener",)]
+        chosen = [n for n in edofs if _edof_method(n) in ("wiener",)]
         if not chosen:
             raise DatasetError("the dataset holds no Wiener EDOF image to budget")
         return chosen
@@ -124,7 +149,7 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
     out: dict[str, Any] = {"dataset": str(root), "second_seed": second_seed, "budgets": {}}
     for name in names:
         scene = Path(name).parent.name
-        method = _EDOF.fullmatch(Path(name).stem)["method"] or "wiener"
+        method = _edof_method(name)
         if method not in _WEIGHTED:
             raise DatasetError(f"{name}: method {method!r} has no scalar weight to budget "
                                f"(allowed: {', '.join(_WEIGHTED)})")
@@ -142,7 +167,7 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
         observed, _, src_meta = read_finite(files[f"{scene}/{source}"])
         clean = read_finite(files[f"{scene}/sweep.exr"])[0]
         second = None
-        if second_seed is not None:
+        if second_seed is not None and work_dir is not None:  # work_dir: checked above
             second = read_finite(_second_render(root, manifest, scene, second_seed,
                                                  Path(work_dir)))[0] / level
         noise = src_meta.get("noise")
@@ -154,7 +179,8 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
         if depth is not None:
             depth = np.where(depth > 0, depth, np.nan)
         logger.info("budget of %s", name)
-        restored, weight = item / level, meta.get("nsr") if method == "wiener" else None
+        restored: np.ndarray | None = item / level
+        weight = meta.get("nsr") if method == "wiener" else None
         if other_bank:
             from ..deconv.weights import model_nsr
 
@@ -175,7 +201,18 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
 
 
 def budget_json(result: dict) -> dict:
-    """:func:`dataset_budget`'s result as plain JSON values (each budget's
-    :meth:`~mitsweep.deconv.budget.ErrorBudget.as_dict`)."""
+    """:func:`dataset_budget`'s result as plain JSON values.
+
+    Parameters
+    ----------
+    result : dict
+        What :func:`dataset_budget` returned.
+
+    Returns
+    -------
+    dict
+        The same keys, each budget replaced by its
+        :meth:`~mitsweep.deconv.budget.ErrorBudget.as_dict`.
+    """
     return {**{k: v for k, v in result.items() if k != "budgets"},
             "budgets": {n: b.as_dict() for n, b in result["budgets"].items()}}

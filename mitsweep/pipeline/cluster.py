@@ -41,11 +41,30 @@ class MitsweepWorkerPlugin(WorkerPlugin):
     name = "mitsweep"
 
     def setup(self, worker: Worker) -> None:
+        """Initialise the worker (:func:`~mitsweep.pipeline.worker_setup.init_worker`).
+
+        Parameters
+        ----------
+        worker : distributed.Worker
+            The worker starting (Dask's argument; the set-up is per process and does
+            not use it).
+        """
         init_worker()
 
 
 def local_cluster(jobs: int) -> LocalCluster:
-    """``jobs`` single-threaded worker processes on 127.0.0.1, no dashboard."""
+    """``jobs`` single-threaded worker processes on 127.0.0.1, no dashboard.
+
+    Parameters
+    ----------
+    jobs : int
+        Worker processes (one thread each).
+
+    Returns
+    -------
+    distributed.LocalCluster
+        Started; the caller closes it.
+    """
     return LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                         host="127.0.0.1", dashboard_address=None,
                         silence_logs=logging.ERROR)
@@ -90,6 +109,19 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
 
     The check runs on an event loop of its own in a helper thread, so that it also
     works where the caller runs one (a notebook).
+
+    Parameters
+    ----------
+    address : str
+        The scheduler's address, ``tcp://HOST:PORT`` or ``tls://HOST:PORT``.
+    timeout : float
+        Seconds for the whole check (default
+        :data:`~mitsweep.pipeline.worker_setup.CONNECT_TIMEOUT_S`).
+
+    Raises
+    ------
+    DatasetError
+        One line naming the address: nothing reachable, or not a Dask scheduler.
     """
     with cf.ThreadPoolExecutor(max_workers=1, thread_name_prefix="mitsweep-probe") as pool:
         try:
@@ -112,7 +144,30 @@ def check_scheduler(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
 @contextlib.contextmanager
 def dask_executor(*, jobs: int, scheduler: str | None = None) -> Iterator:
     """A ``concurrent.futures`` view of a Dask client (``pure=False``: a task submitted
-    again after its worker was lost is a new task, not the failed one)."""
+    again after its worker was lost is a new task, not the failed one).
+
+    Every worker is initialised by :class:`MitsweepWorkerPlugin`; the client, and the
+    cluster when one was started here, are closed on exit.
+
+    Parameters
+    ----------
+    jobs : int
+        Worker processes of the embedded :func:`local_cluster` (unused with
+        ``scheduler``).
+    scheduler : str, optional
+        The address of a running scheduler (checked by :func:`check_scheduler`); None
+        starts an embedded local cluster.
+
+    Yields
+    ------
+    concurrent.futures.Executor
+        The client's executor.
+
+    Raises
+    ------
+    DatasetError
+        The scheduler cannot be reached or is not a Dask scheduler.
+    """
     cluster = None
     try:
         if scheduler is None:

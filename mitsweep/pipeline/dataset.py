@@ -5,6 +5,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import json
 import math
+import os
 from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Any
 
@@ -23,7 +24,26 @@ FORMAT = "mitsweep-dataset/1"
 
 
 def read_manifest(path: str | Path) -> dict:
-    """Read and validate a manifest file (the directory's, or a shard's)."""
+    """Read and validate a manifest file (the directory's, or a shard's).
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``manifest.json`` of a dataset directory, or of one of its shards
+        (``shards/K-of-N/manifest.json``: validated against the dataset directory).
+
+    Returns
+    -------
+    dict
+        The manifest, validated (:func:`validate_manifest`).
+
+    Raises
+    ------
+    DatasetError
+        Not JSON, or an invalid manifest (naming the file and the field).
+    OSError
+        The file cannot be read.
+    """
     p = Path(path)
     try:
         manifest = json.loads(p.read_text(encoding="utf-8"))
@@ -38,7 +58,23 @@ def read_manifest(path: str | Path) -> dict:
 
 
 def load_manifest(directory: str | Path) -> dict:
-    """Read and validate ``directory/manifest.json`` (see :func:`validate_manifest`)."""
+    """Read and validate ``directory/manifest.json`` (see :func:`validate_manifest`).
+
+    Parameters
+    ----------
+    directory : str or Path
+        A dataset directory.
+
+    Returns
+    -------
+    dict
+        The manifest (:func:`read_manifest`).
+
+    Raises
+    ------
+    DatasetError
+        No manifest there (not a mitsweep dataset), or an invalid one.
+    """
     p = Path(directory) / MANIFEST
     if not p.is_file():
         raise DatasetError(f"{directory}: no {MANIFEST} (not a mitsweep dataset)")
@@ -56,7 +92,24 @@ def validate_manifest(manifest: Any, directory: str | Path) -> DatasetOptions:
     hold ``params`` (object), ``sha256`` (64 hex digits), ``bytes`` (integer >= 0) and,
     in datasets written before the per-task logs, ``seconds`` (number >= 0).
     ``complete``, when present, is ``true`` and then every item of the dataset is
-    listed. Raises :class:`DatasetError` naming the field.
+    listed.
+
+    Parameters
+    ----------
+    manifest : object
+        The manifest as parsed from JSON (any type: anything but an object is refused).
+    directory : str or Path
+        The dataset directory its items are relative to.
+
+    Returns
+    -------
+    DatasetOptions
+        The options it records.
+
+    Raises
+    ------
+    DatasetError
+        Naming the first field that breaks the schema.
     """
     _require(isinstance(manifest, dict), "top level",
              f"must be a JSON object, got {type(manifest).__name__}")
@@ -105,7 +158,7 @@ def validate_manifest(manifest: Any, directory: str | Path) -> DatasetOptions:
 def _versions() -> dict:
     from importlib.metadata import PackageNotFoundError, version
 
-    out = {}
+    out: dict[str, str | None] = {}
     for pkg in ("mitsweep", "mitsuba", "drjit", "numpy", "scipy", "scikit-image", "OpenEXR"):
         try:
             out[pkg] = version(pkg)
@@ -114,15 +167,26 @@ def _versions() -> dict:
     return out
 
 
-def dataset_inputs(directory: str | Path) -> list[Path]:
+def dataset_inputs(directory: str | os.PathLike) -> list[Path]:
     """Every file of a dataset that evaluating it reads: the manifest and the items (for
-    :func:`~mitsweep.cli.common.check_outputs`)."""
+    :func:`~mitsweep.cli.common.check_outputs`).
+
+    Parameters
+    ----------
+    directory : str or path-like
+        A dataset directory (its manifest is read and validated).
+
+    Returns
+    -------
+    list of Path
+        ``directory/manifest.json``, then each item's file in the manifest's order.
+    """
     root = Path(directory)
     manifest = load_manifest(root)
     return [root / MANIFEST] + [root / name for name in manifest["items"]]
 
 
-def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
+def scene_files_from(directory: str | os.PathLike, setup: Setup | None = None, *,
                      unit: str | None = None) -> tuple[dict, ...]:
     """The scenes of ``mitsweep dataset --scenes-from``: every ``*.xml`` file of
     ``directory`` (not its subfolders), sorted by name, as ``{"path", "sha256"}``, plus
@@ -135,8 +199,29 @@ def scene_files_from(directory: str | Path, setup: Setup | None = None, *,
     ``unit``): a file that is not Mitsuba XML, references a missing file, uses an
     unknown plugin, has no emitter, puts geometry between the lens and the mirror or
     nothing in the mirror's view is refused before any work starts, naming the file.
-    Raises :class:`DatasetError` (or the loader's ``UserSceneError``), both ValueErrors:
-    one line at the command line.
+
+    Parameters
+    ----------
+    directory : str or path-like
+        The folder of scenes (at most :data:`~mitsweep.pipeline.options.MAX_SCENES`
+        ``*.xml`` files).
+    setup : Setup, optional
+        Probe each scene with this setup; None only checks and digests the files.
+    unit : {"mm", "cm", "m"}, optional
+        The scenes' length unit (default: the setup's ``scene.unit``, else mm).
+
+    Returns
+    -------
+    tuple of dict
+        One :attr:`DatasetOptions.scene_files` entry per scene, sorted by name.
+
+    Raises
+    ------
+    DatasetError
+        Not a folder, no scene in it, too many, or an entry that is not a regular file.
+    mitsweep.render.user_scene.UserSceneError
+        A scene the probe or the digests refuse. Both are ValueErrors: one line at the
+        command line.
     """
     root = Path(directory)
     if not root.is_dir():
@@ -167,14 +252,28 @@ def _scene_file(path: Path) -> dict:
     except (FileTypeError, SceneFileError) as exc:
         raise UserSceneError(str(exc)) from None
     top = path.resolve()
-    entry = {"path": str(top), "sha256": files[top.name]}
+    entry: dict[str, Any] = {"path": str(top), "sha256": files[top.name]}
     if len(files) > 1:
         entry["files"] = files
     return entry
 
 
 def written_paths(opts: DatasetOptions, shard: Shard | None = None) -> set[str]:
-    """Paths (relative to the dataset directory) a run with ``opts`` may write."""
+    """Paths (relative to the dataset directory) a run with ``opts`` may write.
+
+    Parameters
+    ----------
+    opts : DatasetOptions
+        The run's options (they name its items).
+    shard : Shard, optional
+        The shard the run makes; its manifest and lock are then written too.
+
+    Returns
+    -------
+    set of str
+        POSIX paths: the manifest, the lock file, every item and its task log, and the
+        shard's manifest and lock.
+    """
     from ..io.lock import LOCK_FILE
 
     names = item_names(opts)

@@ -4,6 +4,7 @@ truth, inside the mirror's image (PSNR and SSIM overall, per radius, per depth b
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 from typing import Any
 
@@ -62,8 +63,24 @@ def checked_items(root: Path, manifest: dict, *, checksums: bool = True) -> dict
 
 def read_finite(path: Path) -> tuple[np.ndarray, dict, dict]:
     """An item's RGB image (H, W, 3), channels and metadata
-    (:func:`mitsweep.pipeline.tasks.read_rgb`); :class:`DatasetError` naming the file
-    and channel if any pixel is NaN or inf."""
+    (:func:`mitsweep.pipeline.tasks.read_rgb`), every pixel finite.
+
+    Parameters
+    ----------
+    path : Path
+        An EXR item of a dataset.
+
+    Returns
+    -------
+    (ndarray, dict, dict)
+        The ``(H, W, 3)`` float32 image, its other channels by name (``mask.Y``,
+        ``depth.Z``...), its metadata.
+
+    Raises
+    ------
+    DatasetError
+        Naming the file and the channel, if any pixel is NaN or inf.
+    """
     img, chans, meta = read_rgb(path)
     for name, arr in {"image": img, **chans}.items():
         if not np.all(np.isfinite(arr)):
@@ -72,7 +89,7 @@ def read_finite(path: Path) -> tuple[np.ndarray, dict, dict]:
     return img, chans, meta
 
 
-def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
+def evaluate_dataset(directory: str | os.PathLike, *, n_radial_bins: int = 8) -> dict:
     """Score EDOF against focused and stopped images, on the ground truth.
 
     Returns per scene and averaged: PSNR (dB) and SSIM inside the mirror's image, per
@@ -85,6 +102,28 @@ def evaluate_dataset(directory: str | Path, *, n_radial_bins: int = 8) -> dict:
 
     The manifest is validated (:func:`load_manifest`); the dataset must be complete,
     with every item's file present and unchanged, and every image finite.
+
+    Parameters
+    ----------
+    directory : str or path-like
+        A complete dataset (``mitsweep dataset``).
+    n_radial_bins : int
+        Radial bins, equal in width from the optical axis to the mirror's image edge
+        (px).
+
+    Returns
+    -------
+    dict
+        ``dataset`` (the directory), ``scenes`` (per scene: ``white_level``,
+        ``mirror_radius_px``, ``source`` where it has one, and per image ``psnr``,
+        ``ssim``, ``per_radius``, ``per_depth_band``) and ``mean`` (per image name, the
+        scenes' mean ``psnr`` and ``ssim``).
+
+    Raises
+    ------
+    DatasetError
+        An invalid manifest, an incomplete dataset, a missing, changed or non-finite
+        file, a ground truth with no or an empty mirror mask, a shape mismatch.
     """
     from ..deconv import per_depth_band, per_radius, psnr, ssim
 

@@ -36,7 +36,24 @@ _ADDRESS = re.compile(r"^(tcp|tls)://(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9][A-Za-z0-9.-
 
 
 def check_scheduler_address(address: str) -> str:
-    """``tcp://HOST:PORT`` (or ``tls://``), port 1–65535; :class:`DatasetError` else."""
+    """``address`` checked as a Dask scheduler address: ``tcp://HOST:PORT`` (or
+    ``tls://``), port 1–65535.
+
+    Parameters
+    ----------
+    address : str
+        The address as given (surrounding blanks are ignored).
+
+    Returns
+    -------
+    str
+        The address, stripped.
+
+    Raises
+    ------
+    DatasetError
+        Any other form, or a port out of range.
+    """
     m = _ADDRESS.match(str(address).strip())
     if m is None or not 1 <= int(m.group(3)) <= 65535:
         raise DatasetError(f"scheduler: must be a Dask scheduler address tcp://HOST:PORT "
@@ -74,12 +91,35 @@ class _ProcessPool(cf.Executor):
 @contextlib.contextmanager
 def open_executor(executor: str | cf.Executor = "serial", *, jobs: int = 2,
                   scheduler: str | None = None
-                  ) -> Iterator[tuple[cf.Executor | None, tuple[type, ...]]]:
+                  ) -> Iterator[tuple[cf.Executor | None, tuple[type[BaseException], ...]]]:
     """The executor for a run and the exceptions that mean a lost worker.
 
-    Yields ``(None, ())`` for ``"serial"`` (the runner runs tasks itself). A pool or
-    cluster started here is shut down on exit; an Executor passed in is the caller's
-    and stays up.
+    A pool or cluster started here is shut down on exit; an Executor passed in is the
+    caller's and stays up.
+
+    Parameters
+    ----------
+    executor : {"serial", "process", "dask"} or concurrent.futures.Executor
+        Where tasks run: here, a spawn-context pool of ``jobs`` processes, Dask (an
+        embedded local cluster of ``jobs`` workers, or ``scheduler``), or the caller's
+        executor.
+    jobs : int
+        Worker processes of ``"process"`` and of the embedded Dask cluster (>= 1).
+    scheduler : str, optional
+        A Dask scheduler's address (:func:`check_scheduler_address`); implies
+        ``"dask"`` (``"serial"``, the default, is taken as ``"dask"`` then).
+
+    Yields
+    ------
+    (concurrent.futures.Executor or None, tuple of type)
+        The executor (None for ``"serial"``: the runner runs tasks itself) and the
+        exception types that mean a lost worker (Dask's; empty otherwise).
+
+    Raises
+    ------
+    DatasetError
+        An unknown executor, a bad ``jobs``, a bad scheduler address or one with an
+        executor other than Dask.
     """
     if scheduler is not None:
         scheduler = check_scheduler_address(scheduler)
@@ -109,7 +149,7 @@ def open_executor(executor: str | cf.Executor = "serial", *, jobs: int = 2,
             yield pool, _dask_lost_errors()
 
 
-def _dask_lost_errors() -> tuple[type, ...]:
+def _dask_lost_errors() -> tuple[type[BaseException], ...]:
     """Dask's exceptions for a task whose workers died (when Dask is loaded)."""
     import sys
 

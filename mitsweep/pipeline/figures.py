@@ -29,6 +29,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -63,11 +64,23 @@ EDGE_FRACTION = 0.94
 class FigureQuality:
     """How much work each figure gets.
 
-    ``render_scale``: renders at 1/scale of the setup's resolution with scale × its
-    pixel pitch (the same field of view); ``spp``: samples per pixel of each render
-    mode; ``psf_rays``, ``ipsf_rays``: rays per PSF (Fig. 3) and IPSF (Figs. 4, 5);
-    ``bank_rays``: rays per IPSF of the deconvolution bank (None: the tracer's default);
-    ``table1_rays``, ``table1_radii``: Table 1's bank.
+    Attributes
+    ----------
+    name : str
+        The quality's name (``"quick"``, ``"full"``): the suffix of the dataset's
+        folder under ``data/`` (none for :data:`FULL`).
+    render_scale : int
+        Renders at 1/scale of the setup's resolution with scale × its pixel pitch (the
+        same field of view); an integer >= 1.
+    spp : dict
+        Samples per pixel of each render mode (``pinhole``, ``focused``, ``sweep``,
+        ``stopped``).
+    psf_rays, ipsf_rays : int
+        Rays per PSF (Fig. 3) and per IPSF (Figs. 4, 5), >= 1.
+    bank_rays : int or None
+        Rays per IPSF of the deconvolution bank (None: the tracer's default).
+    table1_rays, table1_radii : int
+        Rays per IPSF and radii of Table 1's banks, >= 1.
     """
 
     name: str
@@ -101,9 +114,20 @@ FULL = FigureQuality(name="full", render_scale=1,
 
 
 def figure_files(setup: Setup) -> list[str]:
-    """The files :func:`make_figures` writes for ``setup`` (names relative to the output
-    directory): ``fig{3,4,5,6,8,9,10}_<name>`` and, for an untilted mirror,
-    ``table1_<name>`` (chart as PNG and PDF, table as Markdown and JSON)."""
+    """The files :func:`make_figures` writes for ``setup``.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        One of the setups drawn (its ``name`` is the files' suffix).
+
+    Returns
+    -------
+    list of str
+        Names relative to the output directory: ``fig{3,4,5,6,8,9,10}_<name>`` in each
+        of :data:`FORMATS` and, for an untilted mirror, ``table1_<name>`` (chart as PNG
+        and PDF, table as Markdown and JSON).
+    """
     names = [f"{fig}_{setup.name}.{fmt}" for fig in ("fig3", "fig4", "fig5", "fig6", "fig8",
                                                       "fig9", "fig10") for fmt in FORMATS]
     if setup.mirror.is_symmetric:
@@ -112,7 +136,22 @@ def figure_files(setup: Setup) -> list[str]:
 
 
 def data_dir(out: Path, setup: Setup, quality: FigureQuality) -> Path:
-    """Where the dataset behind Figs. 8–10 lives (resumed by a rerun)."""
+    """Where the dataset behind Figs. 8–10 lives (resumed by a rerun).
+
+    Parameters
+    ----------
+    out : Path
+        The figures' output directory.
+    setup : mitsweep.config.Setup
+        The setup drawn.
+    quality : FigureQuality
+        The run's quality; any but :data:`FULL` adds its name to the folder's.
+
+    Returns
+    -------
+    Path
+        ``out/data/<setup>`` (``out/data/<setup>_<quality>`` below full quality).
+    """
     return Path(out) / "data" / (setup.name + ("" if quality is FULL else f"_{quality.name}"))
 
 
@@ -124,22 +163,52 @@ def _paths(out: Path, stem: str) -> list[Path]:
 
 @dataclass(frozen=True)
 class FieldPoint:
-    """A point of the mirror in its meridional plane (x, mm; 0 the vertex or the
-    sphere's pole) and its chief-ray image (u, v), mm, at a sensor distance."""
+    """A point of the mirror in its meridional plane and its chief-ray image at a sensor
+    distance.
+
+    Attributes
+    ----------
+    x_mm : float
+        The point's coordinate along the meridional plane, mm (0: the vertex, or the
+        sphere's pole).
+    u, v : float
+        Its chief ray's image on the sensor, upright, mm.
+    """
 
     x_mm: float
     u: float
     v: float
 
     def label(self) -> str:
+        """The point as a figure labels it: ``x = 12.3 mm``."""
         return f"x = {self.x_mm:.1f} mm" if self.x_mm else "x = 0 mm"
 
 
 def field_points(setup: Setup, sweep: SweepRange, sensor_distance: float, n: int = N_POINTS,
                  xs: ArrayLike | None = None) -> list[FieldPoint]:
-    """``n`` points across the mirror in the meridional plane, from its centre (untilted:
-    to the edge of the field of view; tilted: from one edge through the vertex to the
-    other), imaged at ``sensor_distance``; or the points at mirror coordinates ``xs``."""
+    """Points across the mirror in the meridional plane and their images.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror and camera.
+    sweep : mitsweep.optics.sweep.SweepRange
+        The sweep whose field of view the points span (its ``rho_start``,
+        ``rho_end``).
+    sensor_distance : float
+        The sensor distance the points are imaged at, mm.
+    n : int
+        Points, when ``xs`` is None: from the mirror's centre to
+        :data:`EDGE_FRACTION` of the way to the edge of the field of view (untilted),
+        or from one edge through the vertex to the other (tilted).
+    xs : array_like, optional
+        Mirror coordinates of the points instead, mm.
+
+    Returns
+    -------
+    list of FieldPoint
+        In order of ``x``.
+    """
     from ..optics import chief_ray, image_point, placement_of
 
     if xs is None:
@@ -179,7 +248,7 @@ class _SetupFigures:
     """What the figures of one setup need, computed on first use and then shared."""
 
     def __init__(self, setup: Setup, quality: FigureQuality, out: Path, *, seed: int,
-                 step: Callable[[str], None]):
+                 step: Callable[[str], object]):
         from ..io.bank import bank_kernel_size
         from ..optics import optimal_sweep_range
         from ..optics.reference import reference_geometry
@@ -349,7 +418,7 @@ class _SetupFigures:
         self.step(f"{self.setup.name}: renders, bank and EDOF images in {where}")
         self._timed("dataset_s", build_dataset, s, where, opts, progress=False)
         scene = where / "scene_000"
-        data = {"setup": s, "bank": load_bank(where / "bank.npz")}
+        data: dict[str, Any] = {"setup": s, "bank": load_bank(where / "bank.npz")}
         for name in ("pinhole", "focused", "sweep", "edof", f"stopped_{FIG10_LUX:g}lux",
                      f"edof_{FIG10_LUX:g}lux"):
             image, chans, _ = read_rgb(scene / f"{name}.exr")
@@ -454,6 +523,30 @@ def inset_regions(mask: np.ndarray, guide: np.ndarray, zones=((0.15, 0.5), (0.75
     square wholly inside ``mask`` with the most detail in ``guide`` (mean gradient
     magnitude of its luminance smoothed over 1.5 px, e.g. the ground truth's), so that
     the insets show what blur removes rather than a flat wall.
+
+    Parameters
+    ----------
+    mask : (H, W) ndarray
+        The mirror's mask (inside where > 0.5).
+    guide : (H, W) or (H, W, C) ndarray
+        The image whose detail chooses the squares (its mean over channels).
+    zones : sequence of (float, float)
+        Per square, the range of its centre's distance from the mirror image's centre,
+        as fractions of its radius; when no square fits in a zone, one anywhere inside
+        the mask.
+    size_fraction : float
+        The squares' side as a fraction of the mirror image's radius (at least 8 px).
+
+    Returns
+    -------
+    list of (int, int, int)
+        Per zone, the square's top row, left column and side, px; no two squares
+        within two sides of each other where the mask leaves room.
+
+    Raises
+    ------
+    ValueError
+        An empty mask, or one that holds no such square.
     """
     inside = mask > 0.5
     rows, cols = np.nonzero(inside)
@@ -477,7 +570,7 @@ def inset_regions(mask: np.ndarray, guide: np.ndarray, zones=((0.15, 0.5), (0.75
     score = box_sums(detail)
     r0, c0 = np.mgrid[:score.shape[0], :score.shape[1]]
     dist = np.hypot(r0 + side / 2 - cy, c0 + side / 2 - cx) / radius
-    out = []
+    out: list[tuple[int, int, int]] = []
     for lo, hi in zones:
         # Apart from the squares already chosen (else both may land on one chart).
         apart = np.ones_like(full)
@@ -490,8 +583,8 @@ def inset_regions(mask: np.ndarray, guide: np.ndarray, zones=((0.15, 0.5), (0.75
             ok = full
         if not ok.any():
             raise ValueError(f"the mirror's image holds no {side} px square to magnify")
-        r, c = np.unravel_index(np.argmax(np.where(ok, score, -np.inf)), score.shape)
-        out.append((int(r), int(c), side))
+        top, left = np.unravel_index(np.argmax(np.where(ok, score, -np.inf)), score.shape)
+        out.append((int(top), int(left), side))
     return out
 
 
@@ -531,7 +624,7 @@ FIGURES = ("fig6", "fig3", "fig4", "fig5", "table1", "fig8", "fig9", "fig10")
 
 
 def make_figures(setups: Sequence[Setup], out: str | Path, *, quality: FigureQuality = FULL,
-                 seed: int = 0, step: Callable[[str], None] | None = None) -> dict:
+                 seed: int = 0, step: Callable[[str], object] | None = None) -> dict:
     """Write every figure of the paper for each setup into ``out``.
 
     Parameters

@@ -46,7 +46,7 @@ def _is_sha256(v: Any) -> bool:
 def _digests(value: Any, key: str) -> dict[str, str]:
     """A scene's content digests (:func:`mitsweep.io.scene_files.scene_digests`):
     ``{name: SHA-256}``, at least one, names non-empty strings; sorted."""
-    _require(isinstance(value, dict) and value, key,
+    _require(isinstance(value, dict) and bool(value), key,
              f"must be an object of file names to SHA-256, got {value!r}")
     for name, sha in value.items():
         _require(isinstance(name, str) and name != "", key, f"file names must be non-empty "
@@ -105,6 +105,44 @@ class DatasetOptions:
     (:func:`mitsweep.io.scene_files.scene_digests`), when it loads more than itself, and
     ``scene_unit`` (one of :data:`SCENE_UNITS`, or None for the setup's).
     A room dataset's options read and write as before these fields existed.
+
+    Attributes
+    ----------
+    scenes : int
+        Scene variations, in [1, :data:`MAX_SCENES`].
+    seed : int
+        Monte Carlo and scene seed of scene 0 (scene i: ``seed + i``), >= 0.
+    spp : dict
+        Samples per pixel of each render mode (``pinhole``, ``focused``, ``sweep``,
+        ``stopped``), positive integers.
+    light_levels_lux : tuple of float
+        Light levels of the noisy images, lux (at most :data:`MAX_LIGHT_LEVELS`; none:
+        no noisy images).
+    bank_depths_mm : tuple of float
+        Depths of the IPSF bank's sources from the mirror, mm (1 to
+        :data:`MAX_BANK_DEPTHS`).
+    bank_rays : int or None
+        Rays per IPSF of the bank (None: the tracer's default).
+    grid : (int, int)
+        Grid bank shape (rows, cols), each in [1, 256], for a tilted mirror.
+    stopped_f_number : float
+        F-number of the ``stopped`` images.
+    diffraction : bool
+        Convolve the bank's IPSFs with the lens's diffraction pattern.
+    methods : tuple of str
+        Restoration methods, each at most once (default Wiener only).
+    family : {"room", "procedural", "xml"}
+        Where the scenes come from (:data:`FAMILIES`).
+    family_params : dict
+        The procedural family's parameters (procedural only).
+    scene_files : tuple of dict
+        One entry per scene (xml only), as :func:`~mitsweep.pipeline.scene_files_from`
+        makes them.
+    scene_unit : {"mm", "cm", "m"} or None
+        The XML scenes' length unit (xml only; None: the setup's).
+    motion : dict or None
+        A tabulated stage motion to run instead of the setup's sweep:
+        ``{"times": [...] (s), "positions_mm": [...]}``.
     """
 
     scenes: int = 1
@@ -245,15 +283,29 @@ class DatasetOptions:
 
 #: Keys a manifest's options may omit (datasets written before they existed), with the
 #: value those datasets were made with.
-_ADDED_LATER = {"methods": ["wiener"], "family": "room", "family_params": {},
+_ADDED_LATER: dict[str, Any] = {"methods": ["wiener"], "family": "room", "family_params": {},
                 "scene_files": [], "scene_unit": None, "motion": None}
 
 
 def options_from_dict(d: Any) -> DatasetOptions:
-    """:class:`DatasetOptions` from a manifest's ``options`` (the keys of
-    :meth:`DatasetOptions.as_dict`, all required but those of ``_ADDED_LATER``, no
-    others); raises
-    :class:`DatasetError` naming the field."""
+    """:class:`DatasetOptions` from a manifest's ``options``.
+
+    Parameters
+    ----------
+    d : object
+        The ``options`` object as parsed from JSON: the keys of
+        :meth:`DatasetOptions.as_dict`, all required but those added later (which older
+        datasets omit), no others.
+
+    Returns
+    -------
+    DatasetOptions
+
+    Raises
+    ------
+    DatasetError
+        Not an object, unknown or missing keys, or a bad value, naming the field.
+    """
     names = [f.name for f in fields(DatasetOptions)]
     _require(isinstance(d, dict), "options", f"must be an object, got {type(d).__name__}")
     unknown = sorted(set(d) - set(names))

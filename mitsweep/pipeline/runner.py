@@ -89,7 +89,15 @@ def _require(ok: bool, key: str, message: str) -> None:
 
 @dataclass(frozen=True)
 class Shard:
-    """Shard ``index`` of ``count`` (1-based: ``1/4`` … ``4/4``)."""
+    """Shard ``index`` of ``count`` (1-based: ``1/4`` … ``4/4``).
+
+    Attributes
+    ----------
+    index : int
+        K, in [1, ``count``].
+    count : int
+        N, the number of shards, in [1, :data:`MAX_SHARDS`].
+    """
 
     index: int
     count: int
@@ -102,7 +110,22 @@ class Shard:
 
     @classmethod
     def parse(cls, text: str) -> Shard:
-        """``"K/N"`` → ``Shard(K, N)``; :class:`DatasetError` naming the form otherwise."""
+        """``"K/N"`` → ``Shard(K, N)``.
+
+        Parameters
+        ----------
+        text : str
+            ``K/N`` (blanks around the numbers allowed), e.g. ``"1/4"``.
+
+        Returns
+        -------
+        Shard
+
+        Raises
+        ------
+        DatasetError
+            Naming the form, for any other text or a K or N out of range.
+        """
         k, sep, n = str(text).strip().partition("/")
         if not (sep and k.strip().isdigit() and n.strip().isdigit()):
             raise DatasetError(f"shard: must be K/N with 1 <= K <= N <= {MAX_SHARDS} "
@@ -114,9 +137,17 @@ class Shard:
 
     @property
     def dirname(self) -> str:
+        """The shard's folder under :data:`SHARD_DIR`: ``K-of-N``."""
         return f"{self.index}-of-{self.count}"
 
     def owns(self, group: int) -> bool:
+        """Whether the tasks of ``group`` are this shard's (``group mod N = K - 1``).
+
+        Parameters
+        ----------
+        group : int
+            A task's :attr:`Task.group` (not None).
+        """
         return group % self.count == self.index - 1
 
 
@@ -124,11 +155,23 @@ class Shard:
 class Task:
     """One item of a directory and how to make it.
 
-    ``fn(context, out, **inputs, **params)`` writes the file ``out``; ``inputs`` maps
-    keyword names to the items it reads (passed as paths; they are its dependencies);
-    ``params`` are its other keyword arguments (JSON values). ``fn`` may return a dict
-    of run information (timings) for the task's log. ``group`` is the shard key
-    (``None``: a task that tasks of every group may need).
+    ``fn(context, out, **inputs, **params)`` writes the file ``out``.
+
+    Attributes
+    ----------
+    name : str
+        The item: its file's path relative to the directory (``scene_000/sweep.exr``).
+    fn : callable
+        The task's function; it may return a dict of run information (timings) for the
+        task's log.
+    params : mapping
+        Its other keyword arguments (JSON values): with the inputs' names, the item's
+        manifest ``params``.
+    inputs : mapping of str to str
+        Keyword names to the items it reads (passed as paths; they are its
+        dependencies).
+    group : int or None
+        The shard key (``None``: a task that tasks of every group may need).
     """
 
     name: str
@@ -139,6 +182,7 @@ class Task:
 
     @property
     def deps(self) -> tuple[str, ...]:
+        """The items this one is made from (the values of :attr:`inputs`)."""
         return tuple(self.inputs.values())
 
     def entry_params(self) -> dict:
@@ -151,11 +195,39 @@ def _jsonable(obj):
 
 
 def task_log_path(root: Path, name: str) -> Path:
+    """Where an item's task log is written.
+
+    Parameters
+    ----------
+    root : Path
+        The directory.
+    name : str
+        The item, relative to ``root``.
+
+    Returns
+    -------
+    Path
+        ``root/logs/NAME.log``.
+    """
     return Path(root) / LOG_DIR / f"{name}.log"
 
 
 def read_task_log(root: Path, name: str) -> dict | None:
-    """The JSON record (first line) of an item's log, or None if there is none."""
+    """The JSON record (first line) of an item's log.
+
+    Parameters
+    ----------
+    root : Path
+        The directory.
+    name : str
+        The item, relative to ``root``.
+
+    Returns
+    -------
+    dict or None
+        The record (``item``, ``attempt``, ``host``, ``pid``, ``started``, ``status``,
+        ``seconds``...), or None if there is no log or its first line is not JSON.
+    """
     try:
         with open(task_log_path(root, name), encoding="utf-8") as f:
             return json.loads(f.readline())
@@ -176,8 +248,34 @@ class _Records(logging.Handler):
 
 def run_task(task: Task, context: Any, root: str, attempt: int, coordinator_pid: int) -> dict:
     """Make one item (on whichever worker runs it) and checksum the file where it was
-    written; write the task's log. Returns ``sha256``, ``bytes``, ``seconds`` and the
-    warnings logged by the task, for a coordinator in another process to show."""
+    written; write the task's log.
+
+    Parameters
+    ----------
+    task : Task
+        The item to make.
+    context : object
+        Passed to the task's function.
+    root : str
+        The directory (a string: it travels to other processes).
+    attempt : int
+        The submission's number, 1 for the first (recorded in the log).
+    coordinator_pid : int
+        The process id of the run's coordinator: a task run in that process leaves its
+        warnings out of the result (they were shown already).
+
+    Returns
+    -------
+    dict
+        ``sha256`` and ``bytes`` of the file, ``seconds`` the task took and
+        ``warnings`` (the messages the task logged at WARNING or above), for a
+        coordinator in another process to show.
+
+    Raises
+    ------
+    BaseException
+        Whatever the task raised, after its log is written.
+    """
     base = Path(root)
     out = base / task.name
     handler = _Records()
@@ -240,7 +338,8 @@ def _run_inline(task: Task, context: Any, root: str, attempt: int) -> cf.Future:
 def run_tasks(root: str | Path, tasks: Sequence[Task], context: Any, header: Mapping[str, Any],
               *, read_manifest: Callable[[Path], dict],
               check_header: Callable[[dict, Path], None],
-              executor: cf.Executor | None = None, lost: tuple[type, ...] = (),
+              executor: cf.Executor | None = None,
+              lost: tuple[type[BaseException], ...] = (),
               shard: Shard | None = None, wait: float | None = None, progress: bool = True,
               retries: int = DEFAULT_RETRIES, desc: str = "items") -> dict:
     """Make the items of ``root`` that are not complete; return the manifest.
@@ -272,8 +371,12 @@ def run_tasks(root: str | Path, tasks: Sequence[Task], context: Any, header: Map
     wait : float or None
         Seconds to wait for the lock of a run on the same directory (or shard);
         ``None`` refuses at once.
+    progress : bool
+        A tqdm bar of the items on stderr.
     retries : int
         Submissions of a task after its worker was lost, before the run stops.
+    desc : str
+        The progress bar's label.
 
     Returns
     -------
@@ -318,8 +421,21 @@ def run_tasks(root: str | Path, tasks: Sequence[Task], context: Any, header: Map
 
 
 def symlinked_folder(root: Path, name: str) -> Path | None:
-    """The first folder of ``name``'s path below ``root`` that is a symbolic link, or
-    None (``root`` itself may be one: it is the user's choice of where the dataset is)."""
+    """The first folder of ``name``'s path below ``root`` that is a symbolic link.
+
+    Parameters
+    ----------
+    root : Path
+        The directory (it may itself be a link: it is the user's choice of where the
+        dataset is).
+    name : str
+        A POSIX path relative to ``root``.
+
+    Returns
+    -------
+    Path or None
+        That folder, or None when there is none.
+    """
     parts = PurePosixPath(name).parts[:-1]
     for k in range(1, len(parts) + 1):
         p = root.joinpath(*parts[:k])
@@ -332,7 +448,20 @@ def refuse_symlinked_folders(root: Path, names: Iterable[str]) -> None:
     """Refuse to write ``names`` (paths relative to ``root``) if a folder on the way is
     a symbolic link: written through, the dataset's files would land wherever it
     points, and a manifest whose items resolve outside the directory is refused when
-    read. Each folder is examined once."""
+    read. Each folder is examined once.
+
+    Parameters
+    ----------
+    root : Path
+        The directory.
+    names : iterable of str
+        POSIX paths relative to ``root`` about to be written.
+
+    Raises
+    ------
+    DatasetError
+        Naming the link and where it points.
+    """
     seen: set[str] = set()
     for name in names:
         parent = PurePosixPath(name).parent.as_posix()
@@ -468,11 +597,11 @@ MANIFEST_INTERVAL_S = 1.0
 
 
 def _execute(root: Path, home: Path, manifest: dict, todo: list[Task], context: Any,
-             executor: cf.Executor | None, *, lost: tuple[type, ...], progress: bool,
-             retries: int, desc: str) -> None:
+             executor: cf.Executor | None, *, lost: tuple[type[BaseException], ...],
+             progress: bool, retries: int, desc: str) -> None:
     """Run ``todo``: each task once its inputs are done, in declaration order among
     those ready; record each finished item in the manifest at once."""
-    lost = (cf.BrokenExecutor, cf.CancelledError, *lost)
+    lost_worker: tuple[type[BaseException], ...] = (cf.BrokenExecutor, cf.CancelledError, *lost)
     order = {t.name: k for k, t in enumerate(todo)}
     blocking = {t.name: {d for d in t.deps if d not in manifest["items"]} for t in todo}
     dependents: dict[str, list[Task]] = {}
@@ -500,7 +629,7 @@ def _execute(root: Path, home: Path, manifest: dict, todo: list[Task], context: 
                 t = running.pop(fut)
                 try:
                     result = fut.result()
-                except lost as exc:
+                except lost_worker as exc:
                     _remove_temporaries(root / t.name)  # its worker died writing it
                     if attempts[t.name] > retries:
                         raise DatasetError(

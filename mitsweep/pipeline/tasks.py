@@ -73,13 +73,39 @@ _RENDER_TIMINGS = ("render_s", "load_and_render_s", "aov_s")
 
 
 def scene_setup(setup: Setup, index: int) -> Setup:
-    """Scene variation ``index``: the texture layout ``scene.texture_seed + index``."""
+    """Scene variation ``index`` of the room: the texture layout
+    ``scene.texture_seed + index``.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The dataset's setup.
+    index : int
+        The scene's index in the dataset, >= 0.
+
+    Returns
+    -------
+    mitsweep.config.Setup
+        ``setup`` with that texture seed.
+    """
     return replace(setup, scene=replace(setup.scene,
                                         texture_seed=setup.scene.texture_seed + index))
 
 
 def read_rgb(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, Any]]:
-    """An EXR's RGB image (H, W, 3), all its channels and its metadata."""
+    """An EXR's RGB image, all its channels and its metadata.
+
+    Parameters
+    ----------
+    path : str or Path
+        An EXR file (a dataset's item).
+
+    Returns
+    -------
+    (ndarray, dict, dict)
+        The ``(H, W, 3)`` float32 image (its R, G, B channels), every channel by name
+        (``R``, ``mask.Y``, ``depth.Z``...), the metadata.
+    """
     chans, meta = read_exr(path)
     return stack_channels(chans), chans, meta
 
@@ -90,7 +116,27 @@ NOISY_UNITS = "render radiance (relative exposure times white_level)"
 
 
 def white_level(pinhole: np.ndarray, mask: np.ndarray | None) -> float:
-    """Relative exposure 1.0: the 99th percentile of the ground truth in the mask."""
+    """Relative exposure 1.0: the :data:`WHITE_PERCENTILE` th percentile of the ground
+    truth in the mirror's mask.
+
+    Parameters
+    ----------
+    pinhole : (H, W[, C]) ndarray
+        The ground truth, render radiance.
+    mask : (H, W) ndarray or None
+        The mirror's mask (inside where > 0); None, or an empty mask, takes every
+        pixel.
+
+    Returns
+    -------
+    float
+        The level, render radiance, > 0.
+
+    Raises
+    ------
+    DatasetError
+        The ground truth is black there (the level is not > 0).
+    """
     values = pinhole[mask > 0] if mask is not None and np.any(mask > 0) else pinhole
     level = float(np.percentile(values, WHITE_PERCENTILE))
     if not level > 0:
@@ -102,10 +148,23 @@ def white_level(pinhole: np.ndarray, mask: np.ndarray | None) -> float:
 # -- the tasks --------------------------------------------------------------------------
 
 def scene_source(opts: DatasetOptions, index: int) -> dict | None:
-    """What scene ``index`` of a dataset is made of, for its render tasks' parameters:
-    None for the room (its parameters predate the families); for the procedural family
-    ``{"family", "seed": opts.seed + index, "params"}``; for XML files
-    ``{"family": "xml", "file", "sha256", "unit"}`` (unit None: the setup's)."""
+    """What scene ``index`` of a dataset is made of, for its render tasks' parameters.
+
+    Parameters
+    ----------
+    opts : DatasetOptions
+        The dataset's options (its ``family``).
+    index : int
+        The scene's index, in [0, ``opts.scenes``).
+
+    Returns
+    -------
+    dict or None
+        None for the room (its parameters predate the families); for the procedural
+        family ``{"family", "seed": opts.seed + index, "params"}``; for XML files
+        ``{"family": "xml", "file", "sha256", "unit"}`` (unit None: the setup's), with
+        ``files`` (the SHA-256 of each file it loads) when it loads others.
+    """
     if opts.family == "procedural":
         return {"family": "procedural", "seed": opts.seed + index,
                 "params": dict(opts.family_params)}
@@ -123,7 +182,25 @@ def setup_scene_digests(setup: Setup | None) -> dict | None:
     """The content identity of the setup's own ``[scene] file`` (None without one): the
     SHA-256 of every file it loads (:func:`mitsweep.io.scene_files.scene_digests`), for
     the room family's render parameters. A scene changed since its items were made
-    changes them, so a rerun redoes those items; another spelling of its path does not."""
+    changes them, so a rerun redoes those items; another spelling of its path does not.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup or None
+        The dataset's setup (None: no setup, no digests).
+
+    Returns
+    -------
+    dict or None
+        ``{file name: SHA-256}``, or None when the setup names no scene file.
+
+    Raises
+    ------
+    DatasetError
+        The scene file does not exist.
+    mitsweep.render.user_scene.UserSceneError
+        It, or a file it loads, cannot be read as a scene.
+    """
     if setup is None or setup.scene.file is None:
         return None
     from ..render.user_scene import UserSceneError
@@ -186,16 +263,59 @@ def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: in
            f_number: float | None, diffraction: bool, sampler: str,
            scene_source: dict | None = None, motion: dict | None = None,
            setup_scene: dict | None = None) -> dict:
-    """Render scene variation ``scene`` in ``mode`` (the pinhole one with the depth and
-    mask AOVs) with ``sampler``; ``f_number``: the stopped mode's; ``diffraction``: add
-    the lens's; ``scene_source``: the scene, if not the room (:func:`scene_source`);
-    ``motion``: the sweep's profile, if not the setup's (every mode is rendered on its
-    reference grid, mid-travel); ``setup_scene``: the digests of the setup's own
-    ``[scene] file`` (:func:`setup_scene_digests`), refused if its files now differ."""
+    """Render scene variation ``scene`` in ``mode`` into the EXR ``out`` (the render
+    task).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The dataset's setup.
+    out : Path
+        The EXR written (image, AOVs, metadata).
+    scene : int
+        The scene's index (:func:`scene_setup` for the room).
+    mode : {"pinhole", "focused", "sweep", "stopped"}
+        The camera; the pinhole render also holds the depth and mask AOVs.
+    spp : int
+        Samples per pixel.
+    seed : int
+        The Monte Carlo seed.
+    f_number : float or None
+        The stopped mode's F-number (None for the other modes: the lens's).
+    diffraction : bool
+        Convolve the image with the lens's pixel-integrated Airy PSF at 550 nm, at the
+        mode's F-number.
+    sampler : str
+        Mitsuba's sampler (:data:`mitsweep.render.api.MODE_SAMPLERS`).
+    scene_source : dict, optional
+        The scene, if not the room (:func:`scene_source`); a procedural scene is built
+        again, an XML file refused if it changed since the plan.
+    motion : dict, optional
+        The sweep's tabulated profile, if not the setup's
+        (:attr:`DatasetOptions.motion`); every mode is rendered on its reference grid,
+        mid-travel.
+    setup_scene : dict, optional
+        The digests of the setup's own ``[scene] file`` (:func:`setup_scene_digests`),
+        refused if its files now differ.
+
+    Returns
+    -------
+    dict
+        The renderer's timings (seconds), for the task's log.
+
+    Raises
+    ------
+    DatasetError
+        A scene file changed or missing since the plan.
+    """
     from ..optics.diffraction import add_diffraction
     from ..render import render_image, render_to_exr
+    from ..render.api import DEFAULT_STOPPED_F_NUMBER
 
     if setup_scene is not None and scene_source is None:
+        if setup.scene.file is None:
+            raise DatasetError("render: the task records the digests of the setup's "
+                               "[scene] file, and the setup names none")
         _check_unchanged(setup.scene.file, setup_scene)
     s = scene_setup(setup, scene)
     aovs = ("depth", "mask") if mode == "pinhole" else ()
@@ -209,7 +329,8 @@ def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: in
     if scene_source is not None:
         result.metadata["scene_source"] = scene_source
     if diffraction:
-        n = f_number if mode == "stopped" else s.lens.f_number
+        # the F-number the image was rendered at (render_image's rule)
+        n = (f_number or DEFAULT_STOPPED_F_NUMBER) if mode == "stopped" else s.lens.f_number
         result.image = add_diffraction(result.image, n, s.sensor.pixel_pitch)
         result.metadata["diffraction"] = {"f_number": n, "wavelength_nm": 550.0,
                                           "model": "pixel-integrated Airy PSF"}
@@ -219,13 +340,37 @@ def render(setup: Setup, out: Path, *, scene: int, mode: str, spp: int, seed: in
 
 def trace_bank(setup: Setup, out: Path, *, depths: list, rays: int | None, grid: list,
                seed: int, motion: dict | None = None) -> dict:
-    """Trace the IPSF bank: radial for a rotationally symmetric setup, else a grid;
-    ``motion``: the sweep's profile, if not the setup's."""
+    """Trace the dataset's IPSF bank into ``out`` (the bank task): radial for a
+    rotationally symmetric setup, else a grid.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The dataset's setup; its pixel pitch sizes the kernels
+        (:func:`mitsweep.io.bank.bank_kernel_size`).
+    out : Path
+        The bank file written (``.npz``, reproducible bytes).
+    depths : list of float
+        Depths of the sources from the mirror, mm.
+    rays : int or None
+        Rays per IPSF (None or 0: the tracer's default).
+    grid : list of int
+        The grid bank's (rows, cols) (:func:`bank_grid`); unused for a radial bank.
+    seed : int
+        The tracer's seed.
+    motion : dict, optional
+        The sweep's tabulated profile, if not the setup's.
+
+    Returns
+    -------
+    dict
+        ``trace_s``: the tracing time, seconds (for the task's log).
+    """
     from ..io.bank import bank_kernel_size, save_bank
     from ..tracer import TraceSettings, ipsf_bank
 
     kind = "radial" if setup.mirror.is_symmetric else "grid"
-    trace = {"seed": seed, "kernel_size": bank_kernel_size(setup.sensor.pixel_pitch)}
+    trace: dict[str, Any] = {"seed": seed, "kernel_size": bank_kernel_size(setup.sensor.pixel_pitch)}
     if rays:
         trace["rays"] = rays
     kw: dict[str, Any] = {"kind": kind, "depths": tuple(depths),
@@ -245,7 +390,37 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
               seed: list) -> dict:
     """The sensor noise of ``lux`` with these camera settings on ``image``, in relative
     exposure (the ground truth's white level); stored in the renders' units (the noisy
-    relative exposure times ``white_level``, as the metadata's ``units`` says)."""
+    relative exposure times ``white_level``, as the metadata's ``units`` says).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The dataset's setup (the task's signature; the noise does not depend on it).
+    out : Path
+        The noisy EXR written; its metadata records the noise model, its seed and the
+        white level.
+    ground_truth : Path
+        The scene's pinhole render (its white level, :func:`white_level`).
+    image : Path
+        The noise-free render to add noise to.
+    lux : float
+        Scene illuminance, lux.
+    f_number : float
+        The exposure's F-number.
+    iso : float
+        ISO sensitivity.
+    exposure_s : float
+        Exposure time, s.
+    pixel_pitch : float
+        The noise model's pixel pitch, mm (:data:`NOISE_PIXEL_MM`).
+    seed : list of int
+        The noise generator's seed (``[dataset seed, scene, level]``).
+
+    Returns
+    -------
+    dict
+        Empty (no run information).
+    """
     from ..deconv import SensorNoise
 
     gt, chans, _ = read_rgb(ground_truth)
@@ -295,6 +470,42 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     (their σ is then at least the model's); the model is in relative exposure, so they
     restore the image divided by its recorded white level and the result is scaled
     back. ``noise`` must be the noise the image's metadata records.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The dataset's setup (the task's signature; the bank holds the optics).
+    out : Path
+        The EDOF EXR written; its metadata adds ``deconvolved_from``, ``bank``,
+        ``method``, ``nsr`` and the weight rule's record.
+    image : Path
+        The sweep image to restore.
+    bank : Path
+        The IPSF bank.
+    method : {"wiener", "rl", "tv", "hyperlaplacian"}
+        The restoration method (:func:`mitsweep.deconv.deconvolve`).
+    nsr : float, optional
+        ``weights="estimated"`` only: the least NSR (the noise model's).
+    noise : dict, optional
+        The image's noise model, ``SensorNoise.as_dict()`` (None: a noise-free sweep).
+    ground_truth : Path, optional
+        The scene's pinhole render, whose ``mask.Y`` bounds the NSR's estimate
+        (``weights="model"``).
+    weights : {"estimated", "model"}
+        The weight rule (above); ``"estimated"`` is the default of the tasks of older
+        manifests, which do not record it.
+
+    Returns
+    -------
+    dict
+        ``deconvolve_s``: the restoration's time, seconds (for the task's log).
+
+    Raises
+    ------
+    ValueError
+        An unknown weight rule, or ``noise`` with Wiener under the former rule.
+    DatasetError
+        The image's metadata does not record ``noise``.
     """
     from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..io.bank import load_bank
@@ -346,8 +557,21 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
 # -- the plan ---------------------------------------------------------------------------
 
 def edof_name(method: str, suffix: str = "") -> str:
-    """The EDOF image's stem: ``edof`` for Wiener (its evaluation key since the first
-    datasets), ``edof_<method>`` for another method; ``suffix`` e.g. ``_50lux``."""
+    """The EDOF image's stem.
+
+    Parameters
+    ----------
+    method : str
+        The restoration method.
+    suffix : str
+        Appended, e.g. ``_50lux`` for the restoration of a noisy image.
+
+    Returns
+    -------
+    str
+        ``edof`` for Wiener (its evaluation key since the first datasets),
+        ``edof_<method>`` for another method, then ``suffix``.
+    """
     return ("edof" if method == "wiener" else f"edof_{method}") + suffix
 
 
@@ -356,7 +580,20 @@ def bank_grid(opts: DatasetOptions, setup: Setup | None) -> list[int]:
     covers only part of the frame (a tilted one) so that
     :func:`mitsweep.deconv.spatial.mirror_grid_shape` nodes lie across it: a 9x9 grid
     over the frame puts 5 across the tilted paraboloid's image and loses ~1 dB. Unused
-    (and unchanged) for a rotationally symmetric mirror's radial bank."""
+    (and unchanged) for a rotationally symmetric mirror's radial bank.
+
+    Parameters
+    ----------
+    opts : DatasetOptions
+        The dataset's options (its ``grid``).
+    setup : mitsweep.config.Setup or None
+        The dataset's setup (None: ``opts.grid`` as it is).
+
+    Returns
+    -------
+    list of int
+        ``[rows, cols]``, each at least ``opts.grid``'s.
+    """
     grid = [int(g) for g in opts.grid]
     if setup is None or setup.mirror.is_symmetric:
         return grid
@@ -367,12 +604,28 @@ def bank_grid(opts: DatasetOptions, setup: Setup | None) -> list[int]:
 
 
 def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
-    """Every task of a dataset with ``opts`` (of ``setup``, which sizes a tilted mirror's
-    grid bank: :func:`bank_grid`), inputs first; each scene is one shard group, the bank
-    is shared. Task names are the items' paths in the directory."""
+    """Every task of a dataset, inputs first.
+
+    Parameters
+    ----------
+    opts : DatasetOptions
+        What the dataset holds.
+    setup : mitsweep.config.Setup, optional
+        The dataset's setup: it sizes a tilted mirror's grid bank (:func:`bank_grid`)
+        and gives a room dataset its own scene file's digests
+        (:func:`setup_scene_digests`). None names the items only (their names do not
+        depend on it).
+
+    Returns
+    -------
+    list of Task
+        The bank (shared, group None), then per scene (its index the shard group) the
+        renders, the EDOF images, the noisy images and their restorations. Task names
+        are the items' paths in the directory.
+    """
     from ..deconv import paper_fig10_settings
 
-    bank = {"depths": list(opts.bank_depths_mm), "rays": opts.bank_rays,
+    bank: dict[str, Any] = {"depths": list(opts.bank_depths_mm), "rays": opts.bank_rays,
             "grid": bank_grid(opts, setup), "seed": opts.seed}
     if opts.motion is not None:   # in the parameters only when set: older manifests hold
         bank["motion"] = opts.motion
@@ -422,5 +675,16 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
 
 
 def item_names(opts: DatasetOptions) -> list[str]:
-    """The items (paths relative to the dataset directory) of a dataset with ``opts``."""
+    """The items of a dataset.
+
+    Parameters
+    ----------
+    opts : DatasetOptions
+        What the dataset holds.
+
+    Returns
+    -------
+    list of str
+        The items' paths relative to the dataset directory, in the plan's order.
+    """
     return [t.name for t in plan(opts)]

@@ -26,10 +26,33 @@ __all__ = ["dataset_weight_bench"]
 _SWEEP = re.compile(r"sweep(?:_(?P<lux>[0-9.e+-]+)lux)?")
 
 
+def _lux(name: str) -> float:
+    """The light level of a sweep item's name, lux (``sweep_2lux.exr``: 2; the
+    noise-free ``sweep.exr``: inf)."""
+    match = _SWEEP.fullmatch(Path(name).stem)
+    if match is None:
+        raise ValueError(f"{name}: not a sweep item")
+    return float(match["lux"] or "inf")
+
+
 def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) -> list[dict]:
-    """Rows of :func:`mitsweep.deconv.weight_bench.weight_rows` for each sweep image
-    (``case``: dataset, scene, image), names ``before`` and ``after``; ``scenes``: only
-    the first so many scenes."""
+    """The weights of each sweep image of a dataset against the oracle.
+
+    Parameters
+    ----------
+    directory : str or Path
+        A complete dataset (``mitsweep dataset``; its items are checked as for
+        :func:`~mitsweep.pipeline.evaluate_dataset`).
+    scenes : int, optional
+        Only the first so many scenes (default: all).
+
+    Returns
+    -------
+    list of dict
+        Per sweep image (noise-free first, then by decreasing light level), the row of
+        :func:`mitsweep.deconv.weight_bench.weight_rows` for the weights ``before`` and
+        ``after``, with ``case``: the dataset's folder name, the scene, the image.
+    """
     from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..deconv.weight_bench import weight_rows
     from ..deconv.weights import model_nsr
@@ -47,7 +70,7 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) ->
         truth = gt / level
         sweeps = sorted((n for n in files if n.startswith(f"{scene}/")
                          and _SWEEP.fullmatch(Path(n).stem)),
-                        key=lambda n: -float(_SWEEP.fullmatch(Path(n).stem)["lux"] or "inf"))
+                        key=lambda n: -_lux(n))
         for name in sweeps:
             img, _, meta = read_finite(files[name])
             noise = SensorNoise.from_dict(meta["noise"]) if "noise" in meta else None
