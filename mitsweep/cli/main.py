@@ -61,7 +61,9 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except ArgumentParserError as exc:  # the line is on stderr already
         if _wants_json(argv):
-            print_error_json(exc.message, _command_name(argv), exc.code)
+            # the code SystemExit holds: an int here (ArgumentParser.error gives 2)
+            status = exc.code if isinstance(exc.code, int) else 2
+            print_error_json(exc.message, _command_name(argv), status)
         raise
     configure_logging(args.verbose)
     try:

@@ -9,7 +9,7 @@ import math
 import os
 import sys
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, overload
 from collections.abc import Callable, Iterator
 
 from ..config import Setup, SetupError, load_setup
@@ -83,7 +83,7 @@ def resolve_setup(setup: Setup | str | os.PathLike) -> Setup:
     if isinstance(setup, Setup):
         result = setup
     elif os.path.lexists(setup):
-        result = load_setup(setup)
+        result = load_setup(os.fspath(setup))
     elif os.fspath(setup) in bundled_setup_names():
         result = load_setup(bundled_setup(os.fspath(setup)))
     else:
@@ -93,6 +93,10 @@ def resolve_setup(setup: Setup | str | os.PathLike) -> Setup:
     return result
 
 
+@overload
+def read_motion_file(path: None, setup: Setup) -> None: ...
+@overload
+def read_motion_file(path: str | os.PathLike, setup: Setup) -> MotionFile: ...
 def read_motion_file(path: str | os.PathLike | None, setup: Setup) -> MotionFile | None:
     """A motion-profile file (``--motion``: e.g. from ``mitsweep design-sweep``), read and
     checked against ``setup`` (:func:`mitsweep.optics.motion_file.check_motion_file`: the

@@ -7,6 +7,7 @@ import os
 import sys
 from pathlib import Path
 from collections.abc import Iterable, Mapping
+from typing import cast
 
 from ._errors import InputError
 
@@ -38,7 +39,7 @@ def shown_path(path: PathArg) -> str:
     return data.decode("utf-8", "backslashreplace")
 
 
-def check_output_name(path: PathArg, option: str = "output") -> None:
+def check_output_name(path: str | os.PathLike, option: str = "output") -> None:
     """Refuse an output path that cannot be written under the name the user gave.
 
     Two encodings meet in one output name: the file system's (:func:`os.fsencode`: what
@@ -114,12 +115,16 @@ def check_outputs(inputs: Iterable[PathArg],
     InputError
         One line naming the option (or both paths).
     """
+    listed: list[tuple[str, PathArg]] = []
     if isinstance(outputs, Mapping):
-        named = [(opt, p) for opt, given in outputs.items()
-                 for p in (given if isinstance(given, (list, tuple)) else [given])]
+        for opt, given in outputs.items():
+            if isinstance(given, (list, tuple)):
+                listed += [(opt, p) for p in given]
+            else:  # one path (a str is a path, not an iterable of them)
+                listed.append((opt, cast(PathArg, given)))
     else:
-        named = [("output", p) for p in outputs]
-    named = [(opt, p) for opt, p in named if p is not None and str(p) != ""]
+        listed = [("output", p) for p in outputs]
+    named = [(opt, p) for opt, p in listed if p is not None and str(p) != ""]
     for opt, p in named:
         check_output_name(p, opt)
     ins = [Path(p) for p in inputs if p is not None and str(p) != ""]

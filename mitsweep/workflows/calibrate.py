@@ -85,7 +85,7 @@ def calibrate_camera(photo: str | os.PathLike, setup: Setup | str | os.PathLike,
     setup_path = None if isinstance(setup, Setup) else setup
     check_outputs([photo, setup_path], {"--write": write})
     setup = resolve_setup(setup)
-    image = read_camera_image(photo, log_warnings=False, pixel_pitch=pixel_pitch,
+    image = read_camera_image(os.fspath(photo), log_warnings=False, pixel_pitch=pixel_pitch,
                               white_balance=white_balance, transfer=transfer)
     pitch = image.pixel_pitch or setup.sensor.pixel_pitch
     pitch_source = image.meta.get("pixel_pitch_source") or "setup"
@@ -104,7 +104,7 @@ def calibrate_camera(photo: str | os.PathLike, setup: Setup | str | os.PathLike,
                   f"radius {cal.rim_radius_px:.3f} px\n(setup predicts "
                   f"{cal.predicted_radius_px:.3f} px), {cal.fit.points_used} of "
                   f"{cal.fit.points_total} rim points, rms {cal.fit.residual_rms_px:.3f} px.")
-        write_text_atomic(write, setup_to_toml(cal.calibrated_setup(setup), header=header))
+        write_text_atomic(os.fspath(write), setup_to_toml(cal.calibrated_setup(setup), header=header))
         out["written"] = os.fspath(write)
     provenance = {"workflow": "calibrate_camera", "version": __version__,
                   "photo": str(photo), "sha256": digest, "setup": setup.name,
@@ -152,7 +152,7 @@ def find_mirror_circle(photo: str | os.PathLike, *, pixel_pitch: float | None = 
     from ..photo.free import find_circle
 
     check_outputs([photo], [])
-    image = read_camera_image(photo, log_warnings=False, pixel_pitch=pixel_pitch,
+    image = read_camera_image(os.fspath(photo), log_warnings=False, pixel_pitch=pixel_pitch,
                               white_balance=white_balance, transfer=transfer)
     fit, radius = find_circle(image.data)
     image.log_warnings()

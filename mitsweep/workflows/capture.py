@@ -31,11 +31,16 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+from typing import TYPE_CHECKING
 
 from .. import __version__
 from ..config import Setup
+from ..optics.motion_file import MotionFile
 from ._base import InputError, WorkflowResult, read_motion_file, resolve_setup
 from ._paths import check_outputs
+
+if TYPE_CHECKING:
+    from ..rig import CapturePlan
 
 __all__ = ["plan_rig_capture", "capture", "capture_failure", "exit_status",
            "EXIT_COMPLETE", "EXIT_INCOMPLETE_SAFE", "EXIT_MAYBE_UNSAFE"]
@@ -55,19 +60,21 @@ def _parse_stage(text: str) -> str | None:
     return port
 
 
-def _plan(setup, stage: str, motion):
+def _plan(setup: Setup | str | os.PathLike, stage: str, motion: str | os.PathLike | None
+          ) -> tuple[Setup, CapturePlan, MotionFile | None, str | None]:
+    """The setup resolved, the capture's plan, the motion file read and the Zaber port."""
     from ..rig import plan_capture
 
     zaber_port = _parse_stage(stage)
-    setup = resolve_setup(setup)
-    motion_file = read_motion_file(motion, setup)
+    resolved = resolve_setup(setup)
+    motion_file = read_motion_file(motion, resolved)
     kind = "zaber" if zaber_port else "arduino"
     if motion_file is None:
-        plan = plan_capture(setup, stage=kind)
+        plan = plan_capture(resolved, stage=kind)
     else:
-        plan = plan_capture(setup, stage=kind, motion=motion_file.profile,
+        plan = plan_capture(resolved, stage=kind, motion=motion_file.profile,
                             exposure_s=motion_file.exposure_s)
-    return setup, plan, motion_file, zaber_port
+    return resolved, plan, motion_file, zaber_port
 
 
 def plan_rig_capture(setup: Setup | str | os.PathLike, *, stage: str = "arduino",
@@ -104,11 +111,12 @@ def plan_rig_capture(setup: Setup | str | os.PathLike, *, stage: str = "arduino"
     >>> plan = plan_rig_capture("sphere").value      # doctest: +SKIP
     >>> print(plan.summary())                        # doctest: +SKIP
     """
-    setup, plan, _, _ = _plan(setup, stage, motion)
-    provenance = {"workflow": "plan_rig_capture", "version": __version__, "setup": setup.name,
-                  "stage": stage, "motion": None if motion is None else os.fspath(motion)}
+    resolved, plan, _, _ = _plan(setup, stage, motion)
+    provenance = {"workflow": "plan_rig_capture", "version": __version__,
+                  "setup": resolved.name, "stage": stage,
+                  "motion": None if motion is None else os.fspath(motion)}
     return WorkflowResult(plan, provenance,
-                          {"setup": setup.name, "dry_run": True, "plan": plan.as_dict()})
+                          {"setup": resolved.name, "dry_run": True, "plan": plan.as_dict()})
 
 
 def capture(setup: Setup | str | os.PathLike, *, port: str | None,
@@ -169,30 +177,31 @@ def capture(setup: Setup | str | os.PathLike, *, port: str | None,
     from ..rig import RigError, RigPorts, run_capture
 
     setup_path = None if isinstance(setup, Setup) else setup
-    setup, plan, motion_file, zaber_port = _plan(setup, stage, motion)
+    resolved, plan, motion_file, zaber_port = _plan(setup, stage, motion)
     if not port:
         raise InputError("--port is required (the Arduino's serial port) unless --dry-run")
     out = os.fspath(out) if out else (
-        f"capture_{setup.name}_{_dt.datetime.now(_dt.timezone.utc):%Y%m%dT%H%M%SZ}.json")
+        f"capture_{resolved.name}_{_dt.datetime.now(_dt.timezone.utc):%Y%m%dT%H%M%SZ}.json")
     check_outputs([setup_path], {"--out": out})          # never the setup, even with force
     if os.path.lexists(out) and not force:
         raise InputError(f"--out {out} exists: pass --force to replace it, or choose "
                          f"another path")
     ports = RigPorts(arduino=port, zaber=zaber_port, checksums=checksums)
     try:
-        record = run_capture(setup, ports, out=out, plan=plan, motion_file=motion_file)
+        record = run_capture(resolved, ports, out=out, plan=plan, motion_file=motion_file)
     except (RigError, KeyboardInterrupt) as exc:
-        exc.capture_out = out
+        exc.capture_out = out  # type: ignore[union-attr]  # the record's path, for capture_failure
         raise
-    m = record.measurement()
+    m = record.measurement(strict=True)  # a complete capture saw the whole shutter cycle
+    assert m is not None  # strict: a missing measurement is raised as a RigError
     cmp = m.get("profile")
     extra = {} if cmp is None else {
         "profile_max_deviation_steps": cmp["max_deviation_steps"],
         "profile_tolerance_steps": cmp["tolerance_steps"]}
-    summary = {"setup": setup.name, "record": str(out), "complete": record.complete,
+    summary = {"setup": resolved.name, "record": str(out), "complete": record.complete,
                **m["exposure"], **extra}
     provenance = {"workflow": "capture", "version": __version__, "record": str(out),
-                  "setup": setup.name, "stage": stage, "port": port,
+                  "setup": resolved.name, "stage": stage, "port": port,
                   "motion": None if motion is None else os.fspath(motion),
                   "measurement": m}
     return WorkflowResult(record, provenance, summary)
@@ -214,7 +223,9 @@ def capture_failure(exc: BaseException) -> tuple[str, int]:
     from ..rig import safety_summary
     from ..rig.capture import status_of
 
-    record, out = exc.capture_record, getattr(exc, "capture_out", None)
+    # run_capture puts the record on the exception (any type: the type cannot say so)
+    record = exc.capture_record  # type: ignore[attr-defined]
+    out = getattr(exc, "capture_out", None)
     safe, steps = safety_summary(record)
     if isinstance(exc, KeyboardInterrupt):
         head = f"capture incomplete (interrupted by {record.signal})"

@@ -82,7 +82,8 @@ def check_dataset_outputs(inputs: list, out: Path, opts: DatasetOptions,
             rel = Path(inp).resolve().relative_to(root).as_posix()
         except ValueError:
             continue  # not inside the directory
-        written = written or written_paths(opts, shard)
+        written = written or written_paths(
+            opts, Shard.parse(shard) if isinstance(shard, str) else shard)
         if rel in written:
             check_outputs([inp], [out / rel])
 
@@ -235,19 +236,19 @@ def evaluate_dataset(dataset: str | os.PathLike, *, plot: str | os.PathLike | No
     check_outputs(dataset_inputs(dataset), {"--plot": plot, "--out": out})
     for path in (plot, out):
         if path:
-            check_writable(path)
+            check_writable(os.fspath(path))
     if plot:
         from ..plots import check_figure_path
 
-        check_figure_path(plot, "--plot")
+        check_figure_path(os.fspath(plot), "--plot")
     t0 = time.perf_counter()
     results = _evaluate(dataset)
     if plot:
         from ..plots import plot_per_radius
 
-        plot_per_radius(results, plot)
+        plot_per_radius(results, os.fspath(plot))
     if out:
-        write_text_atomic(out, json_text(results))      # the same text as --json
+        write_text_atomic(os.fspath(out), json_text(results))      # the same text as --json
     provenance = {"workflow": "evaluate_dataset", "version": __version__,
                   "dataset": os.fspath(dataset), "plot": plot and os.fspath(plot),
                   "out": out and os.fspath(out), "seconds": time.perf_counter() - t0}

@@ -95,7 +95,7 @@ def run_demo(out: str | os.PathLike = "out/demo", *, setup: str | os.PathLike | 
     if not (0 < spp_scale < math.inf):
         raise InputError(f"--spp-scale: must be a finite number > 0, got {spp_scale:g}")
 
-    setup = resolve_setup(setup_path) if setup_path else DEFAULT_SETUP
+    resolved = resolve_setup(setup_path) if setup_path else DEFAULT_SETUP
     out = Path(out)
     spp = {k: max(1, int(round(v * spp_scale))) for k, v in DEMO_SPP.items()}
     opts = DatasetOptions(scenes=scenes, seed=0, spp=spp)
@@ -111,18 +111,18 @@ def run_demo(out: str | os.PathLike = "out/demo", *, setup: str | os.PathLike | 
     t_all = time.perf_counter()
 
     t0 = time.perf_counter()
-    sweep = optimal_sweep_range(setup)
-    plot_focal_surfaces(setup, sweep, out / "focal_surfaces.png")
+    sweep = optimal_sweep_range(resolved)
+    plot_focal_surfaces(resolved, sweep, out / "focal_surfaces.png")
     timings["sweep_range_s"] = time.perf_counter() - t0
     step(f"sweep range {sweep.focus_min:.2f}-{sweep.focus_max:.2f} mm, sensor travel "
           f"{sweep.translation:.3f} mm, exposure {sweep.exposure_s:.3f} s")
-    report: dict = {"setup": setup.name, "sweep_range": sweep.as_dict()}
+    report: dict = {"setup": resolved.name, "sweep_range": sweep.as_dict()}
 
     if verify:
         from ..tracer.focus import traced_sweep_range
 
         t0 = time.perf_counter()
-        traced = traced_sweep_range(setup)
+        traced = traced_sweep_range(resolved)
         timings["traced_sweep_range_s"] = time.perf_counter() - t0
         report["traced_sweep_range"] = {"focus_min_mm": traced.focus_min,
                                         "focus_max_mm": traced.focus_max}
@@ -130,7 +130,7 @@ def run_demo(out: str | os.PathLike = "out/demo", *, setup: str | os.PathLike | 
 
     step(f"rendering and deconvolving into {out / 'dataset'} (spp {spp})")
     t0 = time.perf_counter()
-    build_dataset(setup, out / "dataset", opts)
+    build_dataset(resolved, out / "dataset", opts)
     timings["dataset_s"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -149,9 +149,9 @@ def run_demo(out: str | os.PathLike = "out/demo", *, setup: str | os.PathLike | 
     timings["total_s"] = time.perf_counter() - t_all
     report.update(evaluation=results["mean"], timings=timings, spp=spp)
     write_text_atomic(out / "report.json", json.dumps(report, indent=2, default=str) + "\n")
-    write_text_atomic(out / "report.md", _report_md(setup, sweep, report, results))
+    write_text_atomic(out / "report.md", _report_md(resolved, sweep, report, results))
     step(f"done in {timings['total_s']:.0f} s")
-    provenance = {"workflow": "run_demo", "version": __version__, "setup": setup.name,
+    provenance = {"workflow": "run_demo", "version": __version__, "setup": resolved.name,
                   "out": str(out), "spp": spp, "scenes": scenes, "verify": verify,
                   "timings": timings}
     return WorkflowResult(report, provenance, results)

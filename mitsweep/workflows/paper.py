@@ -66,8 +66,8 @@ def reproduce_table1(setup: Setup | str | os.PathLike, *,
     if plot:  # before the traces, not after
         from ..plots import check_figure_path
 
-        check_writable(plot)
-        check_figure_path(plot, "--plot")
+        check_writable(os.fspath(plot))
+        check_figure_path(os.fspath(plot), "--plot")
     if kernel_size % 2 == 0 or kernel_size < 3:
         raise InputError(f"--kernel-size: must be odd and >= 3, got {kernel_size}")
     ranges = ranges or default_ranges(setup)
@@ -78,7 +78,7 @@ def reproduce_table1(setup: Setup | str | os.PathLike, *,
     if plot:
         from ..plots import plot_table1
 
-        plot_table1(result, plot)
+        plot_table1(result, os.fspath(plot))
         result["plot"] = os.fspath(plot)
     provenance = {"workflow": "reproduce_table1", "version": __version__,
                   "setup": setup.name, "ranges": [list(r) for r in ranges], "radii": radii,

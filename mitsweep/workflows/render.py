@@ -121,13 +121,13 @@ def render_exr(setup: Setup | str | os.PathLike, out: str | os.PathLike, *, mode
     result = render_image(setup, mode, spp=spp, seed=seed, motion=profile,
                           aovs=tuple(dict.fromkeys(aovs)), f_number=f_number,
                           mirror_only=not full_frame, progress=progress, sampler=sampler,
-                          scene=scene,
+                          scene=os.fspath(scene) if isinstance(scene, (str, os.PathLike)) else scene,
                           scene_unit=scene_unit, resolution=resolution)
-    render_to_exr(out, result)
+    render_to_exr(os.fspath(out), result)
     if preview:
         from ..io.png import write_png
 
-        write_png(preview, result.image, max_width=preview_size)
+        write_png(os.fspath(preview), result.image, max_width=preview_size)
     m = result.metadata
     summary = {"out": os.fspath(out), "mode": mode, "spp": spp, "seed": seed,
                "sampler": m["sampler"],

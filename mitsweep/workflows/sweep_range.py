@@ -83,7 +83,7 @@ def compute_sweep_range(setup: Setup | str | os.PathLike, *, fov_deg: float | No
         check_outputs([None if isinstance(setup, Setup) else setup], {"--plot": plot})
         from ..plots import check_figure_path
 
-        check_figure_path(plot, "--plot")  # before the traces, not after
+        check_figure_path(os.fspath(plot), "--plot")  # before the traces, not after
     setup = resolve_setup(setup)
     dmin = dmax = None
     if depth is not None:
@@ -120,7 +120,7 @@ def compute_sweep_range(setup: Setup | str | os.PathLike, *, fov_deg: float | No
     if plot:
         from ..plots import plot_focal_surfaces
 
-        plot_focal_surfaces(setup, result, plot)
+        plot_focal_surfaces(setup, result, os.fspath(plot))
         out["plot"] = os.fspath(plot)
     provenance = {"workflow": "compute_sweep_range", "version": __version__,
                   "setup": setup.name, "fov_deg": fov_deg, "depth": depth,

@@ -141,7 +141,11 @@ def unwarp_image(image: str | os.PathLike, out: str | os.PathLike, *, projection
                          f"at any depth has its sensor beyond it)")
     i = sensor_distance or _number(meta, "reference_sensor_distance")
     if center is None and isinstance(meta.get("center_rc"), list):
-        center = tuple(float(x) for x in meta["center_rc"])
+        rc = [float(x) for x in meta["center_rc"]]
+        if len(rc) != 2:
+            raise InputError(f"{src}: its metadata's center_rc must be (row, col), got "
+                             f"{meta['center_rc']!r}")
+        center = (rc[0], rc[1])
     if center is not None and not (0 <= center[0] < H and 0 <= center[1] < W):
         raise InputError(f"--center {center[0]:g} {center[1]:g} lies outside the {W}x{H} image")
     t0 = time.perf_counter()
