@@ -42,6 +42,7 @@ from matplotlib.layout_engine import ConstrainedLayoutEngine
 from numpy.typing import ArrayLike
 
 from .config import Setup
+from .deprecation import renamed_keywords
 from .io.atomic import atomic_path
 from .io.bank import IPSFBank
 from .optics.sweep import SweepRange
@@ -241,7 +242,8 @@ def _sections_axes(ax, sections, pitch_um: float, labels=("radial", "tangential"
         ax.plot(x * pitch_um, values, "-", color=color, lw=lw, label=name + suffix)
 
 
-def plot_ipsf(kernel: ArrayLike, path: str | Path, *, pitch_mm: float,
+@renamed_keywords(pitch_mm="pixel_pitch")
+def plot_ipsf(kernel: ArrayLike, path: str | Path, *, pixel_pitch: float,
               sections: tuple[np.ndarray, np.ndarray, np.ndarray],
               title: str = "IPSF") -> Path:
     """One IPSF: thumbnail (normalised to its maximum, with a colour bar) and its radial
@@ -252,15 +254,15 @@ def plot_ipsf(kernel: ArrayLike, path: str | Path, *, pitch_mm: float,
     kernel : (K, K) array_like
         Unit-sum kernel, rows down the image, the chief-ray image at the centre.
     path : path
-    pitch_mm : float
-        Pixel pitch, mm.
+    pixel_pitch : float
+        Pixel pitch, mm (formerly ``pitch_mm``, still accepted with a warning).
     sections : tuple of three (n,) arrays
         ``(x, radial, tangential)`` as :func:`mitsweep.tracer.metrics.cross_sections`
         returns them (``x`` in pixels).
     title : str
     """
     fig, (a0, a1) = new_figure(1, 2, figsize=(10, 4))
-    pitch_um = pitch_mm * 1e3
+    pitch_um = pixel_pitch * 1e3
     im = _thumbnail(a0, kernel, pitch_um, title)
     a0.set_ylabel("v (µm)", fontsize=7)
     fig.colorbar(im, ax=a0, label="intensity / maximum", shrink=0.9)
@@ -282,7 +284,7 @@ def plot_bank(bank: IPSFBank, path: str | Path, *,
     ----------
     bank : mitsweep.io.bank.IPSFBank
         Reads ``kernels`` (n_depths, n_points, K, K), ``points_uv`` (n_points, 2) mm,
-        ``depths_mm`` (n_depths,) and ``pixel_pitch`` mm.
+        ``depths`` (n_depths,) and ``pixel_pitch`` mm.
     path : path
     sections : mapping of str to a sequence of ``(x, radial, tangential)``
         Per panel (e.g. ``"centre"``, ``"periphery"``), the cross-sections of one point
@@ -312,11 +314,11 @@ def plot_bank(bank: IPSFBank, path: str | Path, *,
         ax.set_visible(False)
     thumbs[0].set_ylabel("v (µm)", fontsize=7)
     top.colorbar(images[-1], ax=list(thumbs), label="intensity / maximum", shrink=0.9)
-    top.suptitle(f"IPSFs across the field, depth {_depth_text(bank.depths_mm[0])}",
+    top.suptitle(f"IPSFs across the field, depth {_depth_text(bank.depths[0])}",
                  fontsize=9)
     panels = bottom.subplots(1, max(len(sections), 1), squeeze=False)[0]
     for ax, (name, per_depth) in zip(panels, sections.items()):
-        for d, (depth, sec) in enumerate(zip(bank.depths_mm, per_depth)):
+        for d, (depth, sec) in enumerate(zip(bank.depths, per_depth)):
             shade = 1.0 - 0.6 * d / max(n_depths - 1, 1)
             _sections_axes(ax, sec, pitch_um, colors=((0, 0, shade), (shade, 0, 0)),
                            suffix=f" {_depth_text(depth)}", lw=1.0)
@@ -329,8 +331,8 @@ def plot_bank(bank: IPSFBank, path: str | Path, *,
     return save_figure(fig, path)
 
 
-def _depth_text(depth_mm: float) -> str:
-    return "inf" if math.isinf(depth_mm) else f"{depth_mm / 1000:g} m"
+def _depth_text(depth: float) -> str:
+    return "inf" if math.isinf(depth) else f"{depth / 1000:g} m"
 
 
 #: Up to this many sweep ranges, Table 1's bar labels stand upright on two lines.
@@ -568,10 +570,10 @@ def _save_all(fig, path):
     return paths[0] if len(paths) == 1 else paths
 
 
-def _depth_label(depth_mm: float) -> str:
-    if math.isinf(depth_mm):
+def _depth_label(depth: float) -> str:
+    if math.isinf(depth):
         return "depth ∞"
-    return f"depth {depth_mm / 10:g} cm" if depth_mm < 1000 else f"depth {depth_mm / 1000:g} m"
+    return f"depth {depth / 10:g} cm" if depth < 1000 else f"depth {depth / 1000:g} m"
 
 
 def _energy_half_extent(kernels, pitch_um: float, fraction: float = 0.995) -> float:
@@ -628,8 +630,10 @@ def _kernel_grid(fig, kernels, pitch_um: float, col_titles, row_titles, *, supti
     return axes
 
 
-def plot_psf_planes(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
-                    focus_mm: Sequence[float], sensor_mm: Sequence[float],
+@renamed_keywords(pitch_mm="pixel_pitch", focus_mm="focus_distances",
+                  sensor_mm="sensor_distances")
+def plot_psf_planes(kernels: ArrayLike, path: PathOrPaths, *, pixel_pitch: float,
+                    focus_distances: Sequence[float], sensor_distances: Sequence[float],
                     positions: Sequence[str], title: str) -> Path:
     """PSFs across the mirror for several focal planes (paper Fig. 3).
 
@@ -639,10 +643,12 @@ def plot_psf_planes(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
         PSF of each image point (columns) with the sensor at each plane (rows).
     path : path or sequence of paths
         One file per format (e.g. ``fig3.png`` and ``fig3.pdf``).
-    pitch_mm : float
-        Pixel pitch of the kernels, mm.
-    focus_mm, sensor_mm : sequences of float
-        Each plane's focus distance (object side) and sensor distance, mm.
+    pixel_pitch : float
+        Pixel pitch of the kernels, mm (formerly ``pitch_mm``, still accepted with a
+        warning).
+    focus_distances, sensor_distances : sequences of float
+        Each plane's focus distance (object side) and sensor distance, mm (formerly
+        ``focus_mm`` and ``sensor_mm``, as ``pixel_pitch``).
     positions : sequence of str
         Each point's position on the mirror (column titles).
     title : str
@@ -650,14 +656,15 @@ def plot_psf_planes(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
     k = np.asarray(kernels, dtype=np.float64)
     n_rows, n_cols = k.shape[:2]
     fig = Figure(figsize=(1.5 * n_cols + 1.8, 1.4 * n_rows + 1.0), layout="constrained")
-    rows = [f"focus {f:.0f} mm\n(sensor {s:.2f} mm)" for f, s in zip(focus_mm, sensor_mm)]
-    _kernel_grid(fig, k, pitch_mm * 1e3, list(positions), rows, suptitle=title,
-                 half_extent_um=_energy_half_extent(k, pitch_mm * 1e3))
+    rows = [f"focus {f:.0f} mm\n(sensor {s:.2f} mm)" for f, s in zip(focus_distances, sensor_distances)]
+    _kernel_grid(fig, k, pixel_pitch * 1e3, list(positions), rows, suptitle=title,
+                 half_extent_um=_energy_half_extent(k, pixel_pitch * 1e3))
     return _save_all(fig, path)
 
 
-def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
-                     depths_mm: Sequence[float], positions: Sequence[str],
+@renamed_keywords(pitch_mm="pixel_pitch", depths_mm="depths")
+def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pixel_pitch: float,
+                     depths: Sequence[float], positions: Sequence[str],
                      sections: Mapping[str, Sequence[tuple[np.ndarray, np.ndarray, np.ndarray]]],
                      title: str) -> Path:
     """IPSFs across the mirror and their cross-sections over depths (paper Fig. 4).
@@ -667,9 +674,12 @@ def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
     kernels : (n_depths, n_points, K, K) array_like
         Unit-sum IPSFs; the thumbnails show the first depth.
     path : path or sequence of paths
-    pitch_mm : float
-    depths_mm : sequence of float
-        The depths of ``kernels``' first axis, mm.
+    pixel_pitch : float
+        Pixel pitch of the kernels, mm (formerly ``pitch_mm``, still accepted with a
+        warning).
+    depths : sequence of float
+        The depths of ``kernels``' first axis, mm (formerly ``depths_mm``, as
+        ``pixel_pitch``).
     positions : sequence of str
         Each point's position on the mirror (thumbnail titles).
     sections : mapping of str to a sequence of ``(x, radial, tangential)``
@@ -683,7 +693,7 @@ def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
         if len(per_depth) != n_depths:
             raise ValueError(f"sections[{name!r}]: need one per depth ({n_depths}), "
                              f"got {len(per_depth)}")
-    pitch_um = pitch_mm * 1e3
+    pitch_um = pixel_pitch * 1e3
     fig = Figure(figsize=(max(1.7 * n + 1.4, 9.0), 7.0), layout="constrained")
     top, bottom = _subfigures(fig, 2, 1, height_ratios=(1.0, 1.5))
     thumbs = top.subplots(1, n, sharex=True, sharey=True, squeeze=False)[0]
@@ -692,9 +702,9 @@ def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
     _set_window(thumbs, half)
     thumbs[0].set_ylabel("v (µm)", fontsize=7)
     top.colorbar(images[-1], ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
-    top.suptitle(f"{title}: IPSFs across the mirror, {_depth_label(depths_mm[0])}",
+    top.suptitle(f"{title}: IPSFs across the mirror, {_depth_label(depths[0])}",
                  fontsize=10)
-    _section_panels(bottom, sections, depths_mm, pitch_um, half_um=half,
+    _section_panels(bottom, sections, depths, pitch_um, half_um=half,
                     suptitle="cross-sections at each depth (unit-sum IPSFs)")
     return _save_all(fig, path)
 
@@ -704,7 +714,7 @@ def plot_ipsf_depths(kernels: ArrayLike, path: PathOrPaths, *, pitch_mm: float,
 DIRECTION_WIDTHS = {"radial": 2.4, "tangential": 1.1}
 
 
-def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str | None,
+def _section_panels(fig, sections, depths, pitch_um: float, *, suptitle: str | None,
                     half_um: float | None = None, axes=None, legend: bool = True):
     """Radial (blue) and tangential (red) cross-sections, one line style and marker per
     depth; one key for the figure, below the panels."""
@@ -734,7 +744,7 @@ def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str 
                for d, c in DIRECTION_COLORS.items()]
         key += [Line2D([], [], color="k", lw=1.1, linestyle=DEPTH_STYLES[d % len(DEPTH_STYLES)][0],
                        marker=DEPTH_STYLES[d % len(DEPTH_STYLES)][1], ms=3.5,
-                       label=_depth_label(depth)) for d, depth in enumerate(depths_mm)]
+                       label=_depth_label(depth)) for d, depth in enumerate(depths)]
         fig.legend(handles=key, loc="outside lower center", ncols=len(key), fontsize=7,
                    framealpha=1.0)
     if suptitle:
@@ -742,9 +752,10 @@ def _section_panels(fig, sections, depths_mm, pitch_um: float, *, suptitle: str 
     return axes
 
 
+@renamed_keywords(pitch_mm="pixel_pitch", ranges_mm="ranges", depths_mm="depths")
 def plot_sweep_ranges(sections: Sequence[Mapping[str, Sequence[tuple]]], path: PathOrPaths,
-                      *, pitch_mm: float, ranges_mm: Sequence[tuple],
-                      depths_mm: Sequence[float], title: str,
+                      *, pixel_pitch: float, ranges: Sequence[tuple],
+                      depths: Sequence[float], title: str,
                       optimal: tuple[float, float] | None = None) -> Path:
     """IPSF cross-sections at the mirror's centre and periphery for several sweep ranges
     and depths (paper Fig. 5).
@@ -755,31 +766,35 @@ def plot_sweep_ranges(sections: Sequence[Mapping[str, Sequence[tuple]]], path: P
         For each range, per place (e.g. ``"centre"``, ``"periphery"``: the rows), the
         cross-sections at each depth.
     path : path or sequence of paths
-    pitch_mm : float
-    ranges_mm : sequence of (focus_min, focus_max)
-        Column titles, mm.
-    depths_mm : sequence of float
+    pixel_pitch : float
+        Pixel pitch of the cross-sections' ``x`` (pixels), mm (formerly ``pitch_mm``,
+        still accepted with a warning).
+    ranges : sequence of (focus_min, focus_max)
+        Column titles, mm (formerly ``ranges_mm``, as ``pixel_pitch``).
+    depths : sequence of float
+        The depths of each place's cross-sections, mm (formerly ``depths_mm``, as
+        ``pixel_pitch``).
     title : str
     optimal : (focus_min, focus_max), optional
         The optimal range (Eq. 8–9), marked "optimal" in its column's titles.
     """
     places = list(sections[0])
-    n = len(ranges_mm)
+    n = len(ranges)
     x_half = max(float(np.max(np.abs(np.asarray(sec[0])[np.maximum(np.asarray(sec[1]),
                                                                   np.asarray(sec[2]))
                                                        > 1e-3 * max(np.max(sec[1]),
                                                                     np.max(sec[2]))])))
                  for col in sections for per_depth in col.values() for sec in per_depth)
-    x_half = (x_half + 2.0) * pitch_mm * 1e3
+    x_half = (x_half + 2.0) * pixel_pitch * 1e3
     fig = Figure(figsize=(2.7 * n + 1.2, 2.5 * len(places) + 1.2), layout="constrained")
     axes = fig.subplots(len(places), n, squeeze=False, sharey="row", sharex="row")
-    for j, (lo, hi) in enumerate(ranges_mm):
+    for j, (lo, hi) in enumerate(ranges):
         col = {p: sections[j][p] for p in places}
         for i, p in enumerate(places):
             ax = axes[i, j]
             mark = " (optimal)" if optimal is not None and np.allclose((lo, hi), optimal) else ""
-            _section_panels(fig, {f"{p}, sweep {lo:.0f}–{hi:.0f} mm{mark}": col[p]}, depths_mm,
-                            pitch_mm * 1e3, suptitle=None, axes=[ax], half_um=x_half,
+            _section_panels(fig, {f"{p}, sweep {lo:.0f}–{hi:.0f} mm{mark}": col[p]}, depths,
+                            pixel_pitch * 1e3, suptitle=None, axes=[ax], half_um=x_half,
                             legend=(i == 0 and j == 0))
             if j > 0:
                 ax.set_ylabel("")
@@ -788,9 +803,10 @@ def plot_sweep_ranges(sections: Sequence[Mapping[str, Sequence[tuple]]], path: P
     return _save_all(fig, path)
 
 
+@renamed_keywords(pitch_mm="pixel_pitch")
 def plot_pipeline(steps: Sequence[dict], path: PathOrPaths, *,
                   bank_kernels: ArrayLike, bank_positions: Sequence[str],
-                  pitch_mm: float, white: float, title: str) -> Path:
+                  pixel_pitch: float, white: float, title: str) -> Path:
     """The processing pipeline step by step (paper Fig. 8): the IPSF bank, then images.
 
     Parameters
@@ -806,8 +822,9 @@ def plot_pipeline(steps: Sequence[dict], path: PathOrPaths, *,
         The IPSFs the deconvolution uses, shown in a row above the images.
     bank_positions : sequence of str
         Their positions (thumbnail titles).
-    pitch_mm : float
-        Pixel pitch of the kernels, mm.
+    pixel_pitch : float
+        Pixel pitch of the kernels, mm (formerly ``pitch_mm``, still accepted with a
+        warning).
     white : float
         Linear value shown as white (the ground truth's white level).
     title : str
@@ -819,14 +836,15 @@ def plot_pipeline(steps: Sequence[dict], path: PathOrPaths, *,
     fig = Figure(figsize=(12.0, 1.9 + 3.9 * len(rows)), layout="constrained")
     top, bottom = _subfigures(fig, 2, 1, height_ratios=(1.6, 3.9 * len(rows)))
     thumbs = top.subplots(1, len(kernels), sharex=True, sharey=True, squeeze=False)[0]
-    images = [_thumbnail(thumbs[j], k, pitch_mm * 1e3, bank_positions[j])
+    images = [_thumbnail(thumbs[j], k, pixel_pitch * 1e3, bank_positions[j])
               for j, k in enumerate(kernels)]
-    _set_window(thumbs, _energy_half_extent(kernels, pitch_mm * 1e3))
+    _set_window(thumbs, _energy_half_extent(kernels, pixel_pitch * 1e3))
     thumbs[0].set_ylabel("v (µm)", fontsize=7)
     top.colorbar(images[-1], ax=list(thumbs), label="IPSF / its maximum", shrink=0.9)
     top.suptitle("(a) the IPSF bank the deconvolution uses (depth 50 cm)", fontsize=9)
-    mosaic: list[HashableList[str]] = [[f"{r}:{j}" for j, _ in enumerate(row) for _ in range(6 // len(row))]
-              for r, row in enumerate(rows)]
+    mosaic: list[HashableList[str]] = [
+        [f"{r}:{j}" for j, _ in enumerate(row) for _ in range(6 // len(row))]
+        for r, row in enumerate(rows)]
     axes = bottom.subplot_mosaic(mosaic)
     for r, row in enumerate(rows):
         for j, step in enumerate(row):

@@ -19,7 +19,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_rim_radii_keep_the_banks_spacing_and_end_at_the_rim():
     bank = synthetic_radial_bank((64, 64), n_radii=5, r_max_px=20.0, pixel_pitch=0.1)
-    r = np.asarray(bank.radii_mm)                      # 0, 0.5, ..., 2.0 mm
+    r = np.asarray(bank.radii)                      # 0, 0.5, ..., 2.0 mm
     new = rim_radii(bank, 3.3)
     np.testing.assert_allclose(new, [2.4333333, 2.8666667, 3.3], rtol=1e-6)
     assert np.all(np.diff(new) <= np.diff(r)[0] + 1e-12)
@@ -46,15 +46,15 @@ def test_rim_bank_traces_the_points_beyond_the_fov_as_the_tracer_does(paraboloid
 
     setup, bank = paraboloid
     ext = rim_bank(setup, bank)
-    n0 = len(bank.radii_mm)
+    n0 = len(bank.radii)
     ref = reference_geometry(setup).sensor_distance
     rim = rim_image_radius(setup, ref)
-    assert rim > float(np.max(bank.radii_mm)) * 1.1
-    assert float(ext.radii_mm[-1]) == pytest.approx(rim)
-    assert ext.metadata["fov_radius_mm"] == pytest.approx(float(np.max(bank.radii_mm)))
+    assert rim > float(np.max(bank.radii)) * 1.1
+    assert float(ext.radii[-1]) == pytest.approx(rim)
+    assert ext.metadata["fov_radius_mm"] == pytest.approx(float(np.max(bank.radii)))
     np.testing.assert_array_equal(ext.kernels[:, :n0], bank.kernels)
-    j = len(ext.radii_mm) - 1
-    k, _ = integrated_psf(setup, float(ext.radii_mm[j]), 0.0, float(bank.depths_mm[0]),
+    j = len(ext.radii) - 1
+    k, _ = integrated_psf(setup, float(ext.radii[j]), 0.0, float(bank.depths[0]),
                           settings=TraceSettings(rays=20_000, kernel_size=15, seed=j))
     np.testing.assert_allclose(ext.kernels[0, j], k, atol=1e-6)
     assert ext.kernels[0, j].sum() == pytest.approx(1.0, abs=1e-3)

@@ -15,8 +15,8 @@ def bank_with_depths(depths, K=5, resolution=(64, 48)):
         k[d, :, 0, 0] = 1.0
     radii = np.array([0.0, 0.1])
     return IPSFBank(kernels=k, points_uv=np.stack([radii, 0 * radii], 1),
-                    depths_mm=np.asarray(depths, float), pixel_pitch=0.01,
-                    reference_sensor_distance=30.0, kind="radial", radii_mm=radii,
+                    depths=np.asarray(depths, float), pixel_pitch=0.01,
+                    reference_sensor_distance=30.0, kind="radial", radii=radii,
                     metadata={"setup": {"sensor": {"resolution": list(resolution)}}})
 
 

@@ -102,9 +102,9 @@ def _delta_bank(shape, K=9):
     k[..., K // 2, K // 2] = 1
     radii = np.linspace(0, 0.018 * shape[0] / 2, 5)
     return IPSFBank(kernels=k, points_uv=np.stack([radii, 0 * radii], 1),
-                    depths_mm=np.array([500.]),
+                    depths=np.array([500.]),
                     pixel_pitch=0.018, reference_sensor_distance=30.0, kind="radial",
-                    radii_mm=radii)
+                    radii=radii)
 
 
 def test_delta_bank_polar_deconvolution_is_the_round_trip():
@@ -137,8 +137,8 @@ def test_stable_with_spectral_zeros_and_noise(nsr):
     k[..., K // 2, K // 2 - 3] = k[..., K // 2, K // 2 + 3] = 0.5   # exact spectral zeros
     radii = np.linspace(0, 1.2, 4)
     bank = IPSFBank(kernels=k, points_uv=np.stack([radii, 0 * radii], 1),
-                    depths_mm=np.array([500.]), pixel_pitch=0.018,
-                    reference_sensor_distance=30.0, kind="radial", radii_mm=radii)
+                    depths=np.array([500.]), pixel_pitch=0.018,
+                    reference_sensor_distance=30.0, kind="radial", radii=radii)
     x = polar_deconvolve(img, bank, nsr=nsr)
     assert np.all(np.isfinite(x))
     # Wiener gain <= 1/(2 sqrt(nsr)); allow that times the input's range

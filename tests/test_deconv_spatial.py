@@ -73,7 +73,7 @@ def test_no_seams_identical_kernels_equal_one_global_wiener(camera128):
     """With one kernel everywhere the windows must blend to the global Wiener result."""
     base = synthetic_grid_bank(camera128.shape, (4, 4), size=11)
     k = np.repeat(base.kernels[:, 5:6], 16, axis=1)
-    bank = IPSFBank(kernels=k, points_uv=base.points_uv, depths_mm=base.depths_mm,
+    bank = IPSFBank(kernels=k, points_uv=base.points_uv, depths=base.depths,
                     pixel_pitch=base.pixel_pitch, reference_sensor_distance=30.0,
                     kind="grid", grid_shape=(4, 4), metadata=base.metadata)
     # the flat prior's inverse filter is compact, so 3 K of context captures it (the
@@ -140,7 +140,7 @@ def test_irregular_grid_is_refused():
     bank = synthetic_grid_bank((64, 64), (3, 3), size=9)
     pts = bank.points_uv.copy()
     pts[4, 0] += 0.05                                    # move the middle point sideways
-    bad = IPSFBank(kernels=bank.kernels, points_uv=pts, depths_mm=bank.depths_mm,
+    bad = IPSFBank(kernels=bank.kernels, points_uv=pts, depths=bank.depths,
                    pixel_pitch=bank.pixel_pitch, reference_sensor_distance=30.0, kind="grid",
                    grid_shape=(3, 3))
     with pytest.raises(BankError, match="regular"):

@@ -143,8 +143,8 @@ def test_psf_planes_share_one_colour_bar_and_window(tmp_path, drawn):
     kernels = np.stack([np.stack([gaussian_kernel(0.5 + 0.1 * i + 0.1 * j)
                                   for j in range(3)]) for i in range(2)])
     paths = plots.plot_psf_planes(kernels, [tmp_path / "f.png", tmp_path / "f.pdf"],
-                                  pitch_mm=0.018, focus_mm=[340.0, 360.0],
-                                  sensor_mm=[58.6, 58.1], positions=["a", "b", "c"],
+                                  pixel_pitch=0.018, focus_distances=[340.0, 360.0],
+                                  sensor_distances=[58.6, 58.1], positions=["a", "b", "c"],
                                   title="t")
     assert [p.name for p in paths] == ["f.png", "f.pdf"]
     assert (tmp_path / "f.pdf").read_bytes()[:5] == PDF_SIGNATURE
@@ -162,8 +162,8 @@ def test_sweep_ranges_key_clears_the_panels_and_depths_differ_in_style(tmp_path,
     per_depth = [cross_sections(gaussian_kernel(1.0 + 0.1 * d), 0.0) for d in range(3)]
     sections = [{"centre": per_depth, "periphery": per_depth} for _ in range(3)]
     ranges = [(339.0, 348.0), (339.0, 357.0), (339.0, 364.0)]
-    plots.plot_sweep_ranges(sections, tmp_path / "f5.png", pitch_mm=0.018, ranges_mm=ranges,
-                            depths_mm=depths, title="t", optimal=(339.0, 364.0))
+    plots.plot_sweep_ranges(sections, tmp_path / "f5.png", pixel_pitch=0.018, ranges=ranges,
+                            depths=depths, title="t", optimal=(339.0, 364.0))
     fig, renderer = drawn[0]
     panels = [ax for ax in fig.axes if ax.lines]
     assert len(panels) == 6
@@ -250,7 +250,7 @@ def test_pipeline_panels_read_in_the_order_of_the_steps(tmp_path, drawn):
     steps += [{"title": f"({c})", "image": rng.random((8, 36, 3)), **polar} for c in "de"]
     steps += [{"title": "(f)", "image": rng.random((16, 16, 3))}]
     plots.plot_pipeline(steps, tmp_path / "f8.png", bank_kernels=[gaussian_kernel(1.0)] * 2,
-                        bank_positions=["r = 0", "r = 1"], pitch_mm=0.018, white=1.0,
+                        bank_positions=["r = 0", "r = 1"], pixel_pitch=0.018, white=1.0,
                         title="t")
     (fig, renderer), = drawn
     panels = [ax for ax in fig.axes if ax.get_title() in {f"({c})" for c in "bcdef"}]

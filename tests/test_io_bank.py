@@ -18,9 +18,9 @@ OPTICS = optics_sections(setup_to_dict(DEFAULT_SETUP),
 def traced_like(**changes) -> IPSFBank:
     """A small radial bank that claims DEFAULT_SETUP's optics."""
     base = synthetic_radial_bank((64, 64), size=9, n_radii=3)
-    kw = dict(kernels=base.kernels, points_uv=base.points_uv, depths_mm=base.depths_mm,
+    kw = dict(kernels=base.kernels, points_uv=base.points_uv, depths=base.depths,
               pixel_pitch=base.pixel_pitch, reference_sensor_distance=363.4, kind="radial",
-              radii_mm=base.radii_mm, metadata={"seed": 1}, optics=OPTICS)
+              radii=base.radii, metadata={"seed": 1}, optics=OPTICS)
     kw.update(changes)
     return IPSFBank(**kw)
 
@@ -115,7 +115,7 @@ def test_edited_optics_break_the_fingerprint(tmp_path):
 def test_empty_kernels_are_refused():
     base = traced_like()
     with pytest.raises(BankError, match="the bank holds no kernels"):
-        traced_like(kernels=base.kernels[:0], depths_mm=base.depths_mm[:0])
+        traced_like(kernels=base.kernels[:0], depths=base.depths[:0])
 
 
 def test_format_1_banks_load_unfingerprinted_and_cannot_be_resaved(tmp_path):

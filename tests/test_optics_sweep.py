@@ -151,7 +151,7 @@ def test_lengths_are_unsuffixed_attributes_with_mm_json_keys():
     for name in ("focus_min", "focus_max", "sensor_start", "sensor_end", "translation",
                  "rho_max", "rho_start", "rho_end", "depth_min", "depth_max"):
         assert d[f"{name}_mm"] == getattr(r, name)
-        with pytest.warns(DeprecationWarning, match=f"SweepRange.{name} "):
+        with pytest.warns(DeprecationWarning, match=f"use SweepRange.{name}$"):
             assert getattr(r, f"{name}_mm") == getattr(r, name)
     with pytest.raises(AttributeError):
         r.focus_min_mm = 1.0       # the deprecated names are read-only

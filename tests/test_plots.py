@@ -61,8 +61,8 @@ def tiny_bank(n_points: int = 3, depths=(500.0, math.inf)) -> IPSFBank:
                                   for i in range(n_points)]) for d in range(len(depths))])
     radii = np.linspace(0.0, 2.0, n_points)
     return IPSFBank(kernels=kernels, points_uv=np.column_stack([radii, np.zeros(n_points)]),
-                    depths_mm=np.array(depths), pixel_pitch=PITCH_MM,
-                    reference_sensor_distance=50.0, kind="radial", radii_mm=radii,
+                    depths=np.array(depths), pixel_pitch=PITCH_MM,
+                    reference_sensor_distance=50.0, kind="radial", radii=radii,
                     metadata={"synthetic": True})
 
 
@@ -121,7 +121,7 @@ def test_focal_surfaces_png_with_the_legend_off_the_curves(scenes_dir, tmp_path,
 
 def test_ipsf_png_has_a_colour_bar_and_unclashing_labels(tmp_path, drawn):
     kernel = gaussian_kernel(1.5, 1.0)
-    path = plots.plot_ipsf(kernel, tmp_path / "ipsf.png", pitch_mm=PITCH_MM,
+    path = plots.plot_ipsf(kernel, tmp_path / "ipsf.png", pixel_pitch=PITCH_MM,
                            sections=cross_sections(kernel, 0.0), title="IPSF")
     assert_real_png(path, (10, 4))
     (fig, renderer), = drawn
@@ -148,7 +148,7 @@ def test_bank_png_thumbnails_share_a_colour_bar_without_overlap(tmp_path, drawn)
     assert not any(_boxes_overlap(a, b) for j, a in enumerate(boxes) for b in boxes[j + 1:])
     panels = [ax for ax in fig.axes if ax.get_title() in ("centre", "periphery")]
     assert len(panels) == 2
-    assert all(len(ax.lines) == 2 * len(bank.depths_mm) for ax in panels)
+    assert all(len(ax.lines) == 2 * len(bank.depths) for ax in panels)
 
 
 def test_bank_refuses_sections_not_matching_its_depths(tmp_path):

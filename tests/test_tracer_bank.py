@@ -22,10 +22,10 @@ def test_radial_bank_round_trip_and_contract(tmp_path):
     assert time.perf_counter() - t0 < 30
     assert bank.kernels.shape == (2, 19, 31, 31)
     np.testing.assert_allclose(bank.kernels.sum(axis=(2, 3)), 1.0, atol=1e-5)
-    assert bank.radii_mm[0] == 0.0 and np.all(np.diff(bank.radii_mm) > 0)
+    assert bank.radii[0] == 0.0 and np.all(np.diff(bank.radii) > 0)
     np.testing.assert_array_equal(bank.points_uv[:, 1], 0.0)
     # The bank's kernel equals a direct integrated_psf call with the same seed.
-    k, _ = integrated_psf(SPHERE, float(bank.radii_mm[7]), 0.0, 5000.0,
+    k, _ = integrated_psf(SPHERE, float(bank.radii[7]), 0.0, 5000.0,
                           settings=TraceSettings(rays=200_000, seed=7))
     np.testing.assert_array_equal(bank.kernels[1, 7], k)
     path = save_bank(tmp_path / "b.npz", bank)

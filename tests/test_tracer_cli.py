@@ -36,7 +36,7 @@ def test_ipsf_bank_to_npz(tmp_path, capsys):
                          "--depth", "500", "inf", "--rays", "100000", "-o", str(out), "--json"])
     assert res["shape"] == [2, 5, 31, 31]
     bank = load_bank(out)
-    assert np.isinf(bank.depths_mm[1])
+    assert np.isinf(bank.depths[1])
     np.testing.assert_allclose(bank.kernels.sum(axis=(2, 3)), 1.0, atol=1e-5)
 
 

@@ -15,8 +15,10 @@ Layout conventions
   by θ counter-clockwise (rotational symmetry of an untilted mirror).
 - ``kind = "grid"``: points on a regular (rows × cols) grid over the field,
   ``grid_shape`` = (rows, cols), points in row-major order (rows top to bottom).
-- ``depths_mm``: (n_depths,) depth l of the point source, > 0 (inf allowed).
-- ``radii_mm``: (n_points,) radial banks: finite, >= 0, strictly increasing.
+- ``depths_mm``: (n_depths,) depth l of the point source, > 0 (inf allowed)
+  (:attr:`IPSFBank.depths`).
+- ``radii_mm``: (n_points,) radial banks: finite, >= 0, strictly increasing
+  (:attr:`IPSFBank.radii`).
 - ``vignetted``: (n_depths, n_points) fraction in [0, 1] of the source's traced energy lost.
 - Every array is numeric and finite where the above does not allow inf; a bank that is
   not is refused whole when it is made or loaded (:class:`BankError` naming the array).
@@ -31,7 +33,9 @@ Layout conventions
 
 Stored as NPZ (``.npz``; arrays plus a JSON header as a 0-d string array), written
 atomically. Format 2 adds the optics and their fingerprint; format 1 banks still load,
-with ``fingerprinted = False``.
+with ``fingerprinted = False``. The arrays keep their ``*_mm`` names in the file
+(``depths_mm``, ``radii_mm``) whatever the Python names, so that every bank written
+before still reads and a cached bank's bytes do not change.
 """
 
 from __future__ import annotations
@@ -41,11 +45,12 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Mapping
 
 import numpy as np
 
+from ..deprecation import renamed_fields
 from ..resources import ResourceError, require_regular_file
 from .atomic import atomic_path
 
@@ -114,6 +119,7 @@ class BankError(ValueError):
     """A bank file is missing, malformed, or does not match what it is used with."""
 
 
+@renamed_fields(depths_mm="depths", radii_mm="radii")
 @dataclass(frozen=True)
 class IPSFBank:
     """IPSF kernels over image points and depths; see the module docstring for the layout.
@@ -129,16 +135,19 @@ class IPSFBank:
     points_uv : (n_points, 2) ndarray
         Upright image coordinates (u, v) of the points, mm, at the reference sensor
         distance.
-    depths_mm : (n_depths,) ndarray
+    depths : (n_depths,) ndarray
         Depth l of the point source of each row of kernels, mm, > 0 (``inf`` allowed).
+        Formerly ``depths_mm`` (still accepted and readable, with a warning; the file's
+        array keeps that name).
     pixel_pitch : float
         Pixel pitch of the kernels' grid, mm.
     reference_sensor_distance : float
         The sensor distance whose pixel grid the kernels are on, mm.
     kind : {"radial", "grid"}
         Points on the +u half-axis (rotated for other angles) or on a regular grid.
-    radii_mm : (n_points,) ndarray, optional
+    radii : (n_points,) ndarray, optional
         Radial banks: the points' distances from the centre, mm, strictly increasing.
+        Formerly ``radii_mm`` (as ``depths``).
     grid_shape : (int, int), optional
         Grid banks: (rows, cols), rows * cols = n_points.
     vignetted : (n_depths, n_points) ndarray, optional
@@ -153,16 +162,25 @@ class IPSFBank:
 
     kernels: np.ndarray           # (n_depths, n_points, K, K) float32
     points_uv: np.ndarray         # (n_points, 2) mm
-    depths_mm: np.ndarray         # (n_depths,)
+    depths: np.ndarray            # (n_depths,) mm
     pixel_pitch: float            # mm
     reference_sensor_distance: float  # mm
     kind: str                     # "radial" | "grid"
-    radii_mm: np.ndarray | None = None     # (n_points,) for radial banks
+    radii: np.ndarray | None = None        # (n_points,) mm, for radial banks
     grid_shape: tuple[int, int] | None = None
     vignetted: np.ndarray | None = None    # (n_depths, n_points)
     metadata: dict[str, Any] = field(default_factory=dict)
     optics: dict[str, Any] | None = None
     fingerprinted: bool = True
+
+    if TYPE_CHECKING:
+        # The former names renamed_fields adds at run time (with a warning), told to the
+        # type checker so that callers not yet converted still type-check.
+        @property
+        def depths_mm(self) -> np.ndarray: ...
+
+        @property
+        def radii_mm(self) -> np.ndarray | None: ...
 
     def __post_init__(self) -> None:
         k = np.asarray(self.kernels)
@@ -184,13 +202,15 @@ class IPSFBank:
             raise BankError(f"optics must be a JSON object, got {type(self.optics).__name__}")
         if np.asarray(self.points_uv).shape != (k.shape[1], 2):
             raise BankError(f"points_uv must be ({k.shape[1]}, 2), got {np.shape(self.points_uv)}")
-        if np.asarray(self.depths_mm).shape != (k.shape[0],):
-            raise BankError(f"depths_mm must be ({k.shape[0]},), got {np.shape(self.depths_mm)}")
+        if np.asarray(self.depths).shape != (k.shape[0],):
+            raise BankError(f"depths (the file's depths_mm) must be ({k.shape[0]},), got "
+                            f"{np.shape(self.depths)}")
         if self.kind not in ("radial", "grid"):
             raise BankError(f"kind must be 'radial' or 'grid', got {self.kind!r}")
-        if self.kind == "radial" and (self.radii_mm is None or
-                                      np.shape(self.radii_mm) != (k.shape[1],)):
-            raise BankError("a radial bank needs radii_mm of shape (n_points,)")
+        if self.kind == "radial" and (self.radii is None or
+                                      np.shape(self.radii) != (k.shape[1],)):
+            raise BankError("a radial bank needs radii (the file's radii_mm) of shape "
+                            "(n_points,)")
         if self.kind == "grid" and (self.grid_shape is None or
                                     int(np.prod(self.grid_shape)) != k.shape[1]):
             raise BankError("a grid bank needs grid_shape with rows*cols == n_points")
@@ -216,12 +236,12 @@ def _check_values(bank: IPSFBank, n_depths: int, n_points: int) -> None:
     """Every array of a bank holds what its layout allows (the shapes are checked)."""
     if not np.all(np.isfinite(_numbers("points_uv", bank.points_uv))):
         raise BankError("points_uv hold NaN or inf values; finite mm expected")
-    depths = _numbers("depths_mm", bank.depths_mm)
+    depths = _numbers("depths_mm", bank.depths)
     if not np.all(depths > 0):  # NaN fails too
         raise BankError(f"depths_mm must be > 0 mm (inf allowed), got "
                         f"{depths[~(depths > 0)][0]:g}")
-    if bank.radii_mm is not None:
-        radii = _numbers("radii_mm", bank.radii_mm)
+    if bank.radii is not None:
+        radii = _numbers("radii_mm", bank.radii)
         if radii.ndim != 1 or not np.all(np.isfinite(radii)) or np.any(radii < 0):
             raise BankError("radii_mm must be finite and >= 0 mm")
         if np.any(np.diff(radii) <= 0):
@@ -261,10 +281,10 @@ def save_bank(path: str | Path, bank: IPSFBank, *, reproducible: bool = True) ->
     arrays: dict[str, np.ndarray] = {
         "kernels": np.asarray(bank.kernels, dtype=np.float32),
         "points_uv": np.asarray(bank.points_uv, dtype=np.float64),
-        "depths_mm": np.asarray(bank.depths_mm, dtype=np.float64),
+        "depths_mm": np.asarray(bank.depths, dtype=np.float64),   # the file's names
     }
-    if bank.radii_mm is not None:
-        arrays["radii_mm"] = np.asarray(bank.radii_mm, dtype=np.float64)
+    if bank.radii is not None:
+        arrays["radii_mm"] = np.asarray(bank.radii, dtype=np.float64)
     if bank.vignetted is not None:
         arrays["vignetted"] = np.asarray(bank.vignetted, dtype=np.float64)
     if not bank.fingerprinted:
@@ -360,9 +380,9 @@ def load_bank(path: str | Path) -> IPSFBank:
                             f"(the header was edited); trace the bank again")
     try:
         return IPSFBank(kernels=data["kernels"], points_uv=data["points_uv"],
-                        depths_mm=data["depths_mm"], pixel_pitch=header["pixel_pitch"],
+                        depths=data["depths_mm"], pixel_pitch=header["pixel_pitch"],
                         reference_sensor_distance=header["reference_sensor_distance"],
-                        kind=header["kind"], radii_mm=data.get("radii_mm"),
+                        kind=header["kind"], radii=data.get("radii_mm"),
                         grid_shape=tuple(gs) if gs else None, vignetted=data.get("vignetted"),
                         metadata=header.get("metadata", {}), optics=optics,
                         fingerprinted=fingerprinted)

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import Setup
+from ..deprecation import renamed_keywords
 from .chief_ray import chief_ray, image_point
 from .placement import placement_of
 from .reference import reference_geometry
@@ -45,29 +46,32 @@ class RimOutline:
     sensor_distance: float
     on_rim: np.ndarray
 
-    def offsets_px(self, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    @renamed_keywords(pitch="pixel_pitch")
+    def offsets_px(self, pixel_pitch: float) -> tuple[np.ndarray, np.ndarray]:
         """Points and outward normals as ``(drow, dcol)`` pixels from the axis, (N, 2).
 
         Parameters
         ----------
-        pitch : float
+        pixel_pitch : float
             Pixel pitch, mm (the points are divided by it; the unit normals are not).
+            Formerly ``pitch``, still accepted with a warning.
         """
-        pts = np.stack([-self.uv[:, 1], self.uv[:, 0]], axis=-1) / pitch
+        pts = np.stack([-self.uv[:, 1], self.uv[:, 0]], axis=-1) / pixel_pitch
         nrm = np.stack([-self.normal_uv[:, 1], self.normal_uv[:, 0]], axis=-1)
         return pts, nrm
 
-    def equivalent_radius_px(self, pitch: float) -> float:
+    @renamed_keywords(pitch="pixel_pitch")
+    def equivalent_radius_px(self, pixel_pitch: float) -> float:
         """Radius (px) of the circle of the outline's area (the radius, for a circle).
 
         Parameters
         ----------
-        pitch : float
-            Pixel pitch, mm.
+        pixel_pitch : float
+            Pixel pitch, mm (formerly ``pitch``, still accepted with a warning).
         """
         u, v = self.uv[:, 0], self.uv[:, 1]
         area = 0.5 * abs(np.dot(u, np.roll(v, -1)) - np.dot(v, np.roll(u, -1)))
-        return math.sqrt(area / math.pi) / pitch
+        return math.sqrt(area / math.pi) / pixel_pitch
 
 
 def _resample_closed(points: np.ndarray, n: int) -> np.ndarray:

@@ -9,7 +9,7 @@ sensor at the image centre, pixel ``(H/2 − 1/2, W/2 − 1/2)``:
 
     u = (c + \\tfrac12 - \\tfrac W2)\\,p, \\qquad v = (\\tfrac H2 - r - \\tfrac12)\\,p
 
-for pitch ``p`` (mm). Arrays broadcast; ``shape`` is an image's ``(H, W)`` (note that a
+for pixel pitch ``p`` (mm). Arrays broadcast; ``shape`` is an image's ``(H, W)`` (note that a
 setup's ``sensor.resolution`` is ``(W, H)``: use :func:`image_shape`).
 
 A real camera's mirror axis rarely meets the sensor exactly at its centre. Every
@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..config import Setup
+from ..deprecation import renamed_keywords
 
 __all__ = ["image_shape", "center_offset_of", "optical_center_px", "pixel_to_sensor",
            "sensor_to_pixel"]
@@ -72,10 +73,12 @@ def optical_center_px(shape: tuple[int, ...],
     return H / 2.0 - 0.5 + float(drow), W / 2.0 - 0.5 + float(dcol)
 
 
-def sensor_to_pixel(u: ArrayLike, v: ArrayLike, shape: tuple[int, ...], pitch: float, *,
+@renamed_keywords(pitch="pixel_pitch")
+def sensor_to_pixel(u: ArrayLike, v: ArrayLike, shape: tuple[int, ...], pixel_pitch: float, *,
                     center_offset_px: tuple[float, float] | None = None
                    ) -> tuple[float, float] | tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pitch ``pitch`` mm.
+    """``(row, col)`` (fractional) of sensor point ``(u, v)`` mm, pixel pitch
+    ``pixel_pitch`` mm.
 
     Parameters
     ----------
@@ -83,17 +86,18 @@ def sensor_to_pixel(u: ArrayLike, v: ArrayLike, shape: tuple[int, ...], pitch: f
         Upright sensor coordinates, mm (u right, v up).
     shape : tuple of int
         The image's shape, (H, W[, C]).
-    pitch : float
-        Pixel pitch, mm.
+    pixel_pitch : float
+        Pixel pitch, mm (formerly ``pitch``, still accepted with a warning).
     center_offset_px : tuple of float, optional
         The optical axis's offset from the image centre, ``(drow, dcol)`` pixels.
     """
     r0, c0 = optical_center_px(shape, center_offset_px)
     u, v = np.asarray(u, dtype=float), np.asarray(v, dtype=float)
-    return _pair(r0 - v / pitch, c0 + u / pitch)
+    return _pair(r0 - v / pixel_pitch, c0 + u / pixel_pitch)
 
 
-def pixel_to_sensor(row: ArrayLike, col: ArrayLike, shape: tuple[int, ...], pitch: float, *,
+@renamed_keywords(pitch="pixel_pitch")
+def pixel_to_sensor(row: ArrayLike, col: ArrayLike, shape: tuple[int, ...], pixel_pitch: float, *,
                     center_offset_px: tuple[float, float] | None = None
                    ) -> tuple[float, float] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Sensor point ``(u, v)`` mm of pixel ``(row, col)`` (centres at integers).
@@ -104,14 +108,14 @@ def pixel_to_sensor(row: ArrayLike, col: ArrayLike, shape: tuple[int, ...], pitc
         Pixel coordinates (fractional allowed; pixel centres at integers).
     shape : tuple of int
         The image's shape, (H, W[, C]).
-    pitch : float
-        Pixel pitch, mm.
+    pixel_pitch : float
+        Pixel pitch, mm (formerly ``pitch``, still accepted with a warning).
     center_offset_px : tuple of float, optional
         The optical axis's offset from the image centre, ``(drow, dcol)`` pixels.
     """
     r0, c0 = optical_center_px(shape, center_offset_px)
     row, col = np.asarray(row, dtype=float), np.asarray(col, dtype=float)
-    return _pair((col - c0) * pitch, (r0 - row) * pitch)
+    return _pair((col - c0) * pixel_pitch, (r0 - row) * pixel_pitch)
 
 
 def _pair(a: np.ndarray, b: np.ndarray

@@ -15,12 +15,12 @@ evaluated; over the zone a dense grid is refined by a bounded 1-D minimisation.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from ..config import Setup, SetupError
+from ..deprecation import renamed_fields
 from .chief_ray import chief_ray
 from .coddington import focal_image_axial_distances
 from .placement import placement_of
@@ -71,6 +71,12 @@ class MirrorZone:
         return np.linspace(self.rho_start, self.rho_end, n)
 
 
+#: SweepRange lengths (mm) that were named ``<name>_mm`` before; JSON keeps that form.
+_MM_FIELDS = ("focus_min", "focus_max", "sensor_start", "sensor_end", "translation",
+              "rho_max", "rho_start", "rho_end", "depth_min", "depth_max")
+
+
+@renamed_fields(**{f"{name}_mm": name for name in _MM_FIELDS})
 @dataclass(frozen=True)
 class SweepRange:
     """An optical sweep: focus distances (object side) and the sensor travel.
@@ -82,8 +88,9 @@ class SweepRange:
     the motion run over it (:func:`mitsweep.optics.reference.reference_geometry`); for
     the default motion that is :attr:`reference_sensor_distance`.
 
-    The former ``*_mm`` attribute names (``focus_min_mm``, ...) still read, with a
-    :class:`DeprecationWarning`; :meth:`as_dict` keeps the ``*_mm`` keys.
+    The former ``*_mm`` names (``focus_min_mm``, ...) still read, and are still
+    accepted by the constructor, with a :class:`DeprecationWarning`; :meth:`as_dict`
+    keeps the ``*_mm`` keys.
 
     Attributes
     ----------
@@ -139,25 +146,6 @@ class SweepRange:
         d = {(f"{k}_mm" if k in _MM_FIELDS else k): v for k, v in asdict(self).items()}
         d["reference_sensor_distance_mm"] = self.reference_sensor_distance
         return d
-
-
-#: SweepRange lengths (mm) that were named ``<name>_mm`` before; JSON keeps that form.
-_MM_FIELDS = ("focus_min", "focus_max", "sensor_start", "sensor_end", "translation",
-              "rho_max", "rho_start", "rho_end", "depth_min", "depth_max")
-
-
-def _deprecated_mm_alias(name: str) -> property:
-    def read(self) -> float:
-        warnings.warn(f"SweepRange.{name}_mm is deprecated: use SweepRange.{name} (mm)",
-                      DeprecationWarning, stacklevel=2)
-        return getattr(self, name)
-
-    return property(read, doc=f"Deprecated alias of :attr:`{name}` (read-only).")
-
-
-for _name in _MM_FIELDS:
-    setattr(SweepRange, f"{_name}_mm", _deprecated_mm_alias(_name))
-del _name
 
 
 def _reflected_angles(placement, xs):
