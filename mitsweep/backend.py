@@ -46,6 +46,7 @@ import subprocess
 import sys
 import types
 from collections.abc import Iterator
+from typing import Any
 
 __all__ = ["BackendError", "MIN_LLVM", "llvm_version", "select_backend", "mitsuba_variant",
            "set_mitsuba_variant", "drjit_module", "cuda_devices", "describe_machine",
@@ -225,8 +226,7 @@ def _auto_width() -> int | None:
                                                           MAX_LLVM_VECTOR_WIDTH))
 
 
-def _set_width(width: int) -> int:
-    api = _llvm_target_api()
+def _set_width(api: dict, width: int) -> int:
     if int(api["vector_width"]()) != width:
         # keep Dr.Jit's target CPU and features, change only the width
         api["set_target"](api["target_cpu"](), api["target_features"](), width)
@@ -263,13 +263,16 @@ def set_llvm_vector_width(width: int | str) -> int | None:
 
 
 def _set_llvm_vector_width(width, source: str) -> int | None:
-    if _llvm_target_api() is None:
+    api = _llvm_target_api()
+    if api is None:
         return None
+    w: int | None
     if isinstance(width, str) and width.strip().lower() in ("auto", "native"):
         w = _auto_width() if width.strip().lower() == "auto" else native_llvm_vector_width()
     else:
         w = _check_width(width, source)
-    return _set_width(w)
+    # w is None only where the API is missing, which returned above
+    return None if w is None else _set_width(api, w)
 
 
 def _apply_width_setting() -> None:
@@ -294,8 +297,9 @@ def llvm_vector_width_scope(width: int | str) -> Iterator[int | None]:
     try:
         yield now
     finally:
-        if now is not None and before is not None:
-            _set_width(before)
+        api = _llvm_target_api()
+        if now is not None and before is not None and api is not None:
+            _set_width(api, before)
 
 
 # ---------------------------------------------------------------------------------------
@@ -350,7 +354,7 @@ def _unroute_drjit_log() -> None:
 
 
 @functools.cache
-def _logging_appender_type():
+def _logging_appender_type() -> type[Any]:
     """An ``mi.Appender`` that forwards Mitsuba's lines to the ``mitsuba`` logger
     (defined once Mitsuba is imported: backend.py must not import it at load time)."""
     import mitsuba as mi
@@ -381,7 +385,9 @@ def route_mitsuba_log() -> None:
         return
     import mitsuba as mi
 
-    log = mi.logger() if hasattr(mi, "logger") else mi.Thread.thread().logger()
+    # mi.logger() where this Mitsuba has it (its stubs do not declare it), else the thread's
+    get_logger = getattr(mi, "logger", None)
+    log = get_logger() if get_logger is not None else mi.Thread.thread().logger()
     formatter = mi.DefaultFormatter()
     formatter.set_has_date(False)
     formatter.set_has_thread(False)
@@ -536,6 +542,7 @@ def describe_machine() -> dict:
     """
     from . import __version__
 
+    usable: int | None
     try:
         usable = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not Linux
@@ -545,7 +552,7 @@ def describe_machine() -> dict:
         load = [round(x, 2) for x in os.getloadavg()]
     except OSError:  # pragma: no cover
         load = None
-    info = {
+    info: dict[str, Any] = {
         "cpu": _cpu_model(), "cores_logical": os.cpu_count(), "cores_usable": usable,
         "memory_gib": None if mem is None else round(mem / 2 ** 30, 1),
         "load_average": load, "os": platform.platform(),

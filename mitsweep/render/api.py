@@ -178,9 +178,9 @@ def camera_dict(setup: Setup, *, sensor_distance: float | None = None,
          "film": film, "sampler": {"type": sampler, "sample_count": int(spp)}}
     if (sensor_distance is None) == (motion is None):
         raise ValueError("camera_dict: give sensor_distance or motion")
-    if motion is None:
+    if sensor_distance is not None:
         d["sensor_distance"] = float(sensor_distance)
-    else:
+    elif motion is not None:
         d.update(sensor_start=motion.start, sensor_end=motion.end, profile=motion.kind,
                  shutter_open=0.0, shutter_close=float(exposure_s))
         if motion.kind == "trapezoidal":
@@ -266,10 +266,10 @@ def mirror_image_bbox(setup: Setup, sensor_distance: float,
     v = np.concatenate([b for _, b in rims])
     H, W = image_shape(setup)
     rows, cols = sensor_to_pixel(u, v, (H, W), setup.sensor.pixel_pitch)
-    x0 = int(max(0, math.floor(cols.min()) - margin_px))
-    x1 = int(min(W, math.ceil(cols.max()) + margin_px + 1))
-    y0 = int(max(0, math.floor(rows.min()) - margin_px))
-    y1 = int(min(H, math.ceil(rows.max()) + margin_px + 1))
+    x0 = int(max(0, math.floor(np.min(cols)) - margin_px))
+    x1 = int(min(W, math.ceil(np.max(cols)) + margin_px + 1))
+    y0 = int(max(0, math.floor(np.min(rows)) - margin_px))
+    y1 = int(min(H, math.ceil(np.max(rows)) + margin_px + 1))
     if x1 <= x0 or y1 <= y0:
         return (0, 0, W, H)
     return (x0, y0, x1 - x0, y1 - y0)
@@ -291,6 +291,17 @@ def render_memory_bytes(resolution: tuple[int, int], film: tuple[int, int], spp:
     alpha and weight, float32) and its developed copy, the NumPy accumulators of the
     passes (two float64 RGB images), the wavefront of one pass (at most 2^24 lanes of
     :data:`_LANE_BYTES`) and, with AOVs, :data:`_AOV_PIXEL_BYTES` per pixel.
+
+    Parameters
+    ----------
+    resolution : (int, int)
+        The full image, (W, H) px.
+    film : (int, int)
+        The rendered window (Mitsuba's film, the crop), (w, h) px.
+    spp : int
+        Samples per pixel: with the window, the width of a pass's wavefront.
+    aovs : bool, optional
+        Whether the depth and mask layers are computed too (default False).
     """
     W, H = (float(x) for x in resolution)
     w, h = (float(x) for x in film)
@@ -321,6 +332,15 @@ def pass_counts(spp: int, per_pass: int, sampler: str = "independent") -> list[i
     few more passes than the least allow it (512 at most 73 per pass: eight of 64),
     else each pass the largest exact count that fits. Each distinct count is a kernel
     of its own (Dr.Jit compiles the count in), so equal passes also compile less.
+
+    Parameters
+    ----------
+    spp : int
+        Samples per pixel of the whole render (>= 1).
+    per_pass : int
+        Most samples per pixel one pass may take (>= 1; the memory bound).
+    sampler : {"independent", "multijitter"}, optional
+        Mitsuba's sampler of the render (default ``independent``).
     """
     n = math.ceil(spp / per_pass)
     if sampler == "independent":
@@ -558,7 +578,16 @@ def render_image(setup: Setup, mode: str, *, spp: int, seed: int = 0, aovs: Iter
 
 def user_scene_depth(setup: Setup, user_depth: int | None) -> int:
     """Integrator depth of a user scene: ``scene.max_depth`` if set, else the user's
-    integrator's ``max_depth`` plus the mirror's bounce, else unlimited (-1)."""
+    integrator's ``max_depth`` plus the mirror's bounce, else unlimited (-1).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``scene.max_depth`` (> 0: given; else not set) comes first.
+    user_depth : int or None
+        The ``max_depth`` of the scene file's own integrator (None, or <= 0: none or
+        unlimited).
+    """
     if setup.scene.max_depth > 0:
         return setup.scene.max_depth
     if user_depth is not None and user_depth > 0:
@@ -659,6 +688,7 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
         raise ValueError(f"image point ({u:g}, {v:g}) mm: its chief ray misses the mirror")
     centre = ray.surface.position + depth * ray.world_dir
     radius = radius_px * _world_per_pixel(setup, u, v, depth, i_ref)
+    kwargs: dict[str, Any]
     if mode == "fixed":
         if sensor_distance is None:
             raise ValueError("mode 'fixed' needs sensor_distance")
@@ -669,14 +699,14 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
         kwargs, _ = mode_camera(setup, mode, geometry, f_number)
     H, W = image_shape(setup)
     row, col = sensor_to_pixel(u, v, (H, W), setup.sensor.pixel_pitch)
-    x0 = int(np.clip(round(col) - window // 2, 0, max(0, W - window)))
-    y0 = int(np.clip(round(row) - window // 2, 0, max(0, H - window)))
+    x0 = int(np.clip(round(float(col)) - window // 2, 0, max(0, W - window)))
+    y0 = int(np.clip(round(float(row)) - window // 2, 0, max(0, H - window)))
     crop = (x0, y0, min(window, W), min(window, H))
     cam = camera_dict(setup, spp=spp, crop=crop, **kwargs)
     source = {"type": "sphere", "center": centre.tolist(), "radius": radius,
               "bsdf": {"type": "diffuse", "reflectance": 0.0},
               "emitter": {"type": "area", "radiance": 1.0}}
-    mesh = {} if mesh_tol is None else dict(mirror_mesh=True, sag_tol=mesh_tol,
+    mesh: dict[str, Any] = {} if mesh_tol is None else dict(mirror_mesh=True, sag_tol=mesh_tol,
                                             normal_tol=mesh_tol)
     scene_dict, _ = build_scene(setup, cam, surroundings=False, extra={"source": source},
                                 max_depth=2, **mesh)

@@ -247,7 +247,14 @@ def _ground_truth(setup, budgets, modes=("pinhole",)):
 
 
 def run_bench(args: argparse.Namespace) -> dict:
-    """All render benchmarks; ``args.quick`` shrinks sizes for a smoke run."""
+    """All render benchmarks; ``args.quick`` shrinks sizes for a smoke run.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command line's options; read: ``quick`` (bool, absent: False): 64 px and
+        8 spp instead of 256 px and 32 spp, and fewer sample counts and mesh bounds.
+    """
     from .sensor import register
 
     variant = register()

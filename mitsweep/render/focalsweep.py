@@ -148,6 +148,8 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from collections.abc import Sequence
+from typing import Any, cast
 
 import drjit as dr
 import mitsuba as mi
@@ -157,15 +159,13 @@ from ..backend import set_mitsuba_variant
 from .sensor_motion import (DIFFERENTIABLE, PLUGIN_NAME, NotDifferentiableError, SensorMotion,
                             motion_from_properties)
 
-if mi.variant() is None:  # imported for its documentation or types: mitsweep's variant
-    set_mitsuba_variant()
-
 __all__ = ["FocalSweepSensor", "VARIANT"]
 
 logger = logging.getLogger(__name__)
 
-#: The Mitsuba variant this module's class was built for.
-VARIANT: str = mi.variant()
+#: The Mitsuba variant this module's class was built for (mitsweep's, set here, when
+#: the module is imported with none set: for its documentation or types).
+VARIANT: str = mi.variant() or set_mitsuba_variant()
 #: Vectorised (JIT, differentiable) variant; in the scalar one ``mi.Float`` is ``float``.
 _VECTORISED = dr.is_jit_v(mi.Float)
 
@@ -183,6 +183,18 @@ def _at(table, index):
     if _VECTORISED:
         return dr.gather(mi.Float, table, index)
     return table[int(index)]
+
+
+def _float(props: mi.Properties, name: str, default: float) -> float:
+    """A scalar property as a float (``Properties.get`` is typed ``object``: its type is
+    the stored value's)."""
+    return float(cast(float, props.get(name, default)))
+
+
+def _first(value: Any) -> float:
+    """The value of a one-wide parameter (a Dr.Jit array, or a float in the scalar
+    variant) as a float (``dr.slice`` is typed ``object``: it also slices PyTrees)."""
+    return float(cast(float, dr.slice(value, 0)))
 
 
 def _positive(props, name: str) -> float:
@@ -211,7 +223,16 @@ def _aperture_radius(props, focal_length: float) -> float:
 
 class FocalSweepSensor(mi.Sensor):
     """A thin-lens sensor translating along its axis during the exposure (see the
-    module for its parameters, ray generation and derivatives)."""
+    module for its parameters, ray generation and derivatives).
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's properties (the module's table: ``focal_length``, ``pixel_pitch``,
+        ``aperture_radius`` or ``f_number``, the motion, clip distances in mm, the
+        shutter in s, ``to_world``, the film and sampler); a fault raises ValueError
+        naming the property.
+    """
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
@@ -219,8 +240,8 @@ class FocalSweepSensor(mi.Sensor):
         self.focal_length = _positive(props, "focal_length")
         self.pixel_pitch = _positive(props, "pixel_pitch")
         self.aperture_radius = _aperture_radius(props, self.focal_length)
-        self.near_clip = float(props.get("near_clip", 0.01))
-        self.far_clip = float(props.get("far_clip", 1e4))
+        self.near_clip = _float(props, "near_clip", 0.01)
+        self.far_clip = _float(props, "far_clip", 1e4)
         if not (0 < self.near_clip < self.far_clip):
             raise ValueError(f"focalsweep: need 0 < near_clip < far_clip, got "
                              f"{self.near_clip}, {self.far_clip}")
@@ -308,26 +329,32 @@ class FocalSweepSensor(mi.Sensor):
                     f"{self.motion_kind!r} the differentiable parameters are: {allowed}")
 
     # -- geometry --------------------------------------------------------------------
-    def sensor_distance(self, time: mi.Float) -> mi.Float:
+    def sensor_distance(self, time: Any) -> Any:
         """Sensor distance i(t), mm, at Mitsuba time ``time`` (s).
 
         In ``*_ad_*`` variants it is attached to the AD graph of ``sensor_start`` /
         ``sensor_end`` (or ``positions``): the table index and weight are computed from
         the (detached) time, the value from the differentiable entries.
+
+        Parameters
+        ----------
+        time : mi.Float
+            Mitsuba time, s: clamped to the exposure ``[shutter_open, shutter_close]``
+            (ignored by a fixed sensor).
         """
-        kind = self.motion_kind
-        if kind == "fixed":
+        motion = self.motion
+        if motion.kind == "fixed":
             return self.m_start
         t = dr.clip((time - self.shutter_open()) / self.shutter_open_time(), 0.0, 1.0)
-        if kind == "tabulated":
-            times, n = self.m_times, len(self.motion.times)
+        if motion.times is not None:  # tabulated
+            times, n = self.m_times, len(motion.times)
             k = dr.binary_search(0, n - 2, lambda j: _at(times, j + 1) <= t)
             t0, t1 = _at(times, k), _at(times, k + 1)
             w = dr.clip((t - t0) / (t1 - t0), 0.0, 1.0)
             a, b = _at(self.m_positions, k), _at(self.m_positions, k + 1)
             return dr.fma(b - a, w, a)
-        if kind == "trapezoidal":
-            n = len(self.motion.shape) - 1
+        if motion.shape is not None:  # trapezoidal
+            n = len(motion.shape) - 1
             x = t * n
             k = mi.UInt32(dr.clip(dr.floor(x), 0, n - 1))
             w = x - mi.Float(k)
@@ -375,18 +402,68 @@ class FocalSweepSensor(mi.Sensor):
             ray.has_differentials = True
         return ray, wav_weight
 
-    def sample_ray(self, time: mi.Float, sample1: mi.Float, sample2: mi.Point2f,
-                   sample3: mi.Point2f, active: mi.Bool = True) -> tuple[mi.Ray3f, mi.Spectrum]:
+    def sample_ray(self, time: Any, sample1: Any, sample2: mi.Point2f,
+                   sample3: mi.Point2f, active: Any = True) -> tuple[mi.Ray3f, mi.Spectrum]:
+        """A camera ray and its spectral weight, as ``mi.Sensor.sample_ray``.
+
+        Parameters
+        ----------
+        time : mi.Float
+            Mitsuba time of the ray, s: where the sensor is (:meth:`sensor_distance`).
+        sample1 : mi.Float
+            Uniform sample in [0, 1) for the wavelengths (spectral variants).
+        sample2 : mi.Point2f
+            Position on the film, in [0, 1)² of the crop window.
+        sample3 : mi.Point2f
+            Uniform sample in [0, 1)² of the aperture disk.
+        active : mi.Bool, optional
+            Lanes to compute (default: all).
+        """
         return self._rays(time, sample1, sample2, sample3, active, False)
 
-    def sample_ray_differential(self, time: mi.Float, sample1: mi.Float, sample2: mi.Point2f,
-                                sample3: mi.Point2f, active: mi.Bool = True
+    def sample_ray_differential(self, time: Any, sample1: Any, sample2: mi.Point2f,
+                                sample3: mi.Point2f, active: Any = True
                                 ) -> tuple[mi.RayDifferential3f, mi.Spectrum]:
+        """:meth:`sample_ray` with differentials: the rays through the next pixel along
+        x and y, from the same aperture point.
+
+        Parameters
+        ----------
+        time : mi.Float
+            Mitsuba time of the ray, s.
+        sample1 : mi.Float
+            Uniform sample in [0, 1) for the wavelengths (spectral variants).
+        sample2 : mi.Point2f
+            Position on the film, in [0, 1)² of the crop window.
+        sample3 : mi.Point2f
+            Uniform sample in [0, 1)² of the aperture disk.
+        active : mi.Bool, optional
+            Lanes to compute (default: all).
+        """
         return self._rays(time, sample1, sample2, sample3, active, True)
 
-    def sample_direction(self, it: mi.Interaction3f, sample: mi.Point2f, active: mi.Bool = True
+    def sample_direction(self, it: mi.Interaction3f, sample: mi.Point2f, active: Any = True
                          ) -> tuple[mi.DirectionSample3f, mi.Spectrum]:
-        """Connect a scene point to a sampled aperture point (for light tracing)."""
+        """Connect a scene point to a sampled aperture point (for light tracing).
+
+        Parameters
+        ----------
+        it : mi.Interaction3f
+            The scene point (its position, mm, and time, s).
+        sample : mi.Point2f
+            Uniform sample in [0, 1)² of the aperture disk.
+        active : mi.Bool, optional
+            Lanes to compute (default: all).
+
+        Returns
+        -------
+        ds : mi.DirectionSample3f
+            The aperture point, the direction and distance to it, its pdf (solid angle
+            at ``it``; 0 where the point is outside the frame or the clip range) and the
+            film position ``uv`` (px of the crop window).
+        weight : mi.Spectrum
+            The importance ``W / dist²`` (see the module), 0 where ``ds.pdf`` is.
+        """
         self._refuse_gradients_of_non_differentiable()
         to_world = self.world_transform()
         ref = to_world.inverse() @ it.p
@@ -411,7 +488,9 @@ class FocalSweepSensor(mi.Sensor):
                  & (ct > 0) & (cx >= 0) & (cx <= 1) & (cy >= 0) & (cy <= 1))
         area = self.size[0] * self.size[1] * self.m_pitch * self.m_pitch / (i * i)
         value = dr.select(valid, inv_ct * inv_ct * inv_ct / area, 0.0)
-        ds = dr.zeros(mi.DirectionSample3f)
+        # Any: the stubs type its fields with ``drjit.auto.ad`` arrays, a class apart from
+        # ``mi.Float``, and refuse the Python scalars and vectors that convert implicitly
+        ds: Any = dr.zeros(mi.DirectionSample3f)
         ds.uv = mi.Point2f(cx * self.crop_size[0], cy * self.crop_size[1])
         ds.p = to_world @ aperture_p
         ds.d = mi.Vector3f(ds.p - it.p) * inv_dist
@@ -422,7 +501,7 @@ class FocalSweepSensor(mi.Sensor):
         pdf = (dist * dist * inv_ct / lens_area) if lens_area > 0 else mi.Float(1.0)
         ds.pdf = dr.select(valid, pdf, 0.0)
         ds.delta = lens_area == 0
-        return ds, mi.Color3f(value * inv_dist * inv_dist)
+        return ds, mi.Spectrum(value * inv_dist * inv_dist)
 
     def bbox(self) -> mi.ScalarBoundingBox3f:
         p = self.world_transform() @ mi.ScalarPoint3f(0.0)
@@ -430,6 +509,15 @@ class FocalSweepSensor(mi.Sensor):
 
     # -- traversal -------------------------------------------------------------------
     def traverse(self, callback: mi.TraversalCallback) -> None:
+        """Expose the parameters to :func:`mitsuba.traverse` (the module's table of
+        differentiable keys); in the scalar variant ``to_world`` only.
+
+        Parameters
+        ----------
+        callback : mi.TraversalCallback
+            Mitsuba's collector: each parameter is put under its property name, flagged
+            differentiable or not.
+        """
         flag = mi.ParamFlags
         callback.put("to_world", self.m_to_world, flag.NonDifferentiable)
         if not _VECTORISED:  # Python floats: a traversal could not update them in place
@@ -447,23 +535,34 @@ class FocalSweepSensor(mi.Sensor):
             callback.put("sensor_start", self.m_start, flag.Differentiable)
             callback.put("sensor_end", self.m_end, flag.Differentiable)
 
-    def parameters_changed(self, keys: list[str]) -> None:
+    def parameters_changed(self, keys: Sequence[str] = ()) -> None:
+        """Check and take up parameters changed through a traversal: refuse a gradient on
+        a non-differentiable one, a table whose length changed, or a sensor distance at
+        or inside the focal length (ValueError).
+
+        Parameters
+        ----------
+        keys : sequence of str
+            Names of the changed parameters (as :meth:`traverse` put them); every one is
+            checked whatever the names.
+        """
         super().parameters_changed(keys)
         self._refuse_gradients_of_non_differentiable()
         sizes = [("sensor_start", self.m_start, 1), ("sensor_end", self.m_end, 1)]
-        if self.motion_kind == "tabulated":
-            sizes += [("positions", self.m_positions, len(self.motion.positions)),
-                      ("times", self.m_times, len(self.motion.times))]
+        motion = self.motion
+        if motion.times is not None and motion.positions is not None:  # tabulated
+            sizes += [("positions", self.m_positions, len(motion.positions)),
+                      ("times", self.m_times, len(motion.times))]
         for name, value, n in sizes:
             if dr.width(value) != n:
                 raise ValueError(f"focalsweep: {name} must keep its length {n}, "
                                  f"got {dr.width(value)}")
         # Keep the Python-side copies (used for validation and repr) in step.
-        self.aperture_radius = float(dr.slice(self.m_aperture, 0))
-        self.pixel_pitch = float(dr.slice(self.m_pitch, 0))
-        self.focal_length = float(dr.slice(self.m_f, 0))
-        self.motion = dataclasses.replace(self.motion, start=float(dr.slice(self.m_start, 0)),
-                                          end=float(dr.slice(self.m_end, 0)))
+        self.aperture_radius = _first(self.m_aperture)
+        self.pixel_pitch = _first(self.m_pitch)
+        self.focal_length = _first(self.m_f)
+        self.motion = dataclasses.replace(self.motion, start=_first(self.m_start),
+                                          end=_first(self.m_end))
         if self.motion_kind == "tabulated":
             self.motion = _tabulated_update(self.motion, self.m_times, self.m_positions)
         if not self.motion_span[0] > self.focal_length:

@@ -52,7 +52,18 @@ def refuse_integrators_that_drop_the_sweep(
     """Raise :class:`NotDifferentiableError` where ``integrator`` would return a zero
     (or no) derivative of the sweep ``keys`` for ``scene`` (see the module: the ``prb``
     family and ``ptracer`` always; ``path``, ``volpath``, ``direct`` when a shape
-    reflects or transmits in a delta or null lobe, e.g. the mirror)."""
+    reflects or transmits in a delta or null lobe, e.g. the mirror).
+
+    Parameters
+    ----------
+    integrator : mitsuba.Integrator
+        The integrator that would render (a C++ plugin or a Python one).
+    scene : mitsuba.Scene
+        The scene: its shapes' BSDFs are read for delta or null lobes.
+    keys : iterable of str, optional
+        The sensor parameters whose gradient is asked, for the message (default the
+        sweep's ends, ``sensor_start`` and ``sensor_end``).
+    """
     import mitsuba as mi
 
     cls = _integrator_class(integrator)

@@ -32,6 +32,15 @@ def integrator_dict(lighting: str, max_depth: int, *, differentiable: bool = Fal
     depth (-1): a sweep gradient asked of it through a mirror raises
     :class:`~mitsweep.render.sensor.NotDifferentiableError` in
     :func:`~mitsweep.render.differentiable_render`.
+
+    Parameters
+    ----------
+    lighting : {"emissive", "lit"}
+        The scene's lighting (:attr:`mitsweep.config.Scene.lighting`).
+    max_depth : int
+        Longest path in segments, as ``path`` counts them (-1: unlimited).
+    differentiable : bool, optional
+        Whether a gradient may be asked (an ``*_ad_*`` variant; default False).
     """
     if lighting == "emissive" and 1 <= max_depth <= MAX_DEPTH:
         return {"type": INTEGRATOR_NAME, "max_depth": int(max_depth)}

@@ -8,24 +8,31 @@ change of variant (see :mod:`mitsweep.render.focalsweep`).
 
 from __future__ import annotations
 
+from typing import cast
+
 import mitsuba as mi
 
 from ..backend import set_mitsuba_variant
 
-if mi.variant() is None:  # imported for its documentation or types: mitsweep's variant
-    set_mitsuba_variant()
-
 __all__ = ["DepthLimitedIntegrator", "VARIANT"]
 
-#: The Mitsuba variant this module's class was built for.
-VARIANT: str = mi.variant()
+#: The Mitsuba variant this module's class was built for (mitsweep's, set here, when
+#: the module is imported with none set: for its documentation or types).
+VARIANT: str = mi.variant() or set_mitsuba_variant()
 
 
 class DepthLimitedIntegrator(mi.SamplingIntegrator):
     """A ``mi.SamplingIntegrator`` that reads the plugin parameter ``max_depth``
     (default :attr:`DEFAULT_DEPTH`) and refuses one outside ``1..MAX_DEPTH`` with a
     ValueError naming plugin :attr:`NAME`; no AOVs; printed as ``ClassName[max_depth=N]``.
-    A subclass sets the three class attributes and defines ``sample``."""
+    A subclass sets the three class attributes and defines ``sample``.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's properties, as Mitsuba passes them to the constructor; read:
+        ``max_depth`` (int, the longest path in segments, as ``path`` counts them).
+    """
 
     #: Plugin name, for error messages.
     NAME: str = ""
@@ -36,7 +43,8 @@ class DepthLimitedIntegrator(mi.SamplingIntegrator):
 
     def __init__(self, props: mi.Properties) -> None:
         super().__init__(props)
-        depth = int(props.get("max_depth", self.DEFAULT_DEPTH))
+        # Properties.get is typed ``object``: its type is the stored value's
+        depth = int(cast(int, props.get("max_depth", self.DEFAULT_DEPTH)))
         if not 1 <= depth <= self.MAX_DEPTH:
             raise ValueError(f"{self.NAME}: max_depth must be in 1..{self.MAX_DEPTH}, "
                              f"got {depth}")

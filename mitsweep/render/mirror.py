@@ -141,6 +141,20 @@ def mesh_errors(profile: Profile, positions: NDArray[np.floating],
     camera's rays, within a few degrees) hits. Points where the true normal is more
     than ``max_normal_angle_deg`` from the axis (seen at grazing incidence, outside
     every FOV zone; the rim of a hemisphere) are left out.
+
+    Parameters
+    ----------
+    profile : Profile
+        The surface the mesh approximates (its sag and normal, mm).
+    positions : (V, 3) ndarray
+        Vertex positions in the mirror's local frame, mm.
+    normals : (V, 3) ndarray
+        Unit shading normals at the vertices.
+    faces : (F, 3) ndarray of int
+        Vertex indices of each triangle.
+    max_normal_angle_deg : float, optional
+        Points whose true normal is further than this from the axis are not measured,
+        degrees (default :data:`GRAZING_LIMIT_DEG`, 75).
     """
     p = positions[faces]          # (F, 3, 3)
     n = normals[faces]
@@ -206,7 +220,14 @@ def tessellate(profile: Profile, rim_radius: float, *, sag_tol: float = DEFAULT_
 
 
 def uses_analytic_sphere(mirror: Mirror) -> bool:
-    """True where Mitsuba's exact ``sphere`` is the mirror (a full hemisphere)."""
+    """True where Mitsuba's exact ``sphere`` is the mirror (a full hemisphere).
+
+    Parameters
+    ----------
+    mirror : Mirror
+        A spherical mirror whose rim radius reaches its radius is a hemisphere; any
+        other profile or a smaller rim is meshed.
+    """
     return mirror.is_sphere and mirror.rim_radius >= mirror.radius * (1 - 1e-12)
 
 
@@ -248,6 +269,18 @@ def mirror_mesh(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
     ``cache_root()/meshes/mirror-KEY.npz``, keyed by the profile, the rim and both
     bounds: a fine mesh takes seconds to build and milliseconds to read.
 
+    Parameters
+    ----------
+    mirror : Mirror
+        The mirror: its profile and rim radius (mm).
+    sag_tol : float, optional
+        Largest allowed distance from a triangle to the surface, mm (> 0).
+    normal_tol : float, optional
+        Largest allowed shading-normal error, rad (> 0).
+    cache : bool, optional
+        Read and write the mesh cache (default None: :func:`cache_enabled`); a cache
+        folder that cannot be used is warned about and skipped.
+
     Returns
     -------
     mesh : MirrorMesh
@@ -259,9 +292,8 @@ def mirror_mesh(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
     profile = profile_of(mirror)
     use_cache = cache_enabled() if cache is None else bool(cache)
     folder = cache_dir("meshes") if use_cache else None  # None: unusable (warned)
-    use_cache = folder is not None
-    path = folder / _cache_name(mirror, sag_tol, normal_tol) if use_cache else None
-    if use_cache and path.is_file():
+    path = None if folder is None else folder / _cache_name(mirror, sag_tol, normal_tol)
+    if path is not None and path.is_file():
         hit = _read_cached(path)
         if hit is not None:
             return hit
@@ -272,8 +304,8 @@ def mirror_mesh(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
              "normal_tol_rad": normal_tol}
     logger.info("mirror mesh: %d triangles (sag %.2g mm, normal %.2g rad)%s",
                 mesh.n_triangles, mesh.sag_error, mesh.normal_error,
-                f", cached as {path}" if use_cache else "")
-    if use_cache:
+                f", cached as {path}" if path is not None else "")
+    if path is not None:
         try:
             _write_cached(path, mesh, stats)
         except OSError as exc:  # a full disk, a folder gone meanwhile: the mesh is here
@@ -283,7 +315,17 @@ def mirror_mesh(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
 
 def cache_file(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
                normal_tol: float = DEFAULT_NORMAL_TOL) -> Path:
-    """Where :func:`mirror_mesh` caches this mesh (it may not exist)."""
+    """Where :func:`mirror_mesh` caches this mesh (it may not exist).
+
+    Parameters
+    ----------
+    mirror : Mirror
+        The mirror: its profile and rim radius (mm).
+    sag_tol : float, optional
+        The mesh's sag bound, mm: part of the cache key.
+    normal_tol : float, optional
+        The mesh's normal bound, rad: part of the cache key.
+    """
     return cache_root() / "meshes" / _cache_name(mirror, sag_tol, normal_tol)
 
 
@@ -295,7 +337,17 @@ def _cache_name(mirror: Mirror, sag_tol: float, normal_tol: float) -> str:
 def cached_mesh_file(mirror: Mirror, *, sag_tol: float = DEFAULT_SAG_TOL,
                      normal_tol: float = DEFAULT_NORMAL_TOL) -> tuple[Path, dict]:
     """The cache file of the mirror's mesh (built and cached on first use; absent where
-    the cache is unusable) and its stats."""
+    the cache is unusable) and its stats.
+
+    Parameters
+    ----------
+    mirror : Mirror
+        The mirror: its profile and rim radius (mm).
+    sag_tol : float, optional
+        Largest allowed distance from a triangle to the surface, mm (> 0).
+    normal_tol : float, optional
+        Largest allowed shading-normal error, rad (> 0).
+    """
     _, stats = mirror_mesh(mirror, sag_tol=sag_tol, normal_tol=normal_tol, cache=True)
     return cache_file(mirror, sag_tol=sag_tol, normal_tol=normal_tol), stats
 

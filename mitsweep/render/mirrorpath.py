@@ -56,9 +56,12 @@ from __future__ import annotations
 
 import logging
 
+from typing import Any
+
 import drjit as dr
 import mitsuba as mi
 
+from ..backend import set_mitsuba_variant
 from .integrator_base import DepthLimitedIntegrator
 from .plugin_names import MIRRORPATH, MIRRORPATH_MAX_DEPTH
 
@@ -67,11 +70,24 @@ __all__ = ["MirrorPathIntegrator", "VARIANT"]
 logger = logging.getLogger(__name__)
 
 #: The Mitsuba variant this module's class was built for.
-VARIANT: str = mi.variant()
+VARIANT: str = mi.variant() or set_mitsuba_variant()
 
 
 def mis_weight(pdf_a, pdf_b):
-    """Power heuristic, as ``path``'s (but attached: see the module)."""
+    """Power heuristic, as ``path``'s (but attached: see the module).
+
+    Parameters
+    ----------
+    pdf_a : mi.Float
+        Density of the strategy that drew the sample (solid angle).
+    pdf_b : mi.Float
+        Density of the other strategy for the same direction.
+
+    Returns
+    -------
+    mi.Float
+        ``pdf_a² / (pdf_a² + pdf_b²)``; 0 where that is 0/0 or not finite.
+    """
     a, b = dr.square(pdf_a), dr.square(pdf_b)
     s = a + b
     # A safe denominator: where a + b is 0 the unselected 0/0 would turn the
@@ -85,23 +101,56 @@ _SI_FLAGS = getattr(mi.RayFlags, "Default", mi.RayFlags.All)
 
 
 class MirrorPathIntegrator(DepthLimitedIntegrator):
-    """Path tracing with NEE and MIS, differentiable through delta reflections."""
+    """Path tracing with NEE and MIS, differentiable through delta reflections.
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's properties: ``max_depth`` (int, 1 to
+        :data:`~mitsweep.render.plugin_names.MIRRORPATH_MAX_DEPTH`, default 3).
+    """
 
     NAME, MAX_DEPTH, DEFAULT_DEPTH = MIRRORPATH, MIRRORPATH_MAX_DEPTH, 3
 
-    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
-               medium: mi.Medium | None = None, active: mi.Bool = True
-               ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
+               medium: mi.Medium | None = None, active: Any = True
+               ) -> tuple[mi.Spectrum, Any, list[Any]]:
+        """``path``'s estimate along the ray, attached through delta reflections.
+
+        Parameters
+        ----------
+        scene : mi.Scene
+            The scene.
+        sampler : mi.Sampler
+            The pixel's sampler: per bounce, as ``path`` draws them (emitter, BSDF and Russian roulette).
+        ray : mi.Ray3f
+            The camera ray (a ``RayDifferential3f``; its differentials are not used).
+        medium : mi.Medium, optional
+            Ignored (no participating media).
+        active : mi.Bool, optional
+            Lanes to compute (default: all).
+
+        Returns
+        -------
+        spectrum : mi.Spectrum
+            The radiance estimate.
+        valid : mi.Bool
+            Lanes whose path met a surface or the environment, as ``path``'s.
+        aovs : list
+            Empty: no AOVs.
+        """
         ctx = mi.BSDFContext()
         ray = mi.Ray3f(ray)
-        alive = mi.Bool(active)
+        alive: Any = mi.Bool(active)
         throughput = mi.Spectrum(1.0)
         result = mi.Spectrum(0.0)
         valid_ray = mi.Bool(scene.environment() is not None)
         prev_si = dr.zeros(mi.Interaction3f)
         prev_bsdf_pdf = mi.Float(1.0)
         prev_bsdf_delta = mi.Bool(True)
-        pi = scene.ray_intersect_preliminary(ray, coherent=True, active=alive)
+        # (the stubs type ``coherent`` as a Dr.Jit Bool; Mitsuba takes a Python bool)
+        pi = scene.ray_intersect_preliminary(  # type: ignore[call-overload]
+            ray, coherent=True, active=alive)
         # Python loop: unrolled at trace time, so plain AD records every step
         # (Dr.Jit's symbolic loops drop the derivative).
         for depth in range(self.max_depth):
@@ -151,7 +200,8 @@ class MirrorPathIntegrator(DepthLimitedIntegrator):
             prev_bsdf_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
             sampler.next_1d(alive)   # path's Russian-roulette number (kept in step)
             alive = active_next & (dr.max(throughput) != 0.0)
-            pi = scene.ray_intersect_preliminary(ray, coherent=False, active=alive)
+            pi = scene.ray_intersect_preliminary(  # type: ignore[call-overload]
+                ray, coherent=False, active=alive)
         return dr.select(valid_ray, result, 0.0), valid_ray, []
 
 

@@ -38,9 +38,12 @@ from __future__ import annotations
 
 import logging
 
+from typing import Any
+
 import drjit as dr
 import mitsuba as mi
 
+from ..backend import set_mitsuba_variant
 from .integrator_base import DepthLimitedIntegrator
 from .plugin_names import MIRRORVIEW, MIRRORVIEW_MAX_DEPTH
 
@@ -49,23 +52,54 @@ __all__ = ["MirrorViewIntegrator", "VARIANT"]
 logger = logging.getLogger(__name__)
 
 #: The Mitsuba variant this module's class was built for.
-VARIANT: str = mi.variant()
+VARIANT: str = mi.variant() or set_mitsuba_variant()
 
 
 class MirrorViewIntegrator(DepthLimitedIntegrator):
-    """Emission seen directly or through delta reflections (see the module)."""
+    """Emission seen directly or through delta reflections (see the module).
+
+    Parameters
+    ----------
+    props : mi.Properties
+        The plugin's properties: ``max_depth`` (int, 1 to
+        :data:`~mitsweep.render.plugin_names.MIRRORVIEW_MAX_DEPTH`, default 2).
+    """
 
     NAME, MAX_DEPTH, DEFAULT_DEPTH = MIRRORVIEW, MIRRORVIEW_MAX_DEPTH, 2
 
-    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.RayDifferential3f,
-               medium: mi.Medium | None = None, active: mi.Bool = True
-               ) -> tuple[mi.Spectrum, mi.Bool, list[mi.Float]]:
+    def sample(self, scene: mi.Scene, sampler: mi.Sampler, ray: mi.Ray3f,
+               medium: mi.Medium | None = None, active: Any = True
+               ) -> tuple[mi.Spectrum, Any, list[Any]]:
+        """Emission along the ray and its delta reflections.
+
+        Parameters
+        ----------
+        scene : mi.Scene
+            The scene.
+        sampler : mi.Sampler
+            The pixel's sampler: one 1-D and one 2-D sample per bounce, for the BSDF.
+        ray : mi.Ray3f
+            The camera ray (a ``RayDifferential3f``; its differentials are not used).
+        medium : mi.Medium, optional
+            Ignored (no participating media).
+        active : mi.Bool, optional
+            Lanes to compute (default: all).
+
+        Returns
+        -------
+        spectrum : mi.Spectrum
+            The radiance estimate.
+        valid : mi.Bool
+            Lanes whose camera ray hit a surface.
+        aovs : list
+            Empty: no AOVs.
+        """
         ray = mi.Ray3f(ray)
         ctx = mi.BSDFContext()
         throughput = mi.Spectrum(1.0)
         result = mi.Spectrum(0.0)
         first_valid = None
-        alive = mi.Bool(active)
+        alive: Any = mi.Bool(active)
         # Python loop: unrolled at trace time (max_depth is a small constant).
         for depth in range(self.max_depth):
             si = scene.ray_intersect(ray, alive)
@@ -76,7 +110,7 @@ class MirrorViewIntegrator(DepthLimitedIntegrator):
             result += dr.select(alive, throughput * emitter.eval(si, alive), 0.0)
             if depth + 1 == self.max_depth:
                 break
-            bsdf = si.bsdf(ray)
+            bsdf = si.bsdf(ray)  # type: ignore[call-overload]  # a Ray3f converts implicitly
             bs, weight = bsdf.sample(ctx, si, sampler.next_1d(alive),
                                      sampler.next_2d(alive), alive)
             alive &= mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta) & (dr.max(weight) > 0)

@@ -124,6 +124,18 @@ def resolve_params(**params: Any) -> dict:
 
     Raises ValueError naming the parameter and what it allows. The result is plain
     JSON and ``resolve_params(**resolve_params(**p)) == resolve_params(**p)``.
+
+    Parameters
+    ----------
+    **params
+        Any of :data:`DEFAULT_PARAMS`: ``objects`` (1 to :data:`MAX_OBJECTS`),
+        ``shapes`` and ``materials`` (comma-separated names of :data:`SHAPES` and
+        :data:`MATERIALS`), ``palette`` (materials drawn per scene), ``textured`` and
+        ``cluster`` (probabilities in [0, 1]), ``depth_min_mm`` and ``depth_max_mm``
+        (mm, > 0, min <= max), ``size_min_deg`` and ``size_max_deg`` (angular radius,
+        degrees, in (0, 40]), ``envmap`` (``random``, ``none`` or a texture name),
+        ``env_scale`` and ``light_radiance`` (>= 0), ``lights`` (0 to
+        :data:`MAX_LIGHTS`), ``max_depth`` (3 to 16); an unknown name is refused.
     """
     unknown = sorted(set(params) - set(DEFAULT_PARAMS))
     if unknown:
@@ -168,7 +180,16 @@ def resolve_params(**params: Any) -> dict:
 
 def depth_range(setup: Setup, params: dict) -> tuple[float, float]:
     """Depths (mm) objects are drawn over: the parameters' range widened to the setup's
-    ``sweep.depth_min``–``depth_max`` (an infinite ``depth_max`` adds nothing)."""
+    ``sweep.depth_min``–``depth_max`` (an infinite ``depth_max`` adds nothing).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``sweep.depth_min`` and ``sweep.depth_max`` (mm).
+    params : dict
+        Resolved parameters (:func:`resolve_params`): ``depth_min_mm`` and
+        ``depth_max_mm`` are read.
+    """
     lo = min(params["depth_min_mm"], setup.sweep.depth_min)
     far = setup.sweep.depth_max
     hi = max(params["depth_max_mm"], far if math.isfinite(far) else 0.0)
@@ -226,7 +247,7 @@ def _material(rng, params: dict) -> dict:
                   "tint": rng.uniform(0.3, 1.0, 3).tolist() if name in _PATTERNS else None}
     else:
         colour = {"rgb": rng.uniform(0.05, 0.9, 3).tolist()}
-    out = {"kind": kind, "colour": colour}
+    out: dict[str, Any] = {"kind": kind, "colour": colour}
     if kind in ("roughplastic", "roughconductor"):
         out["alpha"] = float(rng.uniform(0.05, 0.35))
     if kind == "roughconductor":
@@ -243,6 +264,16 @@ def procedural_layout(setup: Setup, seed: int, **params: Any) -> tuple[dict, dic
     ``material``), ``layout["lights"]`` the area lights, ``layout["envmap"]`` the
     environment (or None), ``layout["depth_range"]`` the depths drawn over;
     ``params`` are the resolved parameters (:func:`resolve_params`). No Mitsuba.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its mirror, lens and sensor say where pixels look; its depth range widens the
+        depths drawn over.
+    seed : int
+        The scene (>= 0); the same setup, seed and parameters give the same layout.
+    **params
+        Any of :data:`DEFAULT_PARAMS` (:func:`resolve_params`).
     """
     if not (isinstance(seed, (int, np.integer)) and not isinstance(seed, bool) and seed >= 0):
         raise ValueError(f"seed: must be an integer >= 0, got {seed!r}")
@@ -283,7 +314,7 @@ def procedural_layout(setup: Setup, seed: int, **params: Any) -> tuple[dict, dic
         return None
 
     palette = [_material(rng, params) for _ in range(params["palette"])]
-    objects = []
+    objects: list[dict[str, Any]] = []
     for j in range(params["objects"]):
         near = None
         if objects and rng.uniform() < params["cluster"]:
@@ -447,7 +478,14 @@ def _facing(center, normal, half_size):
 
 
 def scene_objects(layout: dict) -> dict:
-    """Mitsuba dicts of a :func:`procedural_layout` (name → dict)."""
+    """Mitsuba dicts of a :func:`procedural_layout` (name → dict).
+
+    Parameters
+    ----------
+    layout : dict
+        The layout (:func:`procedural_layout`'s first value): its objects, lights and
+        environment map, mm, in the mirror's frame.
+    """
     import mitsuba as mi
 
     from .sensor import register

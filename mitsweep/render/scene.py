@@ -50,6 +50,11 @@ def integrator_depth(setup: Setup) -> int:
 
     Emissive surroundings: camera → mirror → emitter is two path segments
     (``max_depth = 2``); lit diffuse surroundings add the light connection (3).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``scene.max_depth`` (> 0: given) and ``scene.lighting``.
     """
     if setup.scene.max_depth > 0:
         return setup.scene.max_depth
@@ -57,7 +62,14 @@ def integrator_depth(setup: Setup) -> int:
 
 
 def camera_transform(setup: Setup) -> Any:
-    """Camera-to-world ``look_at`` for the lens centre (Mitsuba scalar transform)."""
+    """Camera-to-world ``look_at`` for the lens centre (Mitsuba scalar transform).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The lens sits on the mirror's axis at ``mirror.vertex_distance`` (mm) from the
+        vertex, looking at it, +y up.
+    """
     import mitsuba as mi
 
     vd = setup.mirror.vertex_distance
@@ -123,6 +135,12 @@ def board_layout(setup: Setup) -> list[dict]:
     (clipped to the room); directions within the setup's FOV about the mirror axis and
     at least 30° from it; boards reaching into the cylinder the camera looks through
     (radius rim + 15 mm around the camera axis) are redrawn.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        Its ``scene`` (``objects``: how many boards, ``texture_seed``, ``room_size``),
+        mirror and field of view (``sweep.fov_deg``).
     """
     sc = setup.scene
     n = sc.objects
@@ -239,10 +257,11 @@ def _integrator(lighting: str, depth: int) -> dict:
     where a gradient can be asked (``*_ad_*`` variants), else ``path``."""
     import mitsuba as mi
 
-    if mi.variant() is None or mi.variant().startswith("scalar"):
+    variant = mi.variant()
+    if variant is None or variant.startswith("scalar"):
         # Python integrators run per sample in scalar variants: keep the C++ one there.
         return integrator_dict("lit", depth)
-    d = integrator_dict(lighting, depth, differentiable="_ad_" in mi.variant())
+    d = integrator_dict(lighting, depth, differentiable="_ad_" in variant)
     if d["type"] == INTEGRATOR_NAME:
         register_integrator()
     elif d["type"] == ad_integrator.INTEGRATOR_NAME:

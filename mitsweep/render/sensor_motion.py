@@ -41,7 +41,21 @@ class SensorMotion:
     """A validated sensor motion: ``kind`` (a key of :data:`DIFFERENTIABLE`), its
     ``start`` and ``end`` distances (mm), and for ``trapezoidal`` the normalised
     ``shape`` g on :data:`MOTION_TABLE_SIZE` uniform intervals (``i = start + (end −
-    start) g(t)``), for ``tabulated`` the normalised ``times`` and the ``positions``."""
+    start) g(t)``), for ``tabulated`` the normalised ``times`` and the ``positions``.
+
+    Attributes
+    ----------
+    kind : {"fixed", "linear", "trapezoidal", "tabulated"}
+        The kind of motion.
+    start, end : float
+        Sensor distance at shutter open and close, mm (equal for ``fixed``).
+    shape : (MOTION_TABLE_SIZE + 1,) ndarray or None
+        ``trapezoidal`` only: g(t) at ``t = k / MOTION_TABLE_SIZE``, from 0 to 1.
+    times : (n,) ndarray or None
+        ``tabulated`` only: the knots' normalised times, rising from 0 to 1.
+    positions : (n,) ndarray or None
+        ``tabulated`` only: the sensor distance at each knot, mm.
+    """
 
     kind: str
     start: float
@@ -53,7 +67,7 @@ class SensorMotion:
     @property
     def span(self) -> tuple[float, float]:
         """Least and greatest sensor distance, mm."""
-        if self.kind == "tabulated":
+        if self.positions is not None:  # tabulated
             return float(self.positions.min()), float(self.positions.max())
         return min(self.start, self.end), max(self.start, self.end)
 
@@ -72,13 +86,30 @@ def _floats(value: Any, name: str) -> np.ndarray:
 
 def motion_table(motion: MotionProfile, n: int = MOTION_TABLE_SIZE) -> np.ndarray:
     """Sensor distances (mm) of a :class:`~mitsweep.optics.motion.MotionProfile` at
-    ``n + 1`` uniform normalised times ``k / n`` (the kernel interpolates linearly)."""
+    ``n + 1`` uniform normalised times ``k / n`` (the kernel interpolates linearly).
+
+    Parameters
+    ----------
+    motion : MotionProfile
+        The stage's motion over the exposure.
+    n : int, optional
+        Intervals of the table (default :data:`MOTION_TABLE_SIZE`).
+    """
     return np.asarray(motion.sensor_distance(np.linspace(0.0, 1.0, n + 1)), dtype=float)
 
 
 def motion_from_properties(props: Any) -> SensorMotion:
     """The motion a ``focalsweep`` plugin's properties (``mi.Properties`` or a mapping
-    with ``in`` and ``get``) describe; ValueError naming the fault otherwise."""
+    with ``in`` and ``get``) describe; ValueError naming the fault otherwise.
+
+    Parameters
+    ----------
+    props : mi.Properties or mapping
+        The plugin's properties: ``sensor_distance`` (mm), or ``sensor_start`` and
+        ``sensor_end`` (mm) with ``profile`` (``linear``, the default; ``trapezoidal``
+        with ``accel_fraction``, default 0.1; ``tabulated`` with ``times`` and
+        ``positions``, lists of numbers or strings of them).
+    """
     has_fixed = ("sensor_distance" in props)
     has_range = ("sensor_start" in props) or ("sensor_end" in props)
     if has_fixed == has_range:

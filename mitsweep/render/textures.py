@@ -27,7 +27,16 @@ def _rgb(gray: np.ndarray) -> np.ndarray:
 
 
 def siemens_star(size: int = 512, spokes: int = 36) -> np.ndarray:
-    """A Siemens star of ``spokes`` black/white pairs, (size, size, 3) in {0.05, 0.95}."""
+    """A Siemens star of ``spokes`` black/white pairs, (size, size, 3) in {0.05, 0.95}.
+
+    Parameters
+    ----------
+    size : int, optional
+        Side of the image, px (default 512); the star fills the inscribed disk, the
+        corners are 0.5.
+    spokes : int, optional
+        Black/white pairs around the centre (default 36).
+    """
     y, x = np.mgrid[0:size, 0:size] + 0.5 - size / 2
     ang = np.arctan2(y, x)
     star = (np.sin(spokes * ang) > 0).astype(np.float32)
@@ -37,7 +46,14 @@ def siemens_star(size: int = 512, spokes: int = 36) -> np.ndarray:
 
 
 def bar_chart(size: int = 512) -> np.ndarray:
-    """Groups of bars whose period halves from row to row (a 1951-USAF-like chart)."""
+    """Groups of bars whose period halves from row to row (a 1951-USAF-like chart).
+
+    Parameters
+    ----------
+    size : int, optional
+        Side of the (size, size, 3) image, px (default 512): six rows of bars, the
+        first of period ``size / 4`` px, the last at least 2 px.
+    """
     img = np.full((size, size), 0.95, dtype=np.float32)
     rows = 6
     h = size // rows
@@ -50,6 +66,16 @@ def bar_chart(size: int = 512) -> np.ndarray:
 
 
 def checkerboard(size: int = 512, squares: int = 16) -> np.ndarray:
+    """A checkerboard of ``squares`` × ``squares`` squares, (size, size, 3) in
+    {0.1, 0.9}.
+
+    Parameters
+    ----------
+    size : int, optional
+        Side of the image, px (default 512).
+    squares : int, optional
+        Squares along each side (default 16).
+    """
     y, x = np.mgrid[0:size, 0:size]
     c = ((x * squares // size + y * squares // size) % 2).astype(np.float32)
     return _rgb(0.1 + 0.8 * c)
@@ -57,7 +83,14 @@ def checkerboard(size: int = 512, squares: int = 16) -> np.ndarray:
 
 @functools.cache
 def skimage_texture(name: str) -> np.ndarray:
-    """A scikit-image bundled image as linear RGB float32 (H, W, 3)."""
+    """A scikit-image bundled image as linear RGB float32 (H, W, 3).
+
+    Parameters
+    ----------
+    name : str
+        One of scikit-image's bundled images in :data:`TEXTURE_NAMES` (``astronaut``,
+        ``camera``, ...); gray ones are repeated into RGB.
+    """
     from skimage import data
 
     if name not in _SKIMAGE:
@@ -72,7 +105,14 @@ def skimage_texture(name: str) -> np.ndarray:
 
 
 def texture(name: str) -> np.ndarray:
-    """Any texture of :data:`TEXTURE_NAMES` as linear RGB float32 (H, W, 3)."""
+    """Any texture of :data:`TEXTURE_NAMES` as linear RGB float32 (H, W, 3).
+
+    Parameters
+    ----------
+    name : str
+        ``siemens``, ``bars`` or ``checker`` (512 px, default settings) or a
+        scikit-image bundled image (:func:`skimage_texture`).
+    """
     if name == "siemens":
         return siemens_star()
     if name == "bars":

@@ -110,6 +110,14 @@ def scene_transform(unit: str = "mm", placement: Placement | None = None) -> np.
 
     ``S(s)`` for the unit, then the placement's rotations about x, y and z (degrees),
     then its translation (mm); see the module docstring.
+
+    Parameters
+    ----------
+    unit : {"mm", "cm", "m"}, optional
+        The scene's length unit (default mm).
+    placement : mitsweep.config.Placement, optional
+        Rotations ``rotate_deg`` (degrees about x, y, z, in that order) and
+        ``translate`` (mm) of the scene in the mirror frame (default None: none).
     """
     if unit not in MM_PER_UNIT:
         raise UserSceneError(f"scene unit: must be one of {', '.join(MM_PER_UNIT)}, "
@@ -150,12 +158,15 @@ def _resolver(folder: Path | None):
     if folder is None:
         yield
         return
-    old = mi.FileResolver(mi.file_resolver())
-    mi.file_resolver().prepend(str(folder))
+    # Any: Mitsuba's stubs lack its module-level file_resolver and set_file_resolver
+    file_resolver: Any = mi.file_resolver
+    set_file_resolver: Any = mi.set_file_resolver
+    old = mi.FileResolver(file_resolver())
+    file_resolver().prepend(str(folder))
     try:
         yield
     finally:
-        mi.set_file_resolver(old)
+        set_file_resolver(old)
 
 
 def _canonical(value: Any) -> Any:
@@ -365,7 +376,7 @@ def load_user_scene(setup: Setup, scene: str | Path | Mapping[str, Any], *,
 
     from .sensor import register
 
-    register()
+    variant = register()
     unit = unit or setup.scene.unit or "mm"
     placement = placement if placement is not None else setup.scene.placement
     m = scene_transform(unit, placement)
@@ -373,11 +384,11 @@ def load_user_scene(setup: Setup, scene: str | Path | Mapping[str, Any], *,
     label, sha, folder = _source(scene)
     name = label if label == "dict" else str(scene)
     p = mi.parser
-    cfg = p.ParserConfig(mi.variant())
+    cfg = p.ParserConfig(variant)
     cfg.merge_meshes = False  # keep the user's shapes (and their ids) apart
     try:
         with _resolver(folder):
-            state = p.parse_dict(cfg, dict(scene)) if folder is None \
+            state = p.parse_dict(cfg, dict(scene)) if isinstance(scene, Mapping) \
                 else p.parse_file(cfg, label)
             p.transform_upgrade(cfg, state)
             p.transform_resolve(cfg, state)
@@ -564,7 +575,7 @@ def check_view(scene: Any, setup: Setup, sensor_distance: float, *, label: str =
             for k in ids:
                 blocked[k] = blocked.get(k, 0) + 1
     if blocked:
-        worst = max(blocked, key=blocked.get)
+        worst = max(blocked, key=lambda k: blocked[k])
         share = sum(blocked.values()) / total
         raise UserSceneError(f"{label}: shape {worst!r} lies between the lens and the mirror "
                              f"(it hides {100 * share:.3g} % of the probed lens-to-mirror rays); move "
