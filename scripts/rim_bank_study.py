@@ -2,10 +2,11 @@
 with one that covers the whole mirror image, per radius, side by side.
 
 Radial banks (the paraboloid): the dataset's bank extended to the image of the mirror's
-rim (:func:`mitsweep.pipeline.rim.rim_bank`); grid banks (the tilted paraboloid): the
-off-mirror nodes filled with the nearest traced kernel
-(:func:`mitsweep.deconv.kernels.fill_invalid_nodes`). Both are restored with the
-dataset's weight rule; the budget's ``beyond_fov`` region is the design FOV's (radial).
+rim; grid banks (the tilted paraboloid): the off-mirror nodes filled with the nearest
+traced kernel (both :func:`mitsweep.tracer.bank.extend_to_rim`, what
+``ipsf_bank(..., extent="rim")`` traces). Both are restored with the dataset's weight
+rule; the budget's ``beyond_fov`` region is the design FOV's (radial). ``mitsweep budget
+DATASET --rim-bank`` gives the rim bank's budget alone.
 
     .venv/bin/python scripts/rim_bank_study.py DATASET [--item edof_2lux] [--json]
 """
@@ -34,19 +35,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     from mitsweep.config import setup_from_dict
-    from mitsweep.deconv.kernels import fill_invalid_nodes
     from mitsweep.io.bank import load_bank
     from mitsweep.pipeline import load_manifest
     from mitsweep.pipeline.budget import budget_json, dataset_budget
-    from mitsweep.pipeline.rim import rim_bank
+    from mitsweep.tracer.bank import extend_to_rim
 
     manifest = load_manifest(a.dataset)
     setup = setup_from_dict(manifest["setup"])
     bank = load_bank(f"{a.dataset}/bank.npz")
-    if bank.kind == "radial":
-        other, how = rim_bank(setup, bank), "radial bank traced to the mirror's rim"
-    else:
-        other, how = fill_invalid_nodes(bank), "grid bank, off-mirror nodes filled"
+    other = extend_to_rim(setup, bank)
+    how = ("radial bank traced to the mirror's rim" if bank.kind == "radial" else
+           "grid bank, off-mirror nodes filled")
     runs = {}
     for label, b in (("before", None), ("rim", other)):
         res = budget_json(dataset_budget(a.dataset, items=[a.item], bank=b))

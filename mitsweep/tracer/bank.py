@@ -4,6 +4,15 @@ See :mod:`mitsweep.io.bank` for the on-disk contract (kernel orientation, centri
 radial vs grid). Radial banks (rotationally symmetric setups) hold points on the +u
 half-axis from the centre out to the image of the FOV's mirror-zone edge; grid banks
 (tilted setups) hold the centres of a (rows × cols) grid of cells over the sensor.
+
+Banks to the rim (``extent="rim"``, issue 27): the mirror's image reaches beyond the
+design FOV (29 % of the paraboloid's lies beyond), where the sweep does not reach focus
+but the blur is still known. A radial bank then continues its points at their own
+spacing out to the image of the mirror's rim (:func:`rim_field_radius`,
+:func:`rim_radii`), traced with the same settings and the next seeds; a grid bank,
+whose nodes already cover the sensor, gives each node whose chief ray misses the mirror
+the kernel of the nearest traced node (:func:`fill_off_mirror_nodes`) instead of the
+stand-in delta. :func:`extend_to_rim` extends a bank already traced (a dataset's).
 """
 
 from __future__ import annotations
@@ -29,13 +38,17 @@ from .ipsf import KERNEL_PIXEL_BYTES, integrated_psf, integrated_psfs
 from .settings import TraceSettings, settings_from_keywords
 from .source import check_depth
 
-__all__ = ["ipsf_bank", "field_radius", "grid_points"]
+__all__ = ["ipsf_bank", "field_radius", "grid_points", "EXTENTS", "rim_field_radius",
+           "rim_radii", "fill_off_mirror_nodes", "extend_to_rim"]
 
 logger = logging.getLogger(__name__)
 
 #: Rays per IPSF in a bank: ~0.05 s each on 2 cores; L1 error ~1e-2 (docs/reference/tracer.md).
 #: The default of :class:`~mitsweep.tracer.settings.TraceSettings` (``rays``).
 BANK_RAYS = TraceSettings().rays
+#: How far a bank's points reach: the design FOV's image (the default) or the mirror
+#: rim's (``ipsf_bank(..., extent=...)``).
+EXTENTS = ("fov", "rim")
 
 
 def field_radius(setup: Setup, geometry: ReferenceGeometry | None = None) -> float:
@@ -50,13 +63,171 @@ def field_radius(setup: Setup, geometry: ReferenceGeometry | None = None) -> flo
     return float(math.hypot(float(u[0]), float(v[0])))
 
 
+def rim_field_radius(setup: Setup, geometry: ReferenceGeometry | None = None, *,
+                     sensor_distance: float | None = None) -> float:
+    """Image radius (mm) of the chief ray from the mirror's rim
+    (``setup.mirror.rim_radius``) in the +u direction.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The setup whose mirror's rim is imaged.
+    geometry : ReferenceGeometry, optional
+        The setup's reference geometry (default: resolved from the setup); its sensor
+        distance is the image plane's.
+    sensor_distance : float, optional
+        The image plane's sensor distance, mm, instead of ``geometry``'s.
+    """
+    if sensor_distance is None:
+        geometry = reference_geometry(setup) if geometry is None else geometry
+        sensor_distance = geometry.sensor_distance
+    pl = placement_of(setup.mirror)
+    edge = chief_ray(pl, pl.surface(np.array([float(setup.mirror.rim_radius)]),
+                                    np.array([0.0])))
+    u, v = image_point(edge, float(sensor_distance))
+    return float(math.hypot(float(u[0]), float(v[0])))
+
+
+def rim_radii(radii: ArrayLike, rim: float) -> NDArray[np.float64]:
+    """The radii (mm) beyond the last of ``radii``, at their own spacing (the median
+    step), the last one at ``rim`` (none if ``radii`` already reach it).
+
+    Parameters
+    ----------
+    radii : array_like
+        A radial bank's radii, mm.
+    rim : float
+        The radius to reach, mm (:func:`rim_field_radius`).
+    """
+    r = np.asarray(radii, dtype=np.float64)
+    last = float(r.max())
+    if rim <= last * (1 + 1e-9):
+        return np.zeros(0)
+    step = float(np.median(np.diff(np.sort(r)))) if len(r) > 1 else rim - last
+    n = max(1, int(math.ceil((rim - last) / step - 1e-9)))
+    return np.linspace(last, rim, n + 1)[1:]
+
+
+def fill_off_mirror_nodes(bank: IPSFBank) -> IPSFBank:
+    """A grid bank whose nodes off the mirror take the kernel of the nearest traced node.
+
+    The tracer gives a grid node whose chief ray misses the mirror a centred delta
+    kernel and marks it invalid (``metadata["valid"]``); the product-convolution would
+    blend that delta into the cells around it, under-deconvolving the mirror's image near
+    its rim. Beyond the rim there is no image to restore, so the nearest traced kernel
+    (in the sensor plane; the first of equally near ones) is the bank's best knowledge
+    of the blur at every node. The nodes stay marked invalid; ``metadata["filled_nodes"]``
+    lists those filled and ``metadata["filled_from"]`` the node each copies. Radial banks
+    and grid banks with every node (or none) valid are returned unchanged. The same
+    filling as :func:`mitsweep.deconv.kernels.fill_invalid_nodes`.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        The bank; its ``metadata["valid"]`` (one flag per point) marks the traced nodes.
+    """
+    valid = np.asarray((bank.metadata or {}).get("valid", []), dtype=bool)
+    if bank.kind != "grid" or valid.size != len(bank.points_uv) or valid.all() \
+            or not valid.any():
+        return bank
+    pts = np.asarray(bank.points_uv, dtype=np.float64)
+    good = np.flatnonzero(valid)
+    bad = np.flatnonzero(~valid)
+    d = np.hypot(pts[bad, None, 0] - pts[None, good, 0], pts[bad, None, 1] - pts[None, good, 1])
+    src = good[np.argmin(d, axis=1)]
+    kernels = np.array(bank.kernels, copy=True)
+    kernels[:, bad] = kernels[:, src]
+    meta = {**bank.metadata, "filled_nodes": bad.tolist(), "filled_from": src.tolist()}
+    return replace(bank, kernels=kernels, metadata=meta)
+
+
+def _rim_metadata(fov: float, new: NDArray[np.float64]) -> dict[str, Any]:
+    """A radial rim bank's metadata: where the FOV ends (the error budget's
+    ``beyond_fov`` region), where the rim is and how many points reach it."""
+    meta: dict[str, Any] = {"extent": "rim", "fov_radius_mm": float(fov)}
+    if len(new):
+        meta.update(rim_radius_mm=float(new[-1]), rim_points=int(len(new)))
+    return meta
+
+
+def extend_to_rim(setup: Setup, bank: IPSFBank, *,
+                  settings: TraceSettings | None = None) -> IPSFBank:
+    """``bank`` (traced for ``setup``) extended to the mirror's rim: what
+    ``ipsf_bank(..., extent="rim")`` would have traced, from a bank already traced.
+
+    A radial bank gets points at its own spacing beyond its last radius out to the image
+    of the mirror's rim (:func:`rim_radii`), traced at every depth of the bank with its
+    kernel size and method and the seeds after its own (point ``j``: ``seed + j``, as
+    :func:`ipsf_bank` seeds); a grid bank gets its off-mirror nodes filled
+    (:func:`fill_off_mirror_nodes`). ``metadata["extent"]`` becomes ``"rim"``;
+    ``metadata["fov_radius_mm"]`` keeps the radial bank's former last radius.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The setup the bank was traced for (its reference sensor distance must be the
+        setup's: the same sweep and motion).
+    bank : IPSFBank
+        A radial or grid bank.
+    settings : TraceSettings, optional
+        The new points' trace settings (default: the bank's ``rays_per_ipsf``,
+        ``method`` and ``seed`` from its metadata, its kernel size); radial banks only.
+
+    Raises
+    ------
+    ValueError
+        The bank was traced at another reference sensor distance; a new point's trace
+        fails (fully vignetted).
+    """
+    meta = dict(bank.metadata or {})
+    if bank.kind != "radial":
+        filled = fill_off_mirror_nodes(bank)
+        return replace(filled, metadata={**filled.metadata, "extent": "rim"})
+    geometry = reference_geometry(setup)
+    if not math.isclose(geometry.sensor_distance, bank.reference_sensor_distance,
+                        rel_tol=1e-9, abs_tol=1e-9):
+        raise ValueError("extend_to_rim: the bank was traced at another reference sensor "
+                         "distance than the setup's (another sweep or motion)")
+    radii0 = np.asarray(bank.radii, dtype=np.float64)
+    fov = float(meta.get("fov_radius_mm", radii0.max()))
+    new = rim_radii(radii0, rim_field_radius(setup, geometry))
+    if not len(new):
+        return replace(bank, metadata={**meta, **_rim_metadata(fov, new)})
+    K = int(bank.kernels.shape[-1])
+    if settings is None:
+        settings = TraceSettings(rays=int(meta.get("rays_per_ipsf") or BANK_RAYS),
+                                 kernel_size=K, method=str(meta.get("method", "exact")),
+                                 seed=int(meta.get("seed", 0)))
+    n0 = len(radii0)
+    depths = [float(d) for d in bank.depths]
+    traced = integrated_psfs(setup, [(float(r), 0.0, d) for d in depths for r in new],
+                             settings=settings,
+                             seeds=[settings.seed + n0 + i for _ in depths
+                                    for i in range(len(new))],
+                             sweep=geometry.sweep, motion=geometry.motion,
+                             reference_sensor_distance=geometry.sensor_distance)
+    extra = np.zeros((len(depths), len(new), K, K), np.float32)
+    vign = np.zeros((len(depths), len(new)))
+    for j, res in enumerate(traced):
+        if isinstance(res, ValueError):
+            raise res
+        extra[j // len(new), j % len(new)] = res[0]
+        vign[j // len(new), j % len(new)] = res[1]["vignetted_fraction"]
+    radii = np.concatenate([radii0, new])
+    vig0 = np.zeros((len(depths), n0)) if bank.vignetted is None else np.asarray(bank.vignetted)
+    return replace(bank, kernels=np.concatenate([bank.kernels, extra], axis=1),
+                   radii=radii, points_uv=np.stack([radii, np.zeros_like(radii)], axis=1),
+                   vignetted=np.concatenate([vig0, vign], axis=1),
+                   metadata={**meta, **_rim_metadata(fov, new)})
+
+
 def grid_points(setup: Setup, grid: tuple[int, int]) -> NDArray[np.float64]:
     """(rows·cols, 2) upright (u, v) mm: cell centres of a grid over the sensor, row-major,
     rows top to bottom."""
     rows, cols = (int(x) for x in grid)
     if rows < 1 or cols < 1:
         raise ValueError(f"grid: rows and cols must be >= 1, got {grid!r}")
-    w, h = setup.sensor.size_mm
+    w, h = setup.sensor.size
     us = ((np.arange(cols) + 0.5) / cols - 0.5) * w
     vs = (0.5 - (np.arange(rows) + 0.5) / rows) * h
     vv, uu = np.meshgrid(vs, us, indexing="ij")
@@ -68,7 +239,7 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
               settings: TraceSettings | None = None,
               motion: MotionProfile | None = None, sweep: SweepRange | None = None,
               progress: Callable[[], object] | None = None,
-              batched: bool = True, **deprecated: Any) -> IPSFBank:
+              batched: bool = True, extent: str = "fov", **deprecated: Any) -> IPSFBank:
     """A bank of IPSFs for a setup.
 
     Parameters
@@ -97,6 +268,16 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         instead of ~10-25 ms of fixed launch cost per IPSF. The kernels are those of
         ``batched=False`` (one :func:`mitsweep.tracer.integrated_psf` call per IPSF, same
         seeds) up to the float64 summation order of the deposit.
+    extent : {"fov", "rim"}
+        How far the points reach. ``"fov"`` (default): as above. ``"rim"``: a radial
+        bank's ``n_radii`` points to :func:`field_radius` continue at the same spacing
+        out to the image of the mirror's rim (:func:`rim_field_radius`,
+        :func:`rim_radii`), traced with the same settings, point ``j`` with seed
+        ``settings.seed + j`` (``metadata["fov_radius_mm"]``, ``"rim_radius_mm"`` and
+        ``"rim_points"`` record where the FOV and the rim are); a grid bank's nodes off
+        the mirror take the nearest traced node's kernel (:func:`fill_off_mirror_nodes`).
+        ``metadata["extent"]`` records it. The bank cache
+        (:func:`mitsweep.tracer.cache.cached_bank`) holds ``"fov"`` banks.
     **deprecated
         ``rays``, ``kernel_size``, ``seed``, ``method``, ``time_samples``, ``n_planes``:
         the fields of ``settings``, still accepted for one release (DeprecationWarning).
@@ -110,6 +291,9 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
     settings = settings_from_keywords(settings, deprecated, caller="ipsf_bank")
     if kind not in ("radial", "grid"):
         raise ValueError(f"kind: must be 'radial' or 'grid', got {kind!r}")
+    if extent not in EXTENTS:
+        raise ValueError(f"extent: must be one of {', '.join(map(repr, EXTENTS))}, got "
+                         f"{extent!r}")
     depths = [check_depth(d) for d in np.atleast_1d(np.asarray(depths, dtype=float))]
     if not depths:
         raise ValueError("depths: give at least one depth")
@@ -118,7 +302,14 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
     radii = None
     grid_shape = None
     K, seed = settings.kernel_size, settings.seed
-    n_points = float(n_radii) if kind == "radial" else float(grid[0]) * float(grid[1])
+    fov = rim_new = None
+    if kind == "radial" and extent == "rim" and int(n_radii) >= 1:
+        fov = field_radius(setup, geometry)
+        rim_new = rim_radii(np.linspace(0.0, fov, int(n_radii)),
+                            rim_field_radius(setup, geometry))
+    n_extra = 0 if rim_new is None else len(rim_new)
+    n_points = float(n_radii) + n_extra if kind == "radial" else \
+        float(grid[0]) * float(grid[1])
     # kernels (float32), per-point bookkeeping (3 float64 arrays, the grid's points) and
     # one IPSF being traced
     check_allocation(f"IPSF bank of {n_points:.0f} points x {len(depths)} depths, {K}x{K} px "
@@ -131,6 +322,8 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         if int(n_radii) < 1:
             raise ValueError(f"n_radii: must be >= 1, got {n_radii!r}")
         radii = np.linspace(0.0, field_radius(setup, geometry), int(n_radii))
+        if rim_new is not None:
+            radii = np.concatenate([radii, rim_new])
         points = np.stack([radii, np.zeros_like(radii)], axis=1)
     else:
         grid_shape = (int(grid[0]), int(grid[1]))
@@ -183,7 +376,13 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         "generator": "mitsweep.tracer.ipsf_bank", "outside_kernel": outside.tolist(),
         "valid": valid.tolist(), "seconds": time.perf_counter() - t0,
     }
-    return IPSFBank(kernels=kernels, points_uv=points, depths_mm=np.asarray(depths),
+    if extent != "fov":
+        # "fov" banks keep the metadata they always had (an absent extent reads "fov")
+        meta["extent"] = extent
+        if fov is not None and rim_new is not None:
+            meta.update(_rim_metadata(fov, rim_new))
+    bank = IPSFBank(kernels=kernels, points_uv=points, depths=np.asarray(depths),
                     pixel_pitch=setup.sensor.pixel_pitch, reference_sensor_distance=ref,
-                    kind=kind, radii_mm=radii, grid_shape=grid_shape, vignetted=vign,
+                    kind=kind, radii=radii, grid_shape=grid_shape, vignetted=vign,
                     metadata=meta, optics=optics_sections(setup_dict, motion.as_dict()))
+    return fill_off_mirror_nodes(bank) if extent == "rim" and kind == "grid" else bank

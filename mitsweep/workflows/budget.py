@@ -20,22 +20,21 @@ __all__ = ["error_budget"]
 
 
 def _rim_bank(dataset: str | os.PathLike) -> tuple[IPSFBank, str]:
-    """The dataset's bank extended to the mirror's rim, and what was done to it: a radial
-    bank traced to the rim's image (:func:`mitsweep.pipeline.rim.rim_bank`), a grid bank
-    with its off-mirror nodes given the nearest traced kernel
-    (:func:`mitsweep.deconv.kernels.fill_invalid_nodes`)."""
+    """The dataset's bank extended to the mirror's rim
+    (:func:`mitsweep.tracer.bank.extend_to_rim`), and what was done to it: a radial bank
+    traced out to the rim's image, a grid bank with its off-mirror nodes given the
+    nearest traced kernel."""
     from ..config import setup_from_dict
-    from ..deconv.kernels import fill_invalid_nodes
     from ..io.bank import load_bank
     from ..pipeline import load_manifest
-    from ..pipeline.rim import rim_bank
     from ..pipeline.tasks import BANK
+    from ..tracer.bank import extend_to_rim
 
     bank = load_bank(Path(dataset) / BANK)
-    if bank.kind == "radial":
-        setup = setup_from_dict(load_manifest(dataset)["setup"])
-        return rim_bank(setup, bank), "radial bank traced to the mirror's rim"
-    return fill_invalid_nodes(bank), "grid bank, off-mirror nodes filled"
+    setup = setup_from_dict(load_manifest(dataset)["setup"])
+    how = ("radial bank traced to the mirror's rim" if bank.kind == "radial" else
+           "grid bank, off-mirror nodes filled")
+    return extend_to_rim(setup, bank), how
 
 
 def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = None,
@@ -58,10 +57,10 @@ def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = No
         Write ``budget.json``, ``budget.txt`` and one ``budget_*.png`` per item here.
     rim_bank : bool
         Budget the restoration with the dataset's bank extended to the mirror's rim
-        instead of its own (``mitsweep budget --rim-bank``): a radial bank traced out to
-        the image of the rim (:func:`mitsweep.pipeline.rim.rim_bank`: the same trace
-        settings, the next seeds), a grid bank with its off-mirror nodes given the
-        nearest traced kernel (:func:`mitsweep.deconv.kernels.fill_invalid_nodes`). Each
+        instead of its own (``mitsweep budget --rim-bank``,
+        :func:`mitsweep.tracer.bank.extend_to_rim`): a radial bank traced out to the
+        image of the rim (the same trace settings, the next seeds), a grid bank with its
+        off-mirror nodes given the nearest traced kernel. Each
         EDOF image is restored again from its input with that bank and the dataset's
         weight rule (:func:`mitsweep.pipeline.budget.dataset_budget`'s ``bank``); the
         ``beyond_fov`` region stays the design FOV's. Default False: the dataset's bank.
