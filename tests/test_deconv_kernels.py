@@ -42,7 +42,7 @@ def test_select_depth_mean_averages_normalised_kernels():
 
 @pytest.mark.parametrize("bad", ["near", -5.0, 0.0])
 def test_select_depth_rejects_bad_values(bad):
-    with pytest.raises(ValueError, match="depth_mm"):
+    with pytest.raises(ValueError, match="depth"):
         select_depth(bank_with_depths([500.0]), bad)
 
 

@@ -86,7 +86,7 @@ def test_per_depth_band(pair):
     assert res["psnr"][0] == pytest.approx(psnr(img, ref, mask=left), rel=1e-12)
 
 
-@pytest.mark.parametrize("bad", [dict(edges_mm=[100]), dict(edges_mm=[5, 1])])
+@pytest.mark.parametrize("bad", [dict(edges=[100]), dict(edges=[5, 1])])
 def test_bad_depth_edges_are_refused(pair, bad):
     img, ref = pair
     with pytest.raises(ValueError, match="edges"):

@@ -32,8 +32,8 @@ def _truth() -> np.ndarray:
     return img.astype(np.float64)
 
 
-def _model(truth, bank, depth_mm=None):
-    op = blur_operator(bank, truth.shape, depth_mm=depth_mm)
+def _model(truth, bank, depth=None):
+    op = blur_operator(bank, truth.shape, depth=depth)
     return np.stack([op.forward(truth[..., c]) for c in range(truth.shape[2])], axis=-1)
 
 

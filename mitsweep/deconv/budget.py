@@ -64,6 +64,7 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import ArrayLike, DTypeLike
 
+from ..deprecation import renamed_fields, renamed_keywords
 from ..io.bank import IPSFBank
 from ..optics.pixels import optical_center_px
 from .kernels import PAPER_DECONV_DEPTH_MM
@@ -167,24 +168,27 @@ def _per_channel(op: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.nd
     return np.stack([op(x[..., c]) for c in range(x.shape[2])], axis=-1)
 
 
-def _layer_index(depth: np.ndarray, depths_mm: np.ndarray, default: int) -> np.ndarray:
+def _layer_index(depth: np.ndarray, bank_depths: np.ndarray, default: int) -> np.ndarray:
     """Per pixel the bank depth nearest its depth (in 1/depth); ``default`` where the
     depth is unknown (not finite, or <= 0: no hit)."""
     d = np.asarray(depth, dtype=np.float64)
     ok = np.isfinite(d) & (d > 0)
     with np.errstate(divide="ignore"):
-        inv_bank = 1.0 / np.asarray(depths_mm, dtype=np.float64)
+        inv_bank = 1.0 / np.asarray(bank_depths, dtype=np.float64)
         inv = np.where(ok, 1.0 / np.where(ok, d, 1.0), 0.0)
     idx = np.argmin(np.abs(inv[..., None] - inv_bank), axis=-1)
     return np.where(ok, idx, default)
 
 
+@renamed_keywords(depth_mm="deconvolution_depth")
 def layered_blur(truth: np.ndarray, bank: IPSFBank, depth: np.ndarray, *,
-                 depth_mm: float | None = None, dtype: DTypeLike = np.float64) -> np.ndarray:
+                 deconvolution_depth: float | None = None,
+                 dtype: DTypeLike = np.float64) -> np.ndarray:
     r"""The truth blurred layer by layer: :math:`\sum_d A_d (t \cdot 1[\text{layer}=d])`.
 
     Each pixel belongs to the bank depth nearest its depth (``depth``, mm, the depth
-    AOV; in 1/depth); pixels of unknown depth to the bank depth that ``depth_mm`` picks
+    AOV; in 1/depth); pixels of unknown depth to the bank depth that
+    ``deconvolution_depth`` picks
     (the deconvolution's, default 500 mm). :math:`A_d` is the bank's blur at depth d
     (:func:`~mitsweep.deconv.restore.blur_operator`). Occlusion is not modelled: a near
     layer's blur spreads over the far one's pixels, as in a layered scene without
@@ -198,9 +202,11 @@ def layered_blur(truth: np.ndarray, bank: IPSFBank, depth: np.ndarray, *,
         The IPSF bank whose kernels at each of its depths blur the layers.
     depth : (H, W) ndarray
         Scene depth per pixel, mm; not finite or <= 0 where unknown (no hit).
-    depth_mm : float, optional
+    deconvolution_depth : float, optional
         Depth, mm, whose nearest bank depth takes the pixels of unknown depth (default
         :data:`~mitsweep.deconv.kernels.PAPER_DECONV_DEPTH_MM`, the deconvolution's).
+        The former keyword ``depth_mm`` is still accepted, with a
+        :class:`DeprecationWarning`.
     dtype : dtype
         Working and output precision (default float64).
 
@@ -212,13 +218,13 @@ def layered_blur(truth: np.ndarray, bank: IPSFBank, depth: np.ndarray, *,
     from .restore import blur_operator
 
     t = np.asarray(truth, dtype=dtype)
-    depths = np.asarray(bank.depths_mm, dtype=np.float64)
-    default = int(_layer_index(np.array([PAPER_DECONV_DEPTH_MM if depth_mm is None
-                                         else float(depth_mm)]), depths, 0)[0])
+    depths = np.asarray(bank.depths, dtype=np.float64)
+    default = int(_layer_index(np.array([PAPER_DECONV_DEPTH_MM if deconvolution_depth is None
+                                         else float(deconvolution_depth)]), depths, 0)[0])
     layer = _layer_index(depth, depths, default)
     out = np.zeros_like(t)
     for k in np.unique(layer):
-        op = blur_operator(bank, t.shape, depth_mm=float(depths[k]), dtype=dtype)
+        op = blur_operator(bank, t.shape, depth=float(depths[k]), dtype=dtype)
         sel = (layer == k) if t.ndim == 2 else (layer == k)[..., None]
         part = t if bool(np.all(layer == k)) else np.where(sel, t, 0.0)
         out += _per_channel(op.forward, part)
@@ -272,6 +278,7 @@ def _json_safe(o: Any) -> Any:
     return o
 
 
+@renamed_fields(depth_edges_mm="depth_edges")
 @dataclass(frozen=True, kw_only=True)
 class ErrorBudget:
     """A restoration's error split into terms (see the module docstring).
@@ -290,8 +297,12 @@ class ErrorBudget:
     mse : (n_terms, n_regions) ndarray
         Cumulative MSE after each step (data range 1); the last row is the measured
         error of the restoration.
-    radius_edges_px, depth_edges_mm : ndarray
-        Edges of the radial bins and depth bands.
+    radius_edges_px : ndarray
+        Edges of the radial bins, px.
+    depth_edges : ndarray
+        Edges of the depth bands, mm (``as_dict`` writes them under ``edges_mm``, as
+        before). The former name ``depth_edges_mm`` is still accepted and readable,
+        with a :class:`DeprecationWarning`.
     method : str
     info : dict
         Anything else worth recording (bank depth, the traced radius, the edge width).
@@ -303,7 +314,7 @@ class ErrorBudget:
     pixels: np.ndarray
     mse: np.ndarray
     radius_edges_px: np.ndarray
-    depth_edges_mm: np.ndarray
+    depth_edges: np.ndarray
     method: str
     info: dict = field(default_factory=dict)
 
@@ -338,7 +349,7 @@ class ErrorBudget:
             "weights": dict(self.weights),
             "total": block([self.regions.index("all")], True),
             "per_radius": {"edges_px": self.radius_edges_px, **block(self._rows("r"))},
-            "per_depth_band": ({"edges_mm": self.depth_edges_mm, **block(self._rows("d"))}
+            "per_depth_band": ({"edges_mm": self.depth_edges, **block(self._rows("d"))}
                                if self._rows("d") else None),
             "regions": {r: block([j], True) for j, r in enumerate(self.regions)
                         if r in ("beyond_fov", "occlusion_edges")},
@@ -373,12 +384,13 @@ class ErrorBudget:
             if region[0] == "r":
                 e = self.radius_edges_px
                 return f"r {e[i]:.0f}-{e[i + 1]:.0f} px"
-            e = self.depth_edges_mm
+            e = self.depth_edges
             hi = "inf" if not math.isfinite(e[i + 1]) else f"{e[i + 1] / 1000:g}"
             return f"depth {e[i] / 1000:g}-{hi} m"
         return region
 
 
+@renamed_keywords(depth_mm="deconvolution_depth", depth_bands_mm="depth_bands")
 def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
                  clean_observed: np.ndarray | None = None,
                  second_seed: np.ndarray | None = None,
@@ -386,9 +398,9 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
                  depth: np.ndarray | None = None, mask: np.ndarray | None = None,
                  method: str = "wiener", weight: float | None = None,
                  noise: SensorNoise | float | None = None,
-                 depth_mm: float | None = None,
+                 deconvolution_depth: float | None = None,
                  radius_edges_px: ArrayLike | None = None, n_radial_bins: int = 8,
-                 depth_bands_mm: ArrayLike = DEPTH_BANDS_MM, edge_width_px: int = 2,
+                 depth_bands: ArrayLike = DEPTH_BANDS_MM, edge_width_px: int = 2,
                  weight_bounds: tuple[float, float] | None = None,
                  **restore_kw: Any) -> ErrorBudget:
     r"""The error budget of a restoration of ``observed`` against ``truth``.
@@ -422,13 +434,15 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
         (None: the method's calibrated choice from ``noise`` and the image).
     noise : SensorNoise or float, optional
         The observed image's noise, for the methods' calibrated choices.
-    depth_mm : float, optional
-        Bank depth deconvolved with (default 500 mm, :func:`select_depth`).
+    deconvolution_depth : float, optional
+        Bank depth deconvolved with, mm (default 500 mm, :func:`select_depth`); the
+        former keyword ``depth_mm`` is still accepted, with a :class:`DeprecationWarning`.
     radius_edges_px : sequence of float, optional
         Radial bin edges, pixels from the optical axis; default ``n_radial_bins`` equal
         bins from 0 to the mask's farthest pixel + 0.5 (as the evaluation's).
-    depth_bands_mm : sequence of float
-        Depth band edges, mm.
+    depth_bands : sequence of float
+        Depth band edges, mm (default :data:`DEPTH_BANDS_MM`); the former keyword
+        ``depth_bands_mm`` is still accepted, with a :class:`DeprecationWarning`.
     edge_width_px : int
         Half-width of the occlusion-edge region, pixels.
     weight_bounds : (float, float), optional
@@ -465,7 +479,7 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
         raise ValueError(f"error_budget: depth must be {shape[:2]}, got {np.shape(depth)}")
     dt = np.float32 if np.asarray(observed).dtype == np.float32 else np.float64
     bounds = WEIGHT_BOUNDS[method] if weight_bounds is None else weight_bounds
-    kw = dict(restore_kw, depth_mm=depth_mm)
+    kw = dict(restore_kw, depth=deconvolution_depth)
     if method != "wiener":
         kw["noise"] = noise
 
@@ -483,12 +497,13 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
         return cache[key]
 
     # the chain of inputs
-    op = blur_operator(bank, shape, depth_mm=depth_mm, dtype=dt)
+    op = blur_operator(bank, shape, depth=deconvolution_depth, dtype=dt)
     model = _per_channel(op.forward, t.astype(dt))
     clean = np.asarray(observed if clean_observed is None else clean_observed)
     steps: list[tuple[str, np.ndarray]] = [("information", model)]
-    if depth is not None and len(np.asarray(bank.depths_mm)) > 1:
-        steps.append(("depth", layered_blur(t, bank, depth, depth_mm=depth_mm, dtype=dt)))
+    if depth is not None and len(np.asarray(bank.depths)) > 1:
+        steps.append(("depth", layered_blur(t, bank, depth,
+                                            deconvolution_depth=deconvolution_depth, dtype=dt)))
     if second_seed is not None:
         mean = 0.5 * (np.asarray(clean, dtype=np.float64) + np.asarray(second_seed, np.float64))
         steps += [("mismatch", mean), ("monte_carlo", clean)]
@@ -523,14 +538,14 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
         redges = np.asarray(radius_edges_px, dtype=np.float64)
     if redges.ndim != 1 or len(redges) < 2 or np.any(np.diff(redges) <= 0):
         raise ValueError("error_budget: radius_edges_px must be at least two increasing radii")
-    dedges = np.asarray(depth_bands_mm, dtype=np.float64)
+    dedges = np.asarray(depth_bands, dtype=np.float64)
     if dedges.ndim != 1 or len(dedges) < 2 or np.any(~(np.diff(dedges) > 0)):
-        raise ValueError("error_budget: depth_bands_mm must be at least two increasing depths")
+        raise ValueError("error_budget: depth_bands must be at least two increasing depths")
     regions: list[tuple[str, np.ndarray]] = [("all", m)]
     for i in range(len(redges) - 1):
         regions.append((f"r{i}", m & (rr >= redges[i]) & (rr < redges[i + 1])))
-    info: dict[str, Any] = {"bank_depths_mm": np.asarray(bank.depths_mm, float).tolist(),
-                            "deconvolution_depth_mm": depth_mm,
+    info: dict[str, Any] = {"bank_depths_mm": np.asarray(bank.depths, float).tolist(),
+                            "deconvolution_depth_mm": deconvolution_depth,
                             "sensor_noise": clean_observed is not None,
                             "second_seed": second_seed is not None}
     if depth is not None:
@@ -556,5 +571,5 @@ def error_budget(truth: np.ndarray, observed: np.ndarray, bank: IPSFBank, *,
     mse = np.array([[float(e[s].mean()) if s.any() else math.nan for _, s in regions]
                     for e in maps])
     return ErrorBudget(terms=names, weights=weights, regions=tuple(r for r, _ in regions),
-                       pixels=pixels, mse=mse, radius_edges_px=redges, depth_edges_mm=dedges,
+                       pixels=pixels, mse=mse, radius_edges_px=redges, depth_edges=dedges,
                        method=method, info=info)

@@ -20,6 +20,7 @@ from collections.abc import Mapping
 import numpy as np
 import scipy.ndimage as ndi
 
+from ..deprecation import renamed_keywords
 from ..io.bank import OPTICS_SECTIONS, BankError, IPSFBank, optics_fingerprint, optics_sections
 from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..resources import check_allocation
@@ -59,27 +60,28 @@ def normalise(k: np.ndarray) -> np.ndarray:
     return k / s
 
 
-def select_depth(bank: IPSFBank, depth_mm: float | str | None = None) -> np.ndarray:
+@renamed_keywords(depth_mm="depth")
+def select_depth(bank: IPSFBank, depth: float | str | None = None) -> np.ndarray:
     """The (n_points, K, K) unit-sum kernels used for deconvolution.
 
     Parameters
     ----------
     bank : IPSFBank
         The bank whose kernels (n_depths, n_points, K, K) are selected from.
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         A depth in mm picks the bank depth nearest to it (in 1/depth, so ``inf`` works);
         ``"mean"`` averages the kernels over all depths (the IPSF is quasi
         depth-invariant, paper Sec. 3); ``None`` is the paper's choice, 500 mm.
     """
     k = np.asarray(bank.kernels, dtype=np.float64)
-    if isinstance(depth_mm, str):
-        if depth_mm != "mean":
-            raise ValueError(f"depth_mm must be a number, 'mean' or None, got {depth_mm!r}")
+    if isinstance(depth, str):
+        if depth != "mean":
+            raise ValueError(f"depth must be a number, 'mean' or None, got {depth!r}")
         return normalise(k.mean(axis=0))
-    target = PAPER_DECONV_DEPTH_MM if depth_mm is None else float(depth_mm)
+    target = PAPER_DECONV_DEPTH_MM if depth is None else float(depth)
     if not target > 0:
-        raise ValueError(f"depth_mm must be > 0, got {depth_mm!r}")
-    depths = np.asarray(bank.depths_mm, dtype=np.float64)
+        raise ValueError(f"depth must be > 0, got {depth!r}")
+    depths = np.asarray(bank.depths, dtype=np.float64)
     with np.errstate(divide="ignore"):
         i = int(np.argmin(np.abs(1.0 / depths - 1.0 / target)))
     logger.debug("deconvolving with the bank's depth %g mm", depths[i])
@@ -96,7 +98,7 @@ def radii_px(bank: IPSFBank) -> np.ndarray:
     """
     if bank.kind != "radial":
         raise BankError(f"a radial bank is needed here, got a {bank.kind!r} bank")
-    return np.asarray(bank.radii_mm, dtype=np.float64) / float(bank.pixel_pitch)
+    return np.asarray(bank.radii, dtype=np.float64) / float(bank.pixel_pitch)
 
 
 def interpolate_radial(kernels: np.ndarray, radii: np.ndarray, r: float) -> np.ndarray:
@@ -196,7 +198,7 @@ def grid_bank_from_radial(bank: IPSFBank, grid_shape: tuple[int, int],
             for d in range(kernels.shape[0]):
                 out[d, n] = rotate_kernel(interpolate_radial(kernels[d], rad, r), th)
             n += 1
-    return IPSFBank(kernels=out.astype(np.float32), points_uv=pts, depths_mm=bank.depths_mm,
+    return IPSFBank(kernels=out.astype(np.float32), points_uv=pts, depths=bank.depths,
                     pixel_pitch=pitch, reference_sensor_distance=bank.reference_sensor_distance,
                     kind="grid", grid_shape=(rows_n, cols_n),
                     metadata={**bank.metadata, "derived_from": "radial bank, rotated"},

@@ -18,6 +18,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..deprecation import renamed_keywords
 from ..optics.pixels import optical_center_px
 
 __all__ = ["psnr", "ssim_map", "ssim", "disk_mask", "radial_bins", "per_radius",
@@ -203,8 +204,9 @@ def per_radius(image: np.ndarray, reference: np.ndarray, edges_px: ArrayLike, *,
     return {"radius_px": 0.5 * (edges[:-1] + edges[1:]), "edges_px": edges, **res}
 
 
+@renamed_keywords(edges_mm="edges")
 def per_depth_band(image: np.ndarray, reference: np.ndarray, depth: np.ndarray,
-                   edges_mm: ArrayLike, *, mask: np.ndarray | None = None, data_range: float = 1.0
+                   edges: ArrayLike, *, mask: np.ndarray | None = None, data_range: float = 1.0
                   ) -> dict:
     """PSNR and SSIM per depth band ``[edges[i], edges[i+1])`` of a depth AOV map.
 
@@ -217,8 +219,9 @@ def per_depth_band(image: np.ndarray, reference: np.ndarray, depth: np.ndarray,
     depth : (H, W) ndarray
         Depth of each pixel, mm (e.g. the renderer's depth AOV); non-finite pixels
         (no hit) are in no band.
-    edges_mm : sequence of float
-        Increasing band edges, mm (the last may be ``inf``).
+    edges : sequence of float
+        Increasing band edges, mm (the last may be ``inf``). The former keyword
+        ``edges_mm`` is still accepted, with a :class:`DeprecationWarning`.
     mask : (H, W) bool ndarray, optional
         Pixels that count (default all).
     data_range : float
@@ -226,18 +229,19 @@ def per_depth_band(image: np.ndarray, reference: np.ndarray, depth: np.ndarray,
 
     Returns
     -------
-    dict with ``edges_mm``, ``psnr``, ``ssim``, ``pixels`` (arrays of length n_bands).
+    dict with ``edges_mm`` (the edges, under their former key), ``psnr``, ``ssim``,
+    ``pixels`` (arrays of length n_bands).
     """
     d = np.asarray(depth, dtype=np.float64)
     if d.shape != np.shape(image)[:2]:
         raise ValueError(f"depth map must be {np.shape(image)[:2]}, got {d.shape}")
-    edges = np.asarray(edges_mm, dtype=np.float64)
-    if edges.ndim != 1 or len(edges) < 2 or np.any(~(np.diff(edges) > 0)):
-        raise ValueError("edges_mm must be at least two increasing depths")
+    band_edges = np.asarray(edges, dtype=np.float64)
+    if band_edges.ndim != 1 or len(band_edges) < 2 or np.any(~(np.diff(band_edges) > 0)):
+        raise ValueError("edges must be at least two increasing depths")
     finite = np.isfinite(d)
     labels = np.full(d.shape, -1)
-    idx = np.searchsorted(edges, np.where(finite, d, -np.inf), side="right") - 1
-    ok = finite & (d >= edges[0]) & (d < edges[-1])
+    idx = np.searchsorted(band_edges, np.where(finite, d, -np.inf), side="right") - 1
+    ok = finite & (d >= band_edges[0]) & (d < band_edges[-1])
     labels[ok] = idx[ok]
-    res = _per_label(image, reference, labels, len(edges) - 1, mask, data_range)
-    return {"edges_mm": edges, **res}
+    res = _per_label(image, reference, labels, len(band_edges) - 1, mask, data_range)
+    return {"edges_mm": band_edges, **res}

@@ -42,6 +42,7 @@ import scipy.fft as sfft
 import scipy.sparse as sp
 import scipy.signal as ssig
 
+from ..deprecation import renamed_keywords
 from ..io.bank import BankError, IPSFBank
 from .kernels import check_bank_matches, interpolate_radial, radii_px, select_depth
 from .polar import PolarGrid, _band_length, _band_transfer, polar_grid
@@ -124,8 +125,9 @@ def _as_image(x: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
 
 # -- product-convolution (grid banks) ------------------------------------------------
 
+@renamed_keywords(depth_mm="depth")
 def product_convolution_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
-                                 depth_mm: float | str | None = None) -> BlurOperator:
+                                 depth: float | str | None = None) -> BlurOperator:
     """The blur of a ``kind="grid"`` bank as a :class:`BlurOperator` (zero boundary).
 
     Parameters
@@ -134,7 +136,7 @@ def product_convolution_operator(bank: IPSFBank, image_shape: tuple[int, int], *
         A grid bank matching the image (:func:`~mitsweep.deconv.kernels.check_bank_matches`).
     image_shape : (H, W)
         The shape of the images the operator acts on.
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth whose kernels blur, as in
         :func:`~mitsweep.deconv.kernels.select_depth` (default 500 mm).
     """
@@ -144,7 +146,7 @@ def product_convolution_operator(bank: IPSFBank, image_shape: tuple[int, int], *
         raise BankError(f"a product-convolution operator needs a grid bank, got {bank.kind!r}")
     rows, cols = grid_axes_px(bank, shape)
     wy, wx = grid_windows(rows, cols, shape)
-    kernels = select_depth(bank, depth_mm).astype(np.float64)
+    kernels = select_depth(bank, depth).astype(np.float64)
     n_c = wx.shape[0]
     cells = []
     for i in range(wy.shape[0]):
@@ -357,8 +359,9 @@ def _polar_blur(spec: np.ndarray, bands: list[PolarBand], *, adjoint: bool) -> n
     return out
 
 
+@renamed_keywords(depth_mm="depth")
 def polar_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
-                   depth_mm: float | str | None = None,
+                   depth: float | str | None = None,
                    center: tuple[float, float] | None = None, r_max: float | None = None,
                    radial_oversampling: float = 1.5, angular_oversampling: float = 1.25,
                    band_spacing: float = 0.25, dtype: DTypeLike = np.float64) -> BlurOperator:
@@ -370,7 +373,7 @@ def polar_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
         Radial bank (kernels on the +u axis).
     image_shape : (H, W)
         The shape of the images the operator acts on.
-    depth_mm, center, r_max, radial_oversampling, angular_oversampling, band_spacing
+    depth, center, r_max, radial_oversampling, angular_oversampling, band_spacing
         As in :func:`~mitsweep.deconv.polar.polar_deconvolve`.
     dtype : float32 or float64
         Precision of the sparse resampling matrices and transfer functions.
@@ -386,7 +389,7 @@ def polar_operator(bank: IPSFBank, image_shape: tuple[int, int], *,
     """
     shape = (int(image_shape[0]), int(image_shape[1]))
     check_bank_matches(bank, shape)
-    kernels = select_depth(bank, depth_mm).astype(np.float64)
+    kernels = select_depth(bank, depth).astype(np.float64)
     rad = radii_px(bank)
     K = kernels.shape[-1]
     dt = np.dtype(np.float32) if np.dtype(dtype) == np.float32 else np.dtype(np.float64)

@@ -41,6 +41,7 @@ import logging
 import numpy as np
 import scipy.fft as sfft
 
+from ..deprecation import renamed_keywords
 from ..io.bank import BankError, IPSFBank
 from .noise import SensorNoise
 from .kernels import interpolate_radial, radii_px, select_depth
@@ -288,8 +289,9 @@ def _discrepancy(spec, sigma, tau, image, mask) -> tuple[float, float]:
     return nsr, float(np.sqrt(tau) * sigma)
 
 
+@renamed_keywords(depth_mm="depth")
 def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,
-                     depth_mm: float | str | None = None,
+                     depth: float | str | None = None,
                      center: tuple[float, float] | None = None) -> np.ndarray:
     """The one IPSF that stands for the bank in :func:`discrepancy_nsr`.
 
@@ -304,7 +306,7 @@ def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,
         A radial or grid bank.
     image_shape : tuple of int
         The image's (H, W[, C]).
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
         500 mm).
     center : (float, float), optional
@@ -312,7 +314,7 @@ def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,
     """
     from .polar import polar_grid
 
-    kernels = select_depth(bank, depth_mm)
+    kernels = select_depth(bank, depth)
     if bank.kind == "radial":
         rad = radii_px(bank)
         r_max = min(float(rad.max()) + kernels.shape[-1],
@@ -323,8 +325,9 @@ def surrogate_kernel(bank: IPSFBank, image_shape: tuple[int, ...], *,
     raise BankError(f"unknown bank kind {bank.kind!r}")
 
 
+@renamed_keywords(depth_mm="depth")
 def calibrated_nsr(image: np.ndarray, bank: IPSFBank, *, noise: SensorNoise | float | None = None,
-                   depth_mm: float | str | None = None,
+                   depth: float | str | None = None,
                    center: tuple[float, float] | None = None) -> float:
     """Wiener NSR (natural prior) for ``image`` by the discrepancy principle: the median
     over channels of :func:`discrepancy_nsr` with σ from :func:`noise_sigma` and the
@@ -339,7 +342,7 @@ def calibrated_nsr(image: np.ndarray, bank: IPSFBank, *, noise: SensorNoise | fl
     noise : SensorNoise, float or None
         A sensor model, a σ, or None to estimate σ from each channel
         (:func:`noise_sigma`).
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
         500 mm).
     center : (float, float), optional
@@ -347,7 +350,7 @@ def calibrated_nsr(image: np.ndarray, bank: IPSFBank, *, noise: SensorNoise | fl
     """
     img = np.asarray(image)
     chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
-    k = surrogate_kernel(bank, img.shape, depth_mm=depth_mm, center=center)
+    k = surrogate_kernel(bank, img.shape, depth=depth, center=center)
     return float(np.median([discrepancy_nsr(c, k, noise_sigma(c, noise)) for c in chans]))
 
 

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import DTypeLike
 
+from ..deprecation import renamed_keywords
 from ..io.bank import BankError, IPSFBank
 from .methods import METHODS
 from .noise import SensorNoise
@@ -21,8 +22,9 @@ from .wiener import working_dtype
 __all__ = ["deconvolve", "blur_operator"]
 
 
+@renamed_keywords(depth_mm="depth")
 def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
-                  depth_mm: float | str | None = None,
+                  depth: float | str | None = None,
                   center: tuple[float, float] | None = None,
                   dtype: DTypeLike = np.float64) -> BlurOperator:
     """The bank's blur on (H, W) images: polar for a radial bank, product-convolution
@@ -34,7 +36,7 @@ def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
         A radial or grid bank.
     image_shape : tuple of int
         The image's (H, W[, C]); the operator acts on (H, W).
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
         500 mm).
     center : (float, float), optional
@@ -46,14 +48,15 @@ def blur_operator(bank: IPSFBank, image_shape: tuple[int, ...], *,
     """
     shape = (int(image_shape[0]), int(image_shape[1]))
     if bank.kind == "radial":
-        return polar_operator(bank, shape, depth_mm=depth_mm, center=center, dtype=dtype)
+        return polar_operator(bank, shape, depth=depth, center=center, dtype=dtype)
     if bank.kind == "grid":
         if center is not None:
             raise ValueError("center applies to radial banks (polar deconvolution) only")
-        return product_convolution_operator(bank, shape, depth_mm=depth_mm)
+        return product_convolution_operator(bank, shape, depth=depth)
     raise BankError(f"unknown bank kind {bank.kind!r}")
 
 
+@renamed_keywords(depth_mm="depth")
 def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
                weight: float | None = None, iterations: int | None = None,
                noise: SensorNoise | float | None = None, progress: bool = False, **kw: Any
@@ -87,7 +90,7 @@ def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
     progress : bool
         A tqdm bar on stderr for the iterative methods.
     **kw
-        Passed on: ``depth_mm`` and ``center`` (radial banks) for every method;
+        Passed on: ``depth`` and ``center`` (radial banks) for every method;
         ``nsr`` and ``prior`` for Wiener (``nsr`` is the former name of ``weight``);
         for TV / hyper-Laplacian ``nsr`` fixes the NSR of their first (Wiener) step
         (default: calibrated) and ``time_limit_s`` bounds their time; for RL ``nsr``
@@ -106,7 +109,7 @@ def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
             raise ValueError("give weight or nsr (its former name), not both")
         nsr = weight if weight is not None else nsr
         if nsr is None and kw.get("prior", "natural") == "natural":
-            nsr = calibrated_nsr(image, bank, noise=noise, depth_mm=kw.get("depth_mm"),
+            nsr = calibrated_nsr(image, bank, noise=noise, depth=kw.get("depth"),
                                  center=kw.get("center"))
         if bank.kind == "radial":
             return polar_deconvolve(image, bank, nsr=nsr, **kw)
@@ -122,12 +125,12 @@ def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
         kw.pop("nsr", None)
         t0 = time.perf_counter()
         img = np.asarray(image)
-        depth_mm, center = kw.pop("depth_mm", None), kw.pop("center", None)
-        op = blur_operator(bank, img.shape, depth_mm=depth_mm, center=center,
+        depth, center = kw.pop("depth", None), kw.pop("center", None)
+        op = blur_operator(bank, img.shape, depth=depth, center=center,
                            dtype=working_dtype(img))
         limit = kw.pop("time_limit_s", None)
         chans = [img] if img.ndim == 2 else [img[..., c] for c in range(img.shape[2])]
-        k_mid = surrogate_kernel(bank, img.shape, depth_mm=depth_mm, center=center)
+        k_mid = surrogate_kernel(bank, img.shape, depth=depth, center=center)
         outs = []
         for c, chan in enumerate(chans):
             # the limit is the whole call's (building the operator counts), shared

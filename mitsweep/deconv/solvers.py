@@ -43,6 +43,7 @@ import time
 import numpy as np
 import scipy.fft as sfft
 
+from ..deprecation import renamed_keywords
 from ..io.bank import BankError, IPSFBank
 from .kernels import check_bank_matches, interpolate_radial, radii_px, select_depth
 from .noise import SensorNoise
@@ -414,9 +415,10 @@ def _run_hqs(prob, *, beta_wiener, sigma, alpha, weight, steps, time_limit_s, ba
     return u, lam, done
 
 
+@renamed_keywords(depth_mm="depth")
 def hqs_deconvolve(image: np.ndarray, bank: IPSFBank, *, prior: str = "hyperlaplacian",
                    weight: float | None = None, iterations: int | None = None,
-                   noise: SensorNoise | float | None = None, depth_mm: float | str | None = None,
+                   noise: SensorNoise | float | None = None, depth: float | str | None = None,
                    center: tuple[float, float] | None = None, band_spacing: float = 0.25,
                    nsr: float | None = None, time_limit_s: float | None = None,
                    data_term: str = "gaussian", progress: bool = False, info: dict | None = None
@@ -497,11 +499,11 @@ def hqs_deconvolve(image: np.ndarray, bank: IPSFBank, *, prior: str = "hyperlapl
     dt = working_dtype(img)
     img = img.astype(dt, copy=False)
     check_image_values(img)
-    kernels = select_depth(bank, depth_mm)
+    kernels = select_depth(bank, depth)
     K = kernels.shape[-1]
     H, W = img.shape[:2]
     n_px = float(np.sqrt(H * W))
-    k_mid = surrogate_kernel(bank, img.shape, depth_mm=depth_mm, center=center)
+    k_mid = surrogate_kernel(bank, img.shape, depth=depth, center=center)
     if bank.kind == "radial":
         rad = radii_px(bank)
         r_max = min(float(rad.max()) + K, polar_grid(img.shape, center=center).r_max)

@@ -23,6 +23,7 @@ import numpy as np
 import scipy.signal as ssig
 
 from ..config import Setup
+from ..deprecation import renamed_keywords
 from ..io.bank import BankError, IPSFBank
 from ..optics.pixels import sensor_to_pixel
 from ..resources import check_allocation
@@ -227,7 +228,7 @@ def grid_kernel_field(kernels: np.ndarray, wy: np.ndarray, wx: np.ndarray) -> np
     return np.einsum("iy,jx,ijab->yxab", wy, wx, k)
 
 
-def _grid_setup(image, bank, depth_mm):
+def _grid_setup(image, bank, depth):
     img = np.asarray(image)
     check_bank_matches(bank, img.shape)
     if bank.kind != "grid":
@@ -235,11 +236,12 @@ def _grid_setup(image, bank, depth_mm):
                         f"{bank.kind!r} (convert with kernels.grid_bank_from_radial)")
     rows, cols = grid_axes_px(bank, img.shape[:2])
     wy, wx = grid_windows(rows, cols, img.shape[:2])
-    return img, select_depth(bank, depth_mm), wy, wx
+    return img, select_depth(bank, depth), wy, wx
 
 
+@renamed_keywords(depth_mm="depth")
 def spatially_varying_blur(image: np.ndarray, bank: IPSFBank, *,
-                           depth_mm: float | str | None = None) -> np.ndarray:
+                           depth: float | str | None = None) -> np.ndarray:
     """Blur ``image`` by a grid bank's interpolated IPSFs (:func:`product_convolve`).
 
     Parameters
@@ -248,17 +250,18 @@ def spatially_varying_blur(image: np.ndarray, bank: IPSFBank, *,
         The sharp image, on the bank's reference pixel grid.
     bank : IPSFBank
         A grid bank.
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
         500 mm).
     """
-    img, kernels, wy, wx = _grid_setup(image, bank, depth_mm)
+    img, kernels, wy, wx = _grid_setup(image, bank, depth)
     return product_convolve(img, kernels, wy, wx)
 
 
+@renamed_keywords(depth_mm="depth")
 def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
                                  nsr: float | None = None, prior: str = "natural",
-                                 depth_mm: float | str | None = None,
+                                 depth: float | str | None = None,
                                  margin: int | None = None) -> np.ndarray:
     r"""Deconvolve a spatially varying blur given by a grid bank.
 
@@ -273,7 +276,7 @@ def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
         Wiener regulariser, see :func:`~mitsweep.deconv.wiener.wiener_deconvolve`;
         ``nsr=None`` estimates one NSR from the whole image (the same for every region,
         so that regions agree).
-    depth_mm
+    depth
         Which depth of the bank, see :func:`~mitsweep.deconv.kernels.select_depth`.
     margin : int, optional
         Context pixels around each window's support that its Wiener filter sees
@@ -291,7 +294,7 @@ def spatially_varying_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     evaluated on each window's support plus ``margin`` (symmetric extension beyond
     the image border), with bilinear hat windows :math:`w_b` summing to one.
     """
-    img, kernels, wy, wx = _grid_setup(image, bank, depth_mm)
+    img, kernels, wy, wx = _grid_setup(image, bank, depth)
     dt = working_dtype(img)
     img = img.astype(dt, copy=False)
     check_image_values(img)

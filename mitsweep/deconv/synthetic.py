@@ -101,9 +101,9 @@ def synthetic_radial_bank(image_shape: tuple[int, int], *, n_radii: int = 19, si
     depths = np.asarray(depths, float)
     kernels = np.repeat(k[None], len(depths), axis=0).astype(np.float32)
     pts = np.stack([radii * pixel_pitch, np.zeros_like(radii)], axis=1)
-    return IPSFBank(kernels=kernels, points_uv=pts, depths_mm=depths,
+    return IPSFBank(kernels=kernels, points_uv=pts, depths=depths,
                     pixel_pitch=pixel_pitch, reference_sensor_distance=30.0, kind="radial",
-                    radii_mm=radii * pixel_pitch, metadata=_bank_meta(image_shape, r_max_px=r_max))
+                    radii=radii * pixel_pitch, metadata=_bank_meta(image_shape, r_max_px=r_max))
 
 
 @renamed_keywords(depths_mm="depths")
@@ -146,7 +146,7 @@ def synthetic_grid_bank(image_shape: tuple[int, int], grid_shape: tuple[int, int
     depths = np.asarray(depths, float)
     kernels = np.repeat(k[None], len(depths), axis=0).astype(np.float32)
     pts = np.stack([u, v], axis=1)
-    return IPSFBank(kernels=kernels, points_uv=pts, depths_mm=depths,
+    return IPSFBank(kernels=kernels, points_uv=pts, depths=depths,
                     pixel_pitch=pixel_pitch, reference_sensor_distance=30.0, kind="grid",
                     grid_shape=(grid_shape[0], grid_shape[1]),
                     metadata=_bank_meta(image_shape, r_max_px=r_max))

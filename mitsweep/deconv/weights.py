@@ -56,6 +56,7 @@ import numpy as np
 import scipy.fft as sfft
 from threadpoolctl import threadpool_limits
 
+from ..deprecation import renamed_keywords
 from ..io.bank import BankError, IPSFBank
 from ..optics.pixels import optical_center_px
 from .kernels import radii_px, select_depth
@@ -231,10 +232,11 @@ def _kernel_power(kernels: np.ndarray, L: int) -> np.ndarray:
     return np.abs(sfft.fft2(big, axes=(-2, -1), workers=-1)) ** 2
 
 
+@renamed_keywords(depth_mm="depth")
 @_one_blas_thread
 def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
                 floor_var: float | None = None, mask: np.ndarray | None = None,
-                depth_mm: float | str | None = None,
+                depth: float | str | None = None,
                 center: tuple[float, float] | None = None, n_px: float | None = None,
                 bounds: tuple[float, float] = (1e-10, MAX_NSR)
                 ) -> tuple[float, Callable[[float], float]]:
@@ -246,7 +248,7 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
     image : (H, W) or (H, W, C) ndarray
         The image to restore (linear values).
     bank : IPSFBank
-        The image's bank; its kernels at ``depth_mm`` (default 500 mm), weighted by
+        The image's bank; its kernels at ``depth`` (default 500 mm), weighted by
         :func:`kernel_shares` over ``mask`` (the pixels restored; default all).
     noise_var : float
         Noise variance over the mask, image units².
@@ -255,7 +257,7 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
         (default ``noise_var``).
     mask : (H, W) bool ndarray, optional
         The pixels restored (default all).
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
         500 mm).
     center : (float, float), optional
@@ -275,7 +277,7 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
     from scipy.optimize import minimize_scalar
 
     img = np.asarray(image, dtype=np.float64)
-    kernels = select_depth(bank, depth_mm).astype(np.float64)
+    kernels = select_depth(bank, depth).astype(np.float64)
     shares = kernel_shares(bank, img.shape, mask=mask, center=center)
     keep = shares > 0
     L = max(128, 4 * int(kernels.shape[-1]))
@@ -307,9 +309,10 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
     return math.exp(t), (lambda nsr: risk_log(math.log(float(nsr))))
 
 
+@renamed_keywords(depth_mm="depth")
 @_one_blas_thread
 def unexplained_variance(image: np.ndarray, bank: IPSFBank, *,
-                         mask: np.ndarray | None = None, depth_mm: float | str | None = None,
+                         mask: np.ndarray | None = None, depth: float | str | None = None,
                          center: tuple[float, float] | None = None,
                          n_px: float | None = None) -> float:
     r"""The variance of what the bank's blur and the natural prior leave unexplained in
@@ -331,7 +334,7 @@ def unexplained_variance(image: np.ndarray, bank: IPSFBank, *,
         Its bank; the kernels weighted by :func:`kernel_shares` over ``mask``.
     mask : (H, W) bool ndarray, optional
         The pixels restored (default all).
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
         500 mm).
     center : (float, float), optional
@@ -347,7 +350,7 @@ def unexplained_variance(image: np.ndarray, bank: IPSFBank, *,
     from scipy.optimize import minimize_scalar
 
     img = np.asarray(image, dtype=np.float64)
-    kernels = select_depth(bank, depth_mm).astype(np.float64)
+    kernels = select_depth(bank, depth).astype(np.float64)
     shares = kernel_shares(bank, img.shape, mask=mask, center=center)
     keep = shares > 0
     L = max(128, 4 * int(kernels.shape[-1]))
@@ -394,11 +397,12 @@ def high_frequency_floor(image: np.ndarray, *, band: float = 0.45) -> float:
     return float(np.mean(p[sel])) if sel.any() else float(p[-1])
 
 
+@renamed_keywords(depth_mm="depth")
 @_one_blas_thread
 def model_nsr(image: np.ndarray, bank: IPSFBank,
               noise: SensorNoise | float | None = None, *, mask: np.ndarray | None = None,
               level: float = 1.0, extra_variance: float = 0.0,
-              depth_mm: float | str | None = None,
+              depth: float | str | None = None,
               center: tuple[float, float] | None = None, n_px: float | None = None,
               unexplained: bool = True, details: dict | None = None) -> float:
     r"""Wiener's natural-prior NSR for ``image`` from its noise and its own spectrum.
@@ -438,14 +442,14 @@ def model_nsr(image: np.ndarray, bank: IPSFBank,
     # periodogram floor) and everything blur + prior leave unexplained (GCV)
     blind = 0.0 if not unexplained and noise is not None else max(
         blind_noise_variance(img),
-        unexplained_variance(img, bank, mask=m, depth_mm=depth_mm, center=center, n_px=n_px))
+        unexplained_variance(img, bank, mask=m, depth=depth, center=center, n_px=n_px))
     if noise is None:
         var = frame = blind + float(extra_variance)
     else:
         var = max(noise_variance(img, noise, mask=m, level=level) + float(extra_variance),
                   blind)
         frame = max(noise_variance(img, noise, level=level) + float(extra_variance), blind)
-    nsr, risk = wiener_risk(img, bank, var, floor_var=frame, mask=mask, depth_mm=depth_mm,
+    nsr, risk = wiener_risk(img, bank, var, floor_var=frame, mask=mask, depth=depth,
                             center=center, n_px=n_px)
     if details is not None:
         details.update(noise_variance=var, frame_noise_variance=frame,
@@ -468,9 +472,10 @@ def blind_noise_variance(image: np.ndarray) -> float:
     return min(float(estimate_noise_sigma(image)) ** 2, high_frequency_floor(image))
 
 
+@renamed_keywords(depth_mm="depth")
 @_one_blas_thread
 def blind_nsr(image: np.ndarray, bank: IPSFBank, *, mask: np.ndarray | None = None,
-              depth_mm: float | str | None = None,
+              depth: float | str | None = None,
               center: tuple[float, float] | None = None, n_px: float | None = None) -> float:
     """:func:`model_nsr` with nothing known (σ² by :func:`blind_noise_variance`), at
     least :data:`~mitsweep.deconv.wiener.DEFAULT_NSR_FLOOR` (a noiseless render still
@@ -484,7 +489,7 @@ def blind_nsr(image: np.ndarray, bank: IPSFBank, *, mask: np.ndarray | None = No
         Its bank.
     mask : (H, W) bool ndarray, optional
         The pixels restored (default all).
-    depth_mm : float, "mean" or None
+    depth : float, "mean" or None
         The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
         500 mm).
     center : (float, float), optional
@@ -492,5 +497,5 @@ def blind_nsr(image: np.ndarray, bank: IPSFBank, *, mask: np.ndarray | None = No
     n_px : float, optional
         The deconvolver's size for the prior's scale (default √(HW)).
     """
-    nsr = model_nsr(image, bank, None, mask=mask, depth_mm=depth_mm, center=center, n_px=n_px)
+    nsr = model_nsr(image, bank, None, mask=mask, depth=depth, center=center, n_px=n_px)
     return max(nsr, DEFAULT_NSR_FLOOR)

@@ -46,6 +46,7 @@ import logging
 import numpy as np
 from numpy.typing import DTypeLike
 
+from ...deprecation import renamed_keywords
 from ...io.bank import IPSFBank
 from ...resources import check_allocation
 from ..kernels import check_bank_matches, radii_px, select_depth
@@ -101,9 +102,10 @@ def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype: DTy
             + float(H) * W * it * (3 * C + 4))
 
 
+@renamed_keywords(depth_mm="depth")
 def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
                      center: tuple[float, float] | None = None, nsr: float | None = None,
-                     prior: str = "natural", depth_mm: float | str | None = None,
+                     prior: str = "natural", depth: float | str | None = None,
                      r_max: float | None = None, radial_oversampling: float = 1.5,
                      angular_oversampling: float = 1.25, band_spacing: float = 0.25,
                      margin: int | None = None) -> np.ndarray:
@@ -120,7 +122,7 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     nsr, prior
         Wiener regulariser, see :func:`~mitsweep.deconv.wiener.wiener_deconvolve`.
         ``nsr=None`` estimates it from the image.
-    depth_mm
+    depth
         Bank depth to use (:func:`~mitsweep.deconv.kernels.select_depth`; default
         500 mm as in the paper).
     r_max : float, optional
@@ -159,7 +161,7 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
     cdt = np.complex64 if dt == np.float32 else np.complex128
     img = img.astype(dt, copy=False)
     check_image_values(img)
-    kernels = select_depth(bank, depth_mm)
+    kernels = select_depth(bank, depth)
     rad = radii_px(bank)
     K = kernels.shape[-1]
     if nsr is None:
