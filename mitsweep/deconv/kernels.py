@@ -71,7 +71,8 @@ def select_depth(bank: IPSFBank, depth: float | str | None = None) -> np.ndarray
     depth : float, "mean" or None
         A depth in mm picks the bank depth nearest to it (in 1/depth, so ``inf`` works);
         ``"mean"`` averages the kernels over all depths (the IPSF is quasi
-        depth-invariant, paper Sec. 3); ``None`` is the paper's choice, 500 mm.
+        depth-invariant, paper Sec. 3); ``None`` is the paper's choice, 500 mm. The
+        former keyword ``depth_mm`` is still accepted, with a :class:`DeprecationWarning`.
     """
     k = np.asarray(bank.kernels, dtype=np.float64)
     if isinstance(depth, str):

@@ -90,7 +90,8 @@ def deconvolve(image: np.ndarray, bank: IPSFBank, *, method: str = "wiener",
     progress : bool
         A tqdm bar on stderr for the iterative methods.
     **kw
-        Passed on: ``depth`` and ``center`` (radial banks) for every method;
+        Passed on: ``depth`` (mm; its former name ``depth_mm`` is still accepted, with a
+        :class:`DeprecationWarning`) and ``center`` (radial banks) for every method;
         ``nsr`` and ``prior`` for Wiener (``nsr`` is the former name of ``weight``);
         for TV / hyper-Laplacian ``nsr`` fixes the NSR of their first (Wiener) step
         (default: calibrated) and ``time_limit_s`` bounds their time; for RL ``nsr``

@@ -123,8 +123,9 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
         Wiener regulariser, see :func:`~mitsweep.deconv.wiener.wiener_deconvolve`.
         ``nsr=None`` estimates it from the image.
     depth
-        Bank depth to use (:func:`~mitsweep.deconv.kernels.select_depth`; default
-        500 mm as in the paper).
+        Bank depth to use, mm (:func:`~mitsweep.deconv.kernels.select_depth`; default
+        500 mm as in the paper). Its former name ``depth_mm`` is still accepted, with a
+        :class:`DeprecationWarning`.
     r_max : float, optional
         Radius (pixels) of the region restored, default the largest bank radius plus a
         kernel size, capped at the farthest corner; pixels beyond are returned unchanged.
