@@ -72,8 +72,8 @@ def sphere_zaber():
 
 def soft_limit_steps(plan) -> tuple[int, int]:
     """The plan's soft limits (min, max) in the stage's steps."""
-    return (round(plan.soft_limit_min_mm * plan.steps_per_mm),
-            round(plan.soft_limit_max_mm * plan.steps_per_mm))
+    return (round(plan.soft_limit_min * plan.steps_per_mm),
+            round(plan.soft_limit_max * plan.steps_per_mm))
 
 
 def assert_safe(model, lo_steps: int, hi_steps: int) -> None:
@@ -140,8 +140,8 @@ def assert_board_timed_exposure(board: ArduinoModel, exp: dict, plan: CapturePla
     history = list(board.shutter_history)
     assert [h[0] for h in history] == ["open", "close"]
     assert history[1][1] - history[0][1] == pytest.approx(plan.planned_exposure_s, abs=1e-9)
-    assert exp["open_position_mm"] == pytest.approx(plan.open_mm, abs=1e-12)
-    assert exp["close_position_mm"] == pytest.approx(plan.close_mm, abs=1e-12)
+    assert exp["open_position_mm"] == pytest.approx(plan.open_position, abs=1e-12)
+    assert exp["close_position_mm"] == pytest.approx(plan.close_position, abs=1e-12)
 
 
 @contextlib.contextmanager

@@ -66,8 +66,8 @@ def test_measured_motion_feeds_tabulated_profile(sphere, tmp_path):
     plan = plan_capture(sphere)
     arduino_capture(sphere, out, plan, at_approach=True)
     profile = motion.MotionProfile.tabulated(*measured_motion(out))
-    assert profile.start == pytest.approx(plan.sensor_start_mm, abs=0.5 / plan.steps_per_mm)
-    assert profile.end == pytest.approx(plan.sensor_end_mm, abs=1.0 / plan.steps_per_mm)
+    assert profile.start == pytest.approx(plan.sensor_start, abs=0.5 / plan.steps_per_mm)
+    assert profile.end == pytest.approx(plan.sensor_end, abs=1.0 / plan.steps_per_mm)
 
 
 def test_zaber_capture_with_arduino_shutter(sphere_zaber, tmp_path):
@@ -83,10 +83,10 @@ def test_zaber_capture_with_arduino_shutter(sphere_zaber, tmp_path):
     # when idle, more under load): allow both at the velocity. A complete record's
     # latency keeps the whole exposure at constant velocity (within the settle distance)
     placement_s = data["clock_map"]["placement_uncertainty_s"]
-    assert 0 < placement_s <= plan.settle_mm / plan.velocity_actual_mm_s
+    assert 0 < placement_s <= plan.settle_distance / plan.velocity_actual_mm_s
     tol = plan.velocity_actual_mm_s * (exp["timing_uncertainty_s"] + placement_s)
-    assert exp["open_position_mm"] == pytest.approx(plan.open_mm, abs=tol)
-    assert exp["close_position_mm"] == pytest.approx(plan.close_mm, abs=tol)
+    assert exp["open_position_mm"] == pytest.approx(plan.open_position, abs=tol)
+    assert exp["close_position_mm"] == pytest.approx(plan.close_position, abs=tol)
     assert record.devices["zaber"].startswith("zaber device id")
 
 
@@ -104,7 +104,7 @@ def test_zaber_capture_host_too_slow_to_time_the_shutter(sphere_zaber, tmp_path,
     released; a later fast attempt completes, and none fast fails the capture safely."""
     setup = sphere_zaber
     plan = plan_capture(setup, stage="zaber")
-    allowed_s = plan.settle_mm / plan.velocity_actual_mm_s
+    allowed_s = plan.settle_distance / plan.velocity_actual_mm_s
     assert SLOW_SHUTTER_REPLY_S > 2 * allowed_s
     out = tmp_path / "capture.json"
     slow = [Fault("slow_reply", command="SHUTTER", delay_s=SLOW_SHUTTER_REPLY_S)] * slow_attempts
@@ -150,8 +150,8 @@ def test_complete_record_holds_the_reference_geometry_of_its_measured_motion(sph
     assert ref["motion"]["positions_mm"] == pytest.approx(s.tolist(), abs=0)
     # within a step of the plan's midpoint: the measured motion is the planned one
     assert ref["reference_sensor_distance_mm"] == pytest.approx(
-        0.5 * (plan.sensor_start_mm + plan.sensor_end_mm), abs=1.0 / plan.steps_per_mm)
-    assert ref["sweep"]["sensor_start_mm"] == pytest.approx(plan.sensor_start_mm, abs=1e-12)
+        0.5 * (plan.sensor_start + plan.sensor_end), abs=1.0 / plan.steps_per_mm)
+    assert ref["sweep"]["sensor_start_mm"] == pytest.approx(plan.sensor_start, abs=1e-12)
 
     out2 = tmp_path / "interrupted.json"
     with PtyDevice(ArduinoModel([Fault("fault_flag", at_fraction=0.5)], homed=True,

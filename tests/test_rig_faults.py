@@ -112,7 +112,7 @@ def test_ctrl_c_during_sweep_stops_and_records_interrupted(sphere, tmp_path):
         finally:
             if board.timer is not None:
                 board.timer.cancel()
-        assert_safe(dev.model, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
+        assert_safe(dev.model, 0, round(plan.soft_limit_max * plan.steps_per_mm))
         assert dev.model.stopped
     data = assert_incomplete(out, "interrupted")
     assert data["safety"][0]["ok"]
@@ -165,7 +165,7 @@ def test_sigterm_during_sweep_runs_the_safety_path_and_restores_handlers(sphere,
             finally:
                 if board.timer is not None:
                     board.timer.cancel()
-            assert_safe(dev.model, 0, round(plan.soft_limit_max_mm * plan.steps_per_mm))
+            assert_safe(dev.model, 0, round(plan.soft_limit_max * plan.steps_per_mm))
             assert dev.model.stopped
         assert info.value.signal_name == "SIGTERM"
         assert info.value.capture_record.signal == "SIGTERM"

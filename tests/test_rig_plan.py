@@ -41,16 +41,16 @@ def test_plan_covers_sweep_range_at_constant_velocity(scenes_dir_module, scene, 
     plan = plan_capture(setup, stage=stage, sweep_range=sr)
     # the shutter window maps onto the optical sweep, to within half a step
     half_step = 0.5 / spm
-    assert plan.sensor_distance(plan.open_mm) == pytest.approx(sr.sensor_start, abs=half_step)
-    assert plan.sensor_distance(plan.close_mm) == pytest.approx(sr.sensor_end,
+    assert plan.sensor_distance(plan.open_position) == pytest.approx(sr.sensor_start, abs=half_step)
+    assert plan.sensor_distance(plan.close_position) == pytest.approx(sr.sensor_end,
                                                                 abs=2 * half_step)
     # ramp + settle separate the shutter window from both ends of the move
     ramp = plan.velocity_actual_mm_s ** 2 / (2 * plan.acceleration_mm_s2)
     margin = ramp + setup.rig.settle_distance
-    assert abs(plan.open_mm - plan.approach_mm) >= margin - 1e-12
-    assert abs(plan.end_mm - plan.close_mm) >= margin - 1e-12
+    assert abs(plan.open_position - plan.approach_position) >= margin - 1e-12
+    assert abs(plan.end_position - plan.close_position) >= margin - 1e-12
     # ordered along the direction of motion, inside the soft limits
-    xs = [plan.approach_mm, plan.open_mm, plan.close_mm, plan.end_mm]
+    xs = [plan.approach_position, plan.open_position, plan.close_position, plan.end_position]
     assert xs == sorted(xs, reverse=plan.direction < 0)
     assert all(setup.rig.soft_limit_min <= x <= setup.rig.soft_limit_max for x in xs)
     # the run velocity is the requested one up to the controller's velocity quantum
@@ -70,7 +70,7 @@ def test_calibrated_mapping_puts_sweep_where_the_rig_says(sphere, direction):
     s0 = sr.sensor_start - direction * 10.0   # stage 10 mm maps to the sweep start
     plan = plan_capture(with_rig(sphere, sensor_distance_at_zero=s0, sensor_direction=direction))
     assert plan.mapping == "calibrated"
-    assert plan.open_mm == pytest.approx(10.0, abs=0.5 / 400)
+    assert plan.open_position == pytest.approx(10.0, abs=0.5 / 400)
     assert plan.direction == (-1 if direction == 1 else 1)   # sensor distance decreases
 
 

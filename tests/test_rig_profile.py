@@ -67,7 +67,7 @@ def test_table_follows_profile_within_its_stated_tolerance(sphere, sphere_zaber,
     # the profile's stage travel from the open step, at dense times: brute force against
     # the table's reported deviation (exact for two piecewise-linear travels)
     t = np.linspace(0.0, exposure, 20001)
-    x = ((profile.sensor_distance(t / exposure) - plan.sensor_distance_at_zero_mm)
+    x = ((profile.sensor_distance(t / exposure) - plan.sensor_distance_at_zero)
          / plan.sensor_direction)                       # stage position, mm
     ideal = plan.direction * (x * spm - plan.open_steps)
     # placed within half a step of the profile's start, as the linear sweep's window
@@ -92,8 +92,8 @@ def test_table_follows_profile_within_its_stated_tolerance(sphere, sphere_zaber,
     assert rates.max() <= table.max_velocity_mm_s * spm * (1 + 1e-3)
     assert plan.planned_exposure_s == pytest.approx(table.duration_s, abs=1e-6)
     # the shutter window is the profile's span; ramps and settle outside it
-    assert plan.sensor_distance(plan.open_mm) == pytest.approx(profile.start, abs=0.5 / spm)
-    assert plan.sensor_distance(plan.close_mm) == pytest.approx(profile.end, abs=1.0 / spm)
+    assert plan.sensor_distance(plan.open_position) == pytest.approx(profile.start, abs=0.5 / spm)
+    assert plan.sensor_distance(plan.close_position) == pytest.approx(profile.end, abs=1.0 / spm)
     assert plan.close_steps - plan.open_steps == plan.direction * table.total_steps
     xs = [plan.approach_steps, plan.open_steps, plan.close_steps, plan.end_steps]
     assert xs == sorted(xs, reverse=plan.direction < 0)
@@ -103,7 +103,7 @@ def test_table_follows_profile_within_its_stated_tolerance(sphere, sphere_zaber,
     assert abs(plan.open_steps - plan.approach_steps) >= v_in ** 2 / (2 * a) + margin - 1e-9
     assert abs(plan.end_steps - plan.close_steps) >= v_out ** 2 / (2 * a) + margin - 1e-9
     # velocities: the profile's (1 + bend) and (1 - bend) times the mean at its ends
-    mean = plan.translation_mm / exposure
+    mean = plan.translation / exposure
     assert table.max_velocity_mm_s == pytest.approx(1.3 * mean, rel=0.02)
     assert plan.velocity_mm_s == pytest.approx(mean, rel=1e-12)
 
@@ -131,7 +131,7 @@ def test_profile_with_more_knots_than_the_board_holds_is_reknotted(sphere):
     # most bend |Δ| h² / 4; the new knots lie on the 300-knot polyline, itself within
     # bend |Δ| (1/299)² / 4 of the parabola
     bound = 0.3 * sr.translation / 4 * (1 / 64 ** 2 + 1 / 299 ** 2)
-    assert 0.9 * bound <= table.resample_deviation_mm <= bound
+    assert 0.9 * bound <= table.resample_deviation <= bound
     assert "re-knotted" in plan.summary()
 
 
@@ -350,7 +350,7 @@ def test_fault_during_table_sweep_leaves_the_rig_safe(sphere, profile, tmp_path,
                                                       error, status):
     plan = plan_capture(sphere, motion=profile, exposure_s=0.7)
     out = tmp_path / "capture.json"
-    lo, hi = 0, round(plan.soft_limit_max_mm * plan.steps_per_mm)
+    lo, hi = 0, round(plan.soft_limit_max * plan.steps_per_mm)
     with PtyDevice(ArduinoModel([fault], homed=True, position=plan.approach_steps)) as dev:
         t0 = time.monotonic()
         with pytest.raises(error):

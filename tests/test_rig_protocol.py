@@ -79,7 +79,7 @@ def test_arduino_ready_mid_session_is_a_board_restart():
 def test_arduino_state(reply, homed, moving, position):
     with expected_protocol(arduino, [(b"STATE\n", reply)]) as a:
         s = a.state()
-    assert (s.homed, s.moving, s.position_mm) == (homed, moving, position)
+    assert (s.homed, s.moving, s.position) == (homed, moving, position)
 
 
 def test_arduino_limits_home_move():
@@ -181,7 +181,7 @@ def test_zaber_identify_and_state_not_homed():
     ]) as z:
         assert z.identify() == "zaber device id 50081 at address 1"
         s = z.state()
-    assert (s.homed, s.position_mm, s.moving) == (False, None, False)
+    assert (s.homed, s.position, s.moving) == (False, None, False)
 
 
 def test_zaber_limits_motion_move_and_poll():
@@ -229,7 +229,7 @@ def test_zaber_message_ids_and_checksums_exact_bytes():
             (b"/1 1 1 stop:47\n", b"@01 1 1 OK IDLE -- 0:3B\r\n"),
     ]) as z:
         z.enable_checksums()
-        assert z.state().position_mm == 0.01
+        assert z.state().position == 0.01
         z.command("stop")
 
 

@@ -79,6 +79,10 @@ import time
 from dataclasses import dataclass
 from collections.abc import Callable, Iterable
 
+# absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
+# mitsweep.deprecation is a leaf of the standard library only
+from mitsweep.deprecation import renamed_keywords
+
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout, RigError
 from .interfaces import Shutter, Stage, StageState
 from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, XorChecksum
@@ -309,22 +313,24 @@ class ArduinoSweepController(Stage, Shutter):
         t, pos, homed, moving, shutter = self._ints(self._query("STATE", n_fields=5), "STATE")
         self.clock.unwrap(t)
         self.shutter_open = bool(shutter)
-        return StageState(position_mm=pos / self.steps_per_mm if homed else None,
+        return StageState(position=pos / self.steps_per_mm if homed else None,
                           homed=bool(homed), moving=bool(moving))
 
-    def set_soft_limits(self, lo_mm: float, hi_mm: float) -> None:
-        lo, hi = self.steps(lo_mm), self.steps(hi_mm)
-        got = self._ints(self._query(f"LIMITS {lo} {hi}", n_fields=2), "LIMITS")
-        if got != [lo, hi]:
-            raise ProtocolError(f"{self.name}: LIMITS echoed {got}, sent {[lo, hi]}")
+    @renamed_keywords(lo_mm="lo", hi_mm="hi")
+    def set_soft_limits(self, lo: float, hi: float) -> None:
+        lo_steps, hi_steps = self.steps(lo), self.steps(hi)
+        got = self._ints(self._query(f"LIMITS {lo_steps} {hi_steps}", n_fields=2), "LIMITS")
+        if got != [lo_steps, hi_steps]:
+            raise ProtocolError(f"{self.name}: LIMITS echoed {got}, sent {[lo_steps, hi_steps]}")
 
     def home(self, *, velocity_mm_s: float, timeout_s: float) -> None:
         self._query(f"HOME {self.rate(velocity_mm_s)}", n_fields=0)
         self.wait_event("HOMED", timeout_s=timeout_s)
 
-    def move_to(self, position_mm: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
+    @renamed_keywords(position_mm="position")
+    def move_to(self, position: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
                 timeout_s: float) -> float:
-        target = self.steps(position_mm)
+        target = self.steps(position)
         self._query(f"MOVE {target} {self.rate(velocity_mm_s)} "
                     f"{self.accel(acceleration_mm_s2)}", n_fields=0)
         ev = self.wait_event("DONE", timeout_s=timeout_s)

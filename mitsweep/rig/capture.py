@@ -308,7 +308,7 @@ def _prepare(dev: _Devices, plan: CapturePlan, setup, ports: RigPorts,
             dev.zaber.enable_checksums()
         record.devices["zaber"] = dev.zaber.identify()
     stage = dev.stage
-    lo, hi = plan.soft_limit_min_mm, plan.soft_limit_max_mm
+    lo, hi = plan.soft_limit_min, plan.soft_limit_max
     stage.set_soft_limits(lo, hi)
     watchdog_s = setup.rig.watchdog_s if ports.watchdog_s is None else ports.watchdog_s
     if watchdog_s:
@@ -324,15 +324,15 @@ def _prepare(dev: _Devices, plan: CapturePlan, setup, ports: RigPorts,
         record.homed = True
         state = stage.state()
     record.mark("homed" if record.homed else "position known")
-    here = state.position_mm if state.position_mm is not None else 0.0
-    _move_to_approach(stage, plan, here_mm=here)
+    here = state.position if state.position is not None else 0.0
+    _move_to_approach(stage, plan, here=here)
     record.mark("at approach position")
 
 
-def _move_to_approach(stage, plan: CapturePlan, *, here_mm: float) -> None:
-    stage.move_to(plan.approach_mm, velocity_mm_s=plan.positioning_velocity_mm_s,
+def _move_to_approach(stage, plan: CapturePlan, *, here: float) -> None:
+    stage.move_to(plan.approach_position, velocity_mm_s=plan.positioning_velocity_mm_s,
                   acceleration_mm_s2=plan.positioning_acceleration_mm_s2,
-                  timeout_s=_positioning_time(plan, plan.approach_mm - here_mm) * 1.5 + 1.0)
+                  timeout_s=_positioning_time(plan, plan.approach_position - here) * 1.5 + 1.0)
 
 
 def _sweep_arduino(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> None:
@@ -379,11 +379,11 @@ def _sweep_zaber(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> Non
             raise HostTooSlow(
                 f"host too slow to time the shutter: {SHUTTER_ATTEMPTS} attempts took "
                 f"{placement_s:.3f} s (last) from the move to the SHUTTER reply; the "
-                f"settle distance {plan.settle_mm:g} mm at {plan.velocity_actual_mm_s:g} "
+                f"settle distance {plan.settle_distance:g} mm at {plan.velocity_actual_mm_s:g} "
                 f"mm/s allows {allowed_s:.3f} s. Close other programs, or raise "
                 f"rig.settle_distance")
-        z.wait_idle(timeout_s=_positioning_time(plan, plan.translation_mm) * 1.5 + 1.0)
-        _move_to_approach(dev.stage, plan, here_mm=plan.end_mm)
+        z.wait_idle(timeout_s=_positioning_time(plan, plan.translation) * 1.5 + 1.0)
+        _move_to_approach(dev.stage, plan, here=plan.end_position)
     deadline = _deadline(plan.sweep_duration_s)
     while True:
         a.keep_alive()
@@ -427,19 +427,19 @@ def _stream_lines(plan: CapturePlan) -> list[tuple[int, int]]:
 def _time_to_open_s(plan: CapturePlan) -> float:
     """Time from the start of the sweep's move to the shutter's opening position."""
     if plan.profile is None:
-        move = Trapezoid(abs(plan.end_mm - plan.approach_mm), plan.velocity_actual_mm_s,
+        move = Trapezoid(abs(plan.end_position - plan.approach_position), plan.velocity_actual_mm_s,
                          plan.acceleration_mm_s2)
-        return float(move.time_at(abs(plan.open_mm - plan.approach_mm)))
+        return float(move.time_at(abs(plan.open_position - plan.approach_position)))
     # the stream's first line: ramp from rest at tanaccel, then the entry speed
     v = speed_mm_s(plan.profile.driver[0], plan.steps_per_mm)
     a = accel_mm_s2(accel_data(plan.acceleration_mm_s2, plan.steps_per_mm), plan.steps_per_mm)
-    return v / a + (abs(plan.open_mm - plan.approach_mm) - v * v / (2 * a)) / v
+    return v / a + (abs(plan.open_position - plan.approach_position) - v * v / (2 * a)) / v
 
 
 def _shutter_timing_allowance_s(plan: CapturePlan) -> float:
     """How far (s) the host-timed shutter may open from its planned time with the whole
     exposure still at constant velocity: the settle distance at the sweep velocity."""
-    return plan.settle_mm / plan.velocity_actual_mm_s
+    return plan.settle_distance / plan.velocity_actual_mm_s
 
 
 def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) -> float:
@@ -454,7 +454,7 @@ def _start_zaber_sweep(dev: _Devices, plan: CapturePlan, record: CaptureRecord) 
     z.samples.clear()
     t_move = record.log.now()
     if plan.profile is None:
-        z.start_move(plan.end_mm)
+        z.start_move(plan.end_position)
     else:
         z.start_stream()
     elapsed = record.log.now() - t_move

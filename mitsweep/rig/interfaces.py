@@ -11,16 +11,21 @@ from __future__ import annotations
 import abc
 from dataclasses import dataclass
 
+# absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
+# mitsweep.deprecation is a leaf of the standard library only
+from mitsweep.deprecation import renamed_fields
+
 __all__ = ["StageState", "Stage", "Shutter"]
 
 
+@renamed_fields(position_mm="position")
 @dataclass(frozen=True)
 class StageState:
     """What a stage reports about itself.
 
     Attributes
     ----------
-    position_mm : float or None
+    position : float or None
         Position in stage coordinates, mm; None when the stage does not know where it is
         (not homed).
     homed : bool
@@ -31,7 +36,7 @@ class StageState:
         A short device code (e.g. ``"FS"`` stall), or None.
     """
 
-    position_mm: float | None
+    position: float | None
     homed: bool
     moving: bool
     fault: str | None = None
@@ -51,12 +56,12 @@ class Stage(abc.ABC):
         """Current position, homed, moving, fault."""
 
     @abc.abstractmethod
-    def set_soft_limits(self, lo_mm: float, hi_mm: float) -> None:
-        """Make the device itself refuse positions outside ``[lo_mm, hi_mm]``.
+    def set_soft_limits(self, lo: float, hi: float) -> None:
+        """Make the device itself refuse positions outside ``[lo, hi]``.
 
         Parameters
         ----------
-        lo_mm, hi_mm : float
+        lo, hi : float
             The lowest and highest position allowed, mm (stage coordinates).
         """
 
@@ -73,13 +78,13 @@ class Stage(abc.ABC):
         """
 
     @abc.abstractmethod
-    def move_to(self, position_mm: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
+    def move_to(self, position: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
                 timeout_s: float) -> float:
         """Move (shutter closed) and wait until idle; returns the final position, mm.
 
         Parameters
         ----------
-        position_mm : float
+        position : float
             Target position, mm (stage coordinates).
         velocity_mm_s : float
             Cruise velocity, mm/s.

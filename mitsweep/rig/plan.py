@@ -1,8 +1,8 @@
 """From a setup's sweep range to a stage move: the capture plan (pure, no I/O).
 
 The optical sweep (:func:`mitsweep.optics.optimal_sweep_range`) says the sensor must
-travel from ``sensor_start_mm`` to ``sensor_end_mm`` at ``velocity_mm_s`` with the
-shutter open, for ``exposure_s = translation_mm / velocity_mm_s``. A real stage must
+travel from ``sensor_start`` to ``sensor_end`` at ``velocity_mm_s`` with the
+shutter open, for ``exposure_s = translation / velocity_mm_s``. A real stage must
 also accelerate to that velocity, run a little further so that vibrations settle, and
 decelerate afterwards, all inside its soft limits:
 
@@ -43,6 +43,10 @@ from typing import overload
 import numpy as np
 from numpy.typing import NDArray
 
+# absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
+# mitsweep.deprecation is a leaf of the standard library only
+from mitsweep.deprecation import renamed_fields, renamed_keywords
+
 from ..config import Rig, Setup
 from ..optics.kinematics import Trapezoid
 from ..optics.motion import MotionProfile
@@ -59,8 +63,19 @@ STAGE_KINDS = ("arduino", "zaber")
 #: Largest relative difference between the requested velocity and the nearest one the
 #: controller can produce (integer steps/s, or Zaber speed units) that is accepted.
 VELOCITY_TOLERANCE = 0.01
+#: The capture record's key of each :class:`CapturePlan` field renamed to the unit rule
+#: (a length in mm carries no suffix): records keep the keys they were written with.
+RECORD_KEYS = {"sensor_start": "sensor_start_mm", "sensor_end": "sensor_end_mm",
+               "translation": "translation_mm", "ramp_distance": "ramp_mm",
+               "settle_distance": "settle_mm",
+               "sensor_distance_at_zero": "sensor_distance_at_zero_mm",
+               "soft_limit_min": "soft_limit_min_mm", "soft_limit_max": "soft_limit_max_mm",
+               "exit_ramp_distance": "exit_ramp_mm"}
 
 
+@renamed_fields(**{old: new for new, old in RECORD_KEYS.items()},
+                approach_mm="approach_position", open_mm="open_position",
+                close_mm="close_position", end_mm="end_position")
 @dataclass(frozen=True)
 class CapturePlan:
     """A capture, fully resolved into stage positions, rates and times.
@@ -81,9 +96,9 @@ class CapturePlan:
         ``"arduino"`` or ``"zaber"``.
     steps_per_mm : float
         Controller steps (or microsteps) per mm of stage travel.
-    sensor_start_mm, sensor_end_mm : float
+    sensor_start, sensor_end : float
         Sensor distances at the start and end of the exposure, mm.
-    translation_mm : float
+    translation : float
         Sensor travel during the exposure, mm.
     exposure_s : float
         The optical exposure: translation over the requested velocity, s.
@@ -93,19 +108,19 @@ class CapturePlan:
         The velocity the controller will run, mm/s.
     acceleration_mm_s2 : float
         The acceleration the controller will run, mm/s².
-    ramp_mm : float
+    ramp_distance : float
         Acceleration ramp before the shutter opens, mm (v²/2a).
-    settle_mm : float
+    settle_distance : float
         Constant-velocity travel between the ramp and the shutter's opening, mm.
     direction : int
         Sign of the stage's motion during the sweep (+1 or −1).
-    sensor_distance_at_zero_mm : float
+    sensor_distance_at_zero : float
         Sensor distance at stage position 0, mm.
     sensor_direction : int
         Sign relating stage position to sensor distance.
     mapping : str
         ``"calibrated"`` or ``"centred (uncalibrated rig)"``.
-    soft_limit_min_mm, soft_limit_max_mm : float
+    soft_limit_min, soft_limit_max : float
         The soft limits set on the device, mm (stage coordinates).
     approach_steps, open_steps, close_steps, end_steps : int
         Stage positions, in controller steps: start of the approach, shutter open, shutter
@@ -120,28 +135,28 @@ class CapturePlan:
         Velocity and acceleration of the positioning moves (homing, approach).
     profile : ProfileTable, optional
         A motion profile's step-rate table (None: the linear sweep).
-    exit_ramp_mm : float
+    exit_ramp_distance : float
         Deceleration after the shutter closes, mm (with a profile).
     """
 
     setup: str
     stage: str
     steps_per_mm: float
-    sensor_start_mm: float
-    sensor_end_mm: float
-    translation_mm: float
+    sensor_start: float
+    sensor_end: float
+    translation: float
     exposure_s: float            # optical: translation / requested velocity
     velocity_mm_s: float         # requested (sweep.velocity)
     velocity_actual_mm_s: float  # what the controller will run
     acceleration_mm_s2: float    # what the controller will run
-    ramp_mm: float
-    settle_mm: float
+    ramp_distance: float
+    settle_distance: float
     direction: int               # +1 / -1: sign of the stage motion during the sweep
-    sensor_distance_at_zero_mm: float
+    sensor_distance_at_zero: float
     sensor_direction: int
     mapping: str                 # "calibrated" or "centred (uncalibrated rig)"
-    soft_limit_min_mm: float
-    soft_limit_max_mm: float
+    soft_limit_min: float
+    soft_limit_max: float
     approach_steps: int
     open_steps: int
     close_steps: int
@@ -153,10 +168,10 @@ class CapturePlan:
     positioning_acceleration_mm_s2: float
     #: A motion profile's step-rate table (None: the linear sweep). With one,
     #: ``velocity_mm_s`` is the mean velocity (travel / exposure), ``velocity_actual_mm_s``
-    #: and ``ramp_mm`` those of the table's entry rate (run from the ramp to the open
-    #: step); the exit ramp is ``exit_ramp_mm``.
+    #: and ``ramp_distance`` those of the table's entry rate (run from the ramp to the open
+    #: step); the exit ramp is ``exit_ramp_distance``.
     profile: ProfileTable | None = None
-    exit_ramp_mm: float = 0.0
+    exit_ramp_distance: float = 0.0
 
     # -- derived ------------------------------------------------------------------------
     def mm(self, steps: float) -> float:
@@ -170,37 +185,38 @@ class CapturePlan:
         return steps / self.steps_per_mm
 
     @property
-    def approach_mm(self) -> float:
+    def approach_position(self) -> float:
         return self.mm(self.approach_steps)
 
     @property
-    def open_mm(self) -> float:
+    def open_position(self) -> float:
         return self.mm(self.open_steps)
 
     @property
-    def close_mm(self) -> float:
+    def close_position(self) -> float:
         return self.mm(self.close_steps)
 
     @property
-    def end_mm(self) -> float:
+    def end_position(self) -> float:
         return self.mm(self.end_steps)
 
     @overload
-    def sensor_distance(self, position_mm: float) -> float: ...
+    def sensor_distance(self, position: float) -> float: ...
 
     @overload
-    def sensor_distance(self, position_mm: NDArray[np.float64]) -> NDArray[np.float64]: ...
+    def sensor_distance(self, position: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
-    def sensor_distance(self, position_mm: float | NDArray[np.float64]
+    @renamed_keywords(position_mm="position")
+    def sensor_distance(self, position: float | NDArray[np.float64]
                         ) -> float | NDArray[np.float64]:
-        """Sensor distance (mm) at stage position(s) ``position_mm``.
+        """Sensor distance (mm) at stage position(s) ``position``.
 
         Parameters
         ----------
-        position_mm : float or ndarray
+        position : float or ndarray
             Stage position(s), mm (stage coordinates).
         """
-        return self.sensor_distance_at_zero_mm + self.sensor_direction * position_mm
+        return self.sensor_distance_at_zero + self.sensor_direction * position
 
     def driver_units(self) -> dict:
         """The sweep's velocity and acceleration in the controller's own units (derived,
@@ -214,13 +230,16 @@ class CapturePlan:
         return {"maxspeed": speed_data(v, spm), "accel": accel_data(a, spm)}
 
     def as_dict(self) -> dict:
-        d = asdict(self)
+        """The plan for the capture record: the record's keys are those it always had
+        (``sensor_start_mm``, ``approach_mm``, ...; :data:`RECORD_KEYS`), so that records
+        written before the fields were renamed read the same."""
+        d = {RECORD_KEYS.get(k, k): v for k, v in asdict(self).items()}
         if self.profile is not None:
             d["profile"] = self.profile.as_dict()
-        d.update(approach_mm=self.approach_mm, open_mm=self.open_mm, close_mm=self.close_mm,
-                 end_mm=self.end_mm,
-                 open_sensor_distance_mm=self.sensor_distance(self.open_mm),
-                 close_sensor_distance_mm=self.sensor_distance(self.close_mm),
+        d.update(approach_mm=self.approach_position, open_mm=self.open_position,
+                 close_mm=self.close_position, end_mm=self.end_position,
+                 open_sensor_distance_mm=self.sensor_distance(self.open_position),
+                 close_sensor_distance_mm=self.sensor_distance(self.close_position),
                  driver_units=self.driver_units())
         return d
 
@@ -228,20 +247,20 @@ class CapturePlan:
         """Human-readable plan (``--dry-run``)."""
         return "\n".join([
             f"setup              {self.setup} (stage: {self.stage}, {self.steps_per_mm:g} steps/mm)",
-            f"sensor distance    {self.sensor_start_mm:.4f} -> {self.sensor_end_mm:.4f} mm "
-            f"(travel {self.translation_mm:.4f} mm)",
+            f"sensor distance    {self.sensor_start:.4f} -> {self.sensor_end:.4f} mm "
+            f"(travel {self.translation:.4f} mm)",
             (f"velocity           {self.velocity_mm_s:g} mm/s requested, "
              f"{self.velocity_actual_mm_s:.6g} mm/s run" if self.profile is None else
              f"velocity           {self.velocity_mm_s:.6g} mm/s mean (travel / exposure), "
              f"entering at {self.velocity_actual_mm_s:.6g} mm/s"),
             f"exposure           {self.planned_exposure_s:.6f} s "
             f"(optical {self.exposure_s:.6f} s)",
-            f"ramp / settle      {self.ramp_mm:.4f} mm ({self.ramp_time_s:.3f} s at "
-            f"{self.acceleration_mm_s2:g} mm/s^2) / {self.settle_mm:.4f} mm",
-            f"stage positions    approach {self.approach_mm:.4f}, open {self.open_mm:.4f}, "
-            f"close {self.close_mm:.4f}, end {self.end_mm:.4f} mm",
-            f"soft limits        {self.soft_limit_min_mm:g} .. {self.soft_limit_max_mm:g} mm",
-            f"sensor mapping     s = {self.sensor_distance_at_zero_mm:.4f} "
+            f"ramp / settle      {self.ramp_distance:.4f} mm ({self.ramp_time_s:.3f} s at "
+            f"{self.acceleration_mm_s2:g} mm/s^2) / {self.settle_distance:.4f} mm",
+            f"stage positions    approach {self.approach_position:.4f}, open {self.open_position:.4f}, "
+            f"close {self.close_position:.4f}, end {self.end_position:.4f} mm",
+            f"soft limits        {self.soft_limit_min:g} .. {self.soft_limit_max:g} mm",
+            f"sensor mapping     s = {self.sensor_distance_at_zero:.4f} "
             f"{'+' if self.sensor_direction > 0 else '-'} x mm ({self.mapping})",
             f"sweep duration     {self.sweep_duration_s:.3f} s",
             self._driver_units_line(),
@@ -260,9 +279,9 @@ class CapturePlan:
             f"profile tolerance  table within {p.max_deviation_steps:.3f} steps "
             f"({p.max_deviation_steps / spm * 1e3:.3f} um) of the profile's shape, placed "
             f"{p.offset_steps:+.3f} steps from it"
-            + (f", re-knotted ({p.resample_deviation_mm * 1e3:.3f} um chords)"
-               if p.resample_deviation_mm else "")
-            + f"; a ramping stage within {p.ramp_deviation_mm * 1e3:.3f} um more",
+            + (f", re-knotted ({p.resample_deviation * 1e3:.3f} um chords)"
+               if p.resample_deviation else "")
+            + f"; a ramping stage within {p.ramp_deviation * 1e3:.3f} um more",
         ]
 
     def _driver_units_line(self) -> str:
@@ -414,12 +433,12 @@ def plan_capture(setup: Setup, *, stage: str = "arduino",
     sweep = Trapezoid((travel_steps + 2 * margin) / spm, v_run, a_run)   # approach -> end
     return CapturePlan(
         setup=setup.name, stage=stage, steps_per_mm=spm,
-        sensor_start_mm=s_start, sensor_end_mm=s_end, translation_mm=travel,
+        sensor_start=s_start, sensor_end=s_end, translation=travel,
         exposure_s=float(sweep_range.exposure_s), velocity_mm_s=v, velocity_actual_mm_s=v_run,
         acceleration_mm_s2=a_run,
-        ramp_mm=ramp_steps / spm, settle_mm=settle_steps / spm, direction=direction,
-        sensor_distance_at_zero_mm=s0, sensor_direction=delta, mapping=mapping,
-        soft_limit_min_mm=lo, soft_limit_max_mm=hi,
+        ramp_distance=ramp_steps / spm, settle_distance=settle_steps / spm, direction=direction,
+        sensor_distance_at_zero=s0, sensor_direction=delta, mapping=mapping,
+        soft_limit_min=lo, soft_limit_max=hi,
         approach_steps=approach_steps, open_steps=open_steps, close_steps=close_steps,
         end_steps=end_steps, planned_exposure_s=planned_exposure,
         ramp_time_s=sweep.ramp_time, sweep_duration_s=sweep.duration,
@@ -451,7 +470,7 @@ def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> Captur
     rig = setup.rig
     spm = rig.steps_per_mm
     t, p, chord = profile_knots(motion, max_segments=MAX_TABLE_SEGMENTS,
-                                focal_length_mm=setup.lens.focal_length)
+                                focal_length=setup.lens.focal_length)
     travel = float(abs(p[-1] - p[0]))
     if exposure_s is None:
         exposure_s = travel / setup.sweep.velocity
@@ -465,7 +484,7 @@ def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> Captur
     direction = 1 if x[-1] > x[0] else -1
     v_max, a_max, ramp_dev = check_followable(
         times, direction * (x - x[0]), max_velocity=rig.max_velocity,
-        acceleration=rig.acceleration, sensor_mm=p)
+        acceleration=rig.acceleration, sensor_distance=p)
     open_steps = int(round(x[0] * spm))
     travel_steps = direction * (x * spm - open_steps)    # from the open step, unrounded
     max_rate = rig.max_velocity * spm
@@ -488,7 +507,7 @@ def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> Captur
         knot_times_s=tuple(float(v) for v in times),
         knot_travel_steps=tuple(float(v) for v in travel_steps),
         offset_steps=float(travel_steps[0]), max_deviation_steps=deviation,
-        ramp_deviation_mm=ramp_dev, resample_deviation_mm=chord,
+        ramp_deviation=ramp_dev, resample_deviation=chord,
         max_velocity_mm_s=v_max, max_acceleration_mm_s2=a_max)
 
     if stage == "arduino":
@@ -529,15 +548,15 @@ def _plan_profile(setup, stage: str, motion, exposure_s: float | None) -> Captur
                 + ramp_and_settle_s(v_out, exit_ramp))
     return CapturePlan(
         setup=setup.name, stage=stage, steps_per_mm=spm,
-        sensor_start_mm=float(p[0]), sensor_end_mm=float(p[-1]), translation_mm=travel,
+        sensor_start=float(p[0]), sensor_end=float(p[-1]), translation=travel,
         exposure_s=float(exposure_s), velocity_mm_s=travel / exposure_s,
         velocity_actual_mm_s=v_in, acceleration_mm_s2=a_run,
-        ramp_mm=entry_ramp / spm, settle_mm=settle / spm, direction=direction,
-        sensor_distance_at_zero_mm=s0, sensor_direction=delta, mapping=mapping,
-        soft_limit_min_mm=lo, soft_limit_max_mm=hi,
+        ramp_distance=entry_ramp / spm, settle_distance=settle / spm, direction=direction,
+        sensor_distance_at_zero=s0, sensor_direction=delta, mapping=mapping,
+        soft_limit_min=lo, soft_limit_max=hi,
         approach_steps=approach_steps, open_steps=open_steps, close_steps=close_steps,
         end_steps=end_steps, planned_exposure_s=planned_exposure,
         ramp_time_s=v_in / a_run, sweep_duration_s=duration,
         positioning_velocity_mm_s=rig.max_velocity,
         positioning_acceleration_mm_s2=rig.acceleration,
-        profile=table, exit_ramp_mm=exit_ramp / spm)
+        profile=table, exit_ramp_distance=exit_ramp / spm)

@@ -42,7 +42,7 @@ shorter of the two intervals beside it:
 
 A ramp centred on the knot then takes at most half of each interval (ramps never
 overlap), and a stage that ramps so deviates from the profile by at most ``|Δv|² /
-(8 A)`` between knots (:attr:`ProfileTable.ramp_deviation_mm`); the Arduino's stepper
+(8 A)`` between knots (:attr:`ProfileTable.ramp_deviation`); the Arduino's stepper
 takes the change as a rate jump of at most ``A T_min``. For knots evenly spaced in
 sensor distance (``Δi``), as ``design-sweep`` writes them, the rule is ``v |Δv| <= A Δi``
 at the faster side: the stage's ``v dv/dx <= A``. (The mean of the two intervals in
@@ -59,6 +59,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+# absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
+# mitsweep.deprecation is a leaf of the standard library only
+from mitsweep.deprecation import renamed_fields, renamed_keywords
 
 from ..optics.motion import MotionProfile
 from .errors import PlanError
@@ -80,6 +84,8 @@ TOLERANCE_MM = 1e-3
 LIMIT_RTOL = 1e-6
 
 
+@renamed_fields(ramp_deviation_mm="ramp_deviation",
+                resample_deviation_mm="resample_deviation")
 @dataclass(frozen=True)
 class ProfileTable:
     """A step-rate table: segment ``k`` moves ``steps[k]`` steps (>= 0, along the plan's
@@ -113,10 +119,10 @@ class ProfileTable:
         [-0.5, 0.5] steps.
     max_deviation_steps : float
         The table's largest difference from the profile's shape, steps.
-    ramp_deviation_mm : float
+    ramp_deviation : float
         Bound on how far a stage that ramps between rates (centred on each knot) leaves
         the profile, mm (``|Δv|² / (8 A)``).
-    resample_deviation_mm : float
+    resample_deviation : float
         Chord error of re-knotting a profile with more knots than a table holds, mm (0:
         not re-knotted).
     max_velocity_mm_s : float
@@ -133,8 +139,8 @@ class ProfileTable:
     knot_travel_steps: tuple[float, ...]
     offset_steps: float
     max_deviation_steps: float
-    ramp_deviation_mm: float
-    resample_deviation_mm: float
+    ramp_deviation: float
+    resample_deviation: float
     max_velocity_mm_s: float
     max_acceleration_mm_s2: float
 
@@ -187,15 +193,16 @@ class ProfileTable:
                 "exit_rate_steps_s": self.exit_rate,
                 "offset_steps": self.offset_steps,
                 "max_deviation_steps": self.max_deviation_steps,
-                "ramp_deviation_mm": self.ramp_deviation_mm,
-                "resample_deviation_mm": self.resample_deviation_mm,
+                "ramp_deviation_mm": self.ramp_deviation,
+                "resample_deviation_mm": self.resample_deviation,
                 "max_velocity_mm_s": self.max_velocity_mm_s,
                 "max_acceleration_mm_s2": self.max_acceleration_mm_s2,
                 "knot_times_s": list(self.knot_times_s),
                 "knot_travel_steps": list(self.knot_travel_steps)}
 
 
-def profile_knots(motion: MotionProfile, *, max_segments: int, focal_length_mm: float
+@renamed_keywords(focal_length_mm="focal_length")
+def profile_knots(motion: MotionProfile, *, max_segments: int, focal_length: float
                   ) -> tuple[np.ndarray, np.ndarray, float]:
     """The profile's knots ``(t ∈ [0, 1], sensor distance mm)``, checked: monotonic,
     moving, beyond the focal length; re-knotted at ``max_segments`` evenly spaced times
@@ -207,7 +214,7 @@ def profile_knots(motion: MotionProfile, *, max_segments: int, focal_length_mm: 
         The profile (its ramps as :data:`KNOTS_PER_RAMP` chords each).
     max_segments : int
         Most segments a table holds: a profile with more is re-knotted.
-    focal_length_mm : float
+    focal_length : float
         The lens's focal length, mm: every sensor distance must exceed it.
 
     Returns
@@ -239,9 +246,9 @@ def profile_knots(motion: MotionProfile, *, max_segments: int, focal_length_mm: 
         raise PlanError(f"motion profile: sensor distances must be monotonic (the stage "
                         f"runs one way during the exposure); it turns back at knot {k + 1} "
                         f"({p[k + 1]:.4f} mm at t = {t[k + 1]:.4f})")
-    if p.min() <= focal_length_mm:
+    if p.min() <= focal_length:
         raise PlanError(f"motion profile: its span {p.min():.4f} .. {p.max():.4f} mm reaches "
-                        f"the lens's focal length ({focal_length_mm:g} mm): every sensor "
+                        f"the lens's focal length ({focal_length:g} mm): every sensor "
                         f"distance must be > lens.focal_length")
     chord = 0.0
     if t.size - 1 > max_segments:
@@ -252,11 +259,12 @@ def profile_knots(motion: MotionProfile, *, max_segments: int, focal_length_mm: 
     return t, p, chord
 
 
-def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity: float,
-                     acceleration: float, sensor_mm: np.ndarray) -> tuple[float, float, float]:
+@renamed_keywords(travel_mm="travel", sensor_mm="sensor_distance")
+def check_followable(times_s: np.ndarray, travel: np.ndarray, *, max_velocity: float,
+                     acceleration: float, sensor_distance: np.ndarray) -> tuple[float, float, float]:
     """Refuse (:class:`PlanError`) what the stage cannot follow (module docstring).
 
-    ``travel_mm`` is the stage travel from the shutter's opening along the motion,
+    ``travel`` is the stage travel from the shutter's opening along the motion,
     non-decreasing. Returns (largest velocity mm/s, largest acceleration mm/s² as the
     rule measures it, the centred-ramp deviation bound mm).
 
@@ -264,13 +272,13 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
     ----------
     times_s : (n,) ndarray
         Knot times from the shutter's opening, s (strictly increasing).
-    travel_mm : (n,) ndarray
+    travel : (n,) ndarray
         Stage travel at the knots from the shutter's opening, mm, non-decreasing.
     max_velocity : float
         The stage's top velocity, mm/s (``rig.max_velocity``).
     acceleration : float
         The stage's acceleration, mm/s² (``rig.acceleration``).
-    sensor_mm : (n,) ndarray
+    sensor_distance : (n,) ndarray
         Sensor distances at the knots, mm (for the messages).
 
     Raises
@@ -282,16 +290,16 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
     dt = np.diff(times_s)
     if np.any(dt <= 0):
         raise PlanError("motion profile: knot times must be strictly increasing")
-    v = np.diff(travel_mm) / dt
+    v = np.diff(travel) / dt
     k = int(np.argmax(v))
     if v[k] > max_velocity * (1 + LIMIT_RTOL):
         raise PlanError(f"motion profile: the stage cannot follow it: {v[k]:.4g} mm/s at "
-                        f"{sensor_mm[k]:.4f} .. {sensor_mm[k + 1]:.4f} mm (t = "
+                        f"{sensor_distance[k]:.4f} .. {sensor_distance[k + 1]:.4f} mm (t = "
                         f"{times_s[k]:.4f} s), more than rig.max_velocity = "
                         f"{max_velocity:g} mm/s; lengthen the exposure")
     if np.any(v <= 0):
         k = int(np.flatnonzero(v <= 0)[0])
-        raise PlanError(f"motion profile: the sensor rests at {sensor_mm[k]:.4f} mm from "
+        raise PlanError(f"motion profile: the sensor rests at {sensor_distance[k]:.4f} mm from "
                         f"t = {times_s[k]:.4f} to {times_s[k + 1]:.4f} s; a sweep moves "
                         f"throughout the exposure (drop the dwell)")
     if v.size < 2:
@@ -301,7 +309,7 @@ def check_followable(times_s: np.ndarray, travel_mm: np.ndarray, *, max_velocity
     j = int(np.argmax(acc))
     if acc[j] > acceleration * (1 + LIMIT_RTOL):
         raise PlanError(f"motion profile: the stage cannot follow it: the velocity changes "
-                        f"from {v[j]:.4g} to {v[j + 1]:.4g} mm/s at {sensor_mm[j + 1]:.4f} mm "
+                        f"from {v[j]:.4g} to {v[j + 1]:.4g} mm/s at {sensor_distance[j + 1]:.4f} mm "
                         f"(t = {times_s[j + 1]:.4f} s) within {min(dt[j], dt[j + 1]):.4g} s, "
                         f"{acc[j]:.4g} mm/s^2, more than rig.acceleration = "
                         f"{acceleration:g} mm/s^2")

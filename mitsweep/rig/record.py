@@ -52,6 +52,10 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
+# absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
+# mitsweep.deprecation is a leaf of the standard library only
+from mitsweep.deprecation import renamed_keywords
+
 from ..config import Setup
 from .errors import RigError
 from .plan import CapturePlan
@@ -328,7 +332,8 @@ class CaptureRecord:
         return self.path
 
 
-def planned_versus_measured(plan, time_s, position_mm, timing_uncertainty_s: float) -> dict:
+@renamed_keywords(position_mm="position")
+def planned_versus_measured(plan, time_s, position, timing_uncertainty_s: float) -> dict:
     """A profile capture's measured motion against its plan, at the measured times.
 
     ``planned_position_mm``: the step-rate table's commanded position (its travel from
@@ -345,7 +350,7 @@ def planned_versus_measured(plan, time_s, position_mm, timing_uncertainty_s: flo
         A motion profile's plan (``plan.profile`` set).
     time_s : array_like
         Measured times from the shutter's opening, s.
-    position_mm : array_like
+    position : array_like
         Measured stage positions at those times, mm.
     timing_uncertainty_s : float
         How far a sample's time may be off, s.
@@ -362,7 +367,7 @@ def planned_versus_measured(plan, time_s, position_mm, timing_uncertainty_s: flo
     planned = (plan.open_steps + plan.direction * travel) / spm
     ideal = (plan.open_steps + plan.direction * np.interp(t, table.knot_times_s,
                                                           table.knot_travel_steps)) / spm
-    dev = np.abs(np.asarray(position_mm, dtype=float) - planned) * spm
+    dev = np.abs(np.asarray(position, dtype=float) - planned) * spm
     peak_rate = max(k / d for k, d in zip(table.steps, table.durations_s))
     return {"time_s": t.tolist(), "planned_position_mm": planned.tolist(),
             "planned_sensor_distance_mm": plan.sensor_distance(planned).tolist(),

@@ -6,7 +6,7 @@ fails at exit if any expected exchange was not used or any reply was left unread
 
     with expected_protocol(lambda t: ZaberStage(t, steps_per_mm=1000),
                            [(b"/1 1 get pos\\n", b"@01 1 OK IDLE -- 1500\\r\\n")]) as stage:
-        assert stage.state().position_mm == 1.5
+        assert stage.state().position == 1.5
 
 An exchange ``(None, reply)`` is unsolicited output (a READY line, an event): it is
 delivered right after the previous exchange's reply (or at once, if it comes first).

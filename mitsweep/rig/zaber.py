@@ -30,6 +30,10 @@ import time
 from dataclasses import dataclass
 from collections.abc import Iterable
 
+# absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
+# mitsweep.deprecation is a leaf of the standard library only
+from mitsweep.deprecation import renamed_keywords
+
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
 from .interfaces import Stage, StageState
 from .transport import SAFETY_REPLY_TIMEOUT_S, LineTransport, ZaberChecksum
@@ -280,12 +284,13 @@ class ZaberStage(Stage):
     def state(self) -> StageState:
         pos, reply = self.get_position()
         homed = reply.flag not in _NOT_HOMED
-        return StageState(position_mm=pos / self.steps_per_mm if homed else None, homed=homed,
+        return StageState(position=pos / self.steps_per_mm if homed else None, homed=homed,
                           moving=reply.busy, fault=reply.flag if reply.flag in FAULT_FLAGS else None)
 
-    def set_soft_limits(self, lo_mm: float, hi_mm: float) -> None:
-        self.command(f"set limit.min {self.steps(lo_mm)}")
-        self.command(f"set limit.max {self.steps(hi_mm)}")
+    @renamed_keywords(lo_mm="lo", hi_mm="hi")
+    def set_soft_limits(self, lo: float, hi: float) -> None:
+        self.command(f"set limit.min {self.steps(lo)}")
+        self.command(f"set limit.max {self.steps(hi)}")
 
     def set_motion(self, velocity_mm_s: float, acceleration_mm_s2: float) -> None:
         """Set ``maxspeed`` and ``accel`` for the next moves.
@@ -314,12 +319,13 @@ class ZaberStage(Stage):
         self.command("home")
         self.wait_idle(timeout_s=timeout_s)
 
-    def start_move(self, position_mm: float) -> int:
+    @renamed_keywords(position_mm="position")
+    def start_move(self, position: float) -> int:
         """``move abs``: start a move at the set motion, without waiting for it.
 
         Parameters
         ----------
-        position_mm : float
+        position : float
             Target position, mm (stage coordinates).
 
         Returns
@@ -327,7 +333,7 @@ class ZaberStage(Stage):
         int
             The target, microsteps.
         """
-        target = self.steps(position_mm)
+        target = self.steps(position)
         self.command(f"move abs {target}")
         return target
 
@@ -370,10 +376,11 @@ class ZaberStage(Stage):
         """``stream 1 call 1``: run the stored sequence now (the stage goes BUSY)."""
         self.command(f"stream {STREAM_ID} call {STREAM_BUFFER}", axis=0)
 
-    def move_to(self, position_mm: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
+    @renamed_keywords(position_mm="position")
+    def move_to(self, position: float, *, velocity_mm_s: float, acceleration_mm_s2: float,
                 timeout_s: float) -> float:
         self.set_motion(velocity_mm_s, acceleration_mm_s2)
-        target = self.start_move(position_mm)
+        target = self.start_move(position)
         pos = self.wait_idle(timeout_s=timeout_s)
         if pos != target:
             raise ProtocolError(f"{self.name}: move ended at {pos}, not {target} microsteps")
