@@ -28,6 +28,7 @@ ENFORCED = (
     "mitsweep.deprecation",
     "mitsweep.deconv",
     "mitsweep.optics", "mitsweep.io", "mitsweep.plots",
+    "mitsweep.rig",
 )
 
 AGAINST = re.compile(r"(?<!_per)_mm$|^pitch$|^pitch_mm$|^pixel_size_mm$")
