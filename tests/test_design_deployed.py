@@ -67,7 +67,7 @@ def test_a_deployed_design_beats_linear_under_its_model_or_returns_linear():
     else:
         assert r["optimized_mean_mse"] < r["linear_mean_mse"]
     # the predictions are the deployed model's: recomputed from the design's bank
-    dep = deployed_wiener_model(d.bank.kernels, d.bank.depths_mm, NOISE, deploy_nsr=0.01,
+    dep = deployed_wiener_model(d.bank.kernels, d.bank.depths, NOISE, deploy_nsr=0.01,
                                 n_px=float(np.sqrt(np.prod(setup.sensor.resolution))))
     assert r["linear_mean_mse"] == pytest.approx(float(dep.mse(d.tau_linear).mean()),
                                                  rel=1e-9)

@@ -24,8 +24,8 @@ def problem():
     sweep = optimal_sweep_range(setup)
     edges = np.linspace(sweep.sensor_start, sweep.sensor_end, 65)
     i_ref = 0.5 * (sweep.sensor_start + sweep.sensor_end)
-    args = dict(points_uv=[(0.0, 0.0), (3.5, 0.0)], depths_mm=[300.0, 10000.0],
-                edges_mm=edges, reference_sensor_distance=i_ref, rays=1 << 13)
+    args = dict(points_uv=[(0.0, 0.0), (3.5, 0.0)], depths=[300.0, 10000.0],
+                edges=edges, reference_sensor_distance=i_ref, rays=1 << 13)
     limits = StageLimits(exposure_s=sweep.exposure_s, max_velocity=setup.rig.max_velocity,
                          acceleration=setup.rig.acceleration)
     return setup, args, limits
@@ -56,8 +56,8 @@ def test_design_is_bitwise_equal_whatever_the_blas_thread_count(problem, objecti
     results = []
     for threads in (1, 2, 2):
         with threadpool_limits(limits=threads, user_api="blas"):
-            sol = local_optimum(model, bank.widths_mm, limits, objective=objective)
-            bound, _ = certified_lower_bound(model, bank.widths_mm, limits,
+            sol = local_optimum(model, bank.widths, limits, objective=objective)
+            bound, _ = certified_lower_bound(model, bank.widths, limits,
                                              objective=objective)
         results.append((sol.tau, sol.value, sol.info["iterations"], bound))
     for tau, value, iterations, bound in results[1:]:

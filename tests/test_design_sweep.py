@@ -116,7 +116,7 @@ def test_convex_bound_is_below_the_mse_and_convex(small):
 @pytest.mark.parametrize("objective", ["worst", "mean"])
 def test_optimiser_improves_on_uniform_feasibly_and_is_certified(small, objective):
     bank, model, limits = small
-    widths = bank.widths_mm
+    widths = bank.widths
     uniform = np.full(16, 1 / 16)
     reduce = np.max if objective == "worst" else np.mean
     sol = local_optimum(model, widths, limits, objective=objective)
@@ -135,7 +135,7 @@ def test_brute_force_agrees_with_the_optimiser_on_a_small_problem(small):
     coarse = bank.coarsened(4)
     noise = paper_fig10_settings(0.0064, 0.5)["sweep"]
     model = wiener_model(coarse.kernels, noise, n_fft=32, n_px=512)
-    res = brute_force(model, coarse.widths_mm, limits, steps=12)
+    res = brute_force(model, coarse.widths, limits, steps=12)
     assert res["feasible_points"] > 10
     assert res["agrees"] and res["same_optimum"]
     assert res["lower_bound"] <= res["local_value"] <= res["lattice_best"] * (1 + 1e-9)
@@ -148,7 +148,7 @@ def test_uniform_is_the_only_design_when_the_stage_is_at_its_limit(small, sweep)
     span = abs(sweep.sensor_end - sweep.sensor_start)
     limits = StageLimits(exposure_s=sweep.exposure_s, max_velocity=span / sweep.exposure_s,
                          acceleration=10.0)
-    sol = local_optimum(model, bank.widths_mm, limits)
+    sol = local_optimum(model, bank.widths, limits)
     np.testing.assert_allclose(sol.tau, np.full(16, 1 / 16), rtol=1e-9)
 
 
@@ -248,7 +248,7 @@ def test_a_wider_span_is_scored_against_the_uniform_sweep_over_the_optimal_range
 
     noise = paper_fig10_settings(0.0064, 2.0)["sweep"]
     a, b = sweep.sensor_start + 0.05, sweep.sensor_end - 0.05  # the sweep runs a -> b
-    d = design_sweep(setup, noise=noise, n_planes=8, span_mm=(a, b), n_radii=2,
+    d = design_sweep(setup, noise=noise, n_planes=8, span=(a, b), n_radii=2,
                      depths=[300.0, 10000.0], rays=4096, brute_force_steps=0)
     assert d.profile.start == a and d.profile.end == b
     assert d.report["optimal_range_mm"] == [sweep.sensor_start, sweep.sensor_end]

@@ -43,7 +43,7 @@ def _dense_time_average(setup, src, geom, params, n, motion, K, times=1000):
 
 def _exact(setup, src, geom, params, n, motion, K):
     buf = deposit_segments(geom, params, n, offset=0, kernel_size=K,
-                           pitch=setup.sensor.pixel_pitch, center_uv=src.image_uv,
+                           pixel_pitch=setup.sensor.pixel_pitch, center_uv=src.image_uv,
                            span=motion.span, cdf_table=sweep_cdf(motion))
     return fold_buffer(buf, 1, K)[0]
 

@@ -65,8 +65,8 @@ def test_line_foci_are_where_the_pencil_collapses_to_a_line(x, y, depth):
     near, far = _focal_lines_brute_force(TILTED, x, y, depth)
     # Both are exact for the first-order pencil; a 0.1 mm pencil's aberrations separate
     # them by < 0.02 µm of focus distance (measured), so 1 µm is a physics bound.
-    assert res.line_foci_focus_mm[0] == pytest.approx(near, abs=1e-3)
-    assert res.line_foci_focus_mm[1] == pytest.approx(far, abs=1e-3)
+    assert res.line_foci_focus[0] == pytest.approx(near, abs=1e-3)
+    assert res.line_foci_focus[1] == pytest.approx(far, abs=1e-3)
 
 
 @pytest.mark.parametrize("x,y", [(0.0, RIM), (14.0, 14.0)])
@@ -74,16 +74,16 @@ def test_line_foci_do_not_depend_on_the_ray_sample(x, y):
     """The extremes over directions of the RMS focus moved by 0.1 mm with the seed at
     (0, 28.25); the line foci must not (measured spread < 0.05 µm)."""
     src = source_from_mirror(TILTED, x, y, 10000.0, reference_sensor_distance=REF)
-    foci = np.array([numeric_focus(TILTED, src, seed=s).line_foci_focus_mm for s in range(3)])
+    foci = np.array([numeric_focus(TILTED, src, seed=s).line_foci_focus for s in range(3)])
     assert np.ptp(foci, axis=0).max() < 1e-3
 
 
 def test_in_the_tilt_plane_the_line_foci_are_the_radial_and_tangential_foci():
     src = source_from_mirror(TILTED, -RIM, 0.0, 10000.0, reference_sensor_distance=REF)
     res = numeric_focus(TILTED, src)
-    pair = sorted((res.radial_focus_mm, res.tangential_focus_mm))
+    pair = sorted((res.radial_focus, res.tangential_focus))
     # Measured (deterministic): 1.1e-10 mm at 300 mm, 8.8e-12 mm at 10 m
-    assert res.line_foci_focus_mm == pytest.approx(pair, abs=1e-8)
+    assert res.line_foci_focus == pytest.approx(pair, abs=1e-8)
 
 
 def test_unknown_field_is_refused():
@@ -178,7 +178,7 @@ def _dense_grid_extremes(setup, spacing, rim_step_deg, points=None):
                 x, y = x * RIM / h, y * RIM / h
             src = source_from_mirror(setup, x, y, depth,
                                      reference_sensor_distance=sr.reference_sensor_distance)
-            near, far = numeric_focus(setup, src, rays=1 << 15).line_foci_focus_mm
+            near, far = numeric_focus(setup, src, rays=1 << 15).line_foci_focus
             lo = min(lo, (near, (x, y, depth)))
             hi = max(hi, (far, (x, y, depth)))
     return lo, hi

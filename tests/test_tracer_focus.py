@@ -50,8 +50,8 @@ def test_traced_foci_match_coddington(name, frac, depth):
     res = numeric_focus(setup, src)
     d_m, d_s = focal_image_axial_distances(setup, np.array(x), depth)
     f = setup.lens.focal_length
-    assert res.radial_sensor_mm == pytest.approx(image_distance(f, float(d_m)), abs=TOL_MM)
-    assert res.tangential_sensor_mm == pytest.approx(image_distance(f, float(d_s)), abs=TOL_MM)
+    assert res.radial_sensor == pytest.approx(image_distance(f, float(d_m)), abs=TOL_MM)
+    assert res.tangential_sensor == pytest.approx(image_distance(f, float(d_s)), abs=TOL_MM)
 
 
 def test_focus_comparison_resolves_small_changes():
@@ -62,12 +62,12 @@ def test_focus_comparison_resolves_small_changes():
     base = numeric_focus(SPHERE, src)
     near = numeric_focus(SPHERE, source_from_mirror(SPHERE, 21.0, 0.0, 315.0,
                                                     reference_sensor_distance=58.0))
-    assert abs(near.tangential_sensor_mm - base.tangential_sensor_mm) > TOL_MM
+    assert abs(near.tangential_sensor - base.tangential_sensor) > TOL_MM
     bigger = _with_mirror(radius=26.25, rim_radius=25.0)
     other = numeric_focus(bigger, source_from_mirror(bigger, 21.0, 0.0, 300.0,
                                                      reference_sensor_distance=58.0))
-    assert abs(other.radial_sensor_mm - base.radial_sensor_mm) > TOL_MM
-    assert abs(base.radial_sensor_mm - base.tangential_sensor_mm) > 100 * TOL_MM
+    assert abs(other.radial_sensor - base.radial_sensor) > TOL_MM
+    assert abs(base.radial_sensor - base.tangential_sensor) > 100 * TOL_MM
 
 
 # The paper's sweep ranges as docs/reference/sweep-design.md gives them (mm, two decimals).

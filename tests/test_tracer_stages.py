@@ -281,7 +281,7 @@ def test_deposit_time_samples_bins_each_hit():
     hits, h = _hits(2000)
     dists = [10.0, 12.5, 15.0]
     buf = dep.deposit_time_samples(dr.zeros(F64, K * K + 2), hits, [F64(x) for x in dists],
-                                   center=(CU, CV), pitch=PITCH, kernel_size=K)
+                                   center=(CU, CV), pixel_pitch=PITCH, kernel_size=K)
     ref = np.zeros(K * K + 2)
     landed, free_only = h["landed"], h["landed_free"] & ~h["landed"]
     for i in dists:
@@ -318,7 +318,7 @@ def test_deposit_sweeps_integrates_each_segment(table):
 
     hits, h = _hits(300)
     span = (10.0, 15.0)
-    buf = dep.deposit_sweeps(dr.zeros(F64, K * K + 2), hits, center=(CU, CV), pitch=PITCH,
+    buf = dep.deposit_sweeps(dr.zeros(F64, K * K + 2), hits, center=(CU, CV), pixel_pitch=PITCH,
                              kernel_size=K, span=span, cdf_table=table)
 
     def cdf(s):

@@ -75,7 +75,7 @@ def test_random_setups_trace_cleanly(case):
     assert e_fit == pytest.approx(e_big, rel=0.02)
 
     # PSF at the traced radial focus, float32 against float64 on the same samples.
-    i = numeric_focus(setup, src).radial_sensor_mm
+    i = numeric_focus(setup, src).radial_sensor
     if not (math.isfinite(i) and i > setup.lens.focal_length):
         return
     try:
@@ -107,7 +107,7 @@ def test_far_source_of_a_tilted_hyperboloid_float32_matches_float64():
                   lens=Lens(focal_length=50.0, f_number=2.8),
                   sensor=Sensor(resolution=(512, 512), pixel_pitch=0.02), sweep=Sweep(fov_deg=90.0))
     src = _source(setup, 18.984375, 0.0, 16172169.0)
-    i = numeric_focus(setup, src).radial_sensor_mm
+    i = numeric_focus(setup, src).radial_sensor
     k32, _ = render_source(setup, src, times=[i], rays=200_000, kernel_size=63)
     k64, _ = render_source(setup, src, times=[i], rays=200_000, kernel_size=63, double=True)
     assert np.abs(k32 - k64).sum() < 2e-3

@@ -29,6 +29,8 @@ ENFORCED = (
     "mitsweep.deconv",
     "mitsweep.optics", "mitsweep.io", "mitsweep.plots",
     "mitsweep.rig",
+    "mitsweep.tracer",
+    "mitsweep.design.optimize", "mitsweep.design.planes", "mitsweep.design.sweep",
 )
 
 AGAINST = re.compile(r"(?<!_per)_mm$|^pitch$|^pitch_mm$|^pixel_size_mm$")

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..config import Setup
+from ..deprecation import renamed_fields, renamed_keywords
 from ..tracer.ipsf import fit_sampling_box
 from ..tracer.kernel import trace_arrays
 from ..tracer.source import source_from_image
@@ -50,6 +51,7 @@ _CHUNK = 1 << 20
 _KEYS = ("landed", "weight", "Au", "Av", "Bu", "Bv")
 
 
+@renamed_fields(edges_mm="edges", depths_mm="depths", widths_mm="widths")
 @dataclass(frozen=True)
 class PlaneBank:
     """Bin-averaged PSFs over a set of field points and depths.
@@ -58,31 +60,35 @@ class PlaneBank:
     ----------
     kernels : (n_depths, n_points, n_bins, K, K) ndarray
         ``P_k`` of each point and depth (float64; sums = in-window fraction of the light).
-    edges_mm : (n_bins + 1,) ndarray
+    edges : (n_bins + 1,) ndarray
         Bin edges, sensor distances in mm, in the order the sweep runs (start → end).
     points_uv : (n_points, 2) ndarray
         Upright image points (u, v), mm at the reference sensor distance.
-    depths_mm : (n_depths,) ndarray
+    depths : (n_depths,) ndarray
+        Depths l of the point sources, mm.
     reference_sensor_distance : float
         mm: mid-travel of the span.
     pixel_pitch : float
         mm.
     metadata : dict
         rays, sub-planes, seed, seconds.
+
+    The former names ``edges_mm``, ``depths_mm`` and ``widths_mm`` read on with a
+    DeprecationWarning.
     """
 
     kernels: np.ndarray
-    edges_mm: np.ndarray
+    edges: np.ndarray
     points_uv: np.ndarray
-    depths_mm: np.ndarray
+    depths: np.ndarray
     reference_sensor_distance: float
     pixel_pitch: float
     metadata: dict = field(default_factory=dict)
 
     @property
-    def widths_mm(self) -> np.ndarray:
+    def widths(self) -> np.ndarray:
         """``|e_{k+1} − e_k|`` of each bin, mm."""
-        return np.abs(np.diff(self.edges_mm))
+        return np.abs(np.diff(self.edges))
 
     def ipsf(self, tau: ArrayLike) -> np.ndarray:
         """``Σ_k τ_k P_k``: the IPSF of every point and depth for exposure fractions ``tau``.
@@ -122,18 +128,19 @@ class PlaneBank:
         if not 1 <= groups <= n:
             raise ValueError(f"groups: must be in [1, {n}], got {groups}")
         parts = np.array_split(np.arange(n), groups)
-        w = self.widths_mm
+        w = self.widths
         kern = np.stack([np.tensordot(self.kernels[:, :, p], w[p] / w[p].sum(), axes=([2], [0]))
                          for p in parts], axis=2)
-        edges = np.array([self.edges_mm[p[0]] for p in parts] + [self.edges_mm[-1]])
-        return PlaneBank(kernels=kern, edges_mm=edges, points_uv=self.points_uv,
-                         depths_mm=self.depths_mm,
+        edges = np.array([self.edges[p[0]] for p in parts] + [self.edges[-1]])
+        return PlaneBank(kernels=kern, edges=edges, points_uv=self.points_uv,
+                         depths=self.depths,
                          reference_sensor_distance=self.reference_sensor_distance,
                          pixel_pitch=self.pixel_pitch,
                          metadata=dict(self.metadata, coarsened_from=n))
 
 
-def plane_psfs(setup: Setup, u: float, v: float, depth: float, edges_mm: ArrayLike, *,
+@renamed_keywords(edges_mm="edges")
+def plane_psfs(setup: Setup, u: float, v: float, depth: float, edges: ArrayLike, *,
                reference_sensor_distance: float, rays: int = DEFAULT_PLANE_RAYS,
                kernel_size: int = 31, seed: int = 0,
                sub_planes: int = DEFAULT_SUB_PLANES) -> np.ndarray:
@@ -146,7 +153,7 @@ def plane_psfs(setup: Setup, u: float, v: float, depth: float, edges_mm: ArrayLi
         Upright image point, mm at ``reference_sensor_distance``.
     depth : float
         Depth l, mm (inf allowed).
-    edges_mm : (n_bins + 1,) array_like
+    edges : (n_bins + 1,) array_like
         Bin edges, sensor distances in mm (monotonic, all > the lens focal length).
     reference_sensor_distance : float
         Pixel grid and centring distance, mm (mid-travel of the span).
@@ -169,7 +176,7 @@ def plane_psfs(setup: Setup, u: float, v: float, depth: float, edges_mm: ArrayLi
     K = int(kernel_size)
     if K < 3 or K % 2 == 0:
         raise ValueError(f"kernel_size: must be an odd integer >= 3, got {kernel_size!r}")
-    edges = np.asarray(edges_mm, dtype=float)
+    edges = np.asarray(edges, dtype=float)
     S = int(sub_planes)
     if S < 1:
         raise ValueError(f"sub_planes: must be >= 1, got {sub_planes!r}")
@@ -211,7 +218,8 @@ def plane_psfs(setup: Setup, u: float, v: float, depth: float, edges_mm: ArrayLi
     return hist.reshape(n_bins, K, K) / (landed_w * S)
 
 
-def plane_bank(setup: Setup, points_uv: ArrayLike, depths_mm: ArrayLike, edges_mm: ArrayLike, *,
+@renamed_keywords(depths_mm="depths", edges_mm="edges")
+def plane_bank(setup: Setup, points_uv: ArrayLike, depths: ArrayLike, edges: ArrayLike, *,
                reference_sensor_distance: float, rays: int = DEFAULT_PLANE_RAYS,
                kernel_size: int = 31, seed: int = 0, sub_planes: int = DEFAULT_SUB_PLANES,
                progress: Callable[[], object] | None = None) -> PlaneBank:
@@ -224,9 +232,9 @@ def plane_bank(setup: Setup, points_uv: ArrayLike, depths_mm: ArrayLike, edges_m
         The mirror, lens and sensor.
     points_uv : array_like, shape (P, 2)
         Field points, upright mm at ``reference_sensor_distance``.
-    depths_mm : array_like
+    depths : array_like
         Depths l, mm.
-    edges_mm : array_like
+    edges : array_like
         Edges of the sweep's bins, sensor distances, mm.
     reference_sensor_distance : float
         Sensor distance of the kernels' pixel grid, mm.
@@ -242,8 +250,8 @@ def plane_bank(setup: Setup, points_uv: ArrayLike, depths_mm: ArrayLike, edges_m
         Called once per point.
     """
     pts = np.asarray(points_uv, dtype=float).reshape(-1, 2)
-    depths = np.asarray(depths_mm, dtype=float).ravel()
-    edges = np.asarray(edges_mm, dtype=float)
+    depths = np.asarray(depths, dtype=float).ravel()
+    edges = np.asarray(edges, dtype=float)
     K = int(kernel_size)
     kern = np.zeros((depths.size, len(pts), edges.size - 1, K, K))
     t0 = time.perf_counter()
@@ -258,7 +266,7 @@ def plane_bank(setup: Setup, points_uv: ArrayLike, depths_mm: ArrayLike, edges_m
     seconds = time.perf_counter() - t0
     logger.info("plane bank: %d points x %d depths x %d bins in %.1f s", len(pts), depths.size,
                 edges.size - 1, seconds)
-    return PlaneBank(kernels=kern, edges_mm=edges, points_uv=pts, depths_mm=depths,
+    return PlaneBank(kernels=kern, edges=edges, points_uv=pts, depths=depths,
                      reference_sensor_distance=float(reference_sensor_distance),
                      pixel_pitch=setup.sensor.pixel_pitch,
                      metadata={"rays": int(rays), "sub_planes": int(sub_planes),

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..config import Setup, SetupError
+from ..deprecation import renamed_fields, renamed_keywords
 from ..deconv.noise import SensorNoise
 from ..optics import optimal_sweep_range
 from ..optics.motion import MotionProfile
@@ -37,6 +38,7 @@ MIN_PLANES = 8
 _BRUTE_BINS = 6
 
 
+@renamed_fields(edges_mm="edges", depths_mm="depths")
 @dataclass(frozen=True)
 class SweepDesign:
     """A designed sweep and its predictions against the uniform (linear) sweep.
@@ -47,28 +49,32 @@ class SweepDesign:
         Tabulated: knots at the bin edges, times ``Σ τ`` (normalised).
     tau, tau_linear : (N,) ndarray
         Exposure fractions per bin of the design and of the uniform sweep.
-    edges_mm : (N + 1,) ndarray
-        Bin edges, sensor distances, start → end.
+    edges : (N + 1,) ndarray
+        Bin edges, sensor distances in mm, start → end.
     exposure_s : float
     mse, mse_linear : (n_depths, n_points) ndarray
         Predicted Wiener MSE per depth and field point (relative exposure²).
     points_uv : (n_points, 2) ndarray
-    depths_mm : (n_depths,) ndarray
+    depths : (n_depths,) ndarray
+        Depths of the design, mm.
     report : dict
         Everything ``mitsweep design-sweep --json`` prints.
     bank : PlaneBank or None
         The plane bank the design was optimised on.
+
+    The former names ``edges_mm`` and ``depths_mm`` read on with a DeprecationWarning
+    (the report keeps its keys).
     """
 
     profile: MotionProfile
     tau: np.ndarray
     tau_linear: np.ndarray
-    edges_mm: np.ndarray
+    edges: np.ndarray
     exposure_s: float
     mse: np.ndarray
     mse_linear: np.ndarray
     points_uv: np.ndarray
-    depths_mm: np.ndarray
+    depths: np.ndarray
     report: dict = field(default_factory=dict)
     bank: PlaneBank | None = field(default=None, repr=False)
 
@@ -144,15 +150,16 @@ def _v_avg(kernels, depths) -> tuple[float, list]:
     return float(v_avg(k)), [float(depths[j]) for j in sel]
 
 
+@renamed_keywords(span_mm="span", deploy_depth_mm="deploy_depth")
 def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
-                 n_planes: int = 64, span_mm: tuple[float, float] | None = None,
+                 n_planes: int = 64, span: tuple[float, float] | None = None,
                  n_radii: int = 9, grid: tuple[int, int] = (5, 5),
                  depths: Sequence[float] | None = None, rays: int = DEFAULT_PLANE_RAYS,
                  kernel_size: int = 31, seed: int = 0, n_fft: int = DEFAULT_FFT_SIZE,
                  sub_planes: int = DEFAULT_SUB_PLANES, brute_force_steps: int = 16,
                  bank: PlaneBank | None = None,
                  progress: Callable[[], object] | None = None,
-                 restoration: str = "matched", deploy_depth_mm: float = 500.0,
+                 restoration: str = "matched", deploy_depth: float = 500.0,
                  deploy_nsr: float | None = None) -> SweepDesign:
     """Design the time profile of a focal sweep (objective in :mod:`mitsweep.design`).
 
@@ -165,7 +172,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         Minimise the largest or the mean predicted MSE over field points × depths.
     n_planes : int
         Bins N of the span (>= 8).
-    span_mm : (start, end), optional
+    span : (start, end), optional
         Sensor distances the sweep runs between, mm (default: the optimal range,
         ``sensor_start`` → ``sensor_end``). The exposure is the setup's sweep exposure
         over the optimal range either way.
@@ -188,7 +195,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         The restoration whose error is predicted: ``"matched"``, each depth restored
         with its own IPSF and the sensor's NSR (:func:`~mitsweep.design.wiener_model`,
         with a certified bound); ``"deployed"``, as the pipeline restores: every depth
-        with the kernels at ``deploy_depth_mm`` and the NSR ``deploy_nsr`` (default the
+        with the kernels at ``deploy_depth`` and the NSR ``deploy_nsr`` (default the
         sensor's; a dataset's is :func:`mitsweep.deconv.weights.model_nsr` of its
         images) (:func:`~mitsweep.design.objective.deployed_wiener_model`; no certified
         bound). When the designed profile does not beat the linear one under this
@@ -216,8 +223,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     sweep = optimal_sweep_range(setup)
     T = float(sweep.exposure_s)
     f = setup.lens.focal_length
-    start, end = (sweep.sensor_start, sweep.sensor_end) if span_mm is None else \
-        (float(span_mm[0]), float(span_mm[1]))
+    start, end = (sweep.sensor_start, sweep.sensor_end) if span is None else \
+        (float(span[0]), float(span[1]))
     if not (math.isfinite(start) and math.isfinite(end)) or start == end:
         raise SetupError(f"span: need two different finite sensor distances, got "
                          f"{start:g} {end:g} mm")
@@ -247,25 +254,25 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
                                    sub_planes=sub_planes, progress=progress)
     if bank is None:
         bank = trace_bank(setup, points, depths, edges, reference_sensor_distance=i_ref)
-    elif not (np.array_equal(bank.edges_mm, edges) and np.array_equal(bank.points_uv, points)
-              and np.array_equal(bank.depths_mm, np.asarray(depths, dtype=float))):
+    elif not (np.array_equal(bank.edges, edges) and np.array_equal(bank.points_uv, points)
+              and np.array_equal(bank.depths, np.asarray(depths, dtype=float))):
         raise ValueError("bank: traced for other planes, points or depths than this design")
-    widths = bank.widths_mm
+    widths = bank.widths
     n_px = math.sqrt(setup.sensor.resolution[0] * setup.sensor.resolution[1])
     t0 = time.perf_counter()
     deployed = restoration == "deployed"
 
     def predictor(b: PlaneBank):
         if deployed:
-            return deployed_wiener_model(b.kernels, b.depths_mm, noise, n_fft=n_fft, n_px=n_px,
-                                         deploy_depth_mm=deploy_depth_mm,
+            return deployed_wiener_model(b.kernels, b.depths, noise, n_fft=n_fft, n_px=n_px,
+                                         deploy_depth_mm=deploy_depth,
                                          deploy_nsr=deploy_nsr)
         return wiener_model(b.kernels, noise, n_fft=n_fft, n_px=n_px)
 
     model = predictor(bank)
     shape = (len(depths), len(points))
     # the uniform sweep over the optimal range, same exposure: the baseline
-    optimal = span_mm is None or (np.isclose(start, sweep.sensor_start, rtol=0, atol=1e-12)
+    optimal = span is None or (np.isclose(start, sweep.sensor_start, rtol=0, atol=1e-12)
                                   and np.isclose(end, sweep.sensor_end, rtol=0, atol=1e-12))
     tau_lin = widths / widths.sum()
     if optimal:
@@ -279,7 +286,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
                                    n_radii=n_radii, grid=grid)
         lin_bank = trace_bank(setup, lin_points, depths, lin_edges,
                               reference_sensor_distance=lin_geom.sensor_distance)
-        lw = lin_bank.widths_mm
+        lw = lin_bank.widths
         lin_model = predictor(lin_bank)
         mse_lin = lin_model.mse(lw / lw.sum()).reshape(shape)
         kernels_lin = lin_bank.ipsf(lw / lw.sum())
@@ -295,7 +302,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     if brute_force_steps and not deployed:     # its check holds the convex bound's
         small = bank.coarsened(_BRUTE_BINS)
         brute = brute_force(predictor(small),
-                            small.widths_mm, limits, objective=objective,
+                            small.widths, limits, objective=objective,
                             steps=brute_force_steps)
     # uniform τ is in the design's feasible set only when the span is the optimal range
     uniform_value = None
@@ -332,7 +339,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     report = {
         "setup": setup.name, "objective": objective, "planes": N,
         "restoration": restoration,
-        "deploy": ({"depth_mm": float(deploy_depth_mm), "nsr": deploy_nsr} if deployed
+        "deploy": ({"depth_mm": float(deploy_depth), "nsr": deploy_nsr} if deployed
                    else None),
         "returns_linear": returns_linear,
         "span_mm": [start, end], "optimal_range_mm": [sweep.sensor_start, sweep.sensor_end],
@@ -372,6 +379,6 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
                                                      "kernel_size")},
         "n_fft": int(n_fft),
     }
-    return SweepDesign(profile=profile, tau=tau, tau_linear=tau_lin, edges_mm=edges,
+    return SweepDesign(profile=profile, tau=tau, tau_linear=tau_lin, edges=edges,
                        exposure_s=T, mse=mse, mse_linear=mse_lin, points_uv=points,
-                       depths_mm=np.asarray(depths), report=report, bank=bank)
+                       depths=np.asarray(depths), report=report, bank=bank)

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..backend import drjit_module
+from ..deprecation import renamed_keywords
 
 __all__ = ["DepositStrategy", "deposit_copies", "fold_buffer", "new_buffer",
            "sensor_distances", "deposit_time_samples", "deposit_sweeps"]
@@ -187,12 +188,12 @@ def new_buffer(buffer: DrJitArray | None, sources: int, cells: int, copies: int
     return buffer, copies
 
 
-def _window(hits: dict, center: Sequence[DrJitArray], pitch: float, K: int) -> tuple:
+def _window(hits: dict, center: Sequence[DrJitArray], pixel_pitch: float, K: int) -> tuple:
     """Pixel coordinates (col, row; integers at pixel edges) of ``h(i) = A + B i``:
     ``(au, av, bu, bv)`` with ``col = au + bu i``, ``row = av + bv i``."""
     import drjit as dr
 
-    inv_p = dr.opaque(type(hits["Au"]), 1.0 / float(pitch))
+    inv_p = dr.opaque(type(hits["Au"]), 1.0 / float(pixel_pitch))
     au = dr.fma(hits["Au"] - center[0], inv_p, K // 2 + 0.5)
     av = dr.fma(center[1] - hits["Av"], inv_p, K // 2 + 0.5)
     return au, av, hits["Bu"] * inv_p, -hits["Bv"] * inv_p
@@ -277,8 +278,9 @@ def sensor_distances(xi: DrJitArray | None, *, times: Sequence[float] | None = N
     return dists
 
 
+@renamed_keywords(pitch="pixel_pitch")
 def deposit_time_samples(buffer: DrJitArray, hits: dict, dists: Sequence[DrJitArray], *,
-                         center: Sequence[DrJitArray], pitch: float, kernel_size: int,
+                         center: Sequence[DrJitArray], pixel_pitch: float, kernel_size: int,
                          base: DrJitArray | None = None, mode: Any = None) -> DrJitArray:
     """Add each ray's weight, split equally over the sensor distances ``dists``, to the
     pixels its hit ``A + B i`` falls in (stage *deposit*; box filter on the window).
@@ -294,7 +296,7 @@ def deposit_time_samples(buffer: DrJitArray, hits: dict, dists: Sequence[DrJitAr
         :func:`sensor_distances`.
     center : (Float, Float)
         Window centre (u, v), upright image mm.
-    pitch : float
+    pixel_pitch : float
         Pixel pitch, mm.
     kernel_size : int
         K.
@@ -315,7 +317,7 @@ def deposit_time_samples(buffer: DrJitArray, hits: dict, dists: Sequence[DrJitAr
     mode = dr.ReduceMode.Auto if mode is None else mode
     K = int(kernel_size)
     KK = K * K
-    au, av, bu, bv = _window(hits, center, pitch, K)
+    au, av, bu, bv = _window(hits, center, pixel_pitch, K)
     landed, weight = hits["landed"], hits["weight"]
     wj = Acc(weight * (1.0 / len(dists)))
     free_only = hits["landed_free"] & ~landed
@@ -354,8 +356,9 @@ def _slab(p0: DrJitArray, dp: DrJitArray, K: int) -> tuple[DrJitArray, DrJitArra
     return lo, hi
 
 
+@renamed_keywords(pitch="pixel_pitch")
 def deposit_sweeps(buffer: DrJitArray, hits: dict, *, center: Sequence[DrJitArray],
-                   pitch: float, kernel_size: int, span: tuple[float, float],
+                   pixel_pitch: float, kernel_size: int, span: tuple[float, float],
                    cdf_table: np.ndarray | None = None, base: DrJitArray | None = None,
                    mode: Any = None) -> DrJitArray:
     """Add each ray's *whole sweep* to the pixels its hit crosses (stage *deposit*).
@@ -371,7 +374,7 @@ def deposit_sweeps(buffer: DrJitArray, hits: dict, *, center: Sequence[DrJitArra
 
     Parameters
     ----------
-    buffer, hits, center, pitch, kernel_size
+    buffer, hits, center, pixel_pitch, kernel_size
         As :func:`deposit_time_samples`.
     span : (float, float)
         ``(i_lo, i_hi)``: the sensor distances at the sweep's ends, mm.
@@ -398,7 +401,7 @@ def deposit_sweeps(buffer: DrJitArray, hits: dict, *, center: Sequence[DrJitArra
     mode = dr.ReduceMode.Auto if mode is None else mode
     K = int(kernel_size)
     i_lo, i_hi = dr.opaque(Float, float(span[0])), dr.opaque(Float, float(span[1]))
-    au, av, bu, bv = _window(hits, center, pitch, K)
+    au, av, bu, bv = _window(hits, center, pixel_pitch, K)
     # Pixel coordinates (col x, row y; integers at pixel edges) along s ∈ [0, 1].
     x0, y0 = dr.fma(bu, i_lo, au), dr.fma(bv, i_lo, av)
     dx, dy = bu * (i_hi - i_lo), bv * (i_hi - i_lo)

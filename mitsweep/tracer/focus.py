@@ -34,12 +34,12 @@ from __future__ import annotations
 
 import logging
 import math
-import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from ..config import Setup, SetupError
+from ..deprecation import renamed_fields
 from ..optics import chief_ray, object_distance, optimal_sweep_range, placement_of
 from ..optics.sweep import mirror_zone
 from .kernel import trace_arrays
@@ -83,40 +83,50 @@ FIELDS = {
 FIELD_TOL_MM = 1e-4
 
 
+#: FocusResult's fields as :meth:`FocusResult.as_dict` writes them: the keys of earlier
+#: versions (the fields were renamed to the unit rule, the files keep their keys).
+_FOCUS_KEYS = {"radial_sensor": "radial_sensor_mm", "tangential_sensor": "tangential_sensor_mm",
+               "line_foci_sensor": "line_foci_sensor_mm", "radial_focus": "radial_focus_mm",
+               "tangential_focus": "tangential_focus_mm", "line_foci_focus": "line_foci_focus_mm"}
+
+
+@renamed_fields(**{old: new for new, old in _FOCUS_KEYS.items()})
 @dataclass(frozen=True)
 class FocusResult:
     """Sensor distances (mm) of sharpest focus of one point source, and their focus
     distances (mm, object side: the axial distance of the focal image from the lens).
 
-    ``line_foci_sensor_mm`` is (nearer, farther) sensor distance of the two line foci;
-    ``line_foci_focus_mm`` their focus distances (nearer, farther) — the farther sensor
-    distance focuses nearer.
+    ``line_foci_sensor`` is (nearer, farther) sensor distance of the two line foci;
+    ``line_foci_focus`` their focus distances (nearer, farther) — the farther sensor
+    distance focuses nearer. The former names (``radial_sensor_mm``, ...) read on with a
+    DeprecationWarning, and :meth:`as_dict` keeps them as keys.
 
     Attributes
     ----------
-    radial_sensor_mm, tangential_sensor_mm : float
+    radial_sensor, tangential_sensor : float
         Sensor distance of least spread along / across the image radius, mm.
-    line_foci_sensor_mm : (float, float)
+    line_foci_sensor : (float, float)
         Sensor distances of the two line foci, mm, nearer first.
-    radial_focus_mm, tangential_focus_mm : float
+    radial_focus, tangential_focus : float
         Focus distances of the radial and tangential foci, mm (inf where the sensor
         distance is not beyond the focal length).
-    line_foci_focus_mm : (float, float)
+    line_foci_focus : (float, float)
         Focus distances of the line foci, mm, nearer first.
     rays_landed : int
         Traced rays that reached the sensor.
     """
 
-    radial_sensor_mm: float
-    tangential_sensor_mm: float
-    line_foci_sensor_mm: tuple
-    radial_focus_mm: float
-    tangential_focus_mm: float
-    line_foci_focus_mm: tuple
+    radial_sensor: float
+    tangential_sensor: float
+    line_foci_sensor: tuple
+    radial_focus: float
+    tangential_focus: float
+    line_foci_focus: tuple
     rays_landed: int
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The fields under the keys earlier versions wrote (``radial_sensor_mm``, ...)."""
+        return {_FOCUS_KEYS.get(k, k): v for k, v in asdict(self).items()}
 
 
 def _moments(r: dict):
@@ -165,13 +175,15 @@ def numeric_focus(setup: Setup, source: PointSource, *, rays: int = 1 << 16, see
     f = setup.lens.focal_length
     to_focus = lambda i: float(object_distance(f, i)) if i > f else math.inf  # noqa: E731
     return FocusResult(
-        radial_sensor_mm=i_r, tangential_sensor_mm=i_t,
-        line_foci_sensor_mm=(float(lines[0]), float(lines[1])),
-        radial_focus_mm=to_focus(i_r), tangential_focus_mm=to_focus(i_t),
-        line_foci_focus_mm=(to_focus(float(lines[1])), to_focus(float(lines[0]))),
+        radial_sensor=i_r, tangential_sensor=i_t,
+        line_foci_sensor=(float(lines[0]), float(lines[1])),
+        radial_focus=to_focus(i_r), tangential_focus=to_focus(i_t),
+        line_foci_focus=(to_focus(float(lines[1])), to_focus(float(lines[0]))),
         rays_landed=n)
 
 
+@renamed_fields(focus_min_mm="focus_min", focus_max_mm="focus_max", depths_mm="depths",
+                aperture_radius_mm="aperture_radius")
 @dataclass(frozen=True)
 class TracedSweepRange:
     """The sweep range found by tracing over one field (focus distances, mm, object side).
@@ -182,9 +194,7 @@ class TracedSweepRange:
         A key of :data:`FIELDS`.
     focus_min, focus_max : float
         The nearest and the farthest line focus over the field and the two end depths,
-        mm (named as in :class:`~mitsweep.optics.SweepRange`; the former
-        ``focus_min_mm``/``focus_max_mm`` read on with a DeprecationWarning, and
-        :meth:`as_dict` keeps those keys).
+        mm (named as in :class:`~mitsweep.optics.SweepRange`).
     min_at, max_at : dict
         Where they are reached: the mirror point ``x_mm``, ``y_mm`` (local frame),
         ``depth_mm``, ``on_boundary`` (of the field), ``on_rim``, and the chief-ray image
@@ -195,6 +205,18 @@ class TracedSweepRange:
         ``stage`` ("grid", "refined"), ``evaluations`` (traced points so far), ``focus_mm``.
     points : int
         Point sources traced.
+    depths : (float, float) or (float,)
+        The end depths searched, mm, nearer first (one where they coincide).
+    aperture_radius : float
+        Radius of the traced pencils' aperture, mm.
+    samples : list of dict
+        Every traced point: the mirror point, depth and foci (keys ``x_mm``, ``y_mm``,
+        ``depth_mm``, ``line_foci_focus_mm``, ``radial_focus_mm``,
+        ``tangential_focus_mm``); not in :meth:`as_dict`.
+
+    The former names ``focus_min_mm``, ``focus_max_mm``, ``depths_mm`` and
+    ``aperture_radius_mm`` read on with a DeprecationWarning; :meth:`as_dict` keeps them
+    as keys.
     """
 
     field: str
@@ -204,29 +226,18 @@ class TracedSweepRange:
     max_at: dict
     convergence: dict
     points: int
-    depths_mm: tuple
-    aperture_radius_mm: float
+    depths: tuple
+    aperture_radius: float
     samples: list
 
     def as_dict(self) -> dict:
+        """The fields but ``samples``, under the keys earlier versions wrote
+        (``focus_min_mm``, ``focus_max_mm``, ``depths_mm``, ``aperture_radius_mm``)."""
         d = asdict(self)
         d.pop("samples")
-        d["focus_min_mm"], d["focus_max_mm"] = d.pop("focus_min"), d.pop("focus_max")
+        for name in ("focus_min", "focus_max", "depths", "aperture_radius"):
+            d[f"{name}_mm"] = d.pop(name)
         return d
-
-    @property
-    def focus_min_mm(self) -> float:
-        """Deprecated alias of :attr:`focus_min`."""
-        warnings.warn("TracedSweepRange.focus_min_mm is deprecated: use focus_min (mm)",
-                      DeprecationWarning, stacklevel=2)
-        return self.focus_min
-
-    @property
-    def focus_max_mm(self) -> float:
-        """Deprecated alias of :attr:`focus_max`."""
-        warnings.warn("TracedSweepRange.focus_max_mm is deprecated: use focus_max (mm)",
-                      DeprecationWarning, stacklevel=2)
-        return self.focus_max
 
 
 class _LineFoci:
@@ -249,11 +260,11 @@ class _LineFoci:
                                      reference_sensor_distance=self.ref)
             res = numeric_focus(self.setup, src, rays=self.rays,
                                 aperture_radius=self.aperture_radius)
-            self._memo[key] = (res.line_foci_focus_mm, src.image_uv)
+            self._memo[key] = (res.line_foci_focus, src.image_uv)
             self.samples.append({"x_mm": key[0], "y_mm": key[1], "depth_mm": key[2],
-                                 "line_foci_focus_mm": res.line_foci_focus_mm,
-                                 "radial_focus_mm": res.radial_focus_mm,
-                                 "tangential_focus_mm": res.tangential_focus_mm})
+                                 "line_foci_focus_mm": res.line_foci_focus,
+                                 "radial_focus_mm": res.radial_focus,
+                                 "tangential_focus_mm": res.tangential_focus})
         return self._memo[key][0]
 
     @property
@@ -504,7 +515,7 @@ def traced_sweep_range(setup: Setup, fov_deg: float | None = None,
         field=field, focus_min=float(out["min"][0]), focus_max=float(out["max"][0]),
         min_at=out["min"][1], max_at=out["max"][1],
         convergence={"min": out["min"][2], "max": out["max"][2]},
-        points=foci.evaluations, depths_mm=depths,
-        aperture_radius_mm=float(setup.lens.aperture_radius if aperture_radius is None
-                                 else aperture_radius),
+        points=foci.evaluations, depths=depths,
+        aperture_radius=float(setup.lens.aperture_radius if aperture_radius is None
+                              else aperture_radius),
         samples=foci.samples)

@@ -494,7 +494,7 @@ def _deposit_source(geom, params, center_uv, rays, K, pitch, args: _DepositArgs
     launch = deposit_segments if args.exact else deposit
     while done < rays:  # chunks bound the memory: the kernel holds no per-ray arrays
         n = min(_CHUNK, rays - done)
-        buffer = launch(geom, params, n, offset=done, kernel_size=K, pitch=pitch,
+        buffer = launch(geom, params, n, offset=done, kernel_size=K, pixel_pitch=pitch,
                         center_uv=center_uv, buffer=buffer, double=args.double,
                         **args.kernel_keywords())
         dr.eval(buffer)
@@ -599,7 +599,7 @@ def _deposit_batch(batch, rays, K, pitch, args: _DepositArgs, *, progress) -> np
     done = reported = 0
     while done < rays:
         log2_count = min(rays - done, per_launch).bit_length() - 1
-        buffer = deposit_batch(batch, log2_count, offset=done, kernel_size=K, pitch=pitch,
+        buffer = deposit_batch(batch, log2_count, offset=done, kernel_size=K, pixel_pitch=pitch,
                                exact=args.exact, buffer=buffer, **args.kernel_keywords())
         dr.eval(buffer)
         done += 1 << log2_count

@@ -66,6 +66,7 @@ from typing import Any
 
 import numpy as np
 
+from ..deprecation import renamed_keywords
 from . import deposit as _deposit
 from .deposit import (DepositStrategy, deposit_sweeps, deposit_time_samples, fold_buffer,
                       new_buffer, sensor_distances)
@@ -217,8 +218,9 @@ def _read_arrays(geom, lanes, double, keys):
 
 
 
+@renamed_keywords(pitch="pixel_pitch")
 def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_size: int,
-            pitch: float, center_uv: tuple[float, float], times: list | None,
+            pixel_pitch: float, center_uv: tuple[float, float], times: list | None,
             sensor_table: np.ndarray | None, linear: tuple[float, float] | None,
             time_samples: int, buffer: DrJitArray | None = None,
             double: bool = False, strategy: DepositStrategy | None = None) -> DrJitArray:
@@ -250,7 +252,7 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
         Index of the launch's first sample in ``params``'s stream.
     kernel_size : int
         K, px.
-    pitch : float
+    pixel_pitch : float
         Pixel pitch, mm.
     center_uv : (float, float)
         Window centre (u, v), upright image mm at the reference sensor distance.
@@ -275,13 +277,13 @@ def deposit(geom: Geometry, params: TraceParams, n: int, *, offset: int, kernel_
         The buffer.
     """
     lanes = single_lanes(geom, params, n, offset, double, center_uv)
-    return _deposit_samples(geom, lanes, kernel_size=kernel_size, pitch=pitch, times=times,
-                            sensor_table=sensor_table, linear=linear,
+    return _deposit_samples(geom, lanes, kernel_size=kernel_size, pixel_pitch=pixel_pitch,
+                            times=times, sensor_table=sensor_table, linear=linear,
                             time_samples=time_samples, buffer=buffer, double=double,
                             strategy=resolve_strategy(strategy))
 
 
-def _deposit_samples(geom, lanes, *, kernel_size, pitch, times, sensor_table, linear,
+def _deposit_samples(geom, lanes, *, kernel_size, pixel_pitch, times, sensor_table, linear,
                      time_samples, buffer, double, strategy):
     """Trace ``lanes`` and deposit them at time samples (:func:`deposit`)."""
     _, Float, _ = array_types(double)
@@ -294,12 +296,13 @@ def _deposit_samples(geom, lanes, *, kernel_size, pitch, times, sensor_table, li
                              linear=linear, sensor_table=sensor_table, Float=Float)
     return deposit_time_samples(buffer, out, dists, center=(lanes.value("cu"),
                                                             lanes.value("cv")),
-                                pitch=pitch, kernel_size=K, base=base,
+                                pixel_pitch=pixel_pitch, kernel_size=K, base=base,
                                 mode=strategy.reduce_modes()[0])
 
 
+@renamed_keywords(pitch="pixel_pitch")
 def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int,
-                     kernel_size: int, pitch: float, center_uv: tuple[float, float],
+                     kernel_size: int, pixel_pitch: float, center_uv: tuple[float, float],
                      span: tuple[float, float], cdf_table: np.ndarray | None,
                      buffer: DrJitArray | None = None, double: bool = False,
                      strategy: DepositStrategy | None = None) -> DrJitArray:
@@ -315,7 +318,7 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
 
     Parameters
     ----------
-    geom, params, n, offset, kernel_size, pitch, center_uv, buffer, double, strategy
+    geom, params, n, offset, kernel_size, pixel_pitch, center_uv, buffer, double, strategy
         As :func:`deposit`.
     span : (float, float)
         ``(i_lo, i_hi)``, the sensor distances at the sweep's ends, mm.
@@ -330,12 +333,12 @@ def deposit_segments(geom: Geometry, params: TraceParams, n: int, *, offset: int
     strategy = resolve_strategy(strategy)
     lanes = single_lanes(geom, params, n, offset, double, center_uv,
                          coherent=strategy.coherent)
-    return _deposit_sweeps(geom, lanes, kernel_size=kernel_size, pitch=pitch, span=span,
-                           cdf_table=cdf_table, buffer=buffer, double=double,
+    return _deposit_sweeps(geom, lanes, kernel_size=kernel_size, pixel_pitch=pixel_pitch,
+                           span=span, cdf_table=cdf_table, buffer=buffer, double=double,
                            strategy=strategy)
 
 
-def _deposit_sweeps(geom, lanes, *, kernel_size, pitch, span, cdf_table, buffer, double,
+def _deposit_sweeps(geom, lanes, *, kernel_size, pixel_pitch, span, cdf_table, buffer, double,
                     strategy):
     """Trace ``lanes`` and deposit their whole sweeps (:func:`deposit_segments`)."""
     K = int(kernel_size)
@@ -344,12 +347,13 @@ def _deposit_sweeps(geom, lanes, *, kernel_size, pitch, span, cdf_table, buffer,
     base = lanes.cell_base(K * K + 2, copies)
     out = trace_lanes(geom, lanes, double)
     return deposit_sweeps(buffer, out, center=(lanes.value("cu"), lanes.value("cv")),
-                          pitch=pitch, kernel_size=K, span=span, cdf_table=cdf_table,
+                          pixel_pitch=pixel_pitch, kernel_size=K, span=span, cdf_table=cdf_table,
                           base=base, mode=strategy.reduce_modes()[1])
 
 
+@renamed_keywords(pitch="pixel_pitch")
 def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_size: int,
-                  pitch: float, exact: bool, times: list | None = None,
+                  pixel_pitch: float, exact: bool, times: list | None = None,
                   sensor_table: np.ndarray | None = None,
                   linear: tuple[float, float] | None = None, time_samples: int = 1,
                   span: tuple[float, float] | None = None,
@@ -371,7 +375,7 @@ def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_si
         The sources, with their sampling domains, seeds and window centres.
     log2_count : int
         Base-2 logarithm of the samples per source.
-    offset, kernel_size, pitch, buffer, strategy
+    offset, kernel_size, pixel_pitch, buffer, strategy
         As :func:`deposit`.
     exact : bool
         Deposit whole sweeps (:func:`deposit_segments`) instead of time samples.
@@ -389,11 +393,11 @@ def deposit_batch(batch: SourceBatch, log2_count: int, *, offset: int, kernel_si
     lanes = Lanes(batch.double, 0, offset, batch=batch, log2_count=int(log2_count),
                   coherent=exact and strategy.coherent)
     if exact:
-        return _deposit_sweeps(batch.geometry, lanes, kernel_size=kernel_size, pitch=pitch,
-                               span=span, cdf_table=cdf_table, buffer=buffer,
-                               double=batch.double, strategy=strategy)
-    return _deposit_samples(batch.geometry, lanes, kernel_size=kernel_size, pitch=pitch,
-                            times=times, sensor_table=sensor_table, linear=linear,
+        return _deposit_sweeps(batch.geometry, lanes, kernel_size=kernel_size,
+                               pixel_pitch=pixel_pitch, span=span, cdf_table=cdf_table,
+                               buffer=buffer, double=batch.double, strategy=strategy)
+    return _deposit_samples(batch.geometry, lanes, kernel_size=kernel_size,
+                            pixel_pitch=pixel_pitch, times=times, sensor_table=sensor_table, linear=linear,
                             time_samples=time_samples, buffer=buffer, double=batch.double,
                             strategy=strategy)
 
