@@ -22,7 +22,9 @@ SECTION = re.compile(r"^\s*(Parameters|Attributes|Other Parameters)\s*\n\s*-{3,}
 #: Packages and modules whose exported API must document its parameters.
 ENFORCED = ("mitsweep.optics", "mitsweep.io", "mitsweep.rig", "mitsweep.render",
             "mitsweep.design", "mitsweep.datasets", "mitsweep.plots", "mitsweep.backend",
-            "mitsweep.resources", "mitsweep.jit", "mitsweep.tracer", "mitsweep.deconv")
+            "mitsweep.resources", "mitsweep.jit", "mitsweep.tracer", "mitsweep.deconv",
+            "mitsweep.rig.arduino", "mitsweep.rig.zaber", "mitsweep.rig.transport",
+            "mitsweep.rig.profile", "mitsweep.rig.testing", "mitsweep.rig.sim")
 
 
 def _takes_parameters(obj) -> bool:
