@@ -210,9 +210,9 @@ def table1(setup: Setup, *, ranges: Sequence[tuple[float, float]] | None = None,
     for (fmin, fmax), bank in zip(ranges, banks):
         _, sr = _range_setup(setup, fmin, fmax)
         swept = bank.metadata["sweep_range"]
-        radii = bank.radii_mm
+        radii = bank.radii
         if (bank.kind != "radial" or radii is None or len(radii) != int(n_radii)
-                or not np.allclose(bank.depths_mm, depths)
+                or not np.allclose(bank.depths, depths)
                 or not np.allclose((swept["focus_min_mm"], swept["focus_max_mm"]), (fmin, fmax))):
             raise ValueError(f"banks: the bank for {fmin:g}-{fmax:g} mm is not Table 1's "
                              f"(radial, {int(n_radii)} radii, depths {list(depths)} mm, that "
