@@ -289,8 +289,8 @@ def _deadline(duration_s: float) -> float:
     return time.monotonic() + duration_s * (1 + DEADLINE_FRACTION) + DEADLINE_SLACK_S
 
 
-def _positioning_time(plan: CapturePlan, distance_mm: float) -> float:
-    return Trapezoid(abs(distance_mm), plan.positioning_velocity_mm_s,
+def _positioning_time(plan: CapturePlan, distance: float) -> float:
+    return Trapezoid(abs(distance), plan.positioning_velocity_mm_s,
                      plan.positioning_acceleration_mm_s2).duration
 
 

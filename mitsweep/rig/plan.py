@@ -80,13 +80,14 @@ RECORD_KEYS = {"sensor_start": "sensor_start_mm", "sensor_end": "sensor_end_mm",
 class CapturePlan:
     """A capture, fully resolved into stage positions, rates and times.
 
-    Lengths mm (stage coordinates unless named ``sensor_*``), velocities mm/s,
-    accelerations mm/s², times s; each driver converts them to its own units
+    Lengths mm, named without a unit (stage coordinates unless named ``sensor_*``; the
+    capture record keeps their former ``*_mm`` keys, :data:`RECORD_KEYS`), velocities
+    mm/s, accelerations mm/s², times s; each driver converts them to its own units
     (:meth:`driver_units`). The four positions are kept as integer controller steps
     (``*_steps``: Arduino steps or Zaber microsteps, ``steps_per_mm`` of them per mm;
-    ``*_mm`` properties give them in mm) because the plan needs them exact: the board
-    triggers the shutter at those step positions, the exposure is a whole number of
-    steps, and a move is checked to end on its target step.
+    the ``*_position`` properties give them in mm) because the plan needs them exact:
+    the board triggers the shutter at those step positions, the exposure is a whole
+    number of steps, and a move is checked to end on its target step.
 
     Attributes
     ----------
@@ -186,18 +187,22 @@ class CapturePlan:
 
     @property
     def approach_position(self) -> float:
+        """Start of the approach (the sweep's move starts here at rest), mm."""
         return self.mm(self.approach_steps)
 
     @property
     def open_position(self) -> float:
+        """Where the shutter opens, mm (stage coordinates)."""
         return self.mm(self.open_steps)
 
     @property
     def close_position(self) -> float:
+        """Where the shutter closes, mm (stage coordinates)."""
         return self.mm(self.close_steps)
 
     @property
     def end_position(self) -> float:
+        """End of the move, at rest, mm (stage coordinates)."""
         return self.mm(self.end_steps)
 
     @overload
