@@ -81,7 +81,7 @@ def test_render_and_tracer_share_the_grid_of_a_measured_motion(case):
     setup, optimal, measured = case
     motion = measured.motion
     img = render_point_source(setup, U, V, DEPTH, spp=4096, seed=1, mode="sweep",
-                              window=31, motion=motion, radius_px=2.0)
+                              window_px=31, motion=motion, radius_px=2.0)
     rendered = _centroid(img)
     kernel, info = integrated_psf(setup, U, V, DEPTH, motion=motion, rays=400_000,
                                   kernel_size=31)

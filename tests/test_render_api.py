@@ -59,7 +59,7 @@ def test_marker_lands_where_image_point_predicts(name, frac_u, frac_v):
     else:
         pytest.fail(f"no point toward the centre from ({frac_u}, {frac_v}) sees the mirror")
     assert max(abs(u), abs(v)) / p >= 6  # still far enough out that a flip would show
-    img = render_point_source(s, u, v, 800.0, spp=64, seed=1, mode="pinhole", window=16,
+    img = render_point_source(s, u, v, 800.0, spp=64, seed=1, mode="pinhole", window_px=16,
                               radius_px=1.5)
     col, row = centroid(img)
     # The marker's image is a ~3 px disk sampled at 64 spp: its centroid scatters by
@@ -74,9 +74,9 @@ def test_modes_share_the_pinhole_reference_grid(mode):
     """A point's blurred image is centred where the pinhole puts it (same chief rays)."""
     s = small("sphere", 96)
     u, v = 1.6, -0.9
-    ref = render_point_source(s, u, v, 500.0, spp=64, seed=2, mode="pinhole", window=24,
+    ref = render_point_source(s, u, v, 500.0, spp=64, seed=2, mode="pinhole", window_px=24,
                               radius_px=1.5)
-    img = render_point_source(s, u, v, 500.0, spp=256, seed=3, mode=mode, window=24,
+    img = render_point_source(s, u, v, 500.0, spp=256, seed=3, mode=mode, window_px=24,
                               radius_px=1.5)
     # Blur is symmetric about the chief ray to first order; 0.35 px allows for the
     # coma-like asymmetry of the off-axis sweep blur and Monte Carlo scatter.

@@ -92,7 +92,7 @@ def test_point_source_ipsf_matches_tracer_within_noise():
     ker, _ = tracer.integrated_psf(s, u, v, 500.0, kernel_size=K, rays=4_000_000)
     crops = []
     for seed in (1, 2):
-        img = render_point_source(s, u, v, 500.0, spp=1 << 18, seed=seed, window=K,
+        img = render_point_source(s, u, v, 500.0, spp=1 << 18, seed=seed, window_px=K,
                                   radius_px=0.15)
         c = img[row - K // 2: row + K // 2 + 1, col - K // 2: col + K // 2 + 1]
         crops.append(c / c.sum())

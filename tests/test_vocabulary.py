@@ -26,6 +26,7 @@ from mitsweep.deprecation import RENAMED
 #: Packages whose public names keep the rule (a package joins when it is converted).
 ENFORCED = (
     "mitsweep.deprecation",
+    "mitsweep.render", "mitsweep.backend",
     "mitsweep.deconv",
     "mitsweep.optics", "mitsweep.io", "mitsweep.plots",
     "mitsweep.rig",

@@ -41,6 +41,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from ..config import Setup
+from ..deprecation import renamed_keywords
 from ..optics import (SweepRange, chief_ray, focal_image_axial_distances, image_distance,
                       image_point, mirror_point_from_image, placement_of)
 from ..optics.motion import MotionProfile
@@ -626,8 +627,9 @@ def _world_per_pixel(setup, u, v, depth, i_ref) -> float:
     return float(min(np.linalg.norm(pts[1] - pts[0]), np.linalg.norm(pts[2] - pts[0])))
 
 
+@renamed_keywords(window="window_px")
 def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: int,
-                        seed: int = 0, mode: str = "sweep", window: int = 64,
+                        seed: int = 0, mode: str = "sweep", window_px: int = 64,
                         sweep: SweepRange | None = None,
                         motion: MotionProfile | None = None,
                         sensor_distance: float | None = None,
@@ -638,7 +640,7 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
     The emitter is a sphere at depth ``depth`` (mm) along the world-bound chief ray of
     the upright image point ``(u, v)`` (mm) at the reference distance; its radius is
     ``radius_px`` (default a tenth) of the world size of a pixel there, so its own image
-    is sub-pixel. Only a ``window`` × ``window`` pixel crop around the point's reference
+    is sub-pixel. Only a ``window_px`` × ``window_px`` pixel crop around the point's reference
     pixel is rendered. ``sweep`` and ``motion`` as in :func:`render_image` (they set the
     reference distance, so a tabulated ``motion`` places the source where the tracer's
     :func:`~mitsweep.tracer.integrated_psf` with that motion does).
@@ -661,8 +663,9 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
         Random seed.
     mode : str, optional
         One of :data:`MODES`.
-    window : int, optional
-        Side of the rendered crop, pixels.
+    window_px : int, optional
+        Side of the rendered crop, px (default 64; formerly ``window``, still accepted
+        with a DeprecationWarning).
     sweep : mitsweep.optics.sweep.SweepRange, optional
         The sweep (default: the setup's).
     motion : mitsweep.optics.motion.MotionProfile, optional
@@ -699,9 +702,9 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
         kwargs, _ = mode_camera(setup, mode, geometry, f_number)
     H, W = image_shape(setup)
     row, col = sensor_to_pixel(u, v, (H, W), setup.sensor.pixel_pitch)
-    x0 = int(np.clip(round(float(col)) - window // 2, 0, max(0, W - window)))
-    y0 = int(np.clip(round(float(row)) - window // 2, 0, max(0, H - window)))
-    crop = (x0, y0, min(window, W), min(window, H))
+    x0 = int(np.clip(round(float(col)) - window_px // 2, 0, max(0, W - window_px)))
+    y0 = int(np.clip(round(float(row)) - window_px // 2, 0, max(0, H - window_px)))
+    crop = (x0, y0, min(window_px, W), min(window_px, H))
     cam = camera_dict(setup, spp=spp, crop=crop, **kwargs)
     source = {"type": "sphere", "center": centre.tolist(), "radius": radius,
               "bsdf": {"type": "diffuse", "reflectance": 0.0},
@@ -717,5 +720,5 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
     s = out.sum()
     if not s > 0:
         raise ValueError(f"point source at depth {depth:g} mm: no sample reached it "
-                         f"(raise spp or window)")
+                         f"(raise spp or window_px)")
     return out / s

@@ -188,7 +188,7 @@ def _mesh_accuracy(setup, tols, spp):
     H, W = image_shape(setup)
     col, row = int(W * 0.66), int(H * 0.4)
     u, v = pixel_to_sensor(row, col, (H, W), setup.sensor.pixel_pitch)
-    kw = dict(spp=spp, seed=4, mode="focused", window=31, radius_px=0.3)
+    kw = dict(spp=spp, seed=4, mode="focused", window_px=31, radius_px=0.3)
     t0 = time.perf_counter()
     ref = render_point_source(setup, u, v, 500.0, **kw)
     t_ref = time.perf_counter() - t0

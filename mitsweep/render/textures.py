@@ -11,6 +11,7 @@ import functools
 
 import numpy as np
 
+from ..deprecation import renamed_keywords
 from ..io.camera import srgb_to_linear
 
 __all__ = ["siemens_star", "bar_chart", "checkerboard", "skimage_texture", "texture",
@@ -26,58 +27,64 @@ def _rgb(gray: np.ndarray) -> np.ndarray:
     return np.repeat(gray[..., None], 3, axis=-1).astype(np.float32)
 
 
-def siemens_star(size: int = 512, spokes: int = 36) -> np.ndarray:
-    """A Siemens star of ``spokes`` black/white pairs, (size, size, 3) in {0.05, 0.95}.
+@renamed_keywords(size="size_px")
+def siemens_star(size_px: int = 512, spokes: int = 36) -> np.ndarray:
+    """A Siemens star of ``spokes`` black/white pairs, (size_px, size_px, 3) in
+    {0.05, 0.95}.
 
     Parameters
     ----------
-    size : int, optional
+    size_px : int, optional
         Side of the image, px (default 512); the star fills the inscribed disk, the
-        corners are 0.5.
+        corners are 0.5. Formerly ``size`` (still accepted, with a DeprecationWarning).
     spokes : int, optional
         Black/white pairs around the centre (default 36).
     """
-    y, x = np.mgrid[0:size, 0:size] + 0.5 - size / 2
+    y, x = np.mgrid[0:size_px, 0:size_px] + 0.5 - size_px / 2
     ang = np.arctan2(y, x)
     star = (np.sin(spokes * ang) > 0).astype(np.float32)
-    r = np.hypot(x, y) / (size / 2)
+    r = np.hypot(x, y) / (size_px / 2)
     star = np.where(r > 1.0, 0.5, star)
     return _rgb(0.05 + 0.9 * star)
 
 
-def bar_chart(size: int = 512) -> np.ndarray:
+@renamed_keywords(size="size_px")
+def bar_chart(size_px: int = 512) -> np.ndarray:
     """Groups of bars whose period halves from row to row (a 1951-USAF-like chart).
 
     Parameters
     ----------
-    size : int, optional
-        Side of the (size, size, 3) image, px (default 512): six rows of bars, the
-        first of period ``size / 4`` px, the last at least 2 px.
+    size_px : int, optional
+        Side of the (size_px, size_px, 3) image, px (default 512): six rows of bars,
+        the first of period ``size_px / 4`` px, the last at least 2 px. Formerly
+        ``size`` (still accepted, with a DeprecationWarning).
     """
-    img = np.full((size, size), 0.95, dtype=np.float32)
+    img = np.full((size_px, size_px), 0.95, dtype=np.float32)
     rows = 6
-    h = size // rows
-    x = np.arange(size)
+    h = size_px // rows
+    x = np.arange(size_px)
     for k in range(rows):
-        period = max(2, size // (4 * 2 ** k))
+        period = max(2, size_px // (4 * 2 ** k))
         bars = ((x // (period // 2 or 1)) % 2 == 0)
         img[k * h + h // 8: (k + 1) * h - h // 8, :] = np.where(bars, 0.05, 0.95)
     return _rgb(img)
 
 
-def checkerboard(size: int = 512, squares: int = 16) -> np.ndarray:
-    """A checkerboard of ``squares`` × ``squares`` squares, (size, size, 3) in
+@renamed_keywords(size="size_px")
+def checkerboard(size_px: int = 512, squares: int = 16) -> np.ndarray:
+    """A checkerboard of ``squares`` × ``squares`` squares, (size_px, size_px, 3) in
     {0.1, 0.9}.
 
     Parameters
     ----------
-    size : int, optional
-        Side of the image, px (default 512).
+    size_px : int, optional
+        Side of the image, px (default 512). Formerly ``size`` (still accepted, with a
+        DeprecationWarning).
     squares : int, optional
         Squares along each side (default 16).
     """
-    y, x = np.mgrid[0:size, 0:size]
-    c = ((x * squares // size + y * squares // size) % 2).astype(np.float32)
+    y, x = np.mgrid[0:size_px, 0:size_px]
+    c = ((x * squares // size_px + y * squares // size_px) % 2).astype(np.float32)
     return _rgb(0.1 + 0.8 * c)
 
 
