@@ -186,31 +186,33 @@ def trace_ipsf_bank(setup: Setup | str | os.PathLike, *, kind: str = "radial",
     with progress_callback(progress, n_pts * len(depths), "IPSF bank", "ipsf") as step:
         settings = TraceSettings(rays=rays, kernel_size=kernel_size, seed=seed, method=method,
                                  time_samples=time_samples, n_planes=planes)
-        bank = ipsf_bank(setup, kind=kind, n_radii=radii, grid=tuple(grid), depths=depths,
+        bank = ipsf_bank(setup, kind=kind, n_radii=radii, grid=(grid[0], grid[1]), depths=depths,
                          sweep=geometry.sweep, motion=geometry.motion, settings=settings,
                          progress=step)
+    assert bank.vignetted is not None  # ipsf_bank records it for every bank it traces
     out: dict = {"setup": setup.name, "version": __version__, "kind": bank.kind,
                  "shape": list(bank.kernels.shape),
                  "reference_sensor_distance_mm": bank.reference_sensor_distance,
-                 "depths_mm": bank.depths_mm.tolist(), "points_uv_mm": bank.points_uv.tolist(),
+                 "depths_mm": bank.depths.tolist(), "points_uv_mm": bank.points_uv.tolist(),
                  "max_vignetted": float(np.max(bank.vignetted)),
                  "max_outside_kernel": float(np.max(bank.metadata["outside_kernel"])),
                  "seconds": bank.metadata["seconds"]}
     if output:
-        if os.fspath(output).lower().endswith(".npz"):
-            save_bank(output, bank)
+        path = os.fspath(output)
+        if path.lower().endswith(".npz"):
+            save_bank(path, bank)
         else:
             chans = {f"d{j}.p{i}.Y": bank.kernels[j, i]
                      for j in range(bank.kernels.shape[0])
                      for i in range(bank.kernels.shape[1])}
             meta = dict(bank.metadata, kind=bank.kind, points_uv=bank.points_uv.tolist(),
-                        depths_mm=bank.depths_mm.tolist(), pixel_pitch=bank.pixel_pitch,
+                        depths_mm=bank.depths.tolist(), pixel_pitch=bank.pixel_pitch,
                         reference_sensor_distance=bank.reference_sensor_distance,
                         vignetted=bank.vignetted.tolist(),
-                        radii_mm=None if bank.radii_mm is None else bank.radii_mm.tolist(),
+                        radii_mm=None if bank.radii is None else bank.radii.tolist(),
                         grid_shape=bank.grid_shape, optics=bank.optics)
-            write_exr(output, channels=chans, metadata=meta)
-        out["output"] = os.fspath(output)
+            write_exr(path, channels=chans, metadata=meta)
+        out["output"] = path
     if plot:
         from ..plots import plot_bank
         from ..tracer.metrics import cross_sections
@@ -220,7 +222,7 @@ def trace_ipsf_bank(setup: Setup | str | os.PathLike, *, kind: str = "radial",
             u, v = bank.points_uv[i]
             angle = math.atan2(v, u) if (u or v) else 0.0
             sections[name] = [cross_sections(k, angle) for k in bank.kernels[:, i]]
-        plot_bank(bank, plot, sections=sections)
+        plot_bank(bank, os.fspath(plot), sections=sections)
         out["plot"] = os.fspath(plot)
     provenance = {"workflow": "trace_ipsf_bank", "version": __version__,
                   "setup": setup_to_dict(setup), "sweep_range": geometry.sweep.as_dict(),
@@ -306,7 +308,7 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
     setup = _prepare(setup, inputs=[_path(setup), motion_table, motion], outputs=outputs,
                      plot=plot, kernel_size=kernel_size)
     geometry = _geometry(setup, seed, motion, motion_table)
-    sweep, motion, i_ref = geometry.sweep, geometry.motion, geometry.sensor_distance
+    sweep, profile, i_ref = geometry.sweep, geometry.motion, geometry.sensor_distance
     _check_suffix(output, (".npz", ".exr"), "an IPSF")
     if radius is not None:
         a = math.radians(angle_deg)
@@ -333,7 +335,7 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
             settings = TraceSettings(rays=rays, kernel_size=kernel_size, seed=seed,
                                      method=method, time_samples=time_samples,
                                      n_planes=planes)
-            kernel, info = integrated_psf(setup, u, v, depth, sweep=sweep, motion=motion,
+            kernel, info = integrated_psf(setup, u, v, depth, sweep=sweep, motion=profile,
                                           settings=settings, double=float64)
         entry = dict(info)
         if output:
@@ -343,13 +345,13 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
                 write_exr(path, kernel, metadata=meta)
             else:
                 bank = IPSFBank(kernels=kernel[None, None], points_uv=np.array([[u, v]]),
-                                depths_mm=np.array([depth]),
+                                depths=np.array([depth]),
                                 pixel_pitch=setup.sensor.pixel_pitch,
                                 reference_sensor_distance=info["reference_sensor_distance_mm"],
                                 kind="grid", grid_shape=(1, 1),
                                 vignetted=np.array([[info["vignetted_fraction"]]]),
                                 metadata=meta,
-                                optics=optics_sections(setup_dict, motion.as_dict()))
+                                optics=optics_sections(setup_dict, profile.as_dict()))
                 save_bank(path, bank)
             entry["output"] = path
         if plot:
@@ -358,7 +360,7 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
 
             path = per_depth_path(plot, depth) if several else os.fspath(plot)
             title = "PSF" if sensor_distance else "IPSF"
-            plot_ipsf(kernel, path, pitch_mm=setup.sensor.pixel_pitch,
+            plot_ipsf(kernel, path, pixel_pitch=setup.sensor.pixel_pitch,
                       sections=cross_sections(kernel, math.atan2(v, u) if (u or v) else 0.0),
                       title=f"{title} at ({u:.2f}, {v:.2f}) mm, l = {depth:g} mm")
             entry["plot"] = path
@@ -370,11 +372,11 @@ def trace_ipsf(setup: Setup | str | os.PathLike, *, point: tuple[float, float] |
     else:
         out.update(entries[0])
     provenance = {"workflow": "trace_ipsf", "version": __version__, "setup": setup_dict,
-                  "sweep_range": sweep.as_dict(), "motion": motion.as_dict(),
+                  "sweep_range": sweep.as_dict(), "motion": profile.as_dict(),
                   "image_uv_mm": [float(u), float(v)], "depths_mm": list(depths),
                   "sensor_distance_mm": sensor_distance, "traces": entries}
     return WorkflowResult(kernels if several else kernels[0], provenance, out)
 
 
 for _f in (trace_ipsf, trace_ipsf_bank):  # the parameters both share, written once
-    _f.__doc__ = _f.__doc__.replace("{trace_parameters}", _TRACE_PARAMETERS)
+    _f.__doc__ = (_f.__doc__ or "").replace("{trace_parameters}", _TRACE_PARAMETERS)
