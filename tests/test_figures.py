@@ -99,7 +99,7 @@ def test_field_points_run_from_the_centre_across_the_field(scenes_dir, name):
     sweep = optimal_sweep_range(setup)
     ref = reference_geometry(setup, sweep=sweep).sensor_distance
     points = field_points(setup, sweep, ref)
-    xs = [p.x_mm for p in points]
+    xs = [p.x for p in points]
     assert 0.0 in xs and xs == sorted(xs)
     assert max(abs(x) for x in xs) <= max(abs(sweep.rho_start), abs(sweep.rho_end))
     if setup.mirror.is_symmetric:
@@ -215,16 +215,16 @@ def test_fig5_and_table1_draw_one_set_of_traced_banks(tmp_path, scenes_dir, monk
     assert len(calls) == 1 and not figs._ipsfs
     (sections, kw), = drawn_sections
     banks = figs.table1_banks()
-    lengths = [hi - lo for lo, hi in kw["ranges_mm"]]
+    lengths = [hi - lo for lo, hi in kw["ranges"]]
     assert lengths == sorted(lengths)   # columns by sweep length
     table = json.loads((tmp_path / "table1_sphere.json").read_text())
-    for col, (lo, hi) in zip(sections, kw["ranges_mm"]):
+    for col, (lo, hi) in zip(sections, kw["ranges"]):
         (bank,) = [b for b in banks if np.allclose(
             (b.metadata["sweep_range"]["focus_min_mm"], b.metadata["sweep_range"]["focus_max_mm"]),
             (lo, hi))]
         x, rad, tan = col["periphery"][0]
         np.testing.assert_array_equal(rad, cross_sections(bank.kernels[0, -1], 0.0)[1])
-    assert len(table["rows"]) == len(banks) and list(kw["depths_mm"]) == table["depths_mm"]
+    assert len(table["rows"]) == len(banks) and list(kw["depths"]) == table["depths_mm"]
 
 
 def test_table1_chart_runs_from_the_shortest_sweep_and_marks_the_optimal(tmp_path, drawn):

@@ -204,7 +204,7 @@ def test_evaluate_scores_only_the_manifest_items(dataset):
     ("light_levels_lux", (50.0, 50.0), "light_levels_lux: levels must differ"),
     ("light_levels_lux", (float("inf"),),
      "light_levels_lux: every value must be a finite number > 0"),
-    ("bank_depths_mm", (), "bank_depths_mm: must be a list of 1 to"),
+    ("bank_depths", (), "bank_depths: must be a list of 1 to"),
     ("bank_rays", 0, "bank_rays: must be a positive integer or null"),
     ("grid", (9,), "grid: must be two integers"),
     ("stopped_f_number", float("nan"), "stopped_f_number: must be a finite number > 0"),

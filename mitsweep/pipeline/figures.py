@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..config import Setup
+from ..deprecation import renamed_fields
 from ..optics.sweep import SweepRange
 
 __all__ = ["PAPER_SETUPS", "FORMATS", "FigureQuality", "QUICK", "FULL", "figure_files",
@@ -161,6 +162,7 @@ def _paths(out: Path, stem: str) -> list[Path]:
 
 # -- geometry ---------------------------------------------------------------------------
 
+@renamed_fields(x_mm="x")
 @dataclass(frozen=True)
 class FieldPoint:
     """A point of the mirror in its meridional plane and its chief-ray image at a sensor
@@ -168,20 +170,21 @@ class FieldPoint:
 
     Attributes
     ----------
-    x_mm : float
+    x : float
         The point's coordinate along the meridional plane, mm (0: the vertex, or the
-        sphere's pole).
+        sphere's pole). Formerly ``x_mm`` (still accepted and readable, with a
+        warning).
     u, v : float
         Its chief ray's image on the sensor, upright, mm.
     """
 
-    x_mm: float
+    x: float
     u: float
     v: float
 
     def label(self) -> str:
         """The point as a figure labels it: ``x = 12.3 mm``."""
-        return f"x = {self.x_mm:.1f} mm" if self.x_mm else "x = 0 mm"
+        return f"x = {self.x:.1f} mm" if self.x else "x = 0 mm"
 
 
 def field_points(setup: Setup, sweep: SweepRange, sensor_distance: float, n: int = N_POINTS,
@@ -257,8 +260,8 @@ class _SetupFigures:
         self.sweep = optimal_sweep_range(setup)
         self.ref = reference_geometry(setup, sweep=self.sweep).sensor_distance
         self.points = field_points(setup, self.sweep, self.ref)
-        self.centre = next(p for p in self.points if p.x_mm == 0.0)
-        self.periphery = max(self.points, key=lambda p: abs(p.x_mm))
+        self.centre = next(p for p in self.points if p.x == 0.0)
+        self.periphery = max(self.points, key=lambda p: abs(p.x))
         self.kernel_size = bank_kernel_size(setup.sensor.pixel_pitch)
         self._ipsfs: dict = {}
         self._data: dict | None = None
@@ -271,18 +274,18 @@ class _SetupFigures:
         self.timings[key] = self.timings.get(key, 0.0) + time.perf_counter() - t0
         return value
 
-    def ipsf(self, x_mm: float, depth: float, focus: tuple[float, float] | None = None):
-        """The IPSF of the mirror point ``x_mm`` at ``depth`` over the sweep ``focus``
+    def ipsf(self, x: float, depth: float, focus: tuple[float, float] | None = None):
+        """The IPSF of the mirror point ``x`` (mm) at ``depth`` over the sweep ``focus``
         (default the optimal range), traced once."""
         from ..optics.reference import reference_geometry
         from ..tracer import TraceSettings, integrated_psf
 
         focus = focus or (self.sweep.focus_min, self.sweep.focus_max)
-        key = (round(x_mm, 9), float(depth), round(focus[0], 9), round(focus[1], 9))
+        key = (round(x, 9), float(depth), round(focus[0], 9), round(focus[1], 9))
         if key not in self._ipsfs:
             setup, sweep = _range_setup(self.setup, *focus)
             ref = reference_geometry(setup, sweep=sweep).sensor_distance
-            (p,) = field_points(setup, sweep, ref, xs=[x_mm])
+            (p,) = field_points(setup, sweep, ref, xs=[x])
             settings = TraceSettings(rays=self.quality.ipsf_rays, kernel_size=self.kernel_size,
                                      seed=self.seed)
             kernel, _ = self._timed("ipsf_s", integrated_psf, setup, p.u, p.v, depth,
@@ -294,7 +297,7 @@ class _SetupFigures:
         from ..tracer.metrics import cross_sections
 
         angle = _radial_angle(point, self.centre)
-        return [cross_sections(self.ipsf(point.x_mm, d, focus), angle) for d in depths]
+        return [cross_sections(self.ipsf(point.x, d, focus), angle) for d in depths]
 
     # -- the figures --
 
@@ -309,12 +312,13 @@ class _SetupFigures:
         K = 2 * self.kernel_size - 1   # off the sweep's middle, PSFs outgrow the IPSFs
         kernels = np.zeros((N_PLANES, len(self.points), K, K), np.float32)
         for i, d in enumerate(sensor):
-            for j, p in enumerate(field_points(s, self.sweep, d, xs=[q.x_mm for q in self.points])):
+            for j, p in enumerate(field_points(s, self.sweep, d, xs=[q.x for q in self.points])):
                 kernels[i, j] = self._timed("psf_s", psf, s, p.u, p.v, PSF_DEPTH_MM, d,
                                             rays=self.quality.psf_rays, kernel_size=K,
                                             seed=self.seed)[0]
         plot_psf_planes(kernels, _paths(self.out, f"fig3_{s.name}"),
-                        pitch_mm=s.sensor.pixel_pitch, focus_mm=focus, sensor_mm=sensor,
+                        pixel_pitch=s.sensor.pixel_pitch, focus_distances=focus,
+                        sensor_distances=sensor,
                         positions=[p.label() for p in self.points],
                         title=f"{s.name}: PSFs across the mirror for focal planes through the "
                               f"sweep (point sources {PSF_DEPTH_MM / 10:g} cm from the mirror)")
@@ -323,13 +327,13 @@ class _SetupFigures:
         from ..plots import plot_ipsf_depths
 
         s = self.setup
-        kernels = np.stack([np.stack([self.ipsf(p.x_mm, d) for p in self.points])
+        kernels = np.stack([np.stack([self.ipsf(p.x, d) for p in self.points])
                             for d in SECTION_DEPTHS_MM])
         sections = {f"centre, {self.centre.label()}": self.sections(self.centre, SECTION_DEPTHS_MM),
                     f"periphery, {self.periphery.label()}":
                         self.sections(self.periphery, SECTION_DEPTHS_MM)}
         plot_ipsf_depths(kernels, _paths(self.out, f"fig4_{s.name}"),
-                         pitch_mm=s.sensor.pixel_pitch, depths_mm=SECTION_DEPTHS_MM,
+                         pixel_pitch=s.sensor.pixel_pitch, depths=SECTION_DEPTHS_MM,
                          positions=[p.label() for p in self.points], sections=sections,
                          title=f"{s.name} (sweep {self.sweep.focus_min:.0f}–"
                                f"{self.sweep.focus_max:.0f} mm)")
@@ -361,7 +365,7 @@ class _SetupFigures:
             sections = [{place: [cross_sections(b.kernels[j, i], 0.0)
                                  for j in range(len(PAPER_DEPTHS_MM))]
                          for place, i in (("centre", 0), ("periphery", -1))} for b in banks]
-            periphery = f"the field's edge, r = {banks[0].radii_mm[-1]:.2f} mm on the sensor"
+            periphery = f"the field's edge, r = {banks[0].radii[-1]:.2f} mm on the sensor"
         else:
             sections = [{"centre": self.sections(self.centre, PAPER_DEPTHS_MM, r),
                          "periphery": self.sections(self.periphery, PAPER_DEPTHS_MM, r)}
@@ -369,8 +373,8 @@ class _SetupFigures:
             periphery = self.periphery.label()
         order = np.argsort([hi - lo for lo, hi in ranges], kind="stable")
         plot_sweep_ranges([sections[i] for i in order], _paths(self.out, f"fig5_{s.name}"),
-                          pitch_mm=s.sensor.pixel_pitch, ranges_mm=[ranges[i] for i in order],
-                          depths_mm=PAPER_DEPTHS_MM,
+                          pixel_pitch=s.sensor.pixel_pitch, ranges=[ranges[i] for i in order],
+                          depths=PAPER_DEPTHS_MM,
                           optimal=(self.sweep.focus_min, self.sweep.focus_max),
                           title=f"{s.name} (periphery: {periphery})")
 
@@ -458,7 +462,7 @@ class _SetupFigures:
         else:
             steps[-1]["title"] = "(d) the EDOF image (spatially varying Wiener)"
         plot_pipeline(steps, _paths(self.out, f"fig8_{self.setup.name}"), bank_kernels=kernels,
-                      bank_positions=positions, pitch_mm=bank.pixel_pitch, white=d["white"],
+                      bank_positions=positions, pixel_pitch=bank.pixel_pitch, white=d["white"],
                       title=f"{self.setup.name}: the processing pipeline "
                             f"({s.sensor.resolution[0]}×{s.sensor.resolution[1]} px render)")
 
@@ -508,7 +512,7 @@ def _bank_row(bank, n: int = 7):
         idx = idx[np.abs(v - np.median(v)) <= np.ptp(v) / 8 + 1e-12] if len(idx) else idx
     pick = idx[np.unique(np.linspace(0, len(idx) - 1, min(n, len(idx))).round().astype(int))]
     if bank.kind == "radial":
-        labels = [f"r = {bank.radii_mm[i]:.2f} mm" for i in pick]
+        labels = [f"r = {bank.radii[i]:.2f} mm" for i in pick]
     else:
         labels = [f"({bank.points_uv[i][0]:.1f}, {bank.points_uv[i][1]:.1f}) mm" for i in pick]
     return kernels[pick], labels

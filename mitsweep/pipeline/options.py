@@ -8,11 +8,12 @@ import numbers
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from ..deprecation import renamed_fields
 from ..render.api import MODES  # the camera modes; render imports Mitsuba only when rendering
 from .runner import DatasetError
 
 __all__ = ["DatasetOptions", "options_from_dict", "MAX_SCENES", "MAX_LIGHT_LEVELS",
-           "MAX_BANK_DEPTHS", "MAX_SEED", "FAMILIES", "SCENE_UNITS"]
+           "MAX_BANK_DEPTHS", "MAX_SEED", "FAMILIES", "SCENE_UNITS", "FILE_KEYS"]
 
 #: Most scene variations a dataset may hold (``DatasetOptions.scenes``); a manifest that
 #: claims more is refused before any work starts.
@@ -28,6 +29,10 @@ MAX_SEED = 2**32 - 1
 #: Mitsuba XML files (``scene_files``, one scene each).
 FAMILIES = ("room", "procedural", "xml")
 SCENE_UNITS = ("mm", "cm", "m")
+#: Fields renamed since datasets were first written, by the key a manifest keeps for
+#: each (files keep their keys: every manifest written before still reads, and the same
+#: options write the same bytes).
+FILE_KEYS = {"bank_depths": "bank_depths_mm"}
 _HEX = frozenset("0123456789abcdef")
 
 
@@ -84,6 +89,7 @@ def _methods(values: Any) -> tuple[str, ...]:
     return tuple(values)
 
 
+@renamed_fields(bank_depths_mm="bank_depths")
 @dataclass(frozen=True, kw_only=True)
 class DatasetOptions:
     """What a dataset holds. Seeds: scene i renders with ``seed + i`` (texture layout
@@ -118,9 +124,10 @@ class DatasetOptions:
     light_levels_lux : tuple of float
         Light levels of the noisy images, lux (at most :data:`MAX_LIGHT_LEVELS`; none:
         no noisy images).
-    bank_depths_mm : tuple of float
+    bank_depths : tuple of float
         Depths of the IPSF bank's sources from the mirror, mm (1 to
-        :data:`MAX_BANK_DEPTHS`).
+        :data:`MAX_BANK_DEPTHS`). Formerly ``bank_depths_mm`` (still accepted and
+        readable, with a warning; the manifest's key keeps that name).
     bank_rays : int or None
         Rays per IPSF of the bank (None: the tracer's default).
     grid : (int, int)
@@ -150,7 +157,7 @@ class DatasetOptions:
     spp: dict = field(default_factory=lambda: {"pinhole": 16, "focused": 64, "sweep": 128,
                                                "stopped": 64})
     light_levels_lux: tuple[float, ...] = (50.0, 2.0, 0.5)
-    bank_depths_mm: tuple[float, ...] = (500.0,)
+    bank_depths: tuple[float, ...] = (500.0,)
     bank_rays: int | None = None
     grid: tuple[int, int] = (9, 9)
     stopped_f_number: float = 11.0
@@ -179,7 +186,7 @@ class DatasetOptions:
         names = [f"{x:g}" for x in lux]
         _require(len(set(names)) == len(names), "light_levels_lux",
                  f"levels must differ (as file names: {', '.join(names)})")
-        depths = _positive_reals(self.bank_depths_mm, "bank_depths_mm", 1, MAX_BANK_DEPTHS)
+        depths = _positive_reals(self.bank_depths, "bank_depths", 1, MAX_BANK_DEPTHS)
         _require(self.bank_rays is None or (_is_int(self.bank_rays) and self.bank_rays > 0),
                  "bank_rays", f"must be a positive integer or null, got {self.bank_rays!r}")
         _require(isinstance(self.grid, (list, tuple)) and len(self.grid) == 2
@@ -195,7 +202,7 @@ class DatasetOptions:
         self._check_motion()
         object.__setattr__(self, "spp", {m: int(self.spp[m]) for m in MODES})
         object.__setattr__(self, "light_levels_lux", lux)
-        object.__setattr__(self, "bank_depths_mm", depths)
+        object.__setattr__(self, "bank_depths", depths)
         object.__setattr__(self, "grid", tuple(int(g) for g in self.grid))
         object.__setattr__(self, "methods", methods)
 
@@ -262,9 +269,11 @@ class DatasetOptions:
                                             "positions_mm": prof.positions.tolist()})
 
     def as_dict(self) -> dict:
+        """The options as a manifest records them (JSON values; the file's keys,
+        :data:`FILE_KEYS`); :func:`options_from_dict` reads them back."""
         d = {"scenes": self.scenes, "seed": self.seed, "spp": dict(self.spp),
              "light_levels_lux": list(self.light_levels_lux),
-             "bank_depths_mm": list(self.bank_depths_mm), "bank_rays": self.bank_rays,
+             FILE_KEYS["bank_depths"]: list(self.bank_depths), "bank_rays": self.bank_rays,
              "grid": list(self.grid), "stopped_f_number": self.stopped_f_number,
              "diffraction": self.diffraction, "methods": list(self.methods)}
         # The scene fields only where they say something: a room dataset's manifest is
@@ -294,8 +303,8 @@ def options_from_dict(d: Any) -> DatasetOptions:
     ----------
     d : object
         The ``options`` object as parsed from JSON: the keys of
-        :meth:`DatasetOptions.as_dict`, all required but those added later (which older
-        datasets omit), no others.
+        :meth:`DatasetOptions.as_dict` (:data:`FILE_KEYS` where a field was renamed),
+        all required but those added later (which older datasets omit), no others.
 
     Returns
     -------
@@ -304,15 +313,20 @@ def options_from_dict(d: Any) -> DatasetOptions:
     Raises
     ------
     DatasetError
-        Not an object, unknown or missing keys, or a bad value, naming the field.
+        Not an object, unknown or missing keys, or a bad value, naming the field by its
+        key in the file.
     """
-    names = [f.name for f in fields(DatasetOptions)]
+    names = [FILE_KEYS.get(f.name, f.name) for f in fields(DatasetOptions)]
     _require(isinstance(d, dict), "options", f"must be an object, got {type(d).__name__}")
     unknown = sorted(set(d) - set(names))
     missing = [k for k in names if k not in d and k not in _ADDED_LATER]
     _require(not unknown, "options", f"unknown keys {unknown}")
     _require(not missing, "options", f"missing keys {missing}")
+    field_of = {key: name for name, key in FILE_KEYS.items()}
     try:
-        return DatasetOptions(**{**_ADDED_LATER, **d})
+        return DatasetOptions(**{field_of.get(k, k): v for k, v in {**_ADDED_LATER, **d}.items()})
     except DatasetError as exc:
-        raise DatasetError(f"options.{exc}") from None
+        name, sep, rest = str(exc).partition(":")
+        head = name.split("[")[0].split(".")[0]   # spp['sweep'], scene_files[0].path...
+        key = FILE_KEYS.get(head, head) + name[len(head):]
+        raise DatasetError(f"options.{key}{sep}{rest}") from None

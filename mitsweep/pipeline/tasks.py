@@ -625,8 +625,8 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
     """
     from ..deconv import paper_fig10_settings
 
-    bank: dict[str, Any] = {"depths": list(opts.bank_depths_mm), "rays": opts.bank_rays,
-            "grid": bank_grid(opts, setup), "seed": opts.seed}
+    bank: dict[str, Any] = {"depths": list(opts.bank_depths), "rays": opts.bank_rays,
+                            "grid": bank_grid(opts, setup), "seed": opts.seed}
     if opts.motion is not None:   # in the parameters only when set: older manifests hold
         bank["motion"] = opts.motion
     tasks = [Task(BANK, trace_bank, bank)]

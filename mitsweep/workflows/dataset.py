@@ -19,6 +19,7 @@ from ..config import Setup, setup_to_dict
 from ..pipeline import DatasetError, DatasetOptions, Shard, dataset_inputs, item_names
 from ..pipeline import build_dataset as _build
 from ..pipeline import evaluate_dataset as _evaluate
+from ..pipeline.options import FILE_KEYS
 from ._base import (InputError, WorkflowResult, json_text, read_motion_file, resolve_setup)
 from ._paths import check_outputs
 
@@ -186,7 +187,8 @@ def build_dataset(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
                       scheduler=scheduler, shard=shard, retries=retries, wait=wait)
     provenance = {"workflow": "build_dataset", "version": __version__,
                   "setup": setup_to_dict(setup), "out": str(out),
-                  "options": asdict(opts), "executor": executor or "serial",
+                  "options": {FILE_KEYS.get(k, k): v for k, v in asdict(opts).items()},
+                  "executor": executor or "serial",
                   "shard": None if shard is None else str(shard),
                   "items_expected": len(item_names(opts)),
                   "seconds": time.perf_counter() - t0}
