@@ -6,6 +6,12 @@ frozen, keyword-only dataclass validated in ``__post_init__``; a bad value raise
 :class:`SetupError` naming the key and the allowed range. TOML files are strict:
 unknown sections and keys are rejected, so that a typo never passes silently.
 
+Each key's constraint is declared once, in its field's metadata (:func:`setting`: the
+check, the unit and a line of meaning); the same declaration validates the value, words
+its error message and writes the table of setup keys in ``docs/reference/setups.md``
+(:func:`setup_keys_table`). Constraints between keys (``depth_min <= depth_max``, the
+rim inside the conic, ...) are checked in ``__post_init__`` after the fields.
+
 All lengths are millimetres, angles are degrees at this edge (``*_deg``), time is
 seconds (``*_s``).
 
@@ -18,6 +24,9 @@ Mirror kinds (all normalised to a conic of vertex radius ``radius`` and conic co
 - ``"paraboloid"``: ``focal_length`` (R = 2 f, k = -1) and ``vertex_distance``.
 - ``"asphere"``: like ``"conic"`` plus ``aspheric = [a4, a6, ...]``, the coefficients of
   ρ⁴, ρ⁶, ... added to the conic sag.
+
+A setup read from a table (:func:`setup_from_dict`, :func:`load_setup`) must also ask
+for a field of view the mirror can reflect into the lens (:attr:`Mirror.max_fov_deg`).
 """
 
 from __future__ import annotations
@@ -25,11 +34,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
-from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any, ClassVar, TypeAlias
 
+import numpy as np
+
+from .deprecation import renamed_fields
 from .resources import require_regular_file
 
 try:  # Python >= 3.11
@@ -52,6 +65,7 @@ __all__ = [
     "toml_nesting",
     "setup_to_dict",
     "setup_to_toml",
+    "setup_keys_table",
     "DEFAULT_SETUP",
 ]
 
@@ -75,52 +89,348 @@ def _require(ok: bool, key: str, message: str) -> None:
         raise SetupError(f"{key}: {message}")
 
 
-def _is_number(value: Any) -> bool:
+# --- The constraints a key may declare ------------------------------------------------
+#
+# Each check is called as ``check(value, key, unit)`` and returns the value normalised
+# (a float, an int, a tuple) or raises SetupError naming ``key``; ``allowed`` words the
+# constraint for the docs table, and the error message says the same words.
+
+
+def _in_unit(unit: str) -> str:
+    return f" {unit}" if unit else ""
+
+
+@dataclass(frozen=True)
+class Number:
     """A real number (NumPy scalars too), not a bool (``True`` is an ``int`` in Python)
-    and not a string."""
-    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+    nor a string; finite unless ``inf`` allows ±infinity (NaN is always refused).
+
+    Parameters
+    ----------
+    inf : bool, optional
+        Also accept ±infinity (default False).
+    """
+
+    inf: bool = False
+
+    @property
+    def allowed(self) -> str:
+        return "a number (inf allowed)" if self.inf else "a number"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> float:
+        _require(isinstance(value, numbers.Real) and not isinstance(value, bool), key,
+                 f"expected a number, got {value!r}")
+        x = float(value)
+        if self.inf:
+            _require(not math.isnan(x), key, f"must be a number (inf allowed), got {value!r}")
+        else:
+            _require(math.isfinite(x), key, f"must be finite, got {value!r}")
+        return x
 
 
-def _number(value: Any, key: str, *, allow_inf: bool = False) -> float:
-    """``value`` as a float; strings, booleans and NaN are refused, naming ``key``."""
-    _require(_is_number(value), key, f"expected a number, got {value!r}")
-    x = float(value)
-    if allow_inf:
-        _require(not math.isnan(x), key, f"must be a number (inf allowed), got {value!r}")
-    else:
-        _require(math.isfinite(x), key, f"must be finite, got {value!r}")
-    return x
+@dataclass(frozen=True)
+class Positive(Number):
+    """A number > 0 and, when ``most`` is given, at most ``most``. A value <= 0 is
+    refused as not positive; one above ``most`` naming the whole range ``(0, most]``.
+
+    Parameters
+    ----------
+    inf : bool, optional
+        Also accept +infinity (default False).
+    most : float or None, optional
+        The largest value allowed, in the key's unit (default None: no upper bound).
+    """
+
+    most: float | None = None
+
+    @property
+    def allowed(self) -> str:
+        if self.most is not None:
+            return f"in (0, {self.most:g}]"
+        return "> 0, inf allowed" if self.inf else "> 0"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> float:
+        x = Number.__call__(self, value, key, unit)
+        _require(x > 0, key, f"must be > 0{_in_unit(unit)}{' (inf allowed)' if self.inf else ''}, "
+                             f"got {value!r}")
+        if self.most is not None:
+            _require(x <= self.most, key, f"must be {self.allowed}{_in_unit(unit)}, got {value!r}")
+        return x
 
 
-def _finite(value: Any, key: str) -> float:
-    return _number(value, key)
+@dataclass(frozen=True)
+class AtLeast:
+    """A finite number >= ``least``.
+
+    Parameters
+    ----------
+    least : float, optional
+        The smallest value allowed, in the key's unit (default 0).
+    """
+
+    least: float = 0.0
+
+    @property
+    def allowed(self) -> str:
+        return f">= {self.least:g}"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> float:
+        x = Number()(value, key, unit)
+        _require(x >= self.least, key, f"must be {self.allowed}{_in_unit(unit)}, got {value!r}")
+        return x
 
 
-def _integer(value: Any, key: str, lo: int, hi: int | None = None) -> int:
-    """``value`` as an int in ``[lo, hi]``; floats (even 2.0), strings and booleans are refused."""
-    allowed = f"an integer in [{lo}, {hi}]" if hi is not None else f"an integer >= {lo}"
-    ok = isinstance(value, numbers.Integral) and not isinstance(value, bool) \
-        and lo <= int(value) and (hi is None or int(value) <= hi)
-    _require(ok, key, f"must be {allowed}, got {value!r}")
-    return int(value)
+@dataclass(frozen=True)
+class Between:
+    """A finite number in the open interval ``(low, high)``.
+
+    Parameters
+    ----------
+    low, high : float
+        The interval's ends, excluded, in the key's unit.
+    """
+
+    low: float
+    high: float
+
+    @property
+    def allowed(self) -> str:
+        return f"in ({self.low:g}, {self.high:g})"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> float:
+        x = Number()(value, key, unit)
+        _require(self.low < x < self.high, key,
+                 f"must be {self.allowed}{_in_unit(unit)}, got {value!r}")
+        return x
 
 
-def _choice(value: Any, key: str, choices: tuple[str, ...]) -> str:
-    _require(isinstance(value, str) and value in choices, key,
-             f"must be one of {', '.join(choices)}, got {value!r}")
-    return value
+@dataclass(frozen=True)
+class Integer:
+    """An integer in ``[least, most]``; floats (even 2.0), strings and booleans are
+    refused.
+
+    Parameters
+    ----------
+    least : int, optional
+        The smallest value allowed (default 0).
+    most : int or None, optional
+        The largest value allowed (default None: unbounded).
+    """
+
+    least: int = 0
+    most: int | None = None
+
+    @property
+    def allowed(self) -> str:
+        if self.most is None:
+            return f"an integer >= {self.least}"
+        return f"an integer in [{self.least}, {self.most}]"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> int:
+        ok = (isinstance(value, numbers.Integral) and not isinstance(value, bool)
+              and self.least <= int(value) and (self.most is None or int(value) <= self.most))
+        _require(ok, key, f"must be {self.allowed}{_in_unit(unit)}, got {value!r}")
+        return int(value)
 
 
-def _assign(obj: Any, **values: Any) -> None:
-    """Store normalised values on a frozen dataclass from its ``__post_init__``."""
-    for name, value in values.items():
-        object.__setattr__(obj, name, value)
+@dataclass(frozen=True)
+class OneOf:
+    """One of ``choices``: strings, or integers (then not a bool nor a float).
+
+    Parameters
+    ----------
+    choices : tuple of str or tuple of int
+        The values allowed, all of one type.
+    """
+
+    choices: tuple[Any, ...]
+
+    @property
+    def allowed(self) -> str:
+        if all(isinstance(c, str) for c in self.choices):
+            return f"one of {', '.join(self.choices)}"
+        return " or ".join(str(c) for c in self.choices)
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> Any:
+        words = isinstance(self.choices[0], str)
+        same_type = (isinstance(value, str) if words
+                     else isinstance(value, numbers.Integral) and not isinstance(value, bool))
+        _require(same_type and value in self.choices, key,
+                 f"must be {self.allowed}, got {value!r}")
+        return value if words else int(value)
 
 
-def _positive(value: Any, key: str) -> float:
-    x = _finite(value, key)
-    _require(x > 0, key, f"must be > 0, got {value!r}")
-    return x
+@dataclass(frozen=True)
+class Vector:
+    """A list of a fixed length, each item checked by ``item``; kept as a tuple.
+
+    Parameters
+    ----------
+    item : Check
+        The check of each item, in the key's unit.
+    shape : str
+        The list as the message words it, e.g. ``"[x, y, z]"``; its length is the count
+        of its items.
+    names : tuple of str, optional
+        Item names: an item's errors are keyed ``"<key> <name>"`` (default: ``<key>``).
+    """
+
+    item: Check
+    shape: str
+    names: tuple[str, ...] = ()
+
+    @property
+    def length(self) -> int:
+        return self.shape.count(",") + 1
+
+    @property
+    def allowed(self) -> str:
+        return f"{self.shape}, each {self.item.allowed}"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> tuple[Any, ...]:
+        _require(isinstance(value, (tuple, list)) and len(value) == self.length, key,
+                 f"must be {self.shape}{' in ' + unit if unit else ''}, got {value!r}")
+        names = self.names or ("",) * self.length
+        return tuple(self.item(v, f"{key} {name}" if name else key, unit)
+                     for name, v in zip(names, value))
+
+
+@dataclass(frozen=True)
+class Numbers:
+    """A list of any length of finite numbers, item ``i`` keyed ``"<key>[i]"``.
+
+    Parameters
+    ----------
+    shape : str
+        The list as the message words it, e.g. ``"[a4, a6, ...]"``.
+    """
+
+    shape: str
+
+    @property
+    def allowed(self) -> str:
+        return f"a list of numbers {self.shape}"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> tuple[float, ...]:
+        _require(isinstance(value, (tuple, list)), key,
+                 f"must be a list of numbers {self.shape}, got {value!r}")
+        return tuple(Number()(a, f"{key}[{i}]") for i, a in enumerate(value))
+
+
+@dataclass(frozen=True)
+class FilePath:
+    """A non-empty path (a string or a :class:`~pathlib.Path`), kept as a string.
+
+    Parameters
+    ----------
+    what : str
+        What the file is, for the message (``"a Mitsuba XML file"``).
+    """
+
+    what: str
+
+    @property
+    def allowed(self) -> str:
+        return f"a path to {self.what}"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> str:
+        _require(isinstance(value, (str, Path)) and str(value) != "", key,
+                 f"must be a path to {self.what}, got {value!r}")
+        return str(value)
+
+
+@dataclass(frozen=True)
+class Table:
+    """An inline table whose keys are the fields of the dataclass ``cls`` (an instance
+    of it passes as it is).
+
+    Parameters
+    ----------
+    cls : type
+        A setup dataclass (e.g. :class:`Placement`) built from the table.
+    shape : str
+        The table as the message words it.
+    """
+
+    cls: type
+    shape: str
+
+    @property
+    def allowed(self) -> str:
+        return f"a table {self.shape}"
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> Any:
+        if isinstance(value, self.cls):
+            return value
+        _require(isinstance(value, Mapping), key,
+                 f"must be a table {self.shape}, got {value!r}")
+        _reject_unknown(value, {f.name for f in fields(self.cls)}, key)
+        return self.cls(**value)
+
+
+@dataclass(frozen=True)
+class OrNone:
+    """``None`` (the key absent), or a value that passes ``check``.
+
+    Parameters
+    ----------
+    check : Check
+        The check of a value that is given.
+    """
+
+    check: Check
+
+    @property
+    def allowed(self) -> str:
+        return self.check.allowed
+
+    def __call__(self, value: Any, key: str, unit: str = "") -> Any:
+        return None if value is None else self.check(value, key, unit)
+
+
+#: A key's constraint: any of the checks above.
+Check: TypeAlias = (Number | AtLeast | Between | Integer | OneOf | Vector | Numbers | FilePath
+                    | Table | OrNone)
+
+
+def setting(check: Check, meaning: str, *, unit: str = "", also: str = "") -> MappingProxyType:
+    """The field metadata of one setup key: its constraint, declared once.
+
+    Parameters
+    ----------
+    check : Number, Positive, AtLeast, Between, Integer, OneOf, Vector, Numbers, FilePath, Table or OrNone
+        Validates and normalises the value (called with the value, the key and the unit).
+    meaning : str
+        What the key is, one line for the docs table.
+    unit : str, optional
+        The value's unit (``"mm"``, ``"deg"``, ``"s"``, ``"px"``, ...); empty when it has
+        none. Error messages and the docs table say it.
+    also : str, optional
+        A constraint involving other keys, checked in ``__post_init__``, in words for the
+        docs table (e.g. ``"<= sweep.depth_max"``).
+
+    Returns
+    -------
+    mappingproxy
+        For ``dataclasses.field(metadata=...)``.
+    """
+    return MappingProxyType({"check": check, "meaning": meaning, "unit": unit, "also": also})
+
+
+def _check_fields(obj: Any) -> None:
+    """Validate and normalise every declared field of a frozen dataclass in place.
+
+    Frozen dataclasses store normalised values from ``__post_init__`` through
+    ``object.__setattr__`` (the documented way), here in one place.
+    """
+    for f in fields(obj):
+        spec = f.metadata
+        if "check" in spec:
+            value = spec["check"](getattr(obj, f.name), f"{obj.SECTION}.{f.name}", spec["unit"])
+            object.__setattr__(obj, f.name, value)
+
+
+_RESOLUTION_SIDE = Integer(1, MAX_RESOLUTION)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -147,32 +457,34 @@ class Mirror:
         The kind the setup was written as (kept for provenance).
     """
 
-    radius: float
-    conic: float = 0.0
-    rim_radius: float
-    vertex_distance: float
-    tilt_deg: float = 0.0
-    aspheric: tuple[float, ...] = ()
-    kind: str = field(default="conic", compare=False)
+    SECTION: ClassVar[str] = "mirror"
+
+    radius: float = field(metadata=setting(
+        Positive(), "vertex radius of curvature R", unit="mm"))
+    conic: float = field(default=0.0, metadata=setting(
+        Number(), "conic constant k: 0 sphere, -1 paraboloid, < -1 hyperboloid"))
+    rim_radius: float = field(metadata=setting(
+        Positive(), "radial extent of the mirror", unit="mm",
+        also="inside the conic: (1 + k) rim_radius² <= radius²"))
+    vertex_distance: float = field(metadata=setting(
+        Positive(), "lens centre to mirror vertex", unit="mm", also="> lens.focal_length"))
+    tilt_deg: float = field(default=0.0, metadata=setting(
+        Between(low=-90.0, high=90.0), "rotation about the vertex in the x–z plane",
+        unit="deg"))
+    aspheric: tuple[float, ...] = field(default=(), metadata=setting(
+        Numbers("[a4, a6, ...]"), "coefficients of ρ⁴, ρ⁶, ... added to the sag "
+        "(kind = \"asphere\")"))
+    kind: str = field(default="conic", compare=False, metadata=setting(
+        OneOf(MIRROR_KINDS), "how the mirror is written (see below)"))
 
     def __post_init__(self) -> None:
-        _choice(self.kind, "mirror.kind", MIRROR_KINDS)
-        R = _positive(self.radius, "mirror.radius")
-        k = _finite(self.conic, "mirror.conic")
-        rim = _positive(self.rim_radius, "mirror.rim_radius")
-        vd = _positive(self.vertex_distance, "mirror.vertex_distance")
-        tilt = _finite(self.tilt_deg, "mirror.tilt_deg")
-        _require(-90.0 < tilt < 90.0, "mirror.tilt_deg", f"must be in (-90, 90), got {tilt}")
-        _require(isinstance(self.aspheric, (tuple, list)), "mirror.aspheric",
-                 f"must be a list of numbers [a4, a6, ...], got {self.aspheric!r}")
-        coeffs = tuple(_finite(a, f"mirror.aspheric[{i}]") for i, a in enumerate(self.aspheric))
+        _check_fields(self)
+        R, k = self.radius, self.conic
         if 1.0 + k > 0:
             rho_lim = R / math.sqrt(1.0 + k)
-            _require(rim <= rho_lim, "mirror.rim_radius",
+            _require(self.rim_radius <= rho_lim, "mirror.rim_radius",
                      f"must be <= {rho_lim:.6g} mm, where a conic of radius {R:g} and "
-                     f"conic constant {k:g} ends (got {rim:g})")
-        _assign(self, radius=R, conic=k, rim_radius=rim, vertex_distance=vd, tilt_deg=tilt,
-                aspheric=coeffs)
+                     f"conic constant {k:g} ends (got {self.rim_radius:g})")
 
     @property
     def tilt(self) -> float:
@@ -181,6 +493,7 @@ class Mirror:
 
     @property
     def is_sphere(self) -> bool:
+        """True for a sphere: conic constant 0 and no asphere terms."""
         return self.conic == 0.0 and not any(self.aspheric)
 
     @property
@@ -188,17 +501,122 @@ class Mirror:
         """True when the camera axis is the mirror's axis of rotation."""
         return self.tilt_deg == 0.0
 
+    @property
+    def max_fov_deg(self) -> float:
+        """The largest FOV this mirror reflects into the lens, degrees.
+
+        Untilted: twice the largest angle a world-bound reflected chief ray makes with
+        the axis, over the visible run of the mirror from its vertex while that angle
+        grows. Tilted: the spread of those rays' directions within the tilt plane, over
+        the visible run from the rim nearest the camera. This is the reach
+        :func:`mitsweep.optics.sweep.mirror_zone` finds, computed here on the same grid
+        from the mirror's profile in the tilt plane (the configuration may not import the
+        optics), so that a setup refused here is refused there, and one accepted here
+        accepted there: the two agree to ~1e-13° (to 3e-6° where a tilted mirror's rim is
+        the conic's edge, tests/test_config_reach.py).
+        """
+        return math.degrees(_reach(self))
+
+
+# --- The mirror's reach (the largest FOV), in the tilt plane ----------------------------
+#
+# In the plane y = 0 every quantity is an angle measured from +z toward +x. A mirror
+# point at local x (signed) has the local normal angle atan2(x (1 + q p), q) (the
+# profile's normal written through q = sqrt(R² - (1+k) x²), finite at a hemisphere's
+# rim), the world normal angle θ = that + tilt; the direction r̂ toward the lens centre
+# has the angle α; the camera sees the point where cos(θ - α) > 0, and the world-bound
+# reflected chief ray w = -r̂ + 2 (n·r̂) n leaves at the angle 2θ - α.
+
+#: Points of the grid the reach is sampled on: mitsweep.optics.sweep's, so the two agree.
+_REACH_GRID = 4097
+
+
+def _tilt_plane_rays(mirror: Mirror, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(cos_incidence, world_angle)`` of the chief rays at local tilt-plane points ``x``
+    (mm, signed): n·r̂, and the angle of the world-bound reflected ray (radians)."""
+    R, k, t = mirror.radius, mirror.conic, mirror.tilt
+    x2 = x * x
+    q = np.sqrt(np.maximum(R * R - (1.0 + k) * x2, 0.0))
+    sag = x2 / (R + q)
+    p = np.zeros_like(x)   # the asphere's s'/ρ
+    for j, a in enumerate(mirror.aspheric):
+        n = 2 * (j + 2)
+        sag = sag + a * x2 ** (n // 2)
+        p = p + n * a * x2 ** (n // 2 - 1)
+    theta = np.arctan2(x * (1.0 + q * p), q) + t
+    c, s = math.cos(t), math.sin(t)
+    px, pz = c * x - s * sag, -s * x - c * sag           # world position (z = -sag locally)
+    alpha = np.unwrap(np.arctan2(-px, mirror.vertex_distance - pz))
+    return np.cos(theta - alpha), 2.0 * theta - alpha
+
+
+def _visible_end(mirror: Mirror, x_lo: float, x_hi: float) -> float:
+    """The end of the visible run that starts at ``x_lo``, searched toward ``x_hi``: the
+    first sign change of n·r̂ on the grid, refined by bisection to 1e-12 mm."""
+    xs = np.linspace(x_lo, x_hi, _REACH_GRID)
+    vis = _tilt_plane_rays(mirror, xs)[0] > 0
+    if not vis[0]:
+        return x_lo
+    if vis.all():
+        return x_hi
+    j = int(np.argmin(vis))
+    a, b = float(xs[j - 1]), float(xs[j])
+    for _ in range(200):
+        m = 0.5 * (a + b)
+        if abs(b - a) <= 2e-12 or m in (a, b):
+            break
+        fm = float(_tilt_plane_rays(mirror, np.array([m]))[0][0])
+        if fm == 0.0:
+            return m
+        if fm > 0:
+            a = m
+        else:
+            b = m
+    return 0.5 * (a + b)
+
+
+def _reach(mirror: Mirror) -> float:
+    """The mirror's reach, radians (see :attr:`Mirror.max_fov_deg`)."""
+    rim = mirror.rim_radius
+    if mirror.is_symmetric:
+        xs = np.linspace(0.0, _visible_end(mirror, 0.0, rim), _REACH_GRID)
+        phi = _tilt_plane_rays(mirror, xs)[1]
+        ang = np.abs((phi + math.pi) % (2.0 * math.pi) - math.pi)   # angle to the axis
+        grows = np.concatenate([[True], np.diff(ang) > 0])
+        stop = int(np.argmin(grows)) if not grows.all() else len(xs)
+        return 2.0 * float(ang[stop - 1])
+    # Tilted: from the first visible point on the side nearest the camera.
+    s = math.sin(mirror.tilt)
+    near = -rim if s * rim >= -s * rim else rim          # larger world z at the rim
+    xs_all = np.linspace(near, -near, _REACH_GRID)
+    first = int(np.argmax(_tilt_plane_rays(mirror, xs_all)[0] > 0))  # the vertex is seen
+    start = float(xs_all[first])
+    xs = np.linspace(start, _visible_end(mirror, start, -near), _REACH_GRID)
+    phi = _tilt_plane_rays(mirror, xs)[1]
+    return float(np.max(phi) - np.min(phi))
+
 
 @dataclass(frozen=True, kw_only=True)
 class Lens:
-    """Thin lens: ``focal_length`` (mm, > 0) and ``f_number`` (> 0)."""
+    """Thin lens.
 
-    focal_length: float = 50.0
-    f_number: float = 2.8
+    Parameters
+    ----------
+    focal_length : float
+        Focal length f, mm (> 0; default 50).
+    f_number : float
+        f-number N (> 0; default 2.8): the entrance pupil's diameter is f / N.
+    """
+
+    SECTION: ClassVar[str] = "lens"
+
+    focal_length: float = field(default=50.0, metadata=setting(
+        Positive(), "focal length f", unit="mm"))
+    f_number: float = field(default=2.8, metadata=setting(
+        Positive(), "f-number N (entrance pupil diameter f / N)"))
 
     def __post_init__(self) -> None:
-        _assign(self, focal_length=_positive(self.focal_length, "lens.focal_length"),
-                f_number=_positive(self.f_number, "lens.f_number"))
+        _check_fields(self)
 
     @property
     def aperture_radius(self) -> float:
@@ -206,53 +624,61 @@ class Lens:
         return self.focal_length / (2.0 * self.f_number)
 
 
+@renamed_fields(size_mm="size")
 @dataclass(frozen=True, kw_only=True)
 class Sensor:
-    """Image sensor: ``resolution = [width, height]`` in pixels (each at most
-    :data:`MAX_RESOLUTION`), ``pixel_pitch`` in mm.
+    """Image sensor.
 
-    ``center_offset_px = [drow, dcol]`` (optional, pixels) is where the mirror's axis
-    meets the image relative to the image centre, as ``mitsweep calibrate`` measures it
-    on a photograph: the axis is at pixel ``(H/2 - 1/2 + drow, W/2 - 1/2 + dcol)`` (see
-    :mod:`mitsweep.optics.pixels`). Absent (None) means the image centre; each part must
-    lie within the image's height (rows) and width (columns) of it.
+    Parameters
+    ----------
+    resolution : tuple of int
+        ``(width, height)``, pixels, each in [1, :data:`MAX_RESOLUTION`] (default 512²).
+    pixel_pitch : float
+        Pixel pitch, mm (> 0; default 0.018).
+    center_offset_px : tuple of float or None
+        ``(drow, dcol)``, pixels: where the mirror's axis meets the image relative to
+        the image centre, as ``mitsweep calibrate`` measures it on a photograph: the axis
+        is at pixel ``(H/2 - 1/2 + drow, W/2 - 1/2 + dcol)`` (see
+        :mod:`mitsweep.optics.pixels`). None (the default) means the image centre; each
+        part must lie within the image's height (rows) and width (columns) of it.
     """
 
-    resolution: tuple[int, int] = (512, 512)
-    pixel_pitch: float = 0.018
-    center_offset_px: tuple[float, float] | None = None
+    SECTION: ClassVar[str] = "sensor"
+
+    resolution: tuple[int, int] = field(default=(512, 512), metadata=setting(
+        Vector(_RESOLUTION_SIDE, "[width, height]", names=("width", "height")),
+        "image size", unit="px"))
+    pixel_pitch: float = field(default=0.018, metadata=setting(
+        Positive(), "pixel pitch", unit="mm"))
+    center_offset_px: tuple[float, float] | None = field(default=None, metadata=setting(
+        OrNone(Vector(Number(), "[drow, dcol]", names=("drow", "dcol"))),
+        "the mirror axis's image relative to the image centre (default: the centre)",
+        unit="px", also="within the image's height and width of its centre"))
 
     def __post_init__(self) -> None:
-        res = self.resolution
-        _require(isinstance(res, (tuple, list)) and len(res) == 2, "sensor.resolution",
-                 f"must be [width, height], got {res!r}")
-        w, h = (_integer(v, f"sensor.resolution {name}", 1, MAX_RESOLUTION)
-                for name, v in zip(("width", "height"), res))
-        _assign(self, resolution=(w, h),
-                pixel_pitch=_positive(self.pixel_pitch, "sensor.pixel_pitch"))
+        _check_fields(self)
         off = self.center_offset_px
         if off is not None:
-            _require(isinstance(off, (tuple, list)) and len(off) == 2, "sensor.center_offset_px",
-                     f"must be [drow, dcol] in pixels, got {off!r}")
-            drow, dcol = (_finite(v, f"sensor.center_offset_px {name}")
-                          for name, v in zip(("drow", "dcol"), off))
-            for name, value, limit in (("drow", drow, h), ("dcol", dcol, w)):
+            w, h = self.resolution
+            for name, value, limit in (("drow", off[0], h), ("dcol", off[1], w)):
                 _require(abs(value) <= limit, f"sensor.center_offset_px {name}",
                          f"must be in [-{limit}, {limit}] px (within the image's "
                          f"{'height' if name == 'drow' else 'width'} of its centre), "
                          f"got {value:g}")
-            _assign(self, center_offset_px=(drow, dcol))
 
     @property
     def width(self) -> int:
+        """Image width, pixels."""
         return self.resolution[0]
 
     @property
     def height(self) -> int:
+        """Image height, pixels."""
         return self.resolution[1]
 
     @property
-    def size_mm(self) -> tuple[float, float]:
+    def size(self) -> tuple[float, float]:
+        """Sensor size ``(width, height)``, mm: the resolution times the pixel pitch."""
         return (self.width * self.pixel_pitch, self.height * self.pixel_pitch)
 
     def at_resolution(self, width: int, height: int) -> Sensor:
@@ -279,7 +705,7 @@ class Sensor:
         SetupError
             For a resolution outside that range (naming ``sensor.resolution``).
         """
-        w, h = (_integer(v, f"sensor.resolution {name}", 1, MAX_RESOLUTION)
+        w, h = (_RESOLUTION_SIDE(v, f"sensor.resolution {name}", "px")
                 for name, v in zip(("width", "height"), (width, height)))
         scale = max(self.width / w, self.height / h)
         off = self.center_offset_px
@@ -292,46 +718,64 @@ class Sensor:
 class Sweep:
     """The wanted field of view and depth range, and the stage motion.
 
-    ``focus_min``/``focus_max`` (mm, optional, both or neither) override the optimal
-    sweep range computed from ``fov_deg`` and the depth range (paper Eq. 8–9), e.g. to
-    reproduce Table 1's longer sweeps. ``velocity`` is the stage velocity in mm/s.
-
     The fields of the setup dataclasses are the TOML keys, one for one (the loader, the
     strict key check, :func:`setup_to_dict` and the banks' optics fingerprints all use
     them), so ``velocity`` keeps its documented key rather than the ``velocity_mm_s`` of
     computed quantities such as :attr:`mitsweep.optics.SweepRange.velocity_mm_s`.
+
+    Parameters
+    ----------
+    fov_deg : float
+        Field of view, degrees, in (0, 360): the whole cone for an untilted mirror,
+        the spread within the tilt plane for a tilted one.
+    depth_min, depth_max : float
+        Depth range, mm, from the mirror along the reflected ray (defaults 300 and
+        10000; ``depth_max`` may be ``inf``; ``depth_min <= depth_max``).
+    velocity : float
+        Stage velocity, mm/s (> 0; default 1).
+    profile : str
+        Stage motion: ``"linear"`` (default), ``"trapezoidal"`` or ``"tabulated"``.
+    focus_min, focus_max : float or None
+        A given sweep range (focus distances, mm, both or neither), overriding the
+        optimal one computed from ``fov_deg`` and the depth range (paper Eq. 8–9), e.g.
+        to reproduce Table 1's longer sweeps.
     """
 
-    fov_deg: float
-    depth_min: float = 300.0
-    depth_max: float = 10000.0
-    velocity: float = 1.0
-    profile: str = "linear"
-    focus_min: float | None = None
-    focus_max: float | None = None
+    SECTION: ClassVar[str] = "sweep"
+
+    fov_deg: float = field(metadata=setting(
+        Between(low=0.0, high=360.0), "field of view (in the tilt plane when tilted)",
+        unit="deg", also="within the mirror's reach"))
+    depth_min: float = field(default=300.0, metadata=setting(
+        Positive(), "nearest depth, from the mirror along the reflected ray", unit="mm",
+        also="<= sweep.depth_max"))
+    depth_max: float = field(default=10000.0, metadata=setting(
+        Positive(inf=True), "farthest depth", unit="mm"))
+    velocity: float = field(default=1.0, metadata=setting(
+        Positive(), "stage velocity", unit="mm/s"))
+    profile: str = field(default="linear", metadata=setting(
+        OneOf(MOTION_PROFILES), "stage motion"))
+    focus_min: float | None = field(default=None, metadata=setting(
+        OrNone(Positive()), "a given sweep range's nearest focus distance", unit="mm",
+        also="< sweep.focus_max, > lens.focal_length; both or neither"))
+    focus_max: float | None = field(default=None, metadata=setting(
+        OrNone(Positive()), "a given sweep range's farthest focus distance", unit="mm"))
 
     def __post_init__(self) -> None:
-        fov = _finite(self.fov_deg, "sweep.fov_deg")
-        _require(0.0 < fov < 360.0, "sweep.fov_deg", f"must be in (0, 360), got {fov}")
-        dmin = _positive(self.depth_min, "sweep.depth_min")
-        dmax = _number(self.depth_max, "sweep.depth_max", allow_inf=True)
-        _require(dmax > 0, "sweep.depth_max", f"must be > 0 (inf allowed), got {self.depth_max!r}")
+        _check_fields(self)
+        dmin, dmax = self.depth_min, self.depth_max
         _require(dmin <= dmax, "sweep.depth_min",
                  f"must be <= sweep.depth_max ({dmax:g}), got {dmin:g}")
-        vel = _positive(self.velocity, "sweep.velocity")
-        _choice(self.profile, "sweep.profile", MOTION_PROFILES)
-        _require((self.focus_min is None) == (self.focus_max is None), "sweep.focus_min",
+        fmin, fmax = self.focus_min, self.focus_max
+        _require((fmin is None) == (fmax is None), "sweep.focus_min",
                  "give both focus_min and focus_max, or neither")
-        if self.focus_min is not None:
-            fmin = _positive(self.focus_min, "sweep.focus_min")
-            fmax = _positive(self.focus_max, "sweep.focus_max")
+        if fmin is not None and fmax is not None:
             _require(fmin < fmax, "sweep.focus_min",
                      f"must be < sweep.focus_max ({fmax:g}), got {fmin:g}")
-            _assign(self, focus_min=fmin, focus_max=fmax)
-        _assign(self, fov_deg=fov, depth_min=dmin, depth_max=dmax, velocity=vel)
 
     @property
     def fov(self) -> float:
+        """Field of view in radians."""
         return math.radians(self.fov_deg)
 
 
@@ -339,148 +783,204 @@ class Sweep:
 class Placement:
     """Where a user's scene sits in the mirror's frame (after its conversion to mm).
 
-    ``rotate_deg = [rx, ry, rz]``: rotations about the frame's x, y, then z axes
-    (degrees); then ``translate = [x, y, z]`` (mm).
+    Parameters
+    ----------
+    translate : tuple of float
+        ``[x, y, z]``, mm, applied after the rotations (default 0).
+    rotate_deg : tuple of float
+        ``[rx, ry, rz]``: rotations about the frame's x, y, then z axes, degrees
+        (default 0).
     """
 
-    translate: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rotate_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    SECTION: ClassVar[str] = "scene.placement"
+
+    translate: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=setting(
+        Vector(Number(), "[x, y, z]"), "shift after the rotations", unit="mm"))
+    rotate_deg: tuple[float, float, float] = field(default=(0.0, 0.0, 0.0), metadata=setting(
+        Vector(Number(), "[rx, ry, rz]"), "rotations about x, y, then z", unit="deg"))
 
     def __post_init__(self) -> None:
-        for name in ("translate", "rotate_deg"):
-            v = getattr(self, name)
-            _require(isinstance(v, (tuple, list)) and len(v) == 3, f"scene.placement.{name}",
-                     f"must be [x, y, z], got {v!r}")
-            _assign(self, **{name: tuple(_finite(x, f"scene.placement.{name}") for x in v)})
+        _check_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Scene:
     """Synthetic surroundings for rendering (owned by ``mitsweep.render``).
 
-    ``room_size = [x, y, z]`` mm: an axis-aligned room around the mirror whose walls,
-    floor and ceiling lie between ~10 cm and 3 m from it; ``objects`` adds textured
-    boards at those depths; ``texture_seed`` picks the texture layout.
-    ``lighting``: ``"emissive"`` (textured self-luminous surfaces, one bounce off the
-    mirror suffices, noise only from the lens) or ``"lit"`` (diffuse textured surfaces
-    under a ceiling light, two bounces). ``mesh_sag_tol`` (mm) and
-    ``mesh_normal_tol`` (rad) bound the mirror tessellation where a mesh is needed.
+    A user's own Mitsuba scene replaces the room (:mod:`mitsweep.render.user_scene`)
+    when ``file`` is given.
 
-    A user's own Mitsuba scene replaces the room (:mod:`mitsweep.render.user_scene`):
-    ``file`` is its XML file (relative to the setup file's folder when loaded from
-    TOML), ``unit`` its length unit (``"mm"``, ``"cm"`` or ``"m"``; default mm) and
-    ``placement = {translate = [x, y, z], rotate_deg = [rx, ry, rz]}`` where it sits in
-    the mirror's frame: after the conversion to mm, rotated by ``rx``, ``ry`` then ``rz``
-    degrees about the frame's x, y and z axes, then translated by ``translate`` mm.
+    Parameters
+    ----------
+    room_size : tuple of float
+        ``[x, y, z]``, mm: an axis-aligned room around the mirror whose walls, floor and
+        ceiling lie between ~10 cm and 3 m from it (each > 0).
+    objects : int
+        Textured boards added at those depths, in [0, 64] (default 6).
+    texture_seed : int
+        Picks the texture layout (>= 0).
+    max_depth : int
+        Integrator depth in [0, 64]; 0 (the default) chooses it from the scene.
+    lighting : str
+        ``"emissive"`` (textured self-luminous surfaces, one bounce off the mirror
+        suffices, noise only from the lens) or ``"lit"`` (diffuse textured surfaces under
+        a ceiling light, two bounces).
+    mesh_sag_tol : float
+        Largest sag error of the mirror tessellation where a mesh is needed, mm (> 0).
+    mesh_normal_tol : float
+        Largest normal error of that tessellation, radians (> 0).
+    file : str or None
+        A user's Mitsuba XML scene (relative to the setup file's folder when loaded
+        from TOML).
+    unit : str or None
+        That scene's length unit: ``"mm"`` (the default), ``"cm"`` or ``"m"``.
+    placement : Placement or None
+        Where that scene sits in the mirror's frame (a table ``{translate = [x, y, z],
+        rotate_deg = [rx, ry, rz]}`` in TOML): after the conversion to mm, rotated by
+        ``rx``, ``ry`` then ``rz`` degrees about the frame's x, y and z axes, then
+        translated by ``translate`` mm.
     """
 
-    room_size: tuple[float, float, float] = (4000.0, 4000.0, 2500.0)
-    objects: int = 6
-    texture_seed: int = 0
-    max_depth: int = 0  # integrator depth; 0 = chosen from the scene
-    lighting: str = "emissive"
-    mesh_sag_tol: float = 1e-4
-    mesh_normal_tol: float = 1e-4
-    file: str | None = None
-    unit: str | None = None
-    placement: Placement | None = None
+    SECTION: ClassVar[str] = "scene"
+
+    room_size: tuple[float, float, float] = field(
+        default=(4000.0, 4000.0, 2500.0), metadata=setting(
+            Vector(Positive(), "[x, y, z]"), "the synthetic room around the mirror", unit="mm"))
+    objects: int = field(default=6, metadata=setting(
+        Integer(0, 64), "textured boards in the room"))
+    texture_seed: int = field(default=0, metadata=setting(Integer(0), "texture layout"))
+    max_depth: int = field(default=0, metadata=setting(
+        Integer(0, 64), "integrator depth; 0 = chosen from the scene"))
+    lighting: str = field(default="emissive", metadata=setting(
+        OneOf(SCENE_LIGHTING), "self-luminous surfaces, or lit by a ceiling light"))
+    mesh_sag_tol: float = field(default=1e-4, metadata=setting(
+        Positive(), "mirror tessellation: largest sag error", unit="mm"))
+    mesh_normal_tol: float = field(default=1e-4, metadata=setting(
+        Positive(), "mirror tessellation: largest normal error", unit="rad"))
+    file: str | None = field(default=None, metadata=setting(
+        OrNone(FilePath("a Mitsuba XML file")),
+        "a user's Mitsuba scene, relative to the setup file"))
+    unit: str | None = field(default=None, metadata=setting(
+        OrNone(OneOf(SCENE_UNITS)), "that scene's length unit (default mm)"))
+    placement: Placement | None = field(default=None, metadata=setting(
+        OrNone(Table(Placement, "{translate = [x, y, z], rotate_deg = [rx, ry, rz]}")),
+        "where that scene sits in the mirror's frame"))
 
     def __post_init__(self) -> None:
-        if self.file is not None:
-            _require(isinstance(self.file, (str, Path)) and str(self.file) != "", "scene.file",
-                     f"must be a path to a Mitsuba XML file, got {self.file!r}")
-            _assign(self, file=str(self.file))
-        if self.unit is not None:
-            _choice(self.unit, "scene.unit", SCENE_UNITS)
-        if self.placement is not None and not isinstance(self.placement, Placement):
-            _require(isinstance(self.placement, Mapping), "scene.placement",
-                     f"must be a table {{translate = [x, y, z], rotate_deg = [rx, ry, rz]}}, "
-                     f"got {self.placement!r}")
-            _reject_unknown(self.placement, {"translate", "rotate_deg"}, "scene.placement")
-            _assign(self, placement=Placement(**self.placement))
-        rs = self.room_size
-        _require(isinstance(rs, (tuple, list)) and len(rs) == 3, "scene.room_size",
-                 f"must be [x, y, z] in mm, got {rs!r}")
-        _assign(self, room_size=tuple(_positive(v, "scene.room_size") for v in rs),
-                objects=_integer(self.objects, "scene.objects", 0, 64),
-                texture_seed=_integer(self.texture_seed, "scene.texture_seed", 0),
-                max_depth=_integer(self.max_depth, "scene.max_depth", 0, 64))
-        _choice(self.lighting, "scene.lighting", SCENE_LIGHTING)
-        _assign(self, **{name: _positive(getattr(self, name), f"scene.{name}")
-                         for name in ("mesh_sag_tol", "mesh_normal_tol")})
+        _check_fields(self)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Rig:
     """The capture rig (owned by ``mitsweep.rig``): stage limits, motion and camera.
 
-    ``travel`` is the stage's usable travel (mm), ``max_velocity`` (mm/s) and
-    ``acceleration`` (mm/s²) its limits; ``settle_distance`` (mm) is run at constant
-    velocity after the ramp before the shutter opens (and before the ramp down after
-    it closes). ``min_exposure_s``/``max_exposure_s`` bound the camera's bulb exposure.
+    When ``sensor_distance_at_zero`` is absent (an uncalibrated rig) the sweep is
+    centred within the soft limits.
 
-    ``steps_per_mm`` converts stage millimetres to the controller's (micro)steps (the
-    Arduino's stepper, or a Zaber stage's microsteps). ``soft_limit_min`` /
-    ``soft_limit_max`` (mm, stage coordinates, default 0 .. ``travel``) bound every
-    commanded position. ``sensor_distance_at_zero`` (mm) is the lens-to-sensor distance
-    when the stage is at position 0, and ``sensor_direction`` (+1 or -1) the sign of
-    d(sensor distance)/d(stage position); when ``sensor_distance_at_zero`` is absent
-    (an uncalibrated rig) the sweep is centred within the soft limits. ``baudrate`` and
-    ``reply_timeout_s`` (deadline on every reply) set the serial links.
-    ``watchdog_s`` (0 < x <= 60) is how long the firmware waits without host traffic
-    during a motion before it stops the stage.
+    Parameters
+    ----------
+    travel : float
+        The stage's usable travel, mm (> 0; default 25).
+    max_velocity : float
+        Stage velocity limit, mm/s (> 0).
+    acceleration : float
+        Stage acceleration limit, mm/s² (> 0).
+    settle_distance : float
+        Run at constant velocity after the ramp before the shutter opens (and before
+        the ramp down after it closes), mm (>= 0).
+    min_exposure_s, max_exposure_s : float
+        Bounds of the camera's bulb exposure, s (> 0, min < max).
+    steps_per_mm : float
+        Controller (micro)steps per stage millimetre (the Arduino's stepper, or a Zaber
+        stage's microsteps), > 0.
+    soft_limit_min, soft_limit_max : float
+        Bounds of every commanded position, mm in stage coordinates: ``0 <= min < max
+        <= travel``; ``soft_limit_max`` None (the default) means ``travel``.
+    sensor_distance_at_zero : float or None
+        Lens-to-sensor distance when the stage is at position 0, mm (> 0); None for an
+        uncalibrated rig.
+    sensor_direction : int
+        The sign of d(sensor distance)/d(stage position): 1 or -1.
+    baudrate : int
+        Serial links' baud rate, in [300, 4000000].
+    reply_timeout_s : float
+        Deadline on every reply, s (> 0).
+    watchdog_s : float
+        How long the firmware waits without host traffic during a motion before it
+        stops the stage, s, in (0, 60].
     """
 
-    travel: float = 25.0
-    max_velocity: float = 5.0
-    acceleration: float = 10.0
-    settle_distance: float = 0.05
-    min_exposure_s: float = 1.0 / 4000.0
-    max_exposure_s: float = 30.0
-    steps_per_mm: float = 400.0
-    soft_limit_min: float = 0.0
-    soft_limit_max: float | None = None
-    sensor_distance_at_zero: float | None = None
-    sensor_direction: int = 1
-    baudrate: int = 115200
-    reply_timeout_s: float = 1.0
-    watchdog_s: float = 1.0
+    SECTION: ClassVar[str] = "rig"
+
+    travel: float = field(default=25.0, metadata=setting(
+        Positive(), "the stage's usable travel", unit="mm"))
+    max_velocity: float = field(default=5.0, metadata=setting(
+        Positive(), "stage velocity limit", unit="mm/s"))
+    acceleration: float = field(default=10.0, metadata=setting(
+        Positive(), "stage acceleration limit", unit="mm/s²"))
+    settle_distance: float = field(default=0.05, metadata=setting(
+        AtLeast(least=0.0), "run at constant velocity around the exposure", unit="mm"))
+    min_exposure_s: float = field(default=1.0 / 4000.0, metadata=setting(
+        Positive(), "shortest bulb exposure", unit="s", also="< rig.max_exposure_s"))
+    max_exposure_s: float = field(default=30.0, metadata=setting(
+        Positive(), "longest bulb exposure", unit="s"))
+    steps_per_mm: float = field(default=400.0, metadata=setting(
+        Positive(), "controller (micro)steps per stage millimetre"))
+    soft_limit_min: float = field(default=0.0, metadata=setting(
+        AtLeast(least=0.0), "lowest commanded stage position", unit="mm",
+        also="< rig.soft_limit_max"))
+    soft_limit_max: float | None = field(default=None, metadata=setting(
+        OrNone(Number()), "highest commanded stage position (default: rig.travel)",
+        unit="mm", also="<= rig.travel"))
+    sensor_distance_at_zero: float | None = field(default=None, metadata=setting(
+        OrNone(Positive()), "lens-to-sensor distance at stage position 0 (absent: "
+        "uncalibrated)", unit="mm"))
+    sensor_direction: int = field(default=1, metadata=setting(
+        OneOf((1, -1)), "sign of d(sensor distance)/d(stage position)"))
+    baudrate: int = field(default=115200, metadata=setting(
+        Integer(300, 4_000_000), "serial links' baud rate"))
+    reply_timeout_s: float = field(default=1.0, metadata=setting(
+        Positive(), "deadline on every reply", unit="s"))
+    watchdog_s: float = field(default=1.0, metadata=setting(
+        Positive(most=60.0), "firmware stops the stage after this long without host "
+        "traffic", unit="s"))
 
     def __post_init__(self) -> None:
-        _assign(self, **{name: _positive(getattr(self, name), f"rig.{name}")
-                         for name in ("travel", "max_velocity", "acceleration", "min_exposure_s",
-                                      "max_exposure_s", "steps_per_mm", "reply_timeout_s",
-                                      "watchdog_s")})
-        _require(self.watchdog_s <= 60.0, "rig.watchdog_s",
-                 f"must be in (0, 60] s, got {self.watchdog_s:g}")
-        sd = _finite(self.settle_distance, "rig.settle_distance")
-        _require(sd >= 0, "rig.settle_distance", f"must be >= 0, got {sd}")
-        _assign(self, settle_distance=sd)
+        _check_fields(self)
         _require(self.min_exposure_s < self.max_exposure_s, "rig.min_exposure_s",
                  "must be < rig.max_exposure_s")
-        lo = _finite(self.soft_limit_min, "rig.soft_limit_min")
-        hi = self.travel if self.soft_limit_max is None else _finite(self.soft_limit_max,
-                                                                     "rig.soft_limit_max")
-        _require(0.0 <= lo, "rig.soft_limit_min", f"must be >= 0 mm, got {lo:g}")
+        lo = self.soft_limit_min
+        hi = self.travel if self.soft_limit_max is None else self.soft_limit_max
         _require(hi <= self.travel, "rig.soft_limit_max",
                  f"must be <= rig.travel ({self.travel:g} mm), got {hi:g}")
         _require(lo < hi, "rig.soft_limit_min",
                  f"must be < rig.soft_limit_max ({hi:g} mm), got {lo:g}")
-        _assign(self, soft_limit_min=lo, soft_limit_max=hi)
-        if self.sensor_distance_at_zero is not None:
-            _assign(self, sensor_distance_at_zero=_positive(self.sensor_distance_at_zero,
-                                                            "rig.sensor_distance_at_zero"))
-        direction = self.sensor_direction
-        _require(isinstance(direction, numbers.Integral) and not isinstance(direction, bool)
-                 and direction in (1, -1), "rig.sensor_direction",
-                 f"must be 1 or -1, got {direction!r}")
-        _assign(self, sensor_direction=int(direction),
-                baudrate=_integer(self.baudrate, "rig.baudrate", 300, 4_000_000))
+        object.__setattr__(self, "soft_limit_max", hi)
 
 
 @dataclass(frozen=True, kw_only=True)
 class Setup:
-    """One catadioptric focal-sweep camera and, optionally, its scene and rig."""
+    """One catadioptric focal-sweep camera and, optionally, its scene and rig.
+
+    Parameters
+    ----------
+    mirror : Mirror
+        The ``[mirror]`` table (required); ``mirror.vertex_distance`` must exceed
+        ``lens.focal_length`` so the camera can focus on the mirror.
+    lens : Lens
+        The ``[lens]`` table (default :class:`Lens`\\ ()).
+    sensor : Sensor
+        The ``[sensor]`` table (default :class:`Sensor`\\ ()).
+    sweep : Sweep
+        The ``[sweep]`` table (required); ``sweep.focus_min``, when given, must exceed
+        ``lens.focal_length``.
+    scene : Scene
+        The ``[scene]`` table (default :class:`Scene`\\ ()).
+    rig : Rig
+        The ``[rig]`` table (default :class:`Rig`\\ ()).
+    name : str
+        The setup's name (default ``"setup"``; a file's stem when loaded).
+    """
 
     mirror: Mirror
     lens: Lens = field(default_factory=Lens)
@@ -513,13 +1013,13 @@ def _mirror_from_table(table: Mapping[str, Any]) -> Mirror:
         allowed = {"radius", "center_distance", "vertex_distance", "rim_radius", "tilt_deg", "conic"}
         _reject_unknown(t, allowed, "mirror")
         _require("radius" in t, "mirror.radius", "missing (required for kind = 'sphere')")
-        R = _positive(t["radius"], "mirror.radius")
-        _require(_finite(t.get("conic", 0.0), "mirror.conic") == 0.0, "mirror.conic",
+        R = Positive()(t["radius"], "mirror.radius", "mm")
+        _require(Number()(t.get("conic", 0.0), "mirror.conic") == 0.0, "mirror.conic",
                  "must be 0 for kind = 'sphere' (use kind = 'conic')")
         has_c, has_v = "center_distance" in t, "vertex_distance" in t
         _require(has_c != has_v, "mirror.center_distance",
                  "give exactly one of center_distance and vertex_distance for a sphere")
-        vd = (_positive(t["center_distance"], "mirror.center_distance") - R) if has_c \
+        vd = (Positive()(t["center_distance"], "mirror.center_distance", "mm") - R) if has_c \
             else t["vertex_distance"]
         return Mirror(kind=kind, radius=R, conic=0.0, rim_radius=t.get("rim_radius", R),
                       vertex_distance=vd, tilt_deg=t.get("tilt_deg", 0.0))
@@ -528,9 +1028,9 @@ def _mirror_from_table(table: Mapping[str, Any]) -> Mirror:
         _reject_unknown(t, allowed, "mirror")
         _require(("focal_length" in t) != ("radius" in t), "mirror.focal_length",
                  "give exactly one of focal_length and radius (= 2 focal_length) for a paraboloid")
-        R = 2.0 * _positive(t["focal_length"], "mirror.focal_length") if "focal_length" in t \
+        R = 2.0 * Positive()(t["focal_length"], "mirror.focal_length", "mm") if "focal_length" in t \
             else t["radius"]
-        _require(_finite(t.get("conic", -1.0), "mirror.conic") == -1.0, "mirror.conic",
+        _require(Number()(t.get("conic", -1.0), "mirror.conic") == -1.0, "mirror.conic",
                  "must be -1 for kind = 'paraboloid' (use kind = 'conic')")
         for key in ("rim_radius", "vertex_distance"):
             _require(key in t, f"mirror.{key}", "missing (required)")
@@ -573,8 +1073,47 @@ def _section_from_table(cls: type, table: Mapping[str, Any], section: str) -> An
         raise SetupError(f"{section}: {exc}") from None
 
 
+def _refuse_unreachable_fov(setup: Setup) -> None:
+    """Refuse ``sweep.fov_deg`` beyond the mirror's reach, as
+    :func:`mitsweep.optics.sweep.mirror_zone` words it (the same comparison, in
+    radians, on the same reach)."""
+    reach = _reach(setup.mirror)
+    fov = setup.sweep.fov_deg
+    if math.radians(fov) > reach:
+        where = "from the camera" if setup.mirror.is_symmetric else "in its tilt plane"
+        raise SetupError(f"sweep.fov_deg: {fov:g}° is beyond this mirror's reach {where}; "
+                         f"the largest FOV it gives is {math.degrees(reach):.2f}°")
+
+
 def setup_from_dict(data: Mapping[str, Any], *, name: str = "setup") -> Setup:
-    """Build a validated :class:`Setup` from a TOML-like nested mapping."""
+    """Build a validated :class:`Setup` from a TOML-like nested mapping.
+
+    Besides each key's own constraint and those between keys, ``sweep.fov_deg`` must lie
+    within the mirror's reach (:attr:`Mirror.max_fov_deg`): a field of view the mirror
+    cannot reflect into the lens is refused here, not later by
+    :func:`mitsweep.optics.optimal_sweep_range`. (A :class:`Setup` built directly, e.g.
+    by :func:`dataclasses.replace`, is not checked for reach.)
+
+    Parameters
+    ----------
+    data : mapping
+        Sections ``mirror`` and ``sweep`` (required), ``lens``, ``sensor``, ``scene``,
+        ``rig`` (optional), each a mapping of keys as in a setup TOML file, and an
+        optional top-level ``name``.
+    name : str, optional
+        The setup's name when ``data`` has none.
+
+    Returns
+    -------
+    Setup
+
+    Raises
+    ------
+    SetupError
+        For an unknown section or key, a missing one, a value of the wrong type or out
+        of its range, or an FOV beyond the mirror's reach; the message names the key and
+        what is allowed.
+    """
     if not isinstance(data, Mapping):
         raise SetupError(f"setup: must be a table, got {type(data).__name__}")
     unknown = sorted(set(data) - set(_SECTIONS) - {"name"})
@@ -592,11 +1131,23 @@ def setup_from_dict(data: Mapping[str, Any], *, name: str = "setup") -> Setup:
     for section, cls in _SECTIONS.items():
         if section != "mirror" and section in data:
             kwargs[section] = _section_from_table(cls, data[section], section)
-    return Setup(**kwargs)
+    setup = Setup(**kwargs)
+    _refuse_unreachable_fov(setup)
+    return setup
 
 
 def load_setup(path: str | Path) -> Setup:
-    """Load and validate a setup TOML file.
+    """Load and validate a setup TOML file (:func:`setup_from_dict` on its tables).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The setup file. A relative ``[scene] file`` in it is resolved beside it.
+
+    Returns
+    -------
+    Setup
+        Named after the file's stem unless the file gives a ``name``.
 
     Raises
     ------
@@ -642,6 +1193,18 @@ def toml_nesting(source: str) -> tuple[int, int]:
     recursion (a 5000-deep array is a RecursionError). It knows TOML's four string
     forms and comments well enough to skip them; table headers count as one or two
     levels. A malformed file gets whatever depth the scan sees: tomllib reports it.
+
+    Parameters
+    ----------
+    source : str
+        TOML text.
+
+    Returns
+    -------
+    depth : int
+        The deepest nesting (0 when nothing is nested).
+    line : int
+        The 1-based line where that depth is first reached.
     """
     depth = deepest = 0
     line = deepest_line = 1
@@ -682,7 +1245,19 @@ def toml_nesting(source: str) -> tuple[int, int]:
 
 
 def setup_to_dict(setup: Setup) -> dict[str, Any]:
-    """The setup as a plain, JSON/TOML-serialisable nested dict (normalised to a conic)."""
+    """The setup as a plain, JSON/TOML-serialisable nested dict (normalised to a conic).
+
+    Parameters
+    ----------
+    setup : Setup
+        The setup to write.
+
+    Returns
+    -------
+    dict
+        Its sections under their TOML names, keys as in a setup file (absent ones
+        omitted); :func:`setup_from_dict` reads it back to an equal setup.
+    """
     out: dict[str, Any] = {"name": setup.name}
     for section in _SECTIONS:
         value = dataclasses.asdict(getattr(setup, section))
@@ -718,6 +1293,52 @@ def setup_to_toml(setup: Setup, *, header: str = "") -> str:
     lines = [f"# {line}".rstrip() for line in header.splitlines()]
     body = tomli_w.dumps(setup_to_dict(setup))
     return "\n".join(lines) + ("\n" if lines else "") + body
+
+
+def _toml_text(value: Any) -> str:
+    """A default value as a setup file writes it."""
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_toml_text(v) for v in value) + "]"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
+
+
+def _key_rows(cls: type, section: str) -> list[str]:
+    rows = []
+    for f in fields(cls):
+        spec = f.metadata
+        if f.default is not dataclasses.MISSING:
+            default = "absent" if f.default is None else f"`{_toml_text(f.default)}`"
+        else:
+            default = "required"
+        allowed = spec["check"].allowed + (f"; {spec['also']}" if spec["also"] else "")
+        rows.append(f"| `{section}.{f.name}` | {default} | {spec['unit']} | {allowed} "
+                    f"| {spec['meaning']} |")
+        check = spec["check"]
+        inner = check.check if isinstance(check, OrNone) else check
+        if isinstance(inner, Table):
+            rows += _key_rows(inner.cls, f"{section}.{f.name}")
+    return rows
+
+
+def setup_keys_table() -> str:
+    """The keys of a setup file as a Markdown table, written from the fields' declared
+    constraints (:func:`setting`): ``docs/reference/setups.md`` holds this text, and a
+    test checks that it still does.
+
+    Returns
+    -------
+    str
+        One row per key (``section.key``, default, unit, what is allowed, meaning),
+        sections in file order, ending in a newline.
+    """
+    rows = ["| key | default | unit | allowed | meaning |", "|---|---|---|---|---|"]
+    for section, cls in _SECTIONS.items():
+        rows += _key_rows(cls, section)
+    return "\n".join(rows) + "\n"
 
 
 #: The embedded default: the paper's spherical mirror (Sec. 3.1 and 5.2).
