@@ -73,7 +73,7 @@ def mirror_grid_shape(setup: Setup, *, nodes_across: int = MIRROR_GRID_NODES,
     if int(nodes_across) < 2:
         raise ValueError(f"nodes_across: must be >= 2, got {nodes_across!r}")
     uv = predicted_outline(setup, n_points=360).uv
-    w, h = setup.sensor.size_mm
+    w, h = setup.sensor.size
     ratio = max(w / np.ptp(uv[:, 0]), h / np.ptp(uv[:, 1]))
     W, H = setup.sensor.resolution
     n = int(np.ceil(int(nodes_across) * ratio - 1e-9))
