@@ -24,7 +24,8 @@ ENFORCED = ("mitsweep.optics", "mitsweep.io", "mitsweep.rig", "mitsweep.render",
             "mitsweep.design", "mitsweep.datasets", "mitsweep.plots", "mitsweep.backend",
             "mitsweep.resources", "mitsweep.jit", "mitsweep.tracer", "mitsweep.deconv",
             "mitsweep.rig.arduino", "mitsweep.rig.zaber", "mitsweep.rig.transport",
-            "mitsweep.rig.profile", "mitsweep.rig.testing", "mitsweep.rig.sim")
+            "mitsweep.rig.profile", "mitsweep.rig.testing", "mitsweep.rig.sim",
+            "mitsweep.config")
 
 
 def _takes_parameters(obj) -> bool:

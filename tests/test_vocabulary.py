@@ -25,7 +25,7 @@ from mitsweep.deprecation import RENAMED
 
 #: Packages whose public names keep the rule (a package joins when it is converted).
 ENFORCED = (
-    "mitsweep.deprecation",
+    "mitsweep.deprecation", "mitsweep.config",
     "mitsweep.render", "mitsweep.backend",
     "mitsweep.deconv",
     "mitsweep.optics", "mitsweep.io", "mitsweep.plots",
