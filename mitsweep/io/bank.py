@@ -45,7 +45,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 from collections.abc import Mapping
 
 import numpy as np
@@ -172,15 +172,6 @@ class IPSFBank:
     metadata: dict[str, Any] = field(default_factory=dict)
     optics: dict[str, Any] | None = None
     fingerprinted: bool = True
-
-    if TYPE_CHECKING:
-        # The former names renamed_fields adds at run time (with a warning), told to the
-        # type checker so that callers not yet converted still type-check.
-        @property
-        def depths_mm(self) -> np.ndarray: ...
-
-        @property
-        def radii_mm(self) -> np.ndarray | None: ...
 
     def __post_init__(self) -> None:
         k = np.asarray(self.kernels)
