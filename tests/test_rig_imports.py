@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 RIG = Path(__file__).resolve().parents[1] / "mitsweep" / "rig"
-ALLOWED_PACKAGE_MODULES = {"optics", "config", "io"}   # io: atomic writes of the record
+ALLOWED_PACKAGE_MODULES = {"optics", "config", "io", "deprecation"}   # io: atomic writes of the record; deprecation: renamed names
 FORBIDDEN = {"mitsuba", "drjit", "matplotlib", "mitsweep.render", "mitsweep.tracer",
              "mitsweep.deconv"}
 

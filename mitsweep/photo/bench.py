@@ -35,7 +35,15 @@ SIDE_PX, QUICK_SIDE_PX = 4900, 2000
 
 def make_photo(side: int, *, seed: int = 0) -> tuple[np.ndarray, tuple[float, float], float]:
     """A synthetic (side, side, 3) float32 photo of a mirror disc; its centre (row, col)
-    and radius, px."""
+    and radius, px.
+
+    Parameters
+    ----------
+    side : int
+        Side of the square photo, px.
+    seed : int
+        Seed of the texture's random phases (the same seed gives the same photo).
+    """
     from scipy.special import expit
 
     rng = np.random.default_rng(seed)
@@ -95,7 +103,14 @@ def _errors(found_centre, found_radius, centre, radius) -> dict:
 
 
 def run_bench(args: argparse.Namespace) -> dict:
-    """The benchmark (see the module docstring): one dict of results."""
+    """The benchmark (see the module docstring): one dict of results.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The command's options: ``quick`` (bool) chooses the smaller photo
+        (:data:`QUICK_SIDE_PX` instead of :data:`SIDE_PX`).
+    """
     from . import calibrate_photo, luminance
     from .free import find_circle
 

@@ -38,7 +38,32 @@ WARN_ROLL_DEG = 0.5
 
 @dataclass(frozen=True)
 class Calibration:
-    """A photo's calibration against a setup (see :func:`calibrate_photo`)."""
+    """A photo's calibration against a setup (see :func:`calibrate_photo`).
+
+    Attributes
+    ----------
+    fit : RimFit
+        The outline as found (centre, scale, inliers, residuals).
+    image_shape : (int, int)
+        ``(H, W)`` of the photo, px.
+    pixel_pitch : float
+        The setup's pixel pitch, mm.
+    predicted_radius_px : float
+        Equivalent radius of the outline the setup predicts, px.
+    rim_radius_px : float
+        Equivalent radius of the outline found, px.
+    center_offset_px : (float, float)
+        The optical axis's offset ``(drow, dcol)`` from the image centre, px (a setup's
+        ``sensor.center_offset_px``).
+    implied_pixel_pitch : float
+        The pitch (mm) at which the setup's prediction would match the photo.
+    implied_vertex_distance : float or None
+        The lens-mirror distance (mm) at which it would, where one exists.
+    sensor_distance : float
+        Lens-sensor distance (mm) of the prediction.
+    warnings : list of str
+        What the calibration noticed (a setup off its prediction, a limb fit, …).
+    """
 
     fit: RimFit
     image_shape: tuple[int, int]
@@ -60,7 +85,14 @@ class Calibration:
         return self.rim_radius_px / self.predicted_radius_px
 
     def calibrated_setup(self, setup: Setup) -> Setup:
-        """The setup for this camera and photo: resolution, pitch, centre offset."""
+        """The setup for this camera and photo: resolution, pitch, centre offset.
+
+        Parameters
+        ----------
+        setup : Setup
+            The setup the photo was calibrated against; its sensor is replaced by the photo's
+            resolution, ``pixel_pitch`` and the measured ``center_offset_px``.
+        """
         from ..config import Sensor
 
         H, W = self.image_shape
@@ -203,11 +235,11 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
     implied_vd = _implied_vertex_distance(setup, pitch, measured)
     warnings = []
     if abs(fit.scale - 1.0) > WARN_SCALE:
-        vd = f"{implied_vd:.2f}" if implied_vd is not None else "?"
+        vd_text = f"{implied_vd:.2f}" if implied_vd is not None else "?"
         warnings.append(
             f"rim radius {measured:.2f} px differs from the setup's {predicted:.2f} px by "
             f"{100 * (fit.scale - 1):+.2f}%: the pixel pitch would be {implied_pitch:.5g} mm "
-            f"(setup {pitch:g}) or the lens-mirror distance {vd} mm "
+            f"(setup {pitch:g}) or the lens-mirror distance {vd_text} mm "
             f"(setup {setup.mirror.vertex_distance:g})")
         if not outline.on_rim.any() and not fit.limb:
             # A hemisphere's outline is its limb, seen at grazing incidence, where the

@@ -33,13 +33,33 @@ COARSE_SCALE_STEP = 1.04
 
 
 def search_scales(lo: float, hi: float) -> np.ndarray:
+    """Outline sizes from ``lo`` to ``hi`` in geometric steps of at most
+    :data:`COARSE_SCALE_STEP` (both ends included, at least two).
+
+    Parameters
+    ----------
+    lo, hi : float
+        Smallest and largest outline size, relative to the prediction (``0 < lo < hi``).
+    """
     n = max(2, int(math.ceil(math.log(hi / lo) / math.log(COARSE_SCALE_STEP))) + 1)
     return np.geomspace(lo, hi, n)
 
 
 def coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
                   scales: np.ndarray) -> tuple[tuple[float, float], float, float]:
-    """Best ``(center (row, col), scale)`` of the outline in full-resolution pixels."""
+    """Best ``(center (row, col), scale)`` of the outline in full-resolution pixels.
+
+    Parameters
+    ----------
+    lum : (H, W) ndarray
+        Linear luminance of the photo.
+    pts : (N, 2) ndarray
+        The predicted outline's points as ``(row, col)`` offsets from the axis, px.
+    nrm : (N, 2) ndarray
+        Their outward unit normals, ``(row, col)``.
+    scales : (S,) ndarray
+        The outline sizes tried, relative to ``pts`` (:func:`search_scales`).
+    """
     from scipy.fft import irfft2, next_fast_len, rfft2
 
     radius = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
@@ -89,8 +109,9 @@ def coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
         per_scale.append(score)
         if best is None or score.flat[i] > best[0]:
             best = (float(score.flat[i]), i, k)
+    assert best is not None  # at least one scale was searched
     top, idx, _ = best
-    row, col = np.unravel_index(idx, (H, W))
+    row, col = (int(v) for v in np.unravel_index(idx, (H, W)))
     # At that position: of the scale peaks within half the best, the nearest to k = 1.
     local = np.array([s[max(0, row - 1):row + 2, max(0, col - 1):col + 2].max()
                       for s in per_scale])
@@ -102,6 +123,6 @@ def coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
     s = per_scale[j]
     win = s[max(0, row - 2):row + 3, max(0, col - 2):col + 3]
     dr, dc = np.unravel_index(int(np.argmax(win)), win.shape)
-    row, col = max(0, row - 2) + dr, max(0, col - 2) + dc
+    row, col = max(0, row - 2) + int(dr), max(0, col - 2) + int(dc)
     centre = ((row + 0.5) * factor - 0.5, (col + 0.5) * factor - 0.5)
     return centre, float(scales[j]), float(local[j])

@@ -42,7 +42,23 @@ def edge_offsets(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
     with ``outermost``, around the outermost peak at least half as high: the rim is
     the outer boundary of the mirror's content, whose own edges (sharp: the reflection
     is what the sweep focuses on) lie inside it, while what surrounds the mirror is
-    usually far out of focus."""
+    usually far out of focus.
+
+    Parameters
+    ----------
+    lum_s : (H, W) ndarray
+        Smoothed luminance.
+    centre : (float, float)
+        The outline's centre ``(row, col)``, px.
+    scale : float
+        The outline's size relative to ``pts``.
+    pts, nrm : (N, 2) ndarray
+        Outline points (offsets from the centre, px) and outward unit normals.
+    half : float
+        Half-length of the profile sampled along each normal, px.
+    outermost : bool
+        Take the outermost strong peak instead of the highest (see above).
+    """
     from scipy.ndimage import map_coordinates
 
     step = 0.25
@@ -104,7 +120,19 @@ def gaussian_peak(ds: np.ndarray, t: np.ndarray, at: np.ndarray,
     The top of a blurred step's derivative is where the step is, whatever the step's
     size (a symmetric blur); its flanks are where content next to the rim (a reflection's
     bright banner ending at the rim, whose far edge has the opposite sign) adds to or
-    takes from the lobe, which moves a centroid over the whole lobe but not its top."""
+    takes from the lobe, which moves a centroid over the whole lobe but not its top.
+
+    Parameters
+    ----------
+    ds : (N, T) ndarray
+        Derivative profiles (positive: the dominant sign), one per outline point.
+    t : (T,) ndarray
+        Their sample positions along the normal, px (evenly spaced).
+    at : (N,) int ndarray
+        Index of each profile's peak sample.
+    lobe : (N, T) bool ndarray
+        The samples of each profile's lobe around its peak.
+    """
     n = len(ds)
     pk = ds[np.arange(n), at]
     # Only the samples within the half-width of the peak take part: gather that window
@@ -153,7 +181,23 @@ def edge_prominence(lum_s: np.ndarray, centre: tuple[float, float], scale: float
     object in the reflection) would otherwise raise the "beside" level of the whole
     outline. On Mitsuba sweep renders of the paraboloid, cropped to the mirror's
     window, it raises the prominence from 3.8-5.0 to 5.9-10.4; on a photo without a
-    mirror it stays below 2."""
+    mirror it stays below 2.
+
+    Parameters
+    ----------
+    lum_s : (H, W) ndarray
+        Smoothed luminance.
+    centre : (float, float)
+        The fitted outline's centre ``(row, col)``, px.
+    scale : float
+        Its size relative to ``pts``.
+    pts, nrm : (N, 2) ndarray
+        Outline points (offsets from the centre, px) and outward unit normals.
+    half : float
+        Half-width of the edge search, px: "on" is within ``half``/2 of the outline.
+    radius : float
+        The outline's radius, px (the profiles reach at most half of it).
+    """
     from scipy.ndimage import map_coordinates
     from scipy.stats import trim_mean
 

@@ -44,7 +44,15 @@ N_POINTS = 1440
 
 def circle_outline(radius_px: float, n_points: int = N_POINTS) -> RimOutline:
     """A circle of ``radius_px`` about the axis as a :class:`RimOutline` at pitch 1 mm
-    (so that its millimetres are pixels)."""
+    (so that its millimetres are pixels).
+
+    Parameters
+    ----------
+    radius_px : float
+        The circle's radius, px.
+    n_points : int
+        Points on the circle (evenly spaced in angle).
+    """
     phi = np.linspace(0.0, 2.0 * math.pi, n_points, endpoint=False)
     unit = np.stack([np.cos(phi), np.sin(phi)], axis=-1)
     return RimOutline(uv=radius_px * unit, normal_uv=unit, sensor_distance=math.nan,

@@ -26,7 +26,13 @@ VOID_MARGIN_PX = 2
 
 def luminance(image: np.ndarray) -> np.ndarray:
     """Linear luminance (H, W) float64 of an (H, W) or (H, W, 3) linear image
-    (Rec. 709 weights; a grey image is returned as is)."""
+    (Rec. 709 weights; a grey image is returned as is).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        A linear image; of ``C >= 3`` channels the first three are R, G, B.
+    """
     a = np.asarray(image)
     if a.ndim == 2:
         return a.astype(np.float64, copy=False)
@@ -45,6 +51,11 @@ def photo_void(image: np.ndarray) -> np.ndarray:
     cropped to the mirror's window (black from 8 px outside the rim) has a strong
     straight edge beside the rim there, which is not the photo's content: the rim fit
     treats the void as unknown (:func:`fit_rim`). A photo without exact zeros has none.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, C) ndarray
+        The photo as read (exact zeros mark a render's skipped pixels).
     """
     from scipy.ndimage import binary_dilation, binary_opening, uniform_filter
 
@@ -71,7 +82,15 @@ def photo_void(image: np.ndarray) -> np.ndarray:
 
 def fill_void(lum: np.ndarray, void: np.ndarray) -> np.ndarray:
     """``lum`` with each void pixel set to its nearest shown pixel's value: the void's
-    border is then no edge (the profiles and orientation fields see nothing there)."""
+    border is then no edge (the profiles and orientation fields see nothing there).
+
+    Parameters
+    ----------
+    lum : (H, W) ndarray
+        Luminance.
+    void : (H, W) bool ndarray
+        Pixels the photo does not show (:func:`photo_void`).
+    """
     from scipy.ndimage import distance_transform_edt
 
     if not void.any() or void.all():
@@ -94,12 +113,32 @@ def fill_void(lum: np.ndarray, void: np.ndarray) -> np.ndarray:
 
 
 def smooth(img: np.ndarray, sigma: float) -> np.ndarray:
+    """``img`` smoothed by a Gaussian of standard deviation ``sigma`` px.
+
+    Parameters
+    ----------
+    img : (H, W) ndarray
+        Image to smooth.
+    sigma : float
+        Gaussian standard deviation, px (0 or less: ``img`` itself). Edges are extended
+        with their nearest value.
+    """
     from scipy.ndimage import gaussian_filter
 
     return gaussian_filter(img, sigma, mode="nearest") if sigma > 0 else img
 
 
 def reduce_by(img: np.ndarray, factor: int) -> np.ndarray:
+    """``img`` reduced by block means of ``factor`` × ``factor`` pixels.
+
+    Parameters
+    ----------
+    img : (H, W) ndarray
+        Image to reduce.
+    factor : int
+        Block size: each output pixel is the mean of ``factor`` × ``factor`` input pixels
+        (rows and columns beyond a whole block are dropped; 1 or less: ``img`` itself).
+    """
     if factor <= 1:
         return img
     H, W = (img.shape[0] // factor) * factor, (img.shape[1] // factor) * factor
@@ -108,14 +147,28 @@ def reduce_by(img: np.ndarray, factor: int) -> np.ndarray:
 
 def texture_energy(lum: np.ndarray) -> np.ndarray:
     """Local RMS (H, W) of the image's fine detail: the high-pass at
-    :data:`TEXTURE_SCALE_PX`, its square smoothed over the same scale."""
+    :data:`TEXTURE_SCALE_PX`, its square smoothed over the same scale.
+
+    Parameters
+    ----------
+    lum : (H, W) ndarray
+        Luminance.
+    """
     detail = lum - smooth(lum, TEXTURE_SCALE_PX)
     return np.sqrt(smooth(detail * detail, TEXTURE_SCALE_PX))
 
 
 def noise_sigma(lum: np.ndarray, shown: np.ndarray | None = None) -> float:
     """Robust per-pixel noise estimate (MAD of the diagonal second difference), over
-    the 2x2 blocks the photo shows (all of them by default)."""
+    the 2x2 blocks the photo shows (all of them by default).
+
+    Parameters
+    ----------
+    lum : (H, W) ndarray
+        Luminance.
+    shown : (H, W) bool ndarray, optional
+        Pixels the photo shows; blocks touching others are left out.
+    """
     if lum.size > NOISE_SAMPLE_PIXELS:  # a regular subset of rows: the MAD of millions
         # of differences is known to ~0.1% from one million
         stride = int(math.ceil(lum.size / NOISE_SAMPLE_PIXELS))

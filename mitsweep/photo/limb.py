@@ -73,7 +73,35 @@ class LimbFit:
     the log fine-detail energy across it; ``energy_centre_px``/``energy_radius_px`` the
     energy step's circle (stage 1); ``points_used`` of ``points_total`` normals were the
     sign-agnostic step's inliers (``used_index`` into the outline's points, their normal
-    residuals ``residuals_px``), with RMS residual ``residual_rms_px``."""
+    residuals ``residuals_px``), with RMS residual ``residual_rms_px``.
+
+    Attributes
+    ----------
+    center_px : (float, float)
+        The limb's centre ``(row, col)``, px.
+    radius_px : float
+        Its radius, px.
+    energy_step : float
+        Drop of the log fine-detail energy across the limb (0 where stage 1 found none).
+    ridge_height : float
+        Height of the radial derivative's ridge over its median level.
+    step_coherence : float
+        Share of the normals whose bright/dark step across the limb has the fitted sign.
+    energy_center_px : (float, float)
+        Centre of the energy step's circle (stage 1), px.
+    energy_radius_px : float
+        Its radius, px.
+    points_used, points_total : int
+        Inliers of the sign-agnostic step fit, of the outline's normals.
+    residual_rms_px : float
+        RMS of the inliers' normal residuals, px.
+    edge_points_px : (M, 2) ndarray
+        The inliers' limb positions ``(row, col)``, px.
+    used_index : (M,) int ndarray
+        Their indices into the outline's points.
+    residuals_px : (M,) ndarray
+        Their normal residuals, px.
+    """
 
     center_px: tuple[float, float]
     radius_px: float
@@ -93,7 +121,13 @@ class LimbFit:
 def energy_map(lum: np.ndarray) -> tuple[np.ndarray, float]:
     """Log energy of the finest detail, ``log(d² + ε)`` with ``d`` the diagonal second
     difference of each 2x2 block (its centre at ``(i + 0.5, j + 0.5)``), and ``ε`` a
-    tenth of the median ``d²`` (so that flat patches do not dominate)."""
+    tenth of the median ``d²`` (so that flat patches do not dominate).
+
+    Parameters
+    ----------
+    lum : (H, W) ndarray
+        Luminance.
+    """
     d = lum[1:, 1:] - lum[:-1, 1:] - lum[1:, :-1] + lum[:-1, :-1]
     d2 = d * d
     eps = 0.1 * float(np.median(d2)) + 1e-30
@@ -284,7 +318,23 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     to a few px), its size within ``scale_range`` times the outline ``pts`` (N, 2
     offsets from the axis, px, with outward normals ``nrm``). None where neither cue
     finds one (no energy drop of :data:`STRONG_ENERGY_STEP` and no ridge of the radial
-    derivative :data:`MIN_RIDGE` times its median level)."""
+    derivative :data:`MIN_RIDGE` times its median level).
+
+    Parameters
+    ----------
+    lum : (H, W) ndarray
+        Luminance.
+    centre : (float, float)
+        Starting centre ``(row, col)``, px.
+    pts, nrm : (N, 2) ndarray
+        The predicted outline's points (offsets from the axis, px) and outward normals.
+    scale_range : (float, float)
+        Limb sizes searched, relative to the outline.
+    shown : (H, W) bool ndarray, optional
+        Pixels the photo shows (a render's skipped pixels are not).
+    iterations : int
+        Refinement passes of the step fit at most.
+    """
     radius0 = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
     r_lo, r_hi = radius0 * scale_range[0], radius0 * scale_range[1]
     e, _ = energy_map(lum)

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..optics.outline import RimOutline
+from ..deprecation import renamed_keywords
 from ..resources import check_allocation
 from .coarse import COARSE_RADIUS_PX, COARSE_SCALE_STEP, coarse_search, search_scales
 from .edges import edge_offsets, edge_prominence
@@ -140,6 +141,31 @@ class RimFit:
     and ``residual_tolerance_px`` the residual RMS the fit was allowed (see
     :data:`RESIDUAL_WIDTH_SHARE`). ``limb`` is True where the outline was found as a
     limb without an edge (:func:`mitsweep.photo.limb.fit_limb`).
+
+    Attributes
+    ----------
+    center_px : (float, float)
+        The optical axis's pixel ``(row, col)``.
+    scale : float
+        The outline's size relative to the prediction.
+    points_used, points_total : int
+        Inliers, of the outline's points.
+    residual_rms_px : float
+        RMS of the inliers' normal residuals, px.
+    edge_points_px : (N, 2) ndarray
+        The inliers' sub-pixel edge positions ``(row, col)``, px.
+    iterations : int
+        Refinement passes made.
+    center_se_px : float
+        Standard error of the centre, px (the larger of row and column).
+    roll_deg : float or None
+        The camera's roll about its axis, degrees, where fitted.
+    edge_width_px : float
+        The inliers' median edge width, px.
+    residual_tolerance_px : float
+        The residual RMS the fit was allowed, px.
+    limb : bool
+        Whether the outline was found as a limb without an edge.
     """
 
     center_px: tuple[float, float]
@@ -185,7 +211,15 @@ def _in_void(void: np.ndarray, centre, scale: float, pts: np.ndarray) -> np.ndar
 def working_luminance(image: np.ndarray, min_side: int) -> np.ndarray:
     """The luminance a rim search works on, after the memory gate for its work arrays
     (:data:`WORK_BYTES_PER_PIXEL`); :class:`NoMirrorError` for an image that is not
-    (H, W[, C]) with both sides at least ``min_side``."""
+    (H, W[, C]) with both sides at least ``min_side``.
+
+    Parameters
+    ----------
+    image : ndarray
+        The photo, (H, W) or (H, W, C).
+    min_side : int
+        Smallest side accepted, px.
+    """
     shape = np.shape(image)
     if len(shape) < 2:
         raise NoMirrorError(f"the photo must be an image, got shape {shape}")
@@ -198,20 +232,43 @@ def working_luminance(image: np.ndarray, min_side: int) -> np.ndarray:
     return lum
 
 
-def fit_rim(image: np.ndarray, outline: RimOutline, pitch: float, *,
+@renamed_keywords(pitch="pixel_pitch")
+def fit_rim(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
             scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
             max_iterations: int = 30, edge_half_width_px: float | None = None,
             fit_roll: bool = False) -> RimFit:
     """Find the predicted outline in a photograph (see the module docstring, and for a
-    limb :func:`_limb_or_edge`); parameters, result and errors as :func:`fit_edges`."""
-    kw = {"scale_range": scale_range, "max_iterations": max_iterations,
-          "edge_half_width_px": edge_half_width_px, "fit_roll": fit_roll}
+    limb :func:`_limb_or_edge`); parameters, result and errors as :func:`fit_edges`.
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        Linear photograph.
+    outline : RimOutline
+        The setup's prediction (:func:`predicted_outline`).
+    pixel_pitch : float
+        Pixel pitch of the photograph, mm.
+    scale_range : (float, float)
+        Outline sizes searched, relative to the prediction.
+    max_iterations : int
+        Refinement passes at most.
+    edge_half_width_px : float, optional
+        Half-width of the edge search along each normal (default: from the outline size).
+    fit_roll : bool
+        Also fit the camera's roll about its axis (a tilted mirror's outline shows it).
+    """
     if outline.on_rim.any():
-        return fit_edges(image, outline, pitch, **kw)
-    return _limb_or_edge(image, outline, pitch, **kw)
+        return fit_edges(image, outline, pixel_pitch, scale_range=scale_range,
+                         max_iterations=max_iterations,
+                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll)
+    return _limb_or_edge(image, outline, pixel_pitch, scale_range=scale_range,
+                         max_iterations=max_iterations,
+                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll)
 
 
-def _limb_or_edge(image, outline, pitch, **kw) -> RimFit:
+def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
+                  scale_range: tuple[float, float], max_iterations: int,
+                  edge_half_width_px: float | None, fit_roll: bool) -> RimFit:
     """A limb outline (a hemisphere's, where the photo may show no edge): the limb's
     own fit (:func:`mitsweep.photo.limb.fit_limb`: the step of the fine-detail energy,
     then the sign-agnostic step of the mean) where it finds one, unless the edge fit
@@ -221,21 +278,23 @@ def _limb_or_edge(image, outline, pitch, **kw) -> RimFit:
     reflection (the rendered room's boards, 14% inside), not the outline."""
     from .limb import fit_limb
 
+    edge: RimFit | None = None
+    refused: CalibrationError | None = None
     try:
-        edge = fit_edges(image, outline, pitch, **kw)
-        refused = None
+        edge = fit_edges(image, outline, pitch, scale_range=scale_range,
+                         max_iterations=max_iterations,
+                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll)
     except CalibrationError as exc:
-        edge, refused = None, exc
+        refused = exc
     lum = working_luminance(image, 8)
     pts, nrm = outline.offsets_px(pitch)
     void = photo_void(image)
-    shown = ~void
-    if void.any() and shown.any():
+    shown: np.ndarray | None = ~void
+    if void.any() and shown is not None and shown.any():
         lum = fill_void(lum, void)
     else:
         shown = None
     radius = outline.equivalent_radius_px(pitch)
-    scale_range = kw["scale_range"]
     if edge is not None:
         start = edge.center_px
     else:
@@ -248,6 +307,7 @@ def _limb_or_edge(image, outline, pitch, **kw) -> RimFit:
                         and (edge.scale * radius >= (1.0 - LIMB_INSIDE_SHARE) * limb.radius_px
                              or limb.step_coherence > MAX_LIMB_COHERENCE)):
         if edge is None:
+            assert refused is not None  # the edge fit either returned or raised
             raise refused
         return edge
     logger.info("limb fit: centre (%.2f, %.2f) px, radius %.2f px (energy step %.2f; the "
@@ -266,7 +326,8 @@ def _limb_or_edge(image, outline, pitch, **kw) -> RimFit:
                   residual_tolerance_px=math.nan, limb=True)
 
 
-def fit_edges(image: np.ndarray, outline: RimOutline, pitch: float, *,
+@renamed_keywords(pitch="pixel_pitch")
+def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
             scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
             max_iterations: int = 30, edge_half_width_px: float | None = None,
             fit_roll: bool = False) -> RimFit:
@@ -278,7 +339,7 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pitch: float, *,
         Linear photograph.
     outline : RimOutline
         The setup's prediction (:func:`predicted_outline`).
-    pitch : float
+    pixel_pitch : float
         Pixel pitch of the photograph, mm.
     scale_range : (float, float)
         Outline sizes searched, relative to the prediction (default: the plausible
@@ -308,11 +369,11 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pitch: float, *,
         the photo does not show the mirror the setup describes.
     """
     lum = working_luminance(image, 8)
-    pts, nrm = outline.offsets_px(pitch)
-    radius = outline.equivalent_radius_px(pitch)
+    pts, nrm = outline.offsets_px(pixel_pitch)
+    radius = outline.equivalent_radius_px(pixel_pitch)
     if radius < 8:
         raise CalibrationError(f"the setup predicts a mirror image of radius {radius:.3g} px "
-                               f"at pitch {pitch:g} mm: too small to calibrate on")
+                               f"at pitch {pixel_pitch:g} mm: too small to calibrate on")
     scales = search_scales(*scale_range)
     void = photo_void(image)
     shown = ~void
@@ -365,7 +426,7 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pitch: float, *,
         if good.sum() < max(8, MIN_INLIER_FRACTION * n_seen):
             raise NoMirrorError(
                 f"no mirror found: only {int(good.sum())} of {n} points of the predicted "
-                f"outline (radius {radius:.1f} px at pitch {pitch:g} mm) show an edge; "
+                f"outline (radius {radius:.1f} px at pitch {pixel_pitch:g} mm) show an edge; "
                 f"check that the photo shows the mirror of this setup")
         # Normal displacement of point j: n_j · dc + dk (p_j · n_j) [+ dθ k (J p_j · n_j)].
         cols = [nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)]

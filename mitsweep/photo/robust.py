@@ -53,7 +53,17 @@ def centre_standard_error(A: np.ndarray, residuals: np.ndarray, length_px: float
     """Standard error (px) of the fitted centre (the larger of row and column): the
     least-squares covariance ``s² (AᵀA)⁻¹`` of the inliers' design ``A`` (M, 3) and
     residuals, with the points counted as ``length_px / EDGE_CORRELATION_PX``
-    independent measurements, not M."""
+    independent measurements, not M.
+
+    Parameters
+    ----------
+    A : (M, 3) ndarray
+        The inliers' design matrix of the linear circle fit.
+    residuals : (M,) ndarray
+        Their residuals, px.
+    length_px : float
+        Length of outline the inliers cover, px.
+    """
     m = len(residuals)
     if m <= A.shape[1]:
         return math.inf

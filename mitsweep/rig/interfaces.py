@@ -12,8 +12,7 @@ import abc
 from dataclasses import dataclass
 
 # absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
-# mitsweep.deprecation is a leaf of the standard library only
-from mitsweep.deprecation import renamed_fields
+from ..deprecation import renamed_fields
 
 __all__ = ["StageState", "Stage", "Shutter"]
 

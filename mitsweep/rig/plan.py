@@ -44,8 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 # absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
-# mitsweep.deprecation is a leaf of the standard library only
-from mitsweep.deprecation import renamed_fields, renamed_keywords
+from ..deprecation import renamed_fields, renamed_keywords
 
 from ..config import Rig, Setup
 from ..optics.kinematics import Trapezoid

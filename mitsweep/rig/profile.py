@@ -61,8 +61,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 # absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
-# mitsweep.deprecation is a leaf of the standard library only
-from mitsweep.deprecation import renamed_fields, renamed_keywords
+from ..deprecation import renamed_fields, renamed_keywords
 
 from ..optics.motion import MotionProfile
 from .errors import PlanError

@@ -53,8 +53,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 # absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
-# mitsweep.deprecation is a leaf of the standard library only
-from mitsweep.deprecation import renamed_keywords
+from ..deprecation import renamed_keywords
 
 from ..config import Setup
 from .errors import RigError

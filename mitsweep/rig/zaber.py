@@ -31,8 +31,7 @@ from dataclasses import dataclass
 from collections.abc import Iterable
 
 # absolute: tests/test_rig_imports.py admits optics, config and io as relative imports;
-# mitsweep.deprecation is a leaf of the standard library only
-from mitsweep.deprecation import renamed_keywords
+from ..deprecation import renamed_keywords
 
 from .errors import DeviceError, DeviceFault, ProtocolError, ReplyTimeout
 from .interfaces import Stage, StageState
