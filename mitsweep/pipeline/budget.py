@@ -192,7 +192,7 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
                          second_seed=second, restored=restored, depth=depth,
                          mask=mask > 0.5, method=method,
                          weight=weight,
-                         depth_bands_mm=DEPTH_BANDS_MM, n_radial_bins=n_radial_bins,
+                         depth_bands=DEPTH_BANDS_MM, n_radial_bins=n_radial_bins,
                          edge_width_px=edge_width_px, **kw)
         out["budgets"][name] = replace(b, info={**b.info, "item": name, "scene": scene,
                                                 "restored_from": source,
