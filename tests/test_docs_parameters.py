@@ -25,7 +25,7 @@ ENFORCED = ("mitsweep.optics", "mitsweep.io", "mitsweep.rig", "mitsweep.render",
             "mitsweep.resources", "mitsweep.jit", "mitsweep.tracer", "mitsweep.deconv",
             "mitsweep.rig.arduino", "mitsweep.rig.zaber", "mitsweep.rig.transport",
             "mitsweep.rig.profile", "mitsweep.rig.testing", "mitsweep.rig.sim",
-            "mitsweep.config")
+            "mitsweep.config", "mitsweep.pipeline")
 
 
 def _takes_parameters(obj) -> bool:
