@@ -206,7 +206,7 @@ def _candidates(setup, rng) -> dict:
     # Image coordinates on a sensor 1 mm behind the lens: tangents of the view angles.
     u, v = image_point(rim, 1.0)
     i_nominal = image_distance(setup.lens.focal_length, setup.mirror.vertex_distance)
-    half_w, half_h = (0.5 * s / i_nominal for s in setup.sensor.size_mm)
+    half_w, half_h = (0.5 * s / i_nominal for s in setup.sensor.size)
     u0, u1 = max(u.min(), -half_w), min(u.max(), half_w)
     v0, v1 = max(v.min(), -half_h), min(v.max(), half_h)
     uu = rng.uniform(u0, u1, _CANDIDATES)
