@@ -393,13 +393,17 @@ Check: TypeAlias = (Number | AtLeast | Between | Integer | OneOf | Vector | Numb
                     | Table | OrNone)
 
 
-def setting(check: Check, meaning: str, *, unit: str = "", also: str = "") -> MappingProxyType:
+def setting(check: Check, meaning: str, *, unit: str = "",
+            also: str = "") -> MappingProxyType[str, Any]:
     """The field metadata of one setup key: its constraint, declared once.
 
     Parameters
     ----------
-    check : Number, Positive, AtLeast, Between, Integer, OneOf, Vector, Numbers, FilePath, Table or OrNone
-        Validates and normalises the value (called with the value, the key and the unit).
+    check : Check
+        Validates and normalises the value (called with the value, the key and the unit):
+        :class:`Number`, :class:`Positive`, :class:`AtLeast`, :class:`Between`,
+        :class:`Integer`, :class:`OneOf`, :class:`Vector`, :class:`Numbers`,
+        :class:`FilePath`, :class:`Table` or :class:`OrNone`.
     meaning : str
         What the key is, one line for the docs table.
     unit : str, optional
@@ -411,8 +415,9 @@ def setting(check: Check, meaning: str, *, unit: str = "", also: str = "") -> Ma
 
     Returns
     -------
-    mappingproxy
-        For ``dataclasses.field(metadata=...)``.
+    types.MappingProxyType
+        Read-only, for ``dataclasses.field(metadata=...)``: keys ``check``, ``meaning``,
+        ``unit`` and ``also``.
     """
     return MappingProxyType({"check": check, "meaning": meaning, "unit": unit, "also": also})
 
