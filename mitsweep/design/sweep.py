@@ -213,36 +213,11 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         or an unknown objective.
     """
     t_start = time.perf_counter()
-    if objective not in OBJECTIVES:
-        raise SetupError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
-    if restoration not in RESTORATIONS:
-        raise SetupError(f"restoration: must be one of {', '.join(RESTORATIONS)}, got "
-                         f"{restoration!r}")
-    if int(n_planes) < MIN_PLANES:
-        raise SetupError(f"planes: need at least {MIN_PLANES}, got {n_planes}")
     sweep = optimal_sweep_range(setup)
     T = float(sweep.exposure_s)
-    f = setup.lens.focal_length
-    start, end = (sweep.sensor_start, sweep.sensor_end) if span is None else \
-        (float(span[0]), float(span[1]))
-    if not (math.isfinite(start) and math.isfinite(end)) or start == end:
-        raise SetupError(f"span: need two different finite sensor distances, got "
-                         f"{start:g} {end:g} mm")
-    if min(start, end) <= f:
-        raise SetupError(f"span {start:g} .. {end:g} mm reaches the lens focal length "
-                         f"({f:g} mm): both ends must be > {f:g} mm")
+    start, end, limits = _checked_design_inputs(setup, sweep, span, objective, restoration,
+                                                n_planes)
     rig = setup.rig
-    limits = StageLimits(exposure_s=T, max_velocity=rig.max_velocity,
-                         acceleration=rig.acceleration)
-    if abs(end - start) > rig.travel:
-        raise SetupError(f"span {start:g} .. {end:g} mm: travel {abs(end - start):g} mm exceeds "
-                         f"rig.travel ({rig.travel:g} mm)")
-    if abs(end - start) / T > rig.max_velocity:
-        raise SetupError(f"span {start:g} .. {end:g} mm cannot be swept in the exposure "
-                         f"{T:g} s: it needs at least {abs(end - start) / T:g} mm/s, more than "
-                         f"rig.max_velocity ({rig.max_velocity:g} mm/s)")
-    if not rig.min_exposure_s <= T <= rig.max_exposure_s:
-        raise SetupError(f"exposure {T:g} s is outside rig.min_exposure_s .. rig.max_exposure_s")
     depths = design_depths(setup) if depths is None else [float(d) for d in depths]
     N = int(n_planes)
     edges = np.linspace(start, end, N + 1)
@@ -280,16 +255,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         kernels_lin = bank.ipsf(tau_lin)
         lin_feasible = stage_feasible(tau_lin, widths, limits)
     else:
-        lin_edges = np.linspace(sweep.sensor_start, sweep.sensor_end, N + 1)
-        lin_geom = reference_geometry(setup, sweep=sweep)
-        lin_points = design_points(setup, lin_geom.sensor_distance, lin_geom,
-                                   n_radii=n_radii, grid=grid)
-        lin_bank = trace_bank(setup, lin_points, depths, lin_edges,
-                              reference_sensor_distance=lin_geom.sensor_distance)
-        lw = lin_bank.widths
-        lin_model = predictor(lin_bank)
-        mse_lin = lin_model.mse(lw / lw.sum()).reshape(shape)
-        kernels_lin = lin_bank.ipsf(lw / lw.sum())
+        mse_lin, kernels_lin = _linear_over_the_optimal_range(
+            setup, sweep, N, depths, shape, trace_bank, predictor, n_radii=n_radii, grid=grid)
         lin_feasible = True
     sol = local_optimum(model, widths, limits, objective=objective)
     if deployed:
@@ -325,17 +292,6 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     v_lin, _ = _v_avg(kernels_lin, depths)
     velocity = widths / (tau * T)
     accel = np.diff(velocity) / (np.minimum(tau[:-1], tau[1:]) * T)
-    gap = None if bound is None else value - bound
-    if returns_linear:
-        says = ("no profile found beats the linear sweep under the deployed restoration: "
-                "the design is the linear sweep")
-    elif bound is None or gap is None:  # the deployed restoration
-        says = ("the deployed restoration's objective has no certified bound; the "
-                f"profile found predicts {value:.6g} against linear {lin_value:.6g}")
-    else:
-        says = (f"the optimum of this objective (worst/mean predicted MSE over the "
-                f"bank, these stage limits) lies in [{bound:.6g}, {value:.6g}]: the "
-                f"profile found is within {100 * gap / value:.3g} % of it")
     report = {
         "setup": setup.name, "objective": objective, "planes": N,
         "restoration": restoration,
@@ -360,18 +316,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         "max_acceleration_mm_s2": float(np.abs(accel).max()) if accel.size else 0.0,
         "stage_limits": {"max_velocity_mm_s": rig.max_velocity,
                          "acceleration_mm_s2": rig.acceleration},
-        "certificate": {
-            "objective_value": value,
-            "lower_bound": bound,
-            "gap": gap, "relative_gap": None if gap is None else gap / value,
-            "uniform_value": uniform_value,
-            "relaxed_value": bound_info["relaxed_value"],
-            "without_acceleration_value": free.value,
-            "starts": sol.info["starts"], "best_start": sol.info["best_start"],
-            "iterations": sol.info["iterations"],
-            "says": says,
-            "brute_force": brute,
-        },
+        "certificate": _certificate(sol, value, bound, bound_info, uniform_value, free, brute,
+                                    says=_verdict(returns_linear, bound, value, lin_value)),
         "seconds": {"plane_bank": bank.metadata["seconds"], "optimise_and_bound": t_opt,
                     "brute_force": None if brute is None else brute["seconds"],
                     "total": time.perf_counter() - t_start},
@@ -382,3 +328,84 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     return SweepDesign(profile=profile, tau=tau, tau_linear=tau_lin, edges=edges,
                        exposure_s=T, mse=mse, mse_linear=mse_lin, points_uv=points,
                        depths=np.asarray(depths), report=report, bank=bank)
+
+
+def _checked_design_inputs(setup: Setup, sweep, span, objective: str, restoration: str,
+                           n_planes: int) -> tuple[float, float, StageLimits]:
+    """The design's sensor span ``(start, end)`` (mm; the optimal range unless ``span``)
+    and the stage's limits, after the checks of :func:`design_sweep`'s arguments against
+    the setup's lens and rig (:class:`SetupError` naming what is wrong)."""
+    if objective not in OBJECTIVES:
+        raise SetupError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
+    if restoration not in RESTORATIONS:
+        raise SetupError(f"restoration: must be one of {', '.join(RESTORATIONS)}, got "
+                         f"{restoration!r}")
+    if int(n_planes) < MIN_PLANES:
+        raise SetupError(f"planes: need at least {MIN_PLANES}, got {n_planes}")
+    T = float(sweep.exposure_s)
+    f = setup.lens.focal_length
+    start, end = (sweep.sensor_start, sweep.sensor_end) if span is None else \
+        (float(span[0]), float(span[1]))
+    if not (math.isfinite(start) and math.isfinite(end)) or start == end:
+        raise SetupError(f"span: need two different finite sensor distances, got "
+                         f"{start:g} {end:g} mm")
+    if min(start, end) <= f:
+        raise SetupError(f"span {start:g} .. {end:g} mm reaches the lens focal length "
+                         f"({f:g} mm): both ends must be > {f:g} mm")
+    rig = setup.rig
+    limits = StageLimits(exposure_s=T, max_velocity=rig.max_velocity,
+                         acceleration=rig.acceleration)
+    if abs(end - start) > rig.travel:
+        raise SetupError(f"span {start:g} .. {end:g} mm: travel {abs(end - start):g} mm exceeds "
+                         f"rig.travel ({rig.travel:g} mm)")
+    if abs(end - start) / T > rig.max_velocity:
+        raise SetupError(f"span {start:g} .. {end:g} mm cannot be swept in the exposure "
+                         f"{T:g} s: it needs at least {abs(end - start) / T:g} mm/s, more than "
+                         f"rig.max_velocity ({rig.max_velocity:g} mm/s)")
+    if not rig.min_exposure_s <= T <= rig.max_exposure_s:
+        raise SetupError(f"exposure {T:g} s is outside rig.min_exposure_s .. rig.max_exposure_s")
+    return start, end, limits
+
+
+def _linear_over_the_optimal_range(setup: Setup, sweep, N: int, depths, shape, trace_bank,
+                                   predictor, *, n_radii: int, grid: tuple[int, int]):
+    """The baseline of a design over another span: the linear sweep over the optimal
+    range, traced on its own planes and points; its predicted MSE (``shape``) and its
+    kernels."""
+    lin_edges = np.linspace(sweep.sensor_start, sweep.sensor_end, N + 1)
+    lin_geom = reference_geometry(setup, sweep=sweep)
+    lin_points = design_points(setup, lin_geom.sensor_distance, lin_geom,
+                               n_radii=n_radii, grid=grid)
+    lin_bank = trace_bank(setup, lin_points, depths, lin_edges,
+                          reference_sensor_distance=lin_geom.sensor_distance)
+    lw = lin_bank.widths
+    mse_lin = predictor(lin_bank).mse(lw / lw.sum()).reshape(shape)
+    return mse_lin, lin_bank.ipsf(lw / lw.sum())
+
+
+def _verdict(returns_linear: bool, bound: float | None, value: float,
+             lin_value: float) -> str:
+    """What a design says of itself (its report's ``certificate.says``)."""
+    if returns_linear:
+        return ("no profile found beats the linear sweep under the deployed restoration: "
+                "the design is the linear sweep")
+    if bound is None:  # the deployed restoration
+        return ("the deployed restoration's objective has no certified bound; the "
+                f"profile found predicts {value:.6g} against linear {lin_value:.6g}")
+    gap = value - bound
+    return (f"the optimum of this objective (worst/mean predicted MSE over the "
+            f"bank, these stage limits) lies in [{bound:.6g}, {value:.6g}]: the "
+            f"profile found is within {100 * gap / value:.3g} % of it")
+
+
+def _certificate(sol, value: float, bound: float | None, bound_info: dict,
+                 uniform_value: float | None, free, brute, *, says: str) -> dict:
+    """A design report's ``certificate``: the objective's value, its lower bound and gap
+    (None under the deployed restoration), the baselines and the optimiser's record."""
+    gap = None if bound is None else value - bound
+    return {"objective_value": value, "lower_bound": bound,
+            "gap": gap, "relative_gap": None if gap is None else gap / value,
+            "uniform_value": uniform_value, "relaxed_value": bound_info["relaxed_value"],
+            "without_acceleration_value": free.value,
+            "starts": sol.info["starts"], "best_start": sol.info["best_start"],
+            "iterations": sol.info["iterations"], "says": says, "brute_force": brute}
