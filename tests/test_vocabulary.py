@@ -32,6 +32,7 @@ ENFORCED = (
     "mitsweep.rig",
     "mitsweep.tracer",
     "mitsweep.design.optimize", "mitsweep.design.planes", "mitsweep.design.sweep",
+    "mitsweep.datasets", "mitsweep.jit",
 )
 
 AGAINST = re.compile(r"(?<!_per)_mm$|^pitch$|^pitch_mm$|^pixel_size_mm$")
