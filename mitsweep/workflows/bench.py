@@ -14,8 +14,9 @@ import logging
 import os
 import resource
 import time
-from types import ModuleType, SimpleNamespace
 from collections.abc import Callable, Iterable
+from types import ModuleType, SimpleNamespace
+from typing import Any
 
 from .. import __version__
 from ._base import WorkflowResult
@@ -46,8 +47,8 @@ _IMPORTERS: dict[str, Callable[[], ModuleType]] = {
 
 #: The sizes (px) and noise levels σ of ``bench weights``: quick, and full (the
 #: independent blur of docs/guide/weights.md at 512 px).
-WEIGHT_BENCH_QUICK = {"sizes": (256,), "sigmas": (0.005, 0.001)}
-WEIGHT_BENCH_FULL = {"sizes": (512,), "sigmas": (0.005, 0.001)}
+WEIGHT_BENCH_QUICK: dict[str, tuple] = {"sizes": (256,), "sigmas": (0.005, 0.001)}
+WEIGHT_BENCH_FULL: dict[str, tuple] = {"sizes": (512,), "sigmas": (0.005, 0.001)}
 
 
 def weight_bench(options: SimpleNamespace) -> dict:
@@ -205,7 +206,9 @@ def run_benchmarks(target: str = "all", *, quick: bool = False,
                               result)
     from ..backend import describe_machine
 
-    report = {"machine": describe_machine(), "quick": bool(quick), "targets": {}}
+    targets: dict[str, dict] = {}
+    report: dict[str, Any] = {"machine": describe_machine(), "quick": bool(quick),
+                              "targets": targets}
     status = 0
     t_all = time.perf_counter()
     for name in (list(BENCH_TARGETS) if names is None else names):

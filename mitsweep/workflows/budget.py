@@ -31,7 +31,7 @@ def _rim_bank(dataset: str | os.PathLike) -> tuple[IPSFBank, str]:
     from ..tracer.bank import extend_to_rim
 
     bank = load_bank(Path(dataset) / BANK)
-    setup = setup_from_dict(load_manifest(dataset)["setup"])
+    setup = setup_from_dict(load_manifest(Path(dataset))["setup"])
     how = ("radial bank traced to the mirror's rim" if bank.kind == "radial" else
            "grid bank, off-mirror nodes filled")
     return extend_to_rim(setup, bank), how
@@ -98,7 +98,8 @@ def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = No
             raise InputError(f"--out {out}: not a directory")
         check_outputs(dataset_inputs(dataset), [out / "budget.json", out / "budget.txt"])
     bank, how = _rim_bank(dataset) if rim_bank else (None, None)
-    result = dataset_budget(dataset, items=items, second_seed=second_seed,
+    result = dataset_budget(Path(dataset), items=None if items is None else list(items),
+                            second_seed=second_seed,
                             work_dir=out / "renders" if out is not None else None,
                             bank=bank)
     text = "" if how is None else f"bank: {how}\n"

@@ -96,7 +96,7 @@ def _plot_design(design, path: str | os.PathLike) -> None:
     a1.set_yscale("log")
     a1.set_title(f"objective: {design.report['objective']}")
     a1.legend(fontsize="small")
-    save_figure(fig, path)
+    save_figure(fig, os.fspath(path))
 
 
 def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
@@ -190,26 +190,27 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
 
     setup_path = None if isinstance(setup, Setup) else setup
     check_outputs([setup_path], {"--out": out, "--plot": plot})
-    check_writable(out)
+    check_writable(os.fspath(out))
     if plot:
         from ..plots import check_figure_path
 
-        check_figure_path(plot, "--plot")
+        check_figure_path(os.fspath(plot), "--plot")
     setup = resolve_setup(setup)
     _check_args(setup, kernel_size=kernel_size, planes=planes, seed=seed,
                 brute_force_steps=brute_force_steps, out=out, span_mm=span_mm,
                 restoration=restoration, deploy_depth=deploy_depth, deploy_nsr=deploy_nsr)
-    deploy = {} if restoration != "deployed" else {
-        "deploy_depth_mm": 500.0 if deploy_depth is None else float(deploy_depth),
-        "deploy_nsr": None if deploy_nsr is None else float(deploy_nsr)}
     noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
     with progress_callback(progress, None, "plane banks", "point") as step:
         design = design_sweep(setup, noise=noise, objective=objective, n_planes=planes,
-                              span_mm=None if span_mm is None else tuple(span_mm),
-                              n_radii=radii, grid=tuple(grid), depths=depths, rays=rays,
+                              span=None if span_mm is None else
+                              (float(span_mm[0]), float(span_mm[1])),
+                              n_radii=radii, grid=(int(grid[0]), int(grid[1])), depths=depths,
+                              rays=rays,
                               kernel_size=kernel_size, seed=seed,
                               brute_force_steps=brute_force_steps, progress=step,
-                              restoration=restoration, **deploy)
+                              restoration=restoration,
+                              deploy_depth=500.0 if deploy_depth is None else float(deploy_depth),
+                              deploy_nsr=None if deploy_nsr is None else float(deploy_nsr))
     # the plane banks are traced: their tracer revision says which results are comparable
     report = dict(design.report, lux=lux, version=__version__, trace_revision=TRACE_REVISION)
     provenance = {"generator": "mitsweep design-sweep", "version": __version__,
