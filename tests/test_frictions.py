@@ -129,11 +129,19 @@ def _sphere_with_fov(fov: float) -> dict:
 
 
 def _toml(tmp_path, table: dict) -> str:
-    from mitsweep.config import setup_to_toml
+    """The table as a setup file, written as a user would (not through setup_from_dict,
+    which refuses an unreachable FOV itself)."""
+    import tomli_w
 
     path = tmp_path / "wide.toml"
-    path.write_text(setup_to_toml(setup_from_dict(table)))
+    path.write_text(tomli_w.dumps(table))
     return str(path)
+
+
+def test_setup_from_dict_refuses_an_unreachable_fov_at_construction():
+    with pytest.raises(SetupError, match=r"^sweep\.fov_deg: 355° is beyond .* the largest "
+                                         r"FOV it gives is 351\.85°$"):
+        setup_from_dict(_sphere_with_fov(355.0))
 
 
 def test_an_unreachable_fov_is_refused_when_the_setup_is_read(tmp_path, capsys):
