@@ -218,10 +218,12 @@ def scene_files_from(directory: str | os.PathLike, setup: Setup | None = None, *
     Raises
     ------
     DatasetError
-        Not a folder, no scene in it, too many, or an entry that is not a regular file.
+        Not a folder, no scene in it, or too many.
+    mitsweep.resources.FileTypeError
+        A ``*.xml`` entry that is not a regular file.
     mitsweep.render.user_scene.UserSceneError
-        A scene the probe or the digests refuse. Both are ValueErrors: one line at the
-        command line.
+        A scene the probe or the digests refuse. All three are ValueErrors: one line at
+        the command line.
     """
     root = Path(directory)
     if not root.is_dir():

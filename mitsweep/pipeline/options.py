@@ -135,7 +135,8 @@ class DatasetOptions:
     stopped_f_number : float
         F-number of the ``stopped`` images.
     diffraction : bool
-        Convolve the bank's IPSFs with the lens's diffraction pattern.
+        Convolve the thin-lens images (focused, sweep, stopped) with the lens's
+        pixel-integrated Airy PSF at 550 nm; the ground truth stays ideal.
     methods : tuple of str
         Restoration methods, each at most once (default Wiener only).
     family : {"room", "procedural", "xml"}
@@ -149,7 +150,8 @@ class DatasetOptions:
         The XML scenes' length unit (xml only; None: the setup's).
     motion : dict or None
         A tabulated stage motion to run instead of the setup's sweep:
-        ``{"times": [...] (s), "positions_mm": [...]}``.
+        ``{"times": [...], "positions_mm": [...]}`` (times in any unit, rescaled over the
+        exposure; sensor distances, mm).
     """
 
     scenes: int = 1

@@ -116,8 +116,8 @@ NOISY_UNITS = "render radiance (relative exposure times white_level)"
 
 
 def white_level(pinhole: np.ndarray, mask: np.ndarray | None) -> float:
-    """Relative exposure 1.0: the :data:`WHITE_PERCENTILE` th percentile of the ground
-    truth in the mirror's mask.
+    """Relative exposure 1.0: a high percentile (:data:`WHITE_PERCENTILE`, the 99th) of
+    the ground truth in the mirror's mask.
 
     Parameters
     ----------

@@ -95,13 +95,24 @@ def resolve_setup(setup: Setup | str | os.PathLike) -> Setup:
 
 @overload
 def read_motion_file(path: None, setup: Setup) -> None: ...
+
+
 @overload
 def read_motion_file(path: str | os.PathLike, setup: Setup) -> MotionFile: ...
+
+
 def read_motion_file(path: str | os.PathLike | None, setup: Setup) -> MotionFile | None:
     """A motion-profile file (``--motion``: e.g. from ``mitsweep design-sweep``), read and
     checked against ``setup`` (:func:`mitsweep.optics.motion_file.check_motion_file`: the
     focal length, the rig's travel, velocity and acceleration) before any work; None when
     ``path`` is None.
+
+    Parameters
+    ----------
+    path : path-like or None
+        The motion-profile file (JSON), or None (no file: the setup's own sweep).
+    setup : Setup
+        The setup the file must suit.
 
     Returns
     -------
