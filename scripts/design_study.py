@@ -63,7 +63,7 @@ def predicted(out: Path, *, planes: int, rays: int, grid: tuple[int, int],
                              n_radii=radii, bank=bank)
             bank = d.bank
             if held is None:  # held-out bank: another seed, twice the rays
-                held = plane_bank(setup, bank.points_uv, bank.depths_mm, bank.edges_mm,
+                held = plane_bank(setup, bank.points_uv, bank.depths, bank.edges,
                                   reference_sensor_distance=bank.reference_sensor_distance,
                                   rays=2 * rays, seed=1000)
             n_px = float(np.sqrt(np.prod(setup.sensor.resolution)))

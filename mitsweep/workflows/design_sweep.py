@@ -76,7 +76,7 @@ def _plot_design(design, path: str | os.PathLike) -> None:
     from ..plots import new_figure, save_figure
 
     fig, (a0, a1) = new_figure(1, 2, figsize=(10.0, 4.0))
-    e = design.edges_mm
+    e = design.edges
     mid = 0.5 * (e[:-1] + e[1:])
     width = np.abs(np.diff(e))
     T = design.exposure_s
