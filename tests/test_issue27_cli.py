@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from cli_contract import refused
 from conftest import run_cli
 from mitsweep.cli.main import main
 from mitsweep.optics.motion_file import load_motion_file
@@ -26,14 +27,10 @@ def _cli(args, capsys):
 
 
 def _one_line_exit_2(args, capsys, match):
-    try:
-        rc = main([str(a) for a in args])
-    except SystemExit as exc:               # refused by argparse
-        rc = exc.code
-    out = capsys.readouterr()
-    stdout, err = out.out, out.err
-    assert rc == 2 and stdout == "", (rc, stdout)
-    assert err.count("\n") == 1 and match in err, err
+    """A clean refusal (tests/cli_contract.py: exit 2, one line, no warning), naming
+    ``match``; with ``--json`` too."""
+    assert match in refused(capsys, args)
+    assert match in refused(capsys, [*args, "--json"])
 
 
 # -- design-sweep --restoration ---------------------------------------------------------
