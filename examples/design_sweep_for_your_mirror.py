@@ -122,7 +122,7 @@ def design(out: Path, *, quick: bool, **numbers) -> dict:
             "D_range_mm": [min(min(r["D_m_mm"], r["D_s_mm"]) for r in rows),
                            max(max(r["D_m_mm"], r["D_s_mm"]) for r in rows)],
             "bank": {"shape": list(bank.kernels.shape), "depths_mm": depths,
-                     "radii_mm": [float(r) for r in bank.radii_mm], **bank_metrics(bank)}}
+                     "radii_mm": [float(r) for r in bank.radii], **bank_metrics(bank)}}
 
 
 def main(argv=None) -> int:
