@@ -303,7 +303,8 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
     grid_shape = None
     K, seed = settings.kernel_size, settings.seed
     fov = rim_new = None
-    if kind == "radial" and extent == "rim" and int(n_radii) >= 1:
+    if kind == "radial" and extent == "rim" and int(n_radii) >= 1 \
+            and setup.mirror.is_symmetric:   # else refused below, as for "fov"
         fov = field_radius(setup, geometry)
         rim_new = rim_radii(np.linspace(0.0, fov, int(n_radii)),
                             rim_field_radius(setup, geometry))
