@@ -52,7 +52,8 @@ __all__ = ["BackendError", "MIN_LLVM", "llvm_version", "select_backend", "mitsub
            "set_mitsuba_variant", "drjit_module", "cuda_devices", "describe_machine",
            "llvm_vector_width", "native_llvm_vector_width", "set_llvm_vector_width",
            "llvm_vector_width_scope", "LLVM_WIDTH_ENV", "MAX_LLVM_VECTOR_WIDTH",
-           "route_mitsuba_log", "route_drjit_log"]
+           "route_mitsuba_log", "route_drjit_log", "cuda_usable", "drjit_core",
+           "llvm_target_api", "auto_llvm_vector_width", "apply_llvm_vector_width_setting"]
 
 logger = logging.getLogger(__name__)
 
@@ -73,7 +74,15 @@ def llvm_version() -> tuple[int, int, int] | None:
     return tuple(dr.detail.llvm_version())
 
 
-def _cuda_usable() -> bool:
+def cuda_usable() -> bool:
+    """Whether Dr.Jit's CUDA backend initialised and found a device (a driver problem
+    reads as no device). :func:`select_backend` asks this first; it compiles nothing.
+
+    Returns
+    -------
+    bool
+        True when ``drjit.has_backend(JitBackend.CUDA)`` holds.
+    """
     import drjit as dr
 
     try:
@@ -101,7 +110,7 @@ def select_backend(prefer: str | None = None) -> str:
     if choice is not None and choice not in _BACKENDS:
         raise BackendError(f"MITSWEEP_BACKEND: must be one of {', '.join(_BACKENDS)}, "
                            f"got {choice!r}")
-    if choice in (None, "cuda") and _cuda_usable():
+    if choice in (None, "cuda") and cuda_usable():
         return "cuda"
     if choice == "cuda":
         raise BackendError("backend 'cuda' requested but no CUDA device is usable")
@@ -116,7 +125,7 @@ def select_backend(prefer: str | None = None) -> str:
         raise BackendError(f"Dr.Jit loaded libLLVM {'.'.join(map(str, version))}, which aborts "
                            f"on its kernels; install libLLVM >= 19 (apt-get install libllvm19) "
                            f"or point DRJIT_LIBLLVM_PATH at it")
-    _apply_width_setting()
+    apply_llvm_vector_width_setting()
     return "llvm"
 
 
@@ -125,7 +134,7 @@ def select_backend(prefer: str | None = None) -> str:
 
 #: Environment setting: an integer (a power of two from the hardware width to
 #: :data:`MAX_LLVM_VECTOR_WIDTH`), ``native`` (Dr.Jit's own choice) or ``auto``
-#: (mitsweep's default, :func:`_auto_width`).
+#: (mitsweep's default, :func:`auto_llvm_vector_width`).
 LLVM_WIDTH_ENV = "MITSWEEP_LLVM_VECTOR_WIDTH"
 #: Widest width allowed: at 32 Dr.Jit 1.5 emits LLVM IR that does not parse (a mask
 #: ``zext i32 … to i32``) and aborts the process on the first kernel.
@@ -154,9 +163,17 @@ _native_width: int | None = None
 
 
 @functools.cache
-def _drjit_core() -> ctypes.CDLL | str:
+def drjit_core() -> ctypes.CDLL | str:
     """drjit-core, loaded from the very file the drjit package loaded (same path, so the
-    same process-wide state), or why it cannot be."""
+    same process-wide state), or why it cannot be.
+
+    Returns
+    -------
+    ctypes.CDLL or str
+        The library (its exported C API: the LLVM target and log callbacks mitsweep
+        calls), or a one-line reason when no drjit-core file is beside the drjit package
+        or it cannot be loaded. Cached: loaded once per process.
+    """
     import drjit as dr
 
     folder = os.path.dirname(dr.__file__)
@@ -171,11 +188,21 @@ def _drjit_core() -> ctypes.CDLL | str:
 
 
 @functools.cache
-def _llvm_target_api() -> dict | None:
+def llvm_target_api() -> dict | None:
     """ctypes functions of drjit-core's LLVM target API, or None (logged) when the
-    library or one of its symbols is missing."""
+    library or one of its symbols is missing.
+
+    Returns
+    -------
+    dict or None
+        Key → ctypes function, argument and result types set: ``set_target(cpu,
+        features, width)``, ``target_cpu()`` and ``target_features()`` (bytes),
+        ``vector_width()`` (lanes), and the log-level functions :func:`route_drjit_log`
+        uses. Cached; the first call also records Dr.Jit's own width for this CPU
+        (:func:`native_llvm_vector_width`), before mitsweep changes it.
+    """
     global _native_width
-    lib = _drjit_core()
+    lib = drjit_core()
     if isinstance(lib, str):
         logger.warning("%s: LLVM vector width unchanged", lib)
         return None
@@ -198,13 +225,13 @@ def _llvm_target_api() -> dict | None:
 
 def llvm_vector_width() -> int | None:
     """The LLVM backend's current vector width, or None where the API is missing."""
-    api = _llvm_target_api()
+    api = llvm_target_api()
     return None if api is None else int(api["vector_width"]())
 
 
 def native_llvm_vector_width() -> int | None:
     """The width Dr.Jit chose for this CPU (its register width), before any change."""
-    return _native_width if _llvm_target_api() is not None else None
+    return _native_width if llvm_target_api() is not None else None
 
 
 def _check_width(width, source: str) -> int:
@@ -220,7 +247,15 @@ def _check_width(width, source: str) -> int:
     return width
 
 
-def _auto_width() -> int | None:
+def auto_llvm_vector_width() -> int | None:
+    """mitsweep's default LLVM vector width (``auto``): twice the register width, at
+    most :data:`MAX_LLVM_VECTOR_WIDTH`, never below the register width.
+
+    Returns
+    -------
+    int or None
+        Lanes per vector; None where drjit-core's target API is missing.
+    """
     native = native_llvm_vector_width()
     return None if native is None else max(native, min(native * _AUTO_FACTOR,
                                                           MAX_LLVM_VECTOR_WIDTH))
@@ -263,20 +298,29 @@ def set_llvm_vector_width(width: int | str) -> int | None:
 
 
 def _set_llvm_vector_width(width, source: str) -> int | None:
-    api = _llvm_target_api()
+    api = llvm_target_api()
     if api is None:
         return None
     w: int | None
     if isinstance(width, str) and width.strip().lower() in ("auto", "native"):
-        w = _auto_width() if width.strip().lower() == "auto" else native_llvm_vector_width()
+        w = auto_llvm_vector_width() if width.strip().lower() == "auto" else native_llvm_vector_width()
     else:
         w = _check_width(width, source)
     # w is None only where the API is missing, which returned above
     return None if w is None else _set_width(api, w)
 
 
-def _apply_width_setting() -> None:
-    # Once per process (select_backend is cached), before any kernel is compiled.
+def apply_llvm_vector_width_setting() -> None:
+    """Set the LLVM vector width from ``MITSWEEP_LLVM_VECTOR_WIDTH`` (:data:`LLVM_WIDTH_ENV`;
+    unset or empty means ``auto``). :func:`select_backend` calls it once per process
+    (it is cached), before any kernel is compiled.
+
+    Raises
+    ------
+    BackendError
+        If the variable holds neither ``auto``, ``native`` nor an allowed power of two;
+        the message names the variable.
+    """
     _set_llvm_vector_width(os.environ.get(LLVM_WIDTH_ENV, "").strip() or "auto",
                            LLVM_WIDTH_ENV)
 
@@ -297,7 +341,7 @@ def llvm_vector_width_scope(width: int | str) -> Iterator[int | None]:
     try:
         yield now
     finally:
-        api = _llvm_target_api()
+        api = llvm_target_api()
         if now is not None and before is not None and api is not None:
             _set_width(api, before)
 
@@ -326,7 +370,7 @@ def route_drjit_log() -> bool:
     """
     if _drjit_route:
         return True
-    lib = _drjit_core()
+    lib = drjit_core()
     try:
         api = {key: getattr(lib, sym) for key, sym in _LOG_SYMBOLS.items()}
     except AttributeError:  # a string (no library) or a missing symbol

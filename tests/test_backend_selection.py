@@ -21,7 +21,7 @@ def fresh(monkeypatch):
 
 
 def _probe(monkeypatch, usable: bool):
-    monkeypatch.setattr(backend, "_cuda_usable", lambda: usable)
+    monkeypatch.setattr(backend, "cuda_usable", lambda: usable)
 
 
 def test_cuda_is_chosen_when_a_device_is_usable(fresh):
@@ -55,9 +55,9 @@ def test_the_real_probe_agrees_with_the_driver():
     """No driver, no device (this machine); with nvidia-smi listing GPUs Dr.Jit should
     find one too, or the user is told nothing about a broken CUDA set-up."""
     if backend.cuda_devices():
-        assert backend._cuda_usable()
+        assert backend.cuda_usable()
     else:
-        assert not backend._cuda_usable()
+        assert not backend.cuda_usable()
 
 
 def test_an_automatic_cuda_variant_mitsuba_refuses_falls_back_to_llvm(fresh, caplog):

@@ -40,7 +40,7 @@ def _in_subprocess(code: str, width: str | None) -> subprocess.CompletedProcess:
 
 
 _REPORT = ("import json; from mitsweep import backend as b; b.select_backend(); "
-           "api = b._llvm_target_api(); "
+           "api = b.llvm_target_api(); "
            "print(json.dumps([b.llvm_vector_width(), b.native_llvm_vector_width(), "
            "api['target_cpu']().decode(), api['target_features']().decode()]))")
 
@@ -50,7 +50,7 @@ def test_width_from_the_environment_is_applied_at_backend_selection(setting):
     # A fresh process: the setting is read once, when the backend is selected; unset
     # means auto (twice the register width, at most 16).
     auto = min(2 * NATIVE, backend.MAX_LLVM_VECTOR_WIDTH)
-    assert backend._auto_width() == max(auto, NATIVE)
+    assert backend.auto_llvm_vector_width() == max(auto, NATIVE)
     want = {"2x": min(2 * NATIVE, backend.MAX_LLVM_VECTOR_WIDTH), "native": NATIVE,
             "auto": max(auto, NATIVE), "unset": max(auto, NATIVE)}[setting]
     text = {"2x": str(want), "unset": None}.get(setting, setting)
@@ -68,7 +68,7 @@ def test_bad_width_settings_are_refused_with_the_allowed_values(bad, monkeypatch
     monkeypatch.setenv("MITSWEEP_LLVM_VECTOR_WIDTH", bad)
     before = backend.llvm_vector_width()
     with pytest.raises(backend.BackendError, match="MITSWEEP_LLVM_VECTOR_WIDTH: must be"):
-        backend._apply_width_setting()
+        backend.apply_llvm_vector_width_setting()
     assert backend.llvm_vector_width() == before
     with pytest.raises(backend.BackendError, match="power of two from|integer"):
         backend.set_llvm_vector_width(int(bad) if bad.isdigit() else bad)
@@ -88,7 +88,7 @@ def test_non_llvm_backend_leaves_the_width_alone(monkeypatch, caplog):
 
 
 def test_missing_symbols_leave_the_width_alone(monkeypatch):
-    monkeypatch.setattr(backend, "_llvm_target_api", lambda: None)
+    monkeypatch.setattr(backend, "llvm_target_api", lambda: None)
     assert backend.set_llvm_vector_width(2 * NATIVE) is None
     assert backend.set_llvm_vector_width("auto") is None
     assert backend.llvm_vector_width() is None

@@ -68,7 +68,7 @@ def test_mitsuba_log_reaches_the_mitsuba_logger(squashed, caplog):
 
 def test_drjit_log_reaches_the_drjit_logger(caplog, capfd):
     assert backend.route_drjit_log()
-    lib = backend._drjit_core()
+    lib = backend.drjit_core()
     jit_log = lib["_Z7jit_log8LogLevelPKcz"]  # drjit-core's own logging entry point
     jit_log.restype = None
     with caplog.at_level(logging.DEBUG, logger="drjit"):

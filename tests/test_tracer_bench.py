@@ -62,7 +62,7 @@ def test_bench_without_batoid_reports_null(monkeypatch):
         return real_import(name, *a, **kw)
 
     monkeypatch.setattr(builtins, "__import__", fake_import)
-    res = bench._batoid_rate(None, None, None, 10, 1)
+    res = bench.batoid_rate(None, None, None, 10, 1)
     assert res["peer_rays_per_s"] is None and "not installed" in res["peer_note"]
 
 
@@ -71,7 +71,7 @@ def _compared_widths():
 
     if backend.select_backend() != "llvm":
         return []
-    widths = sorted({backend.native_llvm_vector_width(), backend._auto_width(),
+    widths = sorted({backend.native_llvm_vector_width(), backend.auto_llvm_vector_width(),
                      backend.llvm_vector_width()})
     return widths if len(widths) > 1 else []
 
@@ -82,12 +82,12 @@ def test_width_comparison_times_each_width_and_restores_the_width():
     from mitsweep.tracer import bench
     from mitsweep.tracer.bank import field_radius
 
-    setup = bench._setup()
+    setup = bench.bench_setup()
     geometry = reference_geometry(setup)
     backend.select_backend()  # applies MITSWEEP_LLVM_VECTOR_WIDTH
     before = backend.llvm_vector_width()
-    rows = bench._width_comparison(setup, 0.9 * field_radius(setup, geometry), 500.0,
-                                   geometry.sweep, 1 << 14, 1)
+    rows = bench.llvm_width_comparison(setup, 0.9 * field_radius(setup, geometry), 500.0,
+                                       geometry.sweep, 1 << 14, 1)
     assert backend.llvm_vector_width() == before
     assert [r["width"] for r in rows] == _compared_widths()
     for row in rows:

@@ -14,7 +14,7 @@ from scipy.optimize import minimize_scalar
 from mitsweep.config import load_setup
 from mitsweep.optics import chief_ray, object_distance, optimal_sweep_range, placement_of
 from mitsweep.optics.sweep import mirror_zone
-from mitsweep.tracer.focus import (FIELDS, PROBE_APERTURE_MM, _fov_field, numeric_focus,
+from mitsweep.tracer.focus import (FIELDS, PROBE_APERTURE_MM, fov_field, numeric_focus,
                                    traced_sweep_range)
 from mitsweep.tracer.kernel import trace_arrays
 from mitsweep.tracer.ipsf import fit_sampling_box
@@ -118,7 +118,7 @@ def _fov_angle_in_test(setup):
 def test_fov_field_meets_the_tilt_plane_in_the_papers_zone():
     """The 2-D FOV field's boundary: in the tilt plane, the ends of the paper's zone (the
     near rim and the FOV's end); off it, reflected chief rays at FOV/2 or the rim."""
-    star, half = _fov_field(TILTED, None)
+    star, half = fov_field(TILTED, None)
     angle, half_here, zone = _fov_angle_in_test(TILTED)
     assert half == pytest.approx(half_here, abs=1e-12)
     x_far, _ = star.point(1.0, 0.0)

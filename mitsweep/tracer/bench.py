@@ -58,7 +58,15 @@ __all__ = ["run_bench", "bank_error_per_second"]
 logger = logging.getLogger(__name__)
 
 
-def _setup():
+def bench_setup() -> Setup:
+    """The setup the benchmark traces: ``scenes/sphere.toml`` of the source tree where it
+    is there, else :data:`mitsweep.config.DEFAULT_SETUP` (an installed package).
+
+    Returns
+    -------
+    Setup
+        The benchmark's setup.
+    """
     path = os.path.join(os.path.dirname(__file__), "..", "..", "scenes", "sphere.toml")
     return load_setup(path) if os.path.exists(path) else DEFAULT_SETUP
 
@@ -108,7 +116,34 @@ def _batoid_trace(batoid, bg, setup, geom, o, d, threads: int):
     return best, best_cpu, landed, slope_u
 
 
-def _batoid_rate(setup, source, center, n: int, threads: int) -> dict:
+def batoid_rate(setup, source, center, n: int, threads: int) -> dict:
+    """The peer's useful rays per second: batoid reflects the same rays as the tracer off
+    the same sphere, only its ``Surface.reflect`` timed (best of 3), and agrees with the
+    tracer at the image centre.
+
+    Parameters
+    ----------
+    setup : Setup
+        The setup whose mirror both trace.
+    source : PointSource
+        The peripheral point whose rays are timed (:func:`~.source.source_from_image`).
+    center : PointSource
+        A point at the image centre, where batoid's sphere root is right: the two traces'
+        landed masks and sensor slopes are compared there (2^16 rays).
+    n : int
+        Rays timed.
+    threads : int
+        batoid's thread count (set for the call, restored after).
+
+    Returns
+    -------
+    dict
+        ``peer_rays_per_s`` (the raw rate times the tracer's landed fraction of the same
+        rays), ``peer_raw_rays_per_s``, ``peer_cpu_seconds_per_ray``, ``peer_rays``,
+        ``peer_threads``, ``peer_wrong_root_fraction``, ``peer_center_landed_mismatch``
+        and ``peer_center_max_slope_diff``; without batoid installed only
+        ``peer_rays_per_s`` (None) and ``peer_note`` (why), the other arguments unread.
+    """
     try:
         import batoid
         import batoid.global_vars as bg
@@ -141,13 +176,37 @@ def _batoid_rate(setup, source, center, n: int, threads: int) -> dict:
     return out
 
 
-def _width_comparison(setup, u: float, depth: float, sweep, rays: int, repeats: int) -> list:
+def llvm_width_comparison(setup, u: float, depth: float, sweep, rays: int,
+                          repeats: int) -> list:
     """The cheapest deposit (one sweep time per ray) at the native and the default LLVM
     vector widths, interleaved: per width, the best of ``repeats`` CPU seconds per ray
-    and useful rays per second. Empty off the LLVM backend or when both widths agree."""
+    and useful rays per second. Empty off the LLVM backend or when both widths agree.
+    The width in effect before is restored.
+
+    Parameters
+    ----------
+    setup : Setup
+        The setup traced.
+    u : float
+        Image-plane radius of the point traced, mm.
+    depth : float
+        Its depth, mm.
+    sweep : SweepRange
+        The focal sweep.
+    rays : int
+        Rays per measurement.
+    repeats : int
+        Timed repeats per width, after one untimed pass that compiles each width's kernels.
+
+    Returns
+    -------
+    list of dict
+        One row per width, in increasing order: ``width``, ``cpu_seconds_per_ray`` and
+        ``rays_per_s``.
+    """
     if backend.select_backend() != "llvm":
         return []
-    candidates = {backend.native_llvm_vector_width(), backend._auto_width(),
+    candidates = {backend.native_llvm_vector_width(), backend.auto_llvm_vector_width(),
                   backend.llvm_vector_width()}
     widths = sorted(w for w in candidates if w is not None)
     if len(widths) < 2:
@@ -334,7 +393,7 @@ def run_bench(args: argparse.Namespace) -> dict:
         measurement instead of 2^26 and fewer repeats.
     """
     quick = bool(getattr(args, "quick", False))
-    setup = _setup()
+    setup = bench_setup()
     geometry = reference_geometry(setup)
     sweep = geometry.sweep
     u = 0.9 * field_radius(setup, geometry)
@@ -383,7 +442,7 @@ def run_bench(args: argparse.Namespace) -> dict:
     }
     center = source_from_image(setup, 0.0, 0.0, depth,
                                reference_sensor_distance=geometry.sensor_distance)
-    out.update(_batoid_rate(setup, source, center, (1 << 20) if quick else (1 << 22), threads))
+    out.update(batoid_rate(setup, source, center, (1 << 20) if quick else (1 << 22), threads))
     peer = out.get("peer_rays_per_s")
     out["ratio"] = (rate / peer) if peer else None
     out["ratio_default_time_samples"] = (rate_default / peer) if peer else None
@@ -394,7 +453,7 @@ def run_bench(args: argparse.Namespace) -> dict:
     out["ratio_cpu"] = (peer_cpu / out["cpu_seconds_per_ray"]) if peer_cpu else None
     out["llvm_vector_width"] = backend.llvm_vector_width() if llvm else None
     out["llvm_native_vector_width"] = backend.native_llvm_vector_width() if llvm else None
-    out["llvm_widths"] = _width_comparison(setup, u, depth, sweep, rays, 2 if quick else 3)
+    out["llvm_widths"] = llvm_width_comparison(setup, u, depth, sweep, rays, 2 if quick else 3)
     out["deposit_copies"] = kernel.deposit_copies()
     out["deposit_strategies"] = _strategy_comparison(setup, u, depth, sweep, rays,
                                                      2 if quick else 3)

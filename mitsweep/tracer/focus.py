@@ -302,14 +302,26 @@ def _search_segment(foci: _LineFoci, xs, depths, which: int, sign: float, *,
     return sign * v, foci.where(x_best, 0.0, depth, on_boundary=on_boundary), history
 
 
-class _StarField:
+class StarField:
     """A 2-D field of mirror points star-shaped about a centre ``p0`` on the tilt plane:
     ``(t, θ) ∈ [0, 1] × [0, π]`` maps to ``p0 + t s_b(θ) (cos θ, sin θ)``, with
     ``s_b(θ)`` the distance to the field's boundary, so ``t = 1`` is the boundary itself
     (the half ``y >= 0``: the setup is symmetric under ``y → −y``).
 
-    ``angle``, when given, is a function of local (x, y) arrays, zero at ``p0``, whose
-    level ``limit`` bounds the field inside the rim; without it the boundary is the rim.
+    Parameters
+    ----------
+    rim : float
+        The mirror's rim radius, mm: the field never leaves the disc of this radius.
+    p0 : (2,) array_like, optional
+        The centre, local mirror (x, y), mm (default the vertex); it must lie inside
+        the rim.
+    angle : callable, optional
+        ``angle(x, y)`` of local (x, y) arrays (mm), zero at ``p0``, increasing outwards;
+        its level ``limit`` bounds the field inside the rim. Without it (default) the
+        boundary is the rim.
+    limit : float, optional
+        The level of ``angle`` on the boundary (the unit of ``angle``: radians for the
+        FOV field). Required with ``angle``.
     """
 
     def __init__(self, rim: float, p0=(0.0, 0.0), angle=None, limit: float | None = None):
@@ -324,6 +336,20 @@ class _StarField:
         return -b + math.sqrt(max(b * b - (float(self.p0 @ self.p0) - self.rim ** 2), 0.0))
 
     def boundary_distance(self, theta: float) -> float:
+        """The distance ``s_b(θ)`` from ``p0`` to the field's boundary along direction θ,
+        mm: the rim, or the first crossing of ``angle = limit`` (root to 1e-12 mm) before
+        it. Cached per θ.
+
+        Parameters
+        ----------
+        theta : float
+            Direction from ``p0`` in the mirror's (x, y) plane, radians (0: +x).
+
+        Returns
+        -------
+        float
+            ``s_b(θ)``, mm.
+        """
         if theta not in self._s:
             u = np.array([math.cos(theta), math.sin(theta)])
             s_rim = self._s_rim(u)
@@ -343,6 +369,20 @@ class _StarField:
         return self._s[theta]
 
     def point(self, t: float, theta: float) -> tuple[float, float]:
+        """The mirror point at field coordinates (t, θ).
+
+        Parameters
+        ----------
+        t : float
+            Fraction of the way from ``p0`` (0) to the boundary (1).
+        theta : float
+            Direction from ``p0``, radians, in [0, π] for the half ``y >= 0``.
+
+        Returns
+        -------
+        tuple of float
+            Local mirror (x, y), mm; a point rounded past the rim is pulled back onto it.
+        """
         u = np.array([math.cos(theta), math.sin(theta)])
         x, y = self.p0 + t * self.boundary_distance(theta) * u
         h = math.hypot(x, y)
@@ -359,7 +399,7 @@ def _polar_grid(n_rings: int):
     return pts, 1.0 / n_rings, math.pi / (3 * n_rings)
 
 
-def _search_disc(foci: _LineFoci, field: _StarField, n_rings, depths, which: int,
+def _search_disc(foci: _LineFoci, field: StarField, n_rings, depths, which: int,
                  sign: float):
     """Extreme of line focus ``which`` over a 2-D field: the polar grid of
     :func:`_polar_grid`, then refinements from its best point and from its best boundary
@@ -419,8 +459,27 @@ def _disc_samples(rim: float, p0=(0.0, 0.0), s_b=None):
     return p0[0] + t * s * np.cos(th), p0[1] + t * s * np.sin(th)
 
 
-def _fov_field(setup, fov_deg) -> tuple[_StarField, float]:
-    """The 2-D FOV field of a tilted mirror (see :data:`FIELDS`), and its half angle."""
+def fov_field(setup: Setup, fov_deg: float | None) -> tuple[StarField, float]:
+    """The 2-D FOV field of a tilted mirror (see :data:`FIELDS`), and its half angle:
+    the mirror points whose reflected chief ray lies within half the FOV of the ray at
+    the tilt-plane zone's bisector, inside the rim.
+
+    Parameters
+    ----------
+    setup : Setup
+        The setup (its mirror, placement and rim).
+    fov_deg : float or None
+        The field of view, degrees; None for the setup's own
+        (:func:`~mitsweep.optics.sweep.mirror_zone`).
+
+    Returns
+    -------
+    field : StarField
+        Centred on the bisector's mirror point (on the tilt plane), bounded by the
+        chief-ray angle from the bisector reaching the half angle, or by the rim.
+    half : float
+        Half the FOV, radians.
+    """
     from scipy.optimize import minimize_scalar
     pl = placement_of(setup.mirror)
     zone = mirror_zone(setup, fov_deg)
@@ -440,7 +499,7 @@ def _fov_field(setup, fov_deg) -> tuple[_StarField, float]:
     lo, hi = xs[max(j - 1, 0)], xs[min(j + 1, len(xs) - 1)]
     x0 = minimize_scalar(lambda x: float(angle(x, 0.0)), bounds=(min(lo, hi), max(lo, hi)),
                          method="bounded", options={"xatol": 1e-10}).x
-    return _StarField(setup.mirror.rim_radius, (float(x0), 0.0), angle, half), half
+    return StarField(setup.mirror.rim_radius, (float(x0), 0.0), angle, half), half
 
 
 def traced_sweep_range(setup: Setup, fov_deg: float | None = None,
@@ -496,9 +555,9 @@ def traced_sweep_range(setup: Setup, fov_deg: float | None = None,
     elif field == "mirror":
         _check_visible(setup, field, *_disc_samples(rim))
         xs = np.linspace(0.0, rim, int(n_points))
-        star = _StarField(rim) if tilted else None
+        star = StarField(rim) if tilted else None
     else:  # "fov", tilted
-        star, _ = _fov_field(setup, fov_deg)
+        star, _ = fov_field(setup, fov_deg)
         _check_visible(setup, field, *_disc_samples(rim, star.p0, star.boundary_distance))
     foci = _LineFoci(setup, sr.reference_sensor_distance, rays=rays,
                      aperture_radius=aperture_radius)
