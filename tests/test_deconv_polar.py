@@ -272,7 +272,7 @@ def test_dr_jit_resampling_matches_its_ndimage_reference(dtype, tol, spec_tol, m
     img = np.stack([_gray(n, 160) for n in ("camera", "astronaut", "coins")], -1)
     img = img[:150].astype(dtype)
     g = polar_grid(img.shape, center=(70.3, 84.9))
-    assert len({n for _, n in polar.grid._polar_levels(g, True)}) == 3
+    assert len({n for _, n in polar.grid.polar_levels(g, True)}) == 3
     spec_jit = polar.resample.angle_spectrum(img, g, np.complex128)
     out_jit = polar.resample.from_angle_spectrum(spec_jit, g, img.shape[:2], upsample=1.0,
                                                  outside=img, dtype=dtype)
@@ -350,14 +350,14 @@ def test_memory_estimate_bounds_the_measured_peak():
 def test_spline_prefilter_matches_ndimage(shape, dtype, tol):
     import scipy.ndimage as ndi
 
-    from mitsweep.deconv.polar.spline import _spline_filter
+    from mitsweep.deconv.polar.spline import spline_filter
 
     a = (np.random.default_rng(3).random(shape) * 4 - 1).astype(dtype)  # values in [-1, 3]
     for axes in [(0,), (0, 1)]:
         ref = a
         for ax in axes:
             ref = ndi.spline_filter1d(ref, order=3, axis=ax, output=dtype, mode="mirror")
-        got = _spline_filter(a, axes, dtype)
+        got = spline_filter(a, axes, dtype)
         assert got.dtype == dtype
         # rows filtered by recursions in the array's precision (ndimage: float64 lines);
         # float32 differs by a few ulp of coefficients up to ~5

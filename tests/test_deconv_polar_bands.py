@@ -10,7 +10,7 @@ import pytest
 
 from mitsweep.deconv.polar import polar_grid
 from mitsweep.deconv.polar.bands import Band, band_plan
-from mitsweep.deconv.polar.grid import _SPLINE_PX
+from mitsweep.deconv.polar.grid import SPLINE_PX
 
 GRIDS = [((256, 256), None, 1.5, 15), ((512, 384), None, 1.0, 31),
          ((300, 200), (40.5, 60.0), 2.0, 9), ((2048, 2048), None, 1.5, 63)]
@@ -18,7 +18,7 @@ GRIDS = [((256, 256), None, 1.5, 15), ((512, 384), None, 1.0, 31),
 
 def _grid(shape, center, oversampling):
     return polar_grid(shape, center=center, radial_oversampling=oversampling,
-                      inner_px=_SPLINE_PX, outer_px=_SPLINE_PX)
+                      inner_px=SPLINE_PX, outer_px=SPLINE_PX)
 
 
 @pytest.fixture(params=GRIDS, ids=lambda p: f"{p[0][0]}x{p[0][1]}-K{p[3]}")
@@ -60,8 +60,8 @@ def test_bands_rise_and_overlap_only_their_neighbours(planned):
     for first, third in zip(bands, bands[2:]):
         assert third.rows[0] >= first.rows[1]
     # together they cover every row the Cartesian pixels read
-    keep0 = int(math.floor(grid.row_of(-_SPLINE_PX)))
-    keep1 = int(math.ceil(grid.row_of(grid.r_max + _SPLINE_PX))) + 1
+    keep0 = int(math.floor(grid.row_of(-SPLINE_PX)))
+    keep1 = int(math.ceil(grid.row_of(grid.r_max + SPLINE_PX))) + 1
     covered = np.zeros(grid.n_radii, bool)
     for b in bands:
         covered[b.rows[0]:b.rows[1]] = True

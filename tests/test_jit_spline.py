@@ -171,7 +171,7 @@ def test_no_backend_means_no_kernels(monkeypatch, failure):
     jit.available.cache_clear()
     try:
         assert jit.available() is None
-        assert polar._spline_kernels() is None
+        assert polar.spline.jit_kernels() is None
     finally:
         monkeypatch.undo()
         jit.available.cache_clear()

@@ -45,7 +45,8 @@ import scipy.signal as ssig
 from ..deprecation import renamed_keywords
 from ..io.bank import BankError, IPSFBank
 from .kernels import check_bank_matches, interpolate_radial, radii_px, select_depth
-from .polar import PolarGrid, _band_length, _band_transfer, polar_grid
+from .polar import PolarGrid, polar_grid
+from .polar.bands import band_length, band_transfer
 from .spatial import _support, grid_axes_px, grid_windows, hat_weights
 
 __all__ = ["BlurOperator", "polar_operator", "product_convolution_operator",
@@ -312,10 +313,10 @@ def polar_bands(kernels: np.ndarray, radii: np.ndarray, grid: PolarGrid, *,
         nz = np.flatnonzero(weights[b] > 0)
         lo, hi = int(nz[0]), int(nz[-1]) + 1
         s0, s1 = max(0, lo - reach), min(grid.n_radii, hi + reach)
-        L = _band_length(s1 - s0 + reach, step)
+        L = band_length(s1 - s0 + reach, step)
         r_hi = max(float(grid.radii[s1 - 1]), rb)
         mc = int(min(M, math.ceil(2 * math.pi * r_hi / math.sqrt(2)) + 8))
-        Hb = _band_transfer(interpolate_radial(kernels, radii, rb), rb, step, L, mc, cdt)
+        Hb = band_transfer(interpolate_radial(kernels, radii, rb), rb, step, L, mc, cdt)
         bands.append(PolarBand(radius=float(rb), lo=lo, hi=hi, s0=s0, s1=s1, L=L, mc=mc,
                                weights=weights[b, lo:hi].astype(dtype), H=Hb))
     return bands

@@ -53,7 +53,7 @@ from ..kernels import check_bank_matches, radii_px, select_depth
 from ..wiener import check_image_values, check_nsr, estimate_nsr, working_dtype
 from . import spline
 from .bands import band_length, band_plan, band_transfer
-from .grid import _SPLINE_PX, PolarGrid, _channels, polar_grid
+from .grid import SPLINE_PX, PolarGrid, _channels, polar_grid
 from .resample import (angle_spectrum, from_angle_spectrum, from_polar, polar_resampling,
                        polar_spline_coefficients, to_polar)
 from .solver import restore_bands, restore_centre
@@ -64,13 +64,6 @@ __all__ = ["PolarGrid", "polar_grid", "to_polar", "from_polar", "polar_deconvolv
            "spline_sampling_matrix"]
 
 logger = logging.getLogger(__name__)
-
-#: Names this module had before it became a package, kept for their callers
-#: (:mod:`mitsweep.deconv.operators`, :mod:`mitsweep.deconv.solvers`); new code imports
-#: the public ones from the submodules.
-_band_length = band_length
-_band_transfer = band_transfer
-_spline_kernels = spline.jit_kernels
 
 
 def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype: DTypeLike) -> float:
@@ -96,7 +89,7 @@ def polar_memory_bytes(grid: PolarGrid, image_shape: tuple[int, ...], dtype: DTy
     C = image_shape[2] if len(image_shape) == 3 else 1
     H, W = image_shape[0], image_shape[1]
     cells = float(grid.n_radii) * float(grid.n_angles)
-    reach = grid.r_max + _SPLINE_PX + 4
+    reach = grid.r_max + SPLINE_PX + 4
     mirrored = max(float(H) * W, 4 * reach * reach)
     return (cells * it * (2 * C + 2 + 3 * C) + mirrored * it
             + float(H) * W * it * (3 * C + 4))
@@ -176,8 +169,8 @@ def polar_deconvolve(image: np.ndarray, bank: IPSFBank, *,
         r_max = min(float(rad.max()) + K, far)
     grid = polar_grid(img.shape, center=center, r_max=r_max,
                       radial_oversampling=radial_oversampling,
-                      angular_oversampling=angular_oversampling, inner_px=_SPLINE_PX,
-                      outer_px=_SPLINE_PX)
+                      angular_oversampling=angular_oversampling, inner_px=SPLINE_PX,
+                      outer_px=SPLINE_PX)
     check_allocation(f"polar deconvolution of {W}x{H} px on {grid.n_radii} radii x "
                      f"{grid.n_angles} angles", polar_memory_bytes(grid, img.shape, dt))
     spec = angle_spectrum(img, grid, cdt)                              # (n_r, M, C)

@@ -18,7 +18,7 @@ import scipy.fft as sfft
 
 from ..spatial import hat_weights
 from ..wiener import natural_prior_scale, regulariser, wiener_filter
-from .grid import _SPLINE_PX, PolarGrid
+from .grid import SPLINE_PX, PolarGrid
 
 __all__ = ["Band", "BandPlan", "band_plan", "band_length", "band_transfer", "band_wiener",
            "symmetric_extension"]
@@ -281,8 +281,8 @@ def band_plan(grid: PolarGrid, kernel_size: int, *, band_spacing: float = 0.25,
     m_px = int(math.ceil(1.5 * K)) if margin is None else int(margin)
     m_rows = int(math.ceil(m_px / step))
     # rows that the Cartesian pixels read (a spline's reach around [0, r_max])
-    keep0 = int(math.floor(grid.row_of(-_SPLINE_PX)))
-    keep1 = int(math.ceil(grid.row_of(grid.r_max + _SPLINE_PX))) + 1
+    keep0 = int(math.floor(grid.row_of(-SPLINE_PX)))
+    keep1 = int(math.ceil(grid.row_of(grid.r_max + SPLINE_PX))) + 1
     n_r, M = grid.n_radii, grid.n_angles // 2 + 1
     bands: list[Band | None] = []
     for rb, w in zip(centres, weights):

@@ -19,7 +19,9 @@ from ...optics.pixels import optical_center_px
 
 __all__ = ["PolarGrid", "polar_grid"]
 
-_SPLINE_PX = 8  # context a cubic spline needs around the mapped-back region (px; 0.268^12 ≈ 1e-7)
+#: Rows of context a cubic spline needs around the mapped-back region, px: the
+#: prefilter's pole 0.268 decays to 0.268^12 ≈ 1e-7 within it.
+SPLINE_PX = 8
 #: Tangential content of a pixel image along a circle of radius r reaches harmonic
 #: m = 2π r / √2 (the diagonal Nyquist); with the spline's small overshoot, 0.75 cycles/px.
 _TANGENTIAL_REACH = 0.75
@@ -152,11 +154,27 @@ def _level_angles(n: int, q: int) -> int:
     return n if q == 1 else _fast_multiple(-(-n // q), 4)
 
 
-def _polar_levels(grid: PolarGrid, decimate: bool) -> list[tuple[slice, int]]:
+def polar_levels(grid: PolarGrid, decimate: bool) -> list[tuple[slice, int]]:
     """(rows, angles) of each decimation level of the sampling on ``grid``: rows whose
     harmonics fit a quarter (a half) of the angles are sampled at that many. Each entry
     is a run of rows (a slice): the level depends on |r|, so a level can be a run on
-    either side of the pole."""
+    either side of the pole.
+
+    Parameters
+    ----------
+    grid : PolarGrid
+        The polar grid sampled.
+    decimate : bool
+        Whether rows near the pole are sampled at fewer angles (a quarter or a half of
+        ``grid.n_angles``, rounded up to a fast multiple of 4, where their tangential
+        content of 0.75 cycles/px fits); False gives one level, every row at all angles.
+
+    Returns
+    -------
+    list of (slice, int)
+        Runs of consecutive rows and their number of angles, in row order, covering
+        every row of the grid.
+    """
     n = grid.n_angles
     if not decimate:
         return [(slice(0, grid.n_radii), n)]
@@ -170,9 +188,9 @@ def _pixel_levels(grid: PolarGrid, n_up: int) -> list[tuple[int, int, float, flo
     """(q, angles, r_from, r_to) of the decimation levels of the pixels inside
     ``grid.r_max``: a pixel at radius r reads rows out to r + a spline's reach, whose
     harmonics must fit the level's angles (:func:`_decimation`)."""
-    # _decimation(2π (r + _SPLINE_PX) 0.75, n) is 4 below e4, 2 below e2, else 1
+    # _decimation(2π (r + SPLINE_PX) 0.75, n) is 4 below e4, 2 below e2, else 1
     k = 2 * math.pi * _TANGENTIAL_REACH
-    e4, e2 = (n_up / 8 - 8) / k - _SPLINE_PX, (n_up / 4 - 8) / k - _SPLINE_PX
+    e4, e2 = (n_up / 8 - 8) / k - SPLINE_PX, (n_up / 4 - 8) / k - SPLINE_PX
     out = []
     for q, lo, hi in ((4, -math.inf, e4), (2, e4, e2), (1, e2, math.inf)):
         lo, hi = max(lo, 0.0), min(hi, grid.r_max)

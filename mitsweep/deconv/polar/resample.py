@@ -19,9 +19,9 @@ import scipy.sparse as sp
 
 from ..wiener import working_dtype
 from . import spline
-from .grid import (_SPLINE_PX, PolarGrid, _channels, _fast_multiple, _pixel_levels,
-                   _polar_levels)
-from .spline import (_angle_bspline, _spline_filter, _spline_filter_in_place,
+from .grid import (SPLINE_PX, PolarGrid, _channels, _fast_multiple, _pixel_levels,
+                   polar_levels)
+from .spline import (_angle_bspline, _spline_filter_in_place, spline_filter,
                      spline_sampling_matrix)
 
 __all__ = ["to_polar", "from_polar", "polar_resampling", "polar_spline_coefficients",
@@ -33,7 +33,7 @@ _ANGLE_PAD = (2, 3)              # periodic columns added around a polar level (
 def _sample_on_polar(coef: np.ndarray, grid: PolarGrid,
                      levels: list[tuple[slice, int]]) -> list[np.ndarray]:
     """The spline of an image (coefficients ``coef``, mirrored beyond its ends) at the
-    grid's points, level by level: for each (rows, n) of :func:`_polar_levels` an array
+    grid's points, level by level: for each (rows, n) of :func:`polar_levels` an array
     (rows of the run, n), angle k at 2πk/n."""
     cy, cx = grid.center
     r = grid.radii
@@ -152,7 +152,7 @@ def polar_spline_coefficients(polar: np.ndarray) -> np.ndarray:
     spec /= _angle_bspline(np.arange(spec.shape[1]), n, dt)[None, :, None]
     coef = sfft.irfft(spec, n=n, axis=1, workers=-1).astype(dt, copy=False)
     for c in range(coef.shape[2]):
-        coef[..., c] = _spline_filter(coef[..., c], (0,), dt)
+        coef[..., c] = spline_filter(coef[..., c], (0,), dt)
     return coef[..., 0] if squeeze else coef
 
 
@@ -173,8 +173,8 @@ def to_polar(image: np.ndarray, grid: PolarGrid) -> np.ndarray:
     dt = working_dtype(img)
     out = np.empty((grid.n_radii, grid.n_angles, img.shape[2]), dtype=dt)
     for c in range(img.shape[2]):
-        coef = _spline_filter(img[..., c], (0, 1), dt)
-        (out[..., c],) = _sample_on_polar(coef, grid, _polar_levels(grid, False))
+        coef = spline_filter(img[..., c], (0, 1), dt)
+        (out[..., c],) = _sample_on_polar(coef, grid, polar_levels(grid, False))
     return out[..., 0] if squeeze else out
 
 
@@ -233,9 +233,9 @@ def angle_spectrum(img: np.ndarray, grid: PolarGrid, cdt: DTypeLike) -> np.ndarr
     dt = working_dtype(img)
     M = grid.n_angles // 2 + 1
     spec = np.zeros((grid.n_radii, M, C), dtype=cdt)
-    levels = _polar_levels(grid, True)
+    levels = polar_levels(grid, True)
     for c in range(C):
-        coef = _spline_filter(img[..., c], (0, 1), dt)
+        coef = spline_filter(img[..., c], (0, 1), dt)
         for (rows, n), pol in zip(levels, _sample_on_polar(coef, grid, levels)):
             f = sfft.rfft(pol, axis=1, workers=-1)
             if n == grid.n_angles:
@@ -298,8 +298,8 @@ def from_angle_spectrum(spec: np.ndarray, grid: PolarGrid, shape: tuple[int, int
     levels: list[tuple[int, int, int, int, tuple]] = []
     offset = 0
     for q, nq, lo, hi in _pixel_levels(grid, n2):
-        r0 = max(0, int(math.floor(grid.row_of(lo - _SPLINE_PX))))
-        r1 = min(grid.n_radii, int(math.ceil(grid.row_of(hi + _SPLINE_PX))) + 1)
+        r0 = max(0, int(math.floor(grid.row_of(lo - SPLINE_PX))))
+        r1 = min(grid.n_radii, int(math.ceil(grid.row_of(hi + SPLINE_PX))) + 1)
         cols = lead + nq + trail
         levels.append((q, r0, r1, nq, (offset, r1 - r0, cols, float(grid.n_inner - r0), nq,
                                        float(lead), lo if levels else min(lo, 0.0))))

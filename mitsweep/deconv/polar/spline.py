@@ -172,18 +172,34 @@ def _spline_filter_rows(c: np.ndarray) -> None:
     c *= c.dtype.type(6)                  # the filter's gain (1 - z)(1 - 1/z)
 
 
-def _spline_filter(a: np.ndarray, axes: tuple[int, ...], dtype) -> np.ndarray:
+def spline_filter(a: np.ndarray, axes: tuple[int, ...], dtype: DTypeLike) -> np.ndarray:
     """Cubic B-spline coefficients of the 2-D array ``a`` along ``axes`` (mirror ends),
     as ``scipy.ndimage.spline_filter1d`` gives them: along axis 0 row by row
     (:func:`_spline_filter_rows`), along axis 1 with ndimage in blocks across threads
-    (it releases the GIL): each line is filtered whole, so the result is the same."""
+    (it releases the GIL): each line is filtered whole, so the result is the same.
+
+    Parameters
+    ----------
+    a : (M, N) array_like
+        The samples; not modified.
+    axes : tuple of int
+        The axes filtered, in order: ``(0,)``, ``(1,)`` or ``(0, 1)``.
+    dtype : dtype
+        The coefficients' type, and the precision of the recursions (float32 or
+        float64).
+
+    Returns
+    -------
+    (M, N) ndarray of ``dtype``
+        The coefficients: a new array.
+    """
     out = np.array(a, dtype=dtype, copy=True)
     _spline_filter_in_place(out, axes)
     return out
 
 
 def _spline_filter_in_place(out: np.ndarray, axes: int | tuple[int, ...]) -> None:
-    """:func:`_spline_filter` written over the 2-D array (or view) ``out``."""
+    """:func:`spline_filter` written over the 2-D array (or view) ``out``."""
     dtype = out.dtype
     for axis in (axes,) if isinstance(axes, int) else axes:
         if axis == 0 and out.shape[0] > 2 * _POLE_HORIZON:
