@@ -200,3 +200,12 @@ def test_bench_weights_is_registered():
     from mitsweep.cli import bench as cli_bench
 
     assert cli_bench.TARGETS["weights"] == "mitsweep.deconv.weight_bench"
+
+
+def test_design_workflow_former_span_keyword_still_works_with_a_warning(tmp_path):
+    from mitsweep.workflows import design_motion_profile
+    from mitsweep.workflows._errors import InputError
+
+    with pytest.warns(DeprecationWarning, match="span_mm"), \
+            pytest.raises(InputError, match="the two ends must differ"):
+        design_motion_profile(PARABOLOID, tmp_path / "p.json", span_mm=(57.6, 57.6))

@@ -127,3 +127,13 @@ def test_fov_default_keeps_the_bank_and_its_cache_key():
     assert set(a.metadata) - {"seconds"} == set(b.metadata) - {"seconds"}
     name, _, trace = bank_cache_key(setup, settings=s, n_radii=3)
     assert "extent" not in trace
+
+
+def test_rim_radii_former_keyword_still_works_with_a_warning():
+    from mitsweep.deconv.synthetic import synthetic_radial_bank
+    from mitsweep.pipeline.rim import rim_radii
+
+    bank = synthetic_radial_bank((64, 64), n_radii=5, r_max_px=20.0, pixel_pitch=0.1)
+    with pytest.warns(DeprecationWarning, match="rim_mm"):
+        old = rim_radii(bank, rim_mm=3.3)
+    np.testing.assert_array_equal(old, rim_radii(bank, rim=3.3))

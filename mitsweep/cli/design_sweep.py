@@ -74,7 +74,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     result = design_motion_profile(
         args.setup, args.out, lux=args.lux, objective=args.objective, planes=args.planes,
-        span_mm=args.span_mm, radii=args.radii, grid=args.grid, depths=args.depth,
+        span=args.span_mm, radii=args.radii, grid=args.grid, depths=args.depth,
         rays=args.rays, kernel_size=args.kernel_size, seed=args.seed,
         brute_force_steps=args.brute_force_steps, plot=args.plot, progress=True,
         restoration=args.restoration, deploy_depth=args.deploy_depth, deploy_nsr=args.deploy_nsr)

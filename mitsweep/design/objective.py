@@ -259,7 +259,26 @@ def deployed_wiener_model(kernels: np.ndarray, depths_mm: ArrayLike, noise: Sens
     K, K): each depth restored with the kernels of the bank depth nearest
     ``deploy_depth_mm`` (in 1/depth, as :func:`mitsweep.deconv.kernels.select_depth`)
     and the NSR ``deploy_nsr`` (default the sensor's, :meth:`SensorNoise.nsr` at 0.5:
-    then only the kernel's depth differs from :func:`wiener_model`)."""
+    then only the kernel's depth differs from :func:`wiener_model`).
+
+    Parameters
+    ----------
+    kernels : (n_depths, n_points, N, K, K) ndarray
+        The plane bank's bin-averaged kernels.
+    depths_mm : array_like
+        The bank's depths, mm (n_depths; inf allowed).
+    noise : SensorNoise
+        The sensor at the design's light level.
+    deploy_depth_mm : float
+        The depth whose kernels restore every depth, mm (inf allowed; default 500 mm,
+        the datasets' bank depth).
+    deploy_nsr : float, optional
+        The restoration's NSR (default the sensor's at relative exposure 0.5).
+    n_fft : int
+        DFT grid of the MSE sum.
+    n_px : float
+        The restored image's size, px (the prior's scale).
+    """
     base = wiener_model(kernels, noise, n_fft=n_fft, n_px=n_px)
     k = np.asarray(kernels)
     D, P = k.shape[:2]

@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Setup
+from ..deprecation import renamed_keywords
 from ..io.bank import IPSFBank
 
 __all__ = ["rim_image_radius", "rim_radii", "rim_bank"]
@@ -43,21 +44,23 @@ def rim_image_radius(setup: Setup, sensor_distance: float) -> float:
     return rim_field_radius(setup, sensor_distance=sensor_distance)
 
 
-def rim_radii(bank: IPSFBank, rim_mm: float) -> np.ndarray:
+@renamed_keywords(rim_mm="rim")
+def rim_radii(bank: IPSFBank, rim: float) -> np.ndarray:
     """The radii (mm) beyond ``bank``'s last one, at its own spacing, the last one at
-    ``rim_mm`` (none if the bank already reaches it;
+    ``rim`` (none if the bank already reaches it;
     :func:`mitsweep.tracer.bank.rim_radii`).
 
     Parameters
     ----------
     bank : IPSFBank
         A radial bank.
-    rim_mm : float
-        The radius to reach, mm (:func:`rim_image_radius`).
+    rim : float
+        The radius to reach, mm (:func:`rim_image_radius`). Formerly ``rim_mm`` (still
+        accepted, with a DeprecationWarning).
     """
     from ..tracer.bank import rim_radii as radii_to
 
-    return radii_to(np.asarray(bank.radii, dtype=np.float64), rim_mm)
+    return radii_to(np.asarray(bank.radii, dtype=np.float64), rim)
 
 
 def rim_bank(setup: Setup, bank: IPSFBank, *, rays: int | None = None) -> IPSFBank:

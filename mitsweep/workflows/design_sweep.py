@@ -16,13 +16,14 @@ from collections.abc import Sequence
 
 from .. import __version__
 from ..config import Setup
+from ..deprecation import renamed_keywords
 from ._base import (InputError, Progress, WorkflowResult, progress_callback, resolve_setup)
 from ._paths import check_outputs
 
 __all__ = ["design_motion_profile"]
 
 
-def _check_args(setup, *, kernel_size, planes, seed, brute_force_steps, out, span_mm,
+def _check_args(setup, *, kernel_size, planes, seed, brute_force_steps, out, span,
                 restoration, deploy_depth, deploy_nsr) -> None:
     from ..design.objective import DEFAULT_FFT_SIZE
     from ..design.sweep import RESTORATIONS
@@ -59,8 +60,8 @@ def _check_args(setup, *, kernel_size, planes, seed, brute_force_steps, out, spa
                          f"{brute_force_steps}")
     if not os.fspath(out).lower().endswith(".json"):
         raise InputError(f"--out {out}: a motion-profile file must end in .json")
-    if span_mm is not None:
-        a, b = span_mm
+    if span is not None:
+        a, b = span
         f = setup.lens.focal_length
         if a == b:
             raise InputError(f"--span-mm {a:g} {b:g}: the two ends must differ")
@@ -99,9 +100,10 @@ def _plot_design(design, path: str | os.PathLike) -> None:
     save_figure(fig, os.fspath(path))
 
 
+@renamed_keywords(span_mm="span")
 def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
                           lux: float = 50.0, objective: str = "worst", planes: int = 64,
-                          span_mm: tuple[float, float] | None = None, radii: int = 9,
+                          span: tuple[float, float] | None = None, radii: int = 9,
                           grid: tuple[int, int] = (5, 5),
                           depths: Sequence[float] | None = None, rays: int = 1 << 16,
                           kernel_size: int = 31, seed: int = 0, brute_force_steps: int = 16,
@@ -126,8 +128,9 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
         Minimise the worst or the mean predicted MSE over field points x depths.
     planes : int
         Bins N of sensor distance over the span (in [MIN_PLANES, 1024]).
-    span_mm : (float, float), optional
-        Sweep from sensor distance A to B, mm (default: the optimal range).
+    span : (float, float), optional
+        Sweep from sensor distance A to B, mm (default: the optimal range). Formerly
+        ``span_mm`` (still accepted, with a DeprecationWarning).
     radii, grid
         Field points: radii from the centre to the FOV's edge (untilted mirrors), or a
         grid over the sensor (tilted mirrors).
@@ -197,13 +200,13 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
         check_figure_path(os.fspath(plot), "--plot")
     setup = resolve_setup(setup)
     _check_args(setup, kernel_size=kernel_size, planes=planes, seed=seed,
-                brute_force_steps=brute_force_steps, out=out, span_mm=span_mm,
+                brute_force_steps=brute_force_steps, out=out, span=span,
                 restoration=restoration, deploy_depth=deploy_depth, deploy_nsr=deploy_nsr)
     noise = paper_fig10_settings(NOISE_PIXEL_MM, lux)["sweep"]
     with progress_callback(progress, None, "plane banks", "point") as step:
         design = design_sweep(setup, noise=noise, objective=objective, n_planes=planes,
-                              span=None if span_mm is None else
-                              (float(span_mm[0]), float(span_mm[1])),
+                              span=None if span is None else
+                              (float(span[0]), float(span[1])),
                               n_radii=radii, grid=(int(grid[0]), int(grid[1])), depths=depths,
                               rays=rays,
                               kernel_size=kernel_size, seed=seed,
