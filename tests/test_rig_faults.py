@@ -87,6 +87,11 @@ def test_zaber_fault_releases_shutter_and_records_incomplete(sphere_zaber, tmp_p
         assert_safe(stage.model, lo, hi)
 
 
+def _is_sweep(line: bytes) -> bool:
+    """Whether a line the host sent the simulated board is a ``SWEEP`` command."""
+    return line.split()[:1] == [b"SWEEP"]
+
+
 class _InterruptingBoard(ArduinoModel):
     """Presses Ctrl-C (SIGINT to the main thread) 0.2 s into the sweep.
 
@@ -95,10 +100,11 @@ class _InterruptingBoard(ArduinoModel):
 
     timer = None
 
-    def _cmd_sweep(self, nums, now):
-        self.timer = threading.Timer(0.2, _thread.interrupt_main)
-        self.timer.start()
-        return super()._cmd_sweep(nums, now)
+    def handle(self, line, now):
+        if _is_sweep(line):
+            self.timer = threading.Timer(0.2, _thread.interrupt_main)
+            self.timer.start()
+        return super().handle(line, now)
 
 
 def test_ctrl_c_during_sweep_stops_and_records_interrupted(sphere, tmp_path):
@@ -127,9 +133,10 @@ def test_record_marked_running_before_motion(sphere, tmp_path):
     seen = {}
 
     class Spy(ArduinoModel):
-        def _cmd_sweep(self, nums, now):
-            seen.update(load_capture_record(out))
-            return super()._cmd_sweep(nums, now)
+        def handle(self, line, now):
+            if _is_sweep(line):
+                seen.update(load_capture_record(out))
+            return super().handle(line, now)
 
     with PtyDevice(Spy(homed=True, position=plan.approach_steps)) as dev:
         run_capture(sphere, RigPorts(arduino=dev.port), out=out)
@@ -143,10 +150,11 @@ class _TerminatedBoard(ArduinoModel):
 
     timer = None
 
-    def _cmd_sweep(self, nums, now):
-        self.timer = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGTERM))
-        self.timer.start()
-        return super()._cmd_sweep(nums, now)
+    def handle(self, line, now):
+        if _is_sweep(line):
+            self.timer = threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGTERM))
+            self.timer.start()
+        return super().handle(line, now)
 
 
 def test_sigterm_during_sweep_runs_the_safety_path_and_restores_handlers(sphere, tmp_path):

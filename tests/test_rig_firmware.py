@@ -305,8 +305,8 @@ def test_simulator_and_firmware_answer_alike(board_port):
             assert re.match(reply, line), (command, line)
             seen = []
             while len(seen) < len(events):
-                board._take_event(t.read_line(timeout_s=3.0))
-                ev = board._unread.pop(0)
+                ev = board.take_event(t.read_line(timeout_s=3.0))
+                assert ev is not None
                 assert ev.name != "FAULT" or "FAULT" in events, (command, ev)
                 if ev.name != "POS":
                     seen.append(ev)

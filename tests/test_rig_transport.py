@@ -126,7 +126,7 @@ def test_safety_path_discards_a_partial_line_left_by_an_interruption(pty_link):
     os.write(fds["master"], b"EV POS 1 2\nE")
     time.sleep(0.05)
     assert t.read_line() == "EV POS 1 2"
-    t._fill(0.05)                      # the partial "E" is now buffered
+    t.fill(0.05)                       # the partial "E" is now buffered
     assert t.unread == b"E"
     th = _answer_stop(fds, b"OK STOP 1234 5139\n")
     a = ArduinoSweepController(t, steps_per_mm=400.0)

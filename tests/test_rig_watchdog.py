@@ -61,7 +61,7 @@ def test_sigkilled_host_simulator_board_stops_within_watchdog(tmp_path, rig_kind
         board = rig.board.model
 
         def safe() -> bool:
-            shutter_done = not board.shutter_open and board._shutter_plan is None
+            shutter_done = not board.shutter_open and not board.exposure_pending
             # in zaber mode the board guards the exposure only: the stage's own move
             # runs to its target (no watchdog on a Zaber stage)
             return shutter_done and (rig.stage or not board.moving(time.monotonic()))

@@ -506,7 +506,7 @@ class ArduinoSweepController(Stage, Shutter):
                 raise ReplyTimeout(f"{self.name}: no EV {name} before the deadline") from None
             if _PING_RE.match(line):
                 continue
-            if not self._take_event(line):
+            if self.take_event(line) is None:
                 raise self._unexpected(line, f"line while waiting for EV {name}")
 
     def poll_events(self) -> None:
@@ -514,7 +514,7 @@ class ArduinoSweepController(Stage, Shutter):
         :meth:`wait_event`)."""
         while self.transport.pending():
             line = self.transport.read_line(timeout_s=0.0)
-            if not _PING_RE.match(line) and not self._take_event(line):
+            if not _PING_RE.match(line) and self.take_event(line) is None:
                 raise self._unexpected(line, "line between events")
 
     def safe_stop(self, *, timeout_s: float = SAFETY_REPLY_TIMEOUT_S) -> int | None:
@@ -545,7 +545,7 @@ class ArduinoSweepController(Stage, Shutter):
         def keep_event(line: str) -> None:
             if line.startswith("EV "):
                 try:
-                    self._take_event(line)
+                    self.take_event(line)
                 except ProtocolError:
                     pass
 
@@ -598,15 +598,29 @@ class ArduinoSweepController(Stage, Shutter):
             return None
         return self.heartbeat_s, lambda: self.transport.write_line("PING")
 
-    def _take_event(self, line: str) -> bool:
+    def take_event(self, line: str) -> BoardEvent | None:
+        """Take ``line`` as an ``EV`` line from the board: the event, its time unwrapped
+        (:class:`BoardClock`), recorded in :attr:`events` and queued for
+        :meth:`wait_event`.
+
+        Parameters
+        ----------
+        line : str
+            A line read from the board (without its end of line).
+
+        Returns
+        -------
+        BoardEvent or None
+            The event; None (nothing recorded) when ``line`` is not an event line.
+        """
         m = _EVENT_RE.match(line)
         if not m:
-            return False
+            return None
         ev = BoardEvent(m.group(1), self.clock.unwrap(int(m.group(2))), int(m.group(3)),
                         m.group(4) or "", self.transport.log.now())
         self.events.append(ev)
         self._unread.append(ev)
-        return True
+        return ev
 
     def _query(self, command: str, *, n_fields: int) -> list[str]:
         self.transport.write_line(command)
@@ -617,7 +631,7 @@ class ArduinoSweepController(Stage, Shutter):
                 line = self.transport.read_line(deadline=deadline)
             except ReplyTimeout:
                 raise ReplyTimeout(f"{self.name}: no reply to {command!r}") from None
-            if (line.startswith("EV ") and self._take_event(line)) or _PING_RE.match(line):
+            if (line.startswith("EV ") and self.take_event(line) is not None) or _PING_RE.match(line):
                 continue
             return self._expect_ok(word, line, n_fields=n_fields, command=command)
 

@@ -369,7 +369,7 @@ class LineTransport:
             if remaining <= 0:
                 # what arrived while this host was not scheduled arrived in time: read
                 # it before calling the deadline missed
-                self._fill(0.0)
+                self.fill(0.0)
                 line = self._pop_line()
                 if line is not None:
                     return self._accept(line)
@@ -380,11 +380,11 @@ class LineTransport:
                     raise ProtocolError(f"{self.name}: partial line {partial!r} at the deadline "
                                         f"(no line terminator)")
                 raise ReplyTimeout(f"{self.name}: no reply within the deadline")
-            self._fill(min(remaining, 0.05))
+            self.fill(min(remaining, 0.05))
 
     def pending(self) -> bool:
         """True if a whole line is already buffered or waiting on the port."""
-        self._fill(0.0)
+        self.fill(0.0)
         return self._has_line()
 
     def send_on_safety_path(self, line: str, until: Callable[[str], T | None], *, timeout_s: float,
@@ -445,7 +445,7 @@ class LineTransport:
     def drain(self) -> list[str]:
         """Read and log whatever is waiting now (used after a reset); returns raw texts."""
         out = []
-        self._fill(0.0)
+        self.fill(0.0)
         while (line := self._pop_line()) is not None:
             text = line.decode("ascii", "replace")
             self.log.add(self.name, "rx", text + " <drained>")
@@ -489,7 +489,17 @@ class LineTransport:
             if line:
                 return line
 
-    def _fill(self, wait_s: float) -> None:
+    def fill(self, wait_s: float) -> None:
+        """Move what the port has received into the line buffer (:attr:`unread`),
+        returning no line: all bytes waiting now, else those that arrive within
+        ``wait_s``. A lost port is marked lost (the next read raises).
+
+        Parameters
+        ----------
+        wait_s : float
+            How long to wait for a first byte when none is waiting, s; 0 or less: do
+            not wait.
+        """
         self._check_alive()
         try:
             waiting = self.serial.in_waiting

@@ -194,6 +194,12 @@ class ArduinoModel(Model):
         self.watchdog_s = nums[0] * 1e-3
         return [self._line(f"OK WATCHDOG {nums[0]}")]
 
+    @property
+    def exposure_pending(self) -> bool:
+        """Whether an exposure is planned (by ``SWEEP``, ``TSWEEP`` or ``SHUTTER``) and not
+        yet over: the shutter is to open, or is open and to close at its planned time."""
+        return self._shutter_plan is not None
+
     def watchdog_armed(self, now: float) -> bool:
         """Motion, or an exposure pending or open: what the watchdog guards.
 
