@@ -9,7 +9,7 @@ import pytest
 import mitsuba as mi  # noqa: E402
 
 from mitsweep.config import load_setup  # noqa: E402
-from mitsweep.render.api import (SAMPLERS, _multijitter_count, camera_dict,  # noqa: E402
+from mitsweep.render.api import (SAMPLERS, camera_dict, multijitter_count,  # noqa: E402
                                  mode_camera, pass_counts)
 from mitsweep.render.ad_integrator import INTEGRATOR_NAME as LIT_NAME  # noqa: E402
 from mitsweep.render.ad_integrator import MAX_DEPTH as LIT_MAX_DEPTH  # noqa: E402
@@ -95,7 +95,7 @@ def test_multijitter_count_is_mitsubas():
                for n in range(1, 130)]
     finally:
         mi.set_log_level(level)
-    assert got == [_multijitter_count(n) for n in range(1, 130)]
+    assert got == [multijitter_count(n) for n in range(1, 130)]
 
 
 def _mean_var(scene, seeds, spp):

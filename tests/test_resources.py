@@ -139,7 +139,7 @@ def test_a_render_over_the_cap_is_refused_before_mitsuba_runs(monkeypatch):
 
     monkeypatch.setenv(MAX_MEMORY_ENV, "0.001")          # ~1 MiB
     setup = replace(DEFAULT_SETUP, sensor=Sensor(resolution=(256, 256), pixel_pitch=0.036))
-    monkeypatch.setattr(api, "_render_passes", lambda *a, **k: pytest.fail("rendered"))
+    monkeypatch.setattr(api, "render_passes", lambda *a, **k: pytest.fail("rendered"))
     with pytest.raises(ResourceError, match=r"render of 256x256 px .*: needs .* over the 1\.0 MiB"):
         api.render_image(setup, "pinhole", spp=4)
 

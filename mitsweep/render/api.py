@@ -317,9 +317,20 @@ def _pass_seeds(seed: int, n: int) -> list[int]:
     return [int((seed * 1_000_003 + k) % (1 << 32)) for k in range(n)]
 
 
-def _multijitter_count(n: int) -> int:
+def multijitter_count(n: int) -> int:
     """The sample count Mitsuba's ``multijitter`` sampler makes of ``n``: a
-    ``floor(sqrt(n))`` × ``ceil(n / floor(sqrt(n)))`` grid (it rounds up to that)."""
+    ``floor(sqrt(n))`` × ``ceil(n / floor(sqrt(n)))`` grid (it rounds up to that).
+
+    Parameters
+    ----------
+    n : int
+        Samples per pixel asked of the sampler, >= 1.
+
+    Returns
+    -------
+    int
+        Samples per pixel it takes, >= ``n``.
+    """
     f = math.isqrt(n)
     return f * -(-n // f)
 
@@ -347,12 +358,12 @@ def pass_counts(spp: int, per_pass: int, sampler: str = "independent") -> list[i
     if sampler == "independent":
         return [per_pass] * (n - 1) + [spp - per_pass * (n - 1)]
     for k in range(n, 2 * n + 1):
-        if spp % k == 0 and _multijitter_count(spp // k) == spp // k:
+        if spp % k == 0 and multijitter_count(spp // k) == spp // k:
             return [spp // k] * k
     counts, left = [], spp
     while left > 0:
         c = min(left, per_pass)
-        while _multijitter_count(c) != c:
+        while multijitter_count(c) != c:
             c -= 1
         counts.append(c)
         left -= c
@@ -395,12 +406,32 @@ def _render_loaded(scene, counts, seed, *, progress=True, desc="render"):
     return (acc / spp).astype(np.float32), _time.perf_counter() - t0
 
 
-def _render_passes(scene_dict, spp, seed, *, progress=True, desc="render", check=None):
+def render_passes(scene_dict, spp, seed, *, progress=True, desc="render", check=None):
     """Render ``spp`` samples in passes (memory bound, progress).
 
-    ``check(scene)``, if given, runs on the loaded scene before any pass (it raises to
-    stop). Returns the mean image (h, w, C), the loaded scene and the seconds spent
-    rendering (the passes only, not the scene load).
+    Parameters
+    ----------
+    scene_dict : dict
+        The Mitsuba scene description (``mi.load_dict``'s), its sampler included.
+    spp : int
+        Samples per pixel in all, split into passes by :func:`pass_counts`.
+    seed : int
+        The render's seed; pass k renders with seed ``(seed * 1000003 + k) mod 2**32``.
+    progress : bool, optional
+        Show a progress bar on stderr (default True).
+    desc : str, optional
+        The progress bar's label (default ``"render"``).
+    check : callable, optional
+        ``check(scene)`` runs on the loaded scene before any pass; it raises to stop.
+
+    Returns
+    -------
+    image : (h, w, C) ndarray of float32
+        The mean over all samples.
+    scene : mitsuba.Scene
+        The loaded scene.
+    seconds : float
+        Wall time of the passes only, not of the scene load.
     """
     scene, counts = _load_passes(scene_dict, spp)
     if check is not None:
@@ -557,7 +588,7 @@ def render_image(setup: Setup, mode: str, *, spp: int, seed: int = 0, aovs: Iter
             user.provenance["view"] = check_view(loaded, setup, i_ref, label=user.label,
                                                  aperture_radius=kwargs["aperture_radius"])
     t0 = _time.perf_counter()
-    img, scene, t_render = _render_passes(scene_dict, spp, seed, progress=progress,
+    img, scene, t_render = render_passes(scene_dict, spp, seed, progress=progress,
                                           desc=f"{mode}", check=check)
     t_total = _time.perf_counter() - t0
     full = np.zeros((H, W, 3), dtype=np.float32)
@@ -713,7 +744,7 @@ def render_point_source(setup: Setup, u: float, v: float, depth: float, *, spp: 
                                             normal_tol=mesh_tol)
     scene_dict, _ = build_scene(setup, cam, surroundings=False, extra={"source": source},
                                 max_depth=2, **mesh)
-    img, _, _ = _render_passes(scene_dict, spp, seed, progress=False)
+    img, _, _ = render_passes(scene_dict, spp, seed, progress=False)
     out = np.zeros((H, W), dtype=np.float64)
     x, y, w, h = crop
     out[y:y + h, x:x + w] = img[..., :3].mean(axis=-1)

@@ -208,7 +208,7 @@ def _mesh_accuracy(setup, tols, spp):
 def _window_render(setup, mode, spp, seed, *, integrator=None, sampler=None):
     """One render of the mirror's window as :func:`render_image` makes it, optionally
     with another integrator: (image, wall s, CPU s)."""
-    from .api import MODE_SAMPLERS, _render_passes, camera_dict, mirror_image_bbox, mode_camera
+    from .api import MODE_SAMPLERS, camera_dict, mirror_image_bbox, mode_camera, render_passes
     from .scene import build_scene
 
     kw, desc = mode_camera(setup, mode, None, None)
@@ -218,7 +218,7 @@ def _window_render(setup, mode, spp, seed, *, integrator=None, sampler=None):
     if integrator is not None:
         d["integrator"] = integrator
     c0 = time.process_time()
-    img, _, wall = _render_passes(d, spp, seed, progress=False)
+    img, _, wall = render_passes(d, spp, seed, progress=False)
     return img, wall, time.process_time() - c0
 
 
