@@ -1,0 +1,319 @@
+"""The measured tables of the docs, tied to the commands that produce them.
+
+Every Markdown table of ``docs/**/*.md`` whose cells hold a number carries a marker, an
+HTML comment on the lines just above it (blank lines between are allowed)::
+
+    <!-- figures: NAME; tolerance: printed -->
+
+``figures: NAME``
+    the table is produced by the figure ``NAME`` of :data:`FIGURES`: its command(s) are
+    run and each documented number is checked against the value the command prints.
+``figures: timing``
+    a table of machine-dependent timings: not asserted, but the paragraph above the
+    table must name the command that measured it (in backticks) and the machine.
+``figures: generated (TEST)``
+    the table is written by code and compared with it by TEST (e.g. the setup keys).
+``figures: not checked (REASON)``
+    the numbers are not re-run (the paper's own, a study of hours, a photograph);
+    REASON says why, and the report of ``tests/test_doc_figures.py`` lists it.
+
+``tolerance`` (checked tables only): ``printed`` (the default: the documented number
+is the command's value rounded to the digits shown, i.e. within half a unit of its last
+digit), ``N%`` (relative) or ``±X`` (absolute); several, separated by ``,``, are added.
+
+A figure (:class:`Figure`) says which command the page cites (the test checks that the
+text above the table names it), the commands run (as a reader would type them, from the
+repository's root) and a function that turns their outputs into the table's rows: one
+list per row, one entry per cell: ``None`` for a cell that is not checked (a label, a
+number quoted from the paper, a timing), else the list of numbers the cell must show, in
+order. Numbers are read from a cell as written (``−`` is a minus sign, ``–`` a range's
+dash, ``12,403`` one number; ``±`` and ``°`` are dropped).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import re
+import subprocess
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+_NUMBER = re.compile(r"(?<![A-Za-z_\d.])[-+]?(?:\d{1,3}(?:,\d{3})+(?!\d)|\d+\.\d*|\.\d+|\d+)"
+                     r"(?:[eE][-+]?\d+)?")
+_MARKER = re.compile(r"<!--\s*figures:(?P<body>.*?)-->", re.S)
+#: A machine, as a timing table's paragraph must name it.
+MACHINE = re.compile(r"\b(core|cores|CPU|GPU|H200|VM|machine)\b", re.I)
+
+Rows = list[list[list[float] | None]]
+
+
+@dataclass(frozen=True)
+class Figure:
+    """How one documented table is reproduced.
+
+    Attributes
+    ----------
+    cites : str
+        The command as the page names it next to the table (checked to be there).
+    commands : tuple of str
+        The shell commands run, from the repository's root; their stdout are passed, in
+        order, to ``rows``.
+    rows : callable
+        ``rows(outputs) -> Rows``: the table's expected numbers (see the module doc).
+    slow : bool
+        True when the commands take more than about 10 s together (run with ``-m slow``).
+    """
+    cites: str
+    commands: tuple[str, ...]
+    rows: Callable[[list[str]], Rows]
+    slow: bool = False
+
+
+@dataclass
+class Table:
+    """One Markdown table of a page, with its marker."""
+    path: Path
+    line: int
+    header: list[str]
+    body: list[list[str]]
+    above: str
+    marker: dict
+
+    @property
+    def where(self) -> str:
+        return f"{self.path.relative_to(ROOT).as_posix()}:{self.line}"
+
+    @property
+    def kind(self) -> str:
+        """``check``, ``timing``, ``generated``, ``not checked`` or ``none``."""
+        name = self.marker.get("figures", "")
+        for kind in ("timing", "generated", "not checked"):
+            if name.startswith(kind):
+                return kind
+        return "check" if name else "none"
+
+    @property
+    def has_numbers(self) -> bool:
+        return any(numbers(c) for row in self.body for c in row)
+
+
+def doc_pages() -> list[Path]:
+    """Every Markdown page of docs/, but the build's output and docs/benchmarks.md
+    (generated from its JSON by scripts/bench_docs.py, checked by
+    tests/test_bench_docs.py)."""
+    return [p for p in sorted((ROOT / "docs").rglob("*.md"))
+            if "_build" not in p.parts and p.name != "benchmarks.md"]
+
+
+def _split_row(line: str) -> list[str]:
+    cells = re.split(r"(?<!\\)\|", line.strip().strip("|"))
+    return [c.strip() for c in cells]
+
+
+def _marker(lines: list[str], i: int) -> dict:
+    """The ``figures:`` marker among the one-line HTML comments (and blank lines) right
+    above line ``i``, parsed."""
+    k = i - 1
+    while k >= 0 and (not lines[k].strip() or (lines[k].lstrip().startswith("<!--")
+                                               and lines[k].rstrip().endswith("-->"))):
+        m = _MARKER.fullmatch(lines[k].strip())
+        if m:
+            out: dict = {}
+            for part in m.group("body").split(";"):
+                key, sep, value = part.partition(":")
+                if not out:                     # the first part is the figure itself
+                    out["figures"] = part.strip()
+                elif sep:
+                    out[key.strip().lower()] = value.strip()
+            return out
+        k -= 1
+    return {}
+
+
+def tables(paths: Sequence[Path] | None = None) -> list[Table]:
+    """Every Markdown table of the given pages (default: all of docs/)."""
+    found = []
+    for path in paths or doc_pages():
+        lines = path.read_text(encoding="utf-8").splitlines()
+        i = 0
+        while i < len(lines):
+            if lines[i].startswith("|") and i + 1 < len(lines) \
+                    and re.fullmatch(r"\|(\s*:?-{3,}:?\s*\|)+", lines[i + 1].strip()):
+                j = i + 2
+                while j < len(lines) and lines[j].startswith("|"):
+                    j += 1
+                found.append(Table(path, i + 1, _split_row(lines[i]),
+                                   [_split_row(l) for l in lines[i + 2:j]],
+                                   _prose_above(lines, i), _marker(lines, i)))
+                i = j
+                continue
+            i += 1
+    return found
+
+
+def _prose_above(lines: list[str], i: int) -> str:
+    """The paragraph above line ``i`` (its marker and blank lines skipped)."""
+    k = i - 1
+    while k >= 0 and (not lines[k].strip() or lines[k].lstrip().startswith("<!--")
+                      or lines[k].rstrip().endswith("-->")):
+        k -= 1
+    end = k
+    while k >= 0 and lines[k].strip() and not lines[k].startswith("|"):
+        k -= 1
+    return "\n".join(lines[k + 1:end + 1])
+
+
+def numbers(cell: str) -> list[float]:
+    """The numbers a cell shows, as written (see the module doc)."""
+    return [float(n) for n in _written(cell)]
+
+
+def _written(cell: str) -> list[str]:
+    """The numbers of a cell as strings (for their printed digits); code spans, images
+    and links are not read, nor digits that are part of a name (``F11``, ``fig3``)."""
+    text = re.sub(r"`[^`]*`|!?\[[^\]]*\]\([^)]*\)", " ", cell)
+    text = text.replace("\u2212", "-").replace("±", " ").replace("°", " ")
+    text = re.sub(r"(?<=\d)\s*[–—]\s*(?=[-\d])", " ", text)   # a range's dash
+    return [n.replace(",", "") for n in _NUMBER.findall(text)]
+
+
+def slack(written: str, tolerance: str) -> float:
+    """The largest allowed difference for a number ``written`` so, under ``tolerance``."""
+    value = float(written)
+    allowed = 0.0
+    for part in (p.strip() for p in (tolerance or "printed").split(",")):
+        if part == "printed":
+            mantissa, _, exponent = written.lower().partition("e")
+            decimals = len(mantissa.split(".")[1]) if "." in mantissa else 0
+            allowed += 0.5 * 10.0 ** (int(exponent or 0) - decimals)
+        elif part.endswith("%"):
+            allowed += float(part[:-1]) / 100 * abs(value)
+        elif part.startswith("±"):
+            allowed += float(part[1:])
+        else:
+            raise ValueError(f"tolerance {part!r}: expected printed, N% or ±X")
+    return allowed * (1 + 1e-9)
+
+
+def compare(table: Table, expected: Rows) -> list[str]:
+    """The mismatches between a table's cells and the numbers a figure expects."""
+    tolerance = table.marker.get("tolerance", "printed")
+    if len(expected) != len(table.body):
+        return [f"{table.where}: {len(table.body)} rows documented, {len(expected)} produced"]
+    problems = []
+    for r, (doc_row, want_row) in enumerate(zip(table.body, expected)):
+        if len(want_row) != len(doc_row):
+            problems.append(f"row {r + 1}: {len(doc_row)} cells, {len(want_row)} produced")
+            continue
+        for c, (cell, want) in enumerate(zip(doc_row, want_row)):
+            if want is None:
+                continue
+            shown = _written(cell)
+            if len(shown) != len(want):
+                problems.append(f"row {r + 1} {table.header[c]!r}: {cell!r} shows "
+                                f"{len(shown)} numbers, the command gives {list(want)}")
+                continue
+            for w, value in zip(shown, want):
+                if not (abs(float(w) - value) <= slack(w, tolerance)
+                        or (math.isinf(value) and math.isinf(float(w)))):
+                    problems.append(f"row {r + 1} {table.header[c]!r}: {w} documented, "
+                                    f"{value:.6g} computed (tolerance {tolerance})")
+    return [f"{table.where}: {p}" for p in problems]
+
+
+@functools.cache
+def run(command: str, timeout: float = 600) -> str:
+    """stdout of ``command`` run from the repository's root (cached per test session)."""
+    from doc_snippets import environment
+    done = subprocess.run(command, shell=True, cwd=ROOT, env=environment(), text=True,
+                          capture_output=True, timeout=timeout)
+    if done.returncode != 0:
+        raise RuntimeError(f"{command!r} exited {done.returncode}: {done.stderr[-2000:]}")
+    return done.stdout
+
+
+def _json(text: str) -> dict:
+    return json.loads(text[text.index("{"):text.rindex("}") + 1])
+
+
+# -- the figures ------------------------------------------------------------------------
+
+_SETUPS = ("sphere", "paraboloid", "paraboloid_tilted")
+
+
+def _sweep_design_rows(outputs: list[str]) -> Rows:
+    """setup | FOV | paper sweep | mitsweep sweep | paper travel | mitsweep travel."""
+    rows: Rows = []
+    for text in outputs:
+        d = _json(text)
+        rows.append([None, [d["fov_deg"]], None, [d["focus_min_mm"], d["focus_max_mm"]],
+                     None, [d["translation_mm"]]])
+    return rows
+
+
+SWEEP_RANGES = Figure(
+    cites="mitsweep sweep-range",
+    commands=tuple(f".venv/bin/mitsweep sweep-range scenes/{s}.toml --json" for s in _SETUPS),
+    rows=_sweep_design_rows)
+
+#: (setup, --field) per row of docs/reference/tracer.md's traced sweep-range table
+_TRACED = (("sphere", "plane"), ("paraboloid", "plane"), ("paraboloid", "mirror"),
+           ("paraboloid_tilted", "plane"), ("paraboloid_tilted", "fov"),
+           ("paraboloid_tilted", "mirror"))
+
+
+def _traced_rows(outputs: list[str]) -> Rows:
+    """setup | field | analytic | traced | farthest focus at (x, y mm; depth m)."""
+    rows: Rows = []
+    for (_, field_name), text in zip(_TRACED, outputs):
+        d = _json(text)
+        at = d["traced_focus_max_at"]
+        analytic = [d["focus_min_mm"], d["focus_max_mm"]] if field_name == "plane" else []
+        rows.append([None, None, analytic, [d["traced_focus_min_mm"], d["traced_focus_max_mm"]],
+                     [at["x_mm"], abs(at["y_mm"]), at["depth_mm"] / 1000]])
+    return rows
+
+
+TRACED_SWEEP_RANGES = Figure(
+    cites="mitsweep sweep-range scenes/X.toml --verify",
+    commands=tuple(f".venv/bin/mitsweep sweep-range scenes/{s}.toml --verify --field {f} --json"
+                   for s, f in _TRACED),
+    rows=_traced_rows, slow=True)
+
+
+def _table1_rows(outputs: list[str]) -> Rows:
+    """sweep range | V_avg | centre tan | centre rad | periphery tan | periphery rad, and
+    the conventional camera's V_avg."""
+    d = _json(outputs[0])
+    rows: Rows = []
+    for row in d["rows"]:
+        k = row["kurtosis"]
+        rows.append([[row["focus_min_mm"], row["focus_max_mm"]], [row["v_avg"]],
+                     [k["center"]["tangential"]], [k["center"]["radial"]],
+                     [k["periphery"]["tangential"]], [k["periphery"]["radial"]]])
+    rows.append([None, [d["conventional"]["v_avg"]], [], [], [], []])
+    return rows
+
+
+TABLE1_SPHERE = Figure(
+    cites="table1",
+    commands=(".venv/bin/mitsweep table1 scenes/sphere.toml --json",),
+    rows=_table1_rows, slow=True)
+
+TABLE1_PARABOLOID = Figure(
+    cites="table1",
+    commands=(".venv/bin/mitsweep table1 scenes/paraboloid.toml --json",),
+    rows=_table1_rows, slow=True)
+
+
+#: Every checked figure, by the name its page's marker gives.
+FIGURES: dict[str, Figure] = {
+    "sweep-ranges": SWEEP_RANGES,
+    "traced-sweep-ranges": TRACED_SWEEP_RANGES,
+    "table1-sphere": TABLE1_SPHERE,
+    "table1-paraboloid": TABLE1_PARABOLOID,
+}
