@@ -104,7 +104,7 @@ def test_design_sweep_refuses_bad_restoration_options(tmp_path, capsys, extra, m
 
 def test_design_workflow_refuses_what_the_command_line_cannot_say(tmp_path):
     from mitsweep.workflows import design_motion_profile
-    from mitsweep.workflows._errors import InputError
+    from mitsweep.workflows import InputError
 
     out = tmp_path / "p.json"
     with pytest.raises(InputError, match="--restoration: must be one of"):
@@ -143,7 +143,7 @@ def test_budget_rim_bank_restores_with_the_bank_traced_to_the_rim(tiny_dataset, 
                                  "--json", "--out", out)
     assert rc == 0, stderr
     rim = json.loads(stdout)
-    assert "bank" not in own and rim["bank"] == "radial bank traced to the mirror's rim"
+    assert "bank" not in own and rim["bank"].startswith("radial bank traced to the mirror's rim (")
     a, b = own["budgets"][item], rim["budgets"][item]
     # the same design FOV (the beyond_fov region), traced further out
     assert b["info"]["fov_radius_px"] == a["info"]["fov_radius_px"]
@@ -159,9 +159,9 @@ def test_budget_rim_bank_restores_with_the_bank_traced_to_the_rim(tiny_dataset, 
                                                               rel=1e-12)
     assert json.loads((out / "budget.json").read_text()) == rim
     assert (out / "budget.txt").read_text().startswith(
-        "bank: radial bank traced to the mirror's rim\n")
+        f"bank: {rim['bank']}\n")
     rc, text, _ = run_cli("budget", tiny_dataset, "--item", "edof_50lux", "--rim-bank")
-    assert rc == 0 and text.startswith("bank: radial bank traced to the mirror's rim\n")
+    assert rc == 0 and text.startswith(f"bank: {rim['bank']}\n")
 
 
 def test_budget_rim_bank_takes_no_value(tiny_dataset):
@@ -204,7 +204,7 @@ def test_bench_weights_is_registered():
 
 def test_design_workflow_former_span_keyword_still_works_with_a_warning(tmp_path):
     from mitsweep.workflows import design_motion_profile
-    from mitsweep.workflows._errors import InputError
+    from mitsweep.workflows import InputError
 
     with pytest.warns(DeprecationWarning, match="span_mm"), \
             pytest.raises(InputError, match="the two ends must differ"):

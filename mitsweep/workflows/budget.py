@@ -32,9 +32,15 @@ def _rim_bank(dataset: str | os.PathLike) -> tuple[IPSFBank, str]:
 
     bank = load_bank(Path(dataset) / BANK)
     setup = setup_from_dict(load_manifest(Path(dataset))["setup"])
-    how = ("radial bank traced to the mirror's rim" if bank.kind == "radial" else
-           "grid bank, off-mirror nodes filled")
-    return extend_to_rim(setup, bank), how
+    rim = extend_to_rim(setup, bank)
+    meta = rim.metadata or {}
+    if rim.kind == "radial":
+        how = (f"radial bank traced to the mirror's rim ({meta.get('rim_points', 0)} "
+               f"points beyond the FOV's {len(bank.points_uv)})")
+    else:
+        how = (f"grid bank, {len(meta.get('filled_nodes', []))} off-mirror nodes filled "
+               f"with the nearest traced kernel")
+    return rim, how
 
 
 def error_budget(dataset: str | os.PathLike, *, items: Sequence[str] | None = None,
