@@ -310,10 +310,24 @@ TABLE1_PARABOLOID = Figure(
     rows=_table1_rows, slow=True)
 
 
+def _calibration_rows(outputs: list[str]) -> Rows:
+    """setup | worst centre error | worst radius error, for the three setups."""
+    worst = _json(outputs[0])["worst"]
+    return [[None, [worst[s]["centre_error_px"]], [worst[s]["radius_error_px"]]]
+            for s in ("paraboloid", "paraboloid_tilted", "sphere")]
+
+
+CALIBRATION_ERRORS = Figure(
+    cites="scripts/calibration_errors.py",
+    commands=(".venv/bin/python scripts/calibration_errors.py --json",),
+    rows=_calibration_rows, slow=True)
+
+
 #: Every checked figure, by the name its page's marker gives.
 FIGURES: dict[str, Figure] = {
     "sweep-ranges": SWEEP_RANGES,
     "traced-sweep-ranges": TRACED_SWEEP_RANGES,
     "table1-sphere": TABLE1_SPHERE,
     "table1-paraboloid": TABLE1_PARABOLOID,
+    "calibration-errors": CALIBRATION_ERRORS,
 }
