@@ -1,5 +1,6 @@
 """Dataset runner: real renders, real EXR files, resumable and atomic; evaluation."""
 
+import hashlib
 import json
 from dataclasses import replace
 
@@ -37,7 +38,7 @@ def test_dataset_holds_every_item_with_checksums(tiny_dataset):
     assert manifest["complete"] is True
     for name, item in manifest["items"].items():
         assert (root / name).is_file()
-        assert item["sha256"] == pipeline._sha256(root / name)
+        assert item["sha256"] == hashlib.sha256((root / name).read_bytes()).hexdigest()
     assert manifest["versions"]["mitsuba"] and manifest["setup"]["name"] == "sphere"
 
 
@@ -55,12 +56,12 @@ def test_corrupt_or_missing_items_are_redone(tmp_path):
     root = tmp_path / "ds"
     build_dataset(TINY, root, TINY_OPTS, progress=False)
     before = load_manifest(root)["items"]
-    edof = pipeline._read_rgb(root / "scene_000" / "edof.exr")[0]
+    edof = tasks.read_rgb(root / "scene_000" / "edof.exr")[0]
     (root / "scene_000" / "edof.exr").write_bytes(b"garbage")   # corrupted
     (root / "scene_000" / "stopped_50lux.exr").unlink()         # lost
     after = build_dataset(TINY, root, TINY_OPTS, progress=False)["items"]
     # Redone from the same inputs: the same pixels.
-    np.testing.assert_array_equal(pipeline._read_rgb(root / "scene_000" / "edof.exr")[0], edof)
+    np.testing.assert_array_equal(tasks.read_rgb(root / "scene_000" / "edof.exr")[0], edof)
     assert (root / "scene_000" / "stopped_50lux.exr").is_file()
     # Everything else was kept as it was (same checksums, renders not redone).
     for name in EXPECTED - {"scene_000/edof.exr", "scene_000/stopped_50lux.exr"}:
@@ -121,8 +122,8 @@ def test_process_executor_gives_the_same_files(tiny_dataset, tmp_path):
     build_dataset(TINY, other, TINY_OPTS, executor="process", jobs=2, progress=False)
     for name in ("scene_000/pinhole.exr", "scene_000/sweep.exr", "scene_000/sweep_50lux.exr",
                  "scene_000/edof.exr"):
-        np.testing.assert_array_equal(pipeline._read_rgb(root / name)[0],
-                                      pipeline._read_rgb(other / name)[0])
+        np.testing.assert_array_equal(tasks.read_rgb(root / name)[0],
+                                      tasks.read_rgb(other / name)[0])
     np.testing.assert_array_equal(load_bank(root / "bank.npz").kernels,
                                   load_bank(other / "bank.npz").kernels)
 

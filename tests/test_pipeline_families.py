@@ -206,6 +206,17 @@ def test_xml_and_procedural_datasets_evaluate_end_to_end(tmp_path):
     assert _regenerates_alone(tmp_path / "proc", manifest, "scene_002/pinhole.exr", tmp_path)
 
 
+def _scene_options(args, setup) -> dict:
+    """DatasetOptions fields of the command's scene options, passed as ``mitsweep
+    dataset`` passes them to the library (:func:`mitsweep.workflows.dataset.build_dataset`,
+    which calls :func:`~mitsweep.workflows.dataset.scene_options`)."""
+    from mitsweep.workflows.dataset import scene_options
+
+    return scene_options(setup, scenes=args.scenes, family=args.family,
+                         family_params=args.family_param, scenes_from=args.scenes_from,
+                         scene_unit=args.scene_unit)
+
+
 def test_cli_family_options_make_the_dataset_options(tmp_path):
     from mitsweep.cli import dataset as cli
 
@@ -214,13 +225,13 @@ def test_cli_family_options_make_the_dataset_options(tmp_path):
     args = p.parse_args(["s.toml", "--out", "x", "--family", "procedural", "--scenes", "3",
                          "--family-param", "objects=12", "--family-param", "shapes=sphere,cube",
                          "--family-param", "env_scale=0.5"])
-    kw = cli._scene_options(args, TINY)
+    kw = _scene_options(args, TINY)
     opts = DatasetOptions(**kw)
     assert opts.scenes == 3 and opts.family == "procedural"
     assert opts.family_params == resolve_params(objects=12, shapes="sphere,cube", env_scale=0.5)
     folder = write_scenes(tmp_path / "scenes")
     args = p.parse_args(["s.toml", "--out", "x", "--scenes-from", str(folder),
                          "--scene-unit", "m"])
-    opts = DatasetOptions(**cli._scene_options(args, TINY))
+    opts = DatasetOptions(**_scene_options(args, TINY))
     assert opts.scenes == 2 and opts.family == "xml" and opts.scene_unit == "m"
     assert opts.scene_files == scene_files_from(folder)

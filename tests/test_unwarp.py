@@ -17,6 +17,7 @@ from conftest import SCENES
 from mitsweep.cli.main import main
 from mitsweep.config import load_setup
 from mitsweep.io import read_exr, write_exr
+from mitsweep.optics import pixel_to_sensor
 from mitsweep.optics.panorama import (PROJECTIONS, angles_to_directions, image_to_direction,
                                       panorama_map, unwarp)
 
@@ -41,12 +42,18 @@ def scenes_dir_module():
     return SCENES
 
 
+def sensor_points(pmap, rows, cols):
+    """Sensor points (u, v) mm of image pixels (rows, cols) of the map's camera image."""
+    return pixel_to_sensor(rows, cols, pmap.image_shape, pmap.pixel_pitch,
+                           center_offset_px=pmap.center_offset_px)
+
+
 def seen(pmap, world):
     """The image a pinhole camera records of the world radiance ``world(directions)``:
     each pixel's direction by ray–mirror intersection; 0 off the mirror."""
     H, W = pmap.image_shape
     rows, cols = np.mgrid[0:H, 0:W]
-    u, v = pmap._to_sensor(rows, cols)
+    u, v = sensor_points(pmap, rows, cols)
     d, ok = image_to_direction(pmap.placement, u, v, pmap.sensor_distance)
     img = np.zeros((H, W))
     img[ok] = world(d[ok])
@@ -58,7 +65,7 @@ def pixel_step_rad(pmap):
     larger of the row and column neighbours), inf off the mirror."""
     H, W = pmap.image_shape
     rows, cols = np.mgrid[0:H + 1, 0:W + 1]
-    u, v = pmap._to_sensor(rows, cols)
+    u, v = sensor_points(pmap, rows, cols)
     d, ok = image_to_direction(pmap.placement, u, v, pmap.sensor_distance)
     step = np.maximum(np.linalg.norm(d[1:, :-1] - d[:-1, :-1], axis=-1),
                       np.linalg.norm(d[:-1, 1:] - d[:-1, :-1], axis=-1))
