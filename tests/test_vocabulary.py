@@ -32,7 +32,7 @@ ENFORCED = (
     "mitsweep.rig",
     "mitsweep.tracer",
     "mitsweep.design.optimize", "mitsweep.design.planes", "mitsweep.design.sweep",
-    "mitsweep.datasets", "mitsweep.jit",
+    "mitsweep.datasets", "mitsweep.jit", "mitsweep.pipeline", "mitsweep.workflows",
 )
 
 AGAINST = re.compile(r"(?<!_per)_mm$|^pitch$|^pitch_mm$|^pixel_size_mm$")
