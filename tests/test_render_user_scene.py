@@ -150,7 +150,7 @@ def test_uniform_emissive_world_gives_its_radiance_through_the_mirror(monkeypatc
     over several passes."""
     import mitsweep.render.api as api
 
-    monkeypatch.setattr(api, "_MAX_LANES", 24 * 24 * 4)  # 4 spp per pass: 3 passes
+    monkeypatch.setattr(api, "MAX_LANES", 24 * 24 * 4)  # 4 spp per pass: 3 passes
     radiance = [0.25, 0.5, 0.75]
     scene = {"type": "scene",
              "world": {"type": "sphere", "radius": 5.0, "flip_normals": True,

@@ -65,7 +65,7 @@ def test_batched_bank_equals_one_ipsf_at_a_time(method, batch_deposit, monkeypat
     from mitsweep.tracer import ipsf as ipsf_module
 
     if not batch_deposit:
-        monkeypatch.setattr(ipsf_module, "_BATCH_DEPOSIT_RAYS", 1)
+        monkeypatch.setattr(ipsf_module, "BATCH_DEPOSIT_RAYS", 1)
     kw = dict(n_radii=5, depths=(500.0, math.inf),
               settings=TraceSettings(rays=3001, method=method, seed=3))
     one = ipsf_bank(SPHERE, batched=False, **kw)

@@ -74,7 +74,7 @@ MODE_SAMPLERS = {"pinhole": "multijitter", "focused": "multijitter", "sweep": "i
 FOCUS_REFERENCE_DEPTH_MM = 500.0
 DEFAULT_STOPPED_F_NUMBER = 11.0
 #: Largest wavefront (pixels × samples per pass): bounds memory on the LLVM backend.
-_MAX_LANES = 1 << 24
+MAX_LANES = 1 << 24
 
 
 @dataclass
@@ -306,7 +306,7 @@ def render_memory_bytes(resolution: tuple[int, int], film: tuple[int, int], spp:
     """
     W, H = (float(x) for x in resolution)
     w, h = (float(x) for x in film)
-    lanes = min(float(spp) * w * h, float(_MAX_LANES))
+    lanes = min(float(spp) * w * h, float(MAX_LANES))
     total = W * H * 3 * 4 + w * h * (5 * 4 + 3 * 4 + 2 * 3 * 8) + lanes * _LANE_BYTES
     if aovs:
         total += W * H * _AOV_PIXEL_BYTES
@@ -378,7 +378,7 @@ def _load_passes(scene_dict, spp):
     w = film.get("crop_width", film["width"])
     h = film.get("crop_height", film["height"])
     sampler = scene_dict["sensor"]["sampler"]["type"]
-    counts = pass_counts(spp, max(1, min(spp, _MAX_LANES // max(1, w * h))), sampler)
+    counts = pass_counts(spp, max(1, min(spp, MAX_LANES // max(1, w * h))), sampler)
     scene_dict["sensor"]["sampler"]["sample_count"] = counts[0]
     return mi.load_dict(scene_dict), counts
 

@@ -63,7 +63,7 @@ _CHUNK = 1 << 24
 #: Rays per source from which a batch deposits source by source (one-source launches,
 #: literals) instead of in batched launches (per-lane table reads): measured on the
 #: 2-core LLVM machine, the table reads cost ~30 % of the trace, a launch ~2-4 ms.
-_BATCH_DEPOSIT_RAYS = 1 << 18
+BATCH_DEPOSIT_RAYS = 1 << 18
 _PILOT_LOG2 = 14
 _PILOT = 1 << _PILOT_LOG2
 _PILOT_KEYS = ("landed_free", "a", "b")
@@ -563,7 +563,7 @@ def render_sources(setup: Setup, sources: Iterable[PointSource], *, seeds: Itera
     if not ok:
         return results
     pitch = setup.sensor.pixel_pitch
-    if rays >= _BATCH_DEPOSIT_RAYS:
+    if rays >= BATCH_DEPOSIT_RAYS:
         # Many rays per source: the launch cost is amortised, and the literals of a
         # one-source launch are cheaper than the batch's per-lane table reads.
         buf = np.empty((len(ok), K * K + 2))
