@@ -147,7 +147,18 @@ def _finite_json(o: Any):
 def json_text(obj: Any) -> str:
     """``obj`` as strict JSON text (what ``--json`` prints and ``--out`` files hold):
     non-finite floats become null (NaN) or "inf" / "-inf", never the ``Infinity`` that
-    Python writes by default and strict parsers (jq, browsers) refuse."""
+    Python writes by default and strict parsers (jq, browsers) refuse.
+
+    Parameters
+    ----------
+    obj : object
+        JSON-serialisable values (dicts, lists, tuples, numbers, strings, None).
+
+    Returns
+    -------
+    str
+        Indented, keys sorted, ending in a newline.
+    """
     return json.dumps(_finite_json(obj), indent=2, sort_keys=True, allow_nan=False) + "\n"
 
 
@@ -156,7 +167,25 @@ def progress_callback(progress: Progress, total: int | None, desc: str, unit: st
                       ) -> Iterator[Callable[..., object] | None]:
     """The callable a long loop reports to, for a workflow's ``progress`` argument: None
     (nothing), True (a tqdm bar on stderr, shown when stderr is a terminal) or the
-    caller's own callable (called with the number of items done since the last call)."""
+    caller's own callable (called with the number of items done since the last call).
+
+    Parameters
+    ----------
+    progress : None, bool or callable
+        What to report to; False is as None.
+    total : int or None
+        Items in all (the bar's length; None: unknown).
+    desc : str
+        The bar's label.
+    unit : str
+        The bar's unit (``"ipsf"``, ``"item"``...).
+
+    Yields
+    ------
+    callable or None
+        ``step(n)``, to call with the items done since the last call; None reports
+        nothing.
+    """
     if progress is None or progress is False:
         yield None
     elif progress is True:

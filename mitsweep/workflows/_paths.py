@@ -30,7 +30,17 @@ def _same_path(a: Path, b: Path) -> bool:
 
 def shown_path(path: PathArg) -> str:
     """``path`` as a message shows it: its file-system bytes as UTF-8, with any byte that is
-    not UTF-8 written ``\\xNN`` (never a lone surrogate that a terminal cannot print)."""
+    not UTF-8 written ``\\xNN`` (never a lone surrogate that a terminal cannot print).
+
+    Parameters
+    ----------
+    path : str, path-like or None
+        The path (None shows as the empty string).
+
+    Returns
+    -------
+    str
+    """
     text = os.fspath(path) if path is not None else ""
     try:
         data = os.fsencode(text)
@@ -53,6 +63,13 @@ def check_output_name(path: str | os.PathLike, option: str = "output") -> None:
     - under an ASCII or other non-UTF-8 file-system encoding (``LC_ALL=C`` with
       ``PYTHONUTF8=0``, a Latin-1 locale), a non-ASCII name: its file-system bytes differ
       from the UTF-8 bytes OpenEXR would write (or it has none).
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output's name as given.
+    option : str
+        The option that names it, for the message (``"--out"``).
 
     Raises
     ------

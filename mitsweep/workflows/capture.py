@@ -208,7 +208,23 @@ def capture(setup: Setup | str | os.PathLike, *, port: str | None,
 
 
 def exit_status(exc: BaseException, safe: bool) -> int:
-    """The exit status of an incomplete capture (the table of ``mitsweep capture``)."""
+    """The exit status of an incomplete capture (the table of ``mitsweep capture``).
+
+    Parameters
+    ----------
+    exc : BaseException
+        Why the capture stopped.
+    safe : bool
+        Whether the devices confirmed every safety step (shutter released, stage
+        stopped).
+
+    Returns
+    -------
+    int
+        :data:`EXIT_MAYBE_UNSAFE` when not ``safe``; else 128 + the signal's number for
+        an interruption (SIGINT when it has none), :data:`EXIT_INCOMPLETE_SAFE`
+        otherwise.
+    """
     if not safe:
         return EXIT_MAYBE_UNSAFE
     if isinstance(exc, KeyboardInterrupt):
@@ -219,7 +235,19 @@ def exit_status(exc: BaseException, safe: bool) -> int:
 def capture_failure(exc: BaseException) -> tuple[str, int]:
     """What an incomplete capture (an exception of :func:`capture` holding its record)
     means: the line for the user (which safety steps the devices confirmed, where the
-    record is) and the exit status."""
+    record is) and the exit status.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception :func:`capture` raised, holding the incomplete record as
+        ``capture_record`` (and its path as ``capture_out``).
+
+    Returns
+    -------
+    (str, int)
+        The line and the exit status (:func:`exit_status`).
+    """
     from ..rig import safety_summary
     from ..rig.capture import status_of
 

@@ -41,6 +41,28 @@ def scene_options(setup: Setup, *, scenes: int | None = None, family: str | None
     built-in room or the procedural family (``scenes`` of them), or every ``*.xml``
     Mitsuba scene of the folder ``scenes_from``.
 
+    Parameters
+    ----------
+    setup : Setup
+        The dataset's setup (each XML scene is probed with it).
+    scenes : int, optional
+        Scene variations of the room or the procedural family (default 1).
+    family : {"room", "procedural"}, optional
+        The family (default the room).
+    family_params : mapping or sequence of (name, value) pairs
+        The procedural family's parameters.
+    scenes_from : path-like, optional
+        A folder of Mitsuba XML scenes, one scene per ``*.xml`` file
+        (:func:`mitsweep.pipeline.scene_files_from`).
+    scene_unit : {"mm", "cm", "m"}, optional
+        Those scenes' length unit (default: the setup's).
+
+    Returns
+    -------
+    dict
+        ``scenes``, ``family`` and either ``family_params`` or ``scene_files`` and
+        ``scene_unit``: keyword arguments of :class:`~mitsweep.pipeline.DatasetOptions`.
+
     Raises
     ------
     InputError
@@ -70,7 +92,24 @@ def scene_options(setup: Setup, *, scenes: int | None = None, family: str | None
 def check_dataset_outputs(inputs: list, out: Path, opts: DatasetOptions,
                           shard: Shard | str | None = None) -> None:
     """:func:`check_outputs` for a dataset directory: no input is the directory, nor one
-    of the files a run with ``opts`` writes in it (manifest, lock, items, logs)."""
+    of the files a run with ``opts`` writes in it (manifest, lock, items, logs).
+
+    Parameters
+    ----------
+    inputs : list of path-like or None
+        Every file the run reads (None entries are skipped).
+    out : Path
+        The dataset directory.
+    opts : DatasetOptions
+        The run's options (they name the files it writes).
+    shard : Shard or "K/N", optional
+        The shard the run makes (its manifest and lock are written too).
+
+    Raises
+    ------
+    InputError
+        An input that is the directory or one of the files the run writes.
+    """
     from ..pipeline.dataset import written_paths
 
     check_outputs(inputs, {"--out": out})

@@ -18,14 +18,36 @@ from ._paths import check_outputs
 __all__ = ["trace_ipsf", "trace_ipsf_bank", "depth_tag", "per_depth_path"]
 
 def depth_tag(depth: float) -> str:
-    """The file-name tag of a depth: ``l500mm``, ``l1e06mm``, ``linf``."""
+    """The file-name tag of a depth: ``l500mm``, ``l1e06mm``, ``linf``.
+
+    Parameters
+    ----------
+    depth : float
+        Depth of the source from the mirror, mm (inf allowed).
+
+    Returns
+    -------
+    str
+    """
     if math.isinf(depth):
         return "linf"
     return "l" + f"{depth:.10g}".replace("+", "") + "mm"
 
 
 def per_depth_path(path: str | os.PathLike, depth: float) -> str:
-    """``path`` with the depth's tag before its suffix: ``k.exr`` → ``k_l500mm.exr``."""
+    """``path`` with the depth's tag before its suffix: ``k.exr`` → ``k_l500mm.exr``.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The output named for all depths.
+    depth : float
+        The depth, mm (:func:`depth_tag`).
+
+    Returns
+    -------
+    str
+    """
     p = Path(path)
     return str(p.with_name(f"{p.stem}_{depth_tag(depth)}{p.suffix}"))
 

@@ -90,6 +90,16 @@ def paper_setup_file(text: str | os.PathLike) -> Path:
     """A paper setup's name (the bundled file, :func:`mitsweep.resources.bundled_setup`)
     or a path → its TOML file.
 
+    Parameters
+    ----------
+    text : str or path-like
+        ``sphere``, ``paraboloid``, ``paraboloid_tilted``, or an existing ``.toml``
+        file.
+
+    Returns
+    -------
+    Path
+
     Raises
     ------
     InputError
