@@ -71,6 +71,18 @@ def _image_pixel_pitch(meta: dict) -> float | None:
     return None
 
 
+def _resolve_pitch(photo, meta: dict, setup: Setup | None) -> tuple[float | None, str | None]:
+    """The photo's pixel pitch (mm) and where it came from: the file's (or the caller's,
+    ``photo.meta["pixel_pitch_source"]``), the image metadata's (``"metadata"``), the
+    setup's (``"setup"``), else None."""
+    pitch, pitch_from = photo.pixel_pitch, photo.meta.get("pixel_pitch_source")
+    if pitch is None and _image_pixel_pitch(meta) is not None:
+        pitch, pitch_from = _image_pixel_pitch(meta), "metadata"
+    if pitch is None and setup is not None:
+        pitch, pitch_from = float(setup.sensor.pixel_pitch), "setup"
+    return pitch, pitch_from
+
+
 def _setup_motion(setup: Setup) -> dict | None:
     """The stage motion a setup implies, or None for a measured (tabulated) one."""
     if setup.sweep.profile == "tabulated":
@@ -193,6 +205,44 @@ def _unwindow(photo: np.ndarray, window: np.ndarray, shift) -> np.ndarray:
     return out
 
 
+def _given_bank_identity(bank, optics_from: tuple, src: Path, force: bool) -> dict:
+    """The identity record of a given bank checked against the photo's optics
+    (``optics_from``: :func:`_image_optics`' optics and where they came from); a bank of
+    other optics is refused unless ``force``."""
+    from ..deconv.kernels import bank_identity_problem
+    from ..io.bank import BankError, optics_fingerprint
+
+    optics, checked_against = optics_from
+    problem = bank_identity_problem(bank, optics, image=f"{src}")
+    if problem is not None and not force:
+        hint = " (give --setup)" if optics is None and bank.optics is not None else ""
+        raise BankError(f"{problem}{hint}; use --force to override")
+    if problem is not None:
+        logger.warning("--force: %s", problem)
+    return {"checked_against": checked_against, "forced": problem is not None,
+            "problem": problem, "bank_optics_sha256":
+            None if bank.optics is None else optics_fingerprint(bank.optics)}
+
+
+def _restore(pixels: np.ndarray, bank, *, method: str, operator: str | None, grid: int,
+             center: tuple[float, float], explicit_center: bool, **kw):
+    """``(restored, operator used, window shift or None)``: the polar operator on a
+    radial bank (unless ``operator`` is ``"grid"``), else the product-convolution on a
+    window centred on ``center`` (a radial bank rotated onto a ``grid`` x ``grid``
+    grid)."""
+    from ..deconv import deconvolve, grid_bank_from_radial
+
+    if bank.kind == "radial" and operator != "grid":
+        restored = deconvolve(pixels, bank, method=method,
+                              center=center if explicit_center else None, **kw)
+        return restored, "polar", None
+    work = grid_bank_from_radial(bank, (grid, grid), pixels.shape[:2]) \
+        if bank.kind == "radial" else bank
+    window, shift = _window(pixels, center)
+    return _unwindow(pixels, deconvolve(window, work, method=method, **kw), shift), "grid", \
+        shift
+
+
 def _check_depth(depth):
     if depth is None or depth == "mean":
         return depth
@@ -300,10 +350,9 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     >>> result.provenance["center_from"]                         # doctest: +SKIP
     'the image centre'
     """
-    from ..deconv import deconvolve, grid_bank_from_radial
-    from ..deconv.kernels import bank_identity_problem, check_bank_matches
+    from ..deconv.kernels import check_bank_matches
     from ..io import write_exr
-    from ..io.bank import BankError, load_bank, optics_fingerprint
+    from ..io.bank import load_bank, optics_fingerprint
     from ..io.camera import CameraFileError, read_camera_image, write_display_image
 
     depth = _check_depth(depth)
@@ -337,12 +386,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     if record is not None and setup is None:
         raise InputError("--record needs the photo's setup: give --setup")
     motion = _record_motion(record, setup) if record is not None else None
-    pitch = photo.pixel_pitch
-    pitch_from = photo.meta.get("pixel_pitch_source")
-    if pitch is None and _image_pixel_pitch(meta) is not None:
-        pitch, pitch_from = _image_pixel_pitch(meta), "metadata"
-    if pitch is None and setup is not None:
-        pitch, pitch_from = float(setup.sensor.pixel_pitch), "setup"
+    pitch, pitch_from = _resolve_pitch(photo, meta, setup)
     H, W = pixels.shape[:2]
     center_given = center is not None
     center, center_from = _resolve_center(center, setup, (H, W))
@@ -358,23 +402,15 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
 
     cache = None
     if bank is not None:
-        bank_path, bank = bank, load_bank(bank)
+        bank_source = str(bank)
+        bank = load_bank(bank)
         check_operator(bank.kind)
         if pitch is None:
             logger.warning("%s: no pixel pitch in the metadata; assuming the bank's %g mm",
                            src, bank.pixel_pitch)
         check_bank_matches(bank, pixels.shape, pixel_pitch=pitch)
-        optics, optics_from = _image_optics(meta, given, setup_path, src, motion)
-        problem = bank_identity_problem(bank, optics, image=f"{src}")
-        if problem is not None and not force:
-            hint = " (give --setup)" if optics is None and bank.optics is not None else ""
-            raise BankError(f"{problem}{hint}; use --force to override")
-        if problem is not None:
-            logger.warning("--force: %s", problem)
-        identity = {"checked_against": optics_from, "forced": problem is not None,
-                    "problem": problem, "bank_optics_sha256":
-                    None if bank.optics is None else optics_fingerprint(bank.optics)}
-        bank_source = str(bank_path)
+        identity = _given_bank_identity(bank, _image_optics(meta, given, setup_path, src,
+                                                            motion), src, force)
     else:
         if force:
             raise InputError("--force applies to a given --bank only")
@@ -392,19 +428,11 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
                        "(%s); use --operator %s", deprecated, "wiener", deprecated)
 
     t0 = time.perf_counter()
-    kw = dict(nsr=nsr, prior=prior, depth_mm=depth) if method == "wiener" else \
-        dict(nsr=nsr, depth_mm=depth)
-    shift = None
-    if bank.kind == "radial" and operator != "grid":
-        used = "polar"
-        restored = deconvolve(pixels, bank, method=method,
-                              center=center if explicit_center else None, **kw)
-    else:
-        used = "grid"
-        work = grid_bank_from_radial(bank, (grid, grid), (H, W)) \
-            if bank.kind == "radial" else bank
-        window, shift = _window(pixels, center)
-        restored = _unwindow(pixels, deconvolve(window, work, method=method, **kw), shift)
+    kw = dict(nsr=nsr, prior=prior, depth=depth) if method == "wiener" else \
+        dict(nsr=nsr, depth=depth)
+    restored, used, shift = _restore(pixels, bank, method=method, operator=operator,
+                                     grid=grid, center=center,
+                                     explicit_center=explicit_center, **kw)
     seconds = time.perf_counter() - t0
 
     provenance = {
