@@ -37,6 +37,8 @@ COMMANDS = [
 
 
 def build_parser() -> ArgumentParser:
+    """The ``mitsweep`` parser: ``--version``, ``-v``, and one subparser per module of
+    :data:`COMMANDS`, each with its ``run`` as the ``_run`` default."""
     from .. import __version__
 
     parser = ArgumentParser(prog="mitsweep", description="Focal-sweep EDOF catadioptric "
@@ -55,6 +57,26 @@ def build_parser() -> ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one ``mitsweep`` command line.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program's name (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        The exit status: the command's (0 on success), 2 for a user error (one line on
+        stderr; with ``--json`` also an error object on stdout), 130 when interrupted.
+
+    Raises
+    ------
+    SystemExit
+        A command line argparse refused (status 2, after its line on stderr),
+        ``--help`` and ``--version`` (status 0), or SIGTERM during the command (status
+        143, once temporaries are removed and locks released).
+    """
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
@@ -114,4 +136,6 @@ def _terminate_cleanly():
 
 
 def entry() -> None:
+    """The ``mitsweep`` console script: :func:`main` on ``sys.argv``, its status the
+    process's exit status."""
     sys.exit(main())
