@@ -323,6 +323,24 @@ CALIBRATION_ERRORS = Figure(
     rows=_calibration_rows, slow=True)
 
 
+def _weight_bench_rows(outputs: list[str]) -> Rows:
+    """case (size px, σ) | oracle NSR | oracle dB | before, model, blind loss (dB)."""
+    rows: Rows = []
+    for case in _json(outputs[0])["independent_blur"]:
+        size, sigma = re.fullmatch(r"independent blur (\d+) px, sigma ([\d.e-]+)",
+                                   case["case"]).groups()
+        rows.append([[float(size), float(sigma)], [case["oracle"]["weight"]],
+                     [case["oracle"]["psnr_db"]],
+                     *([case[k]["loss_db"]] for k in ("before", "model", "blind"))])
+    return rows
+
+
+WEIGHT_BENCH_BLUR = Figure(
+    cites="scripts/weight_bench.py --sizes 512 2048",
+    commands=(".venv/bin/python scripts/weight_bench.py --sizes 512 2048 --json",),
+    rows=_weight_bench_rows, slow=True)
+
+
 #: Every checked figure, by the name its page's marker gives.
 FIGURES: dict[str, Figure] = {
     "sweep-ranges": SWEEP_RANGES,
@@ -330,4 +348,5 @@ FIGURES: dict[str, Figure] = {
     "table1-sphere": TABLE1_SPHERE,
     "table1-paraboloid": TABLE1_PARABOLOID,
     "calibration-errors": CALIBRATION_ERRORS,
+    "weight-bench-blur": WEIGHT_BENCH_BLUR,
 }
