@@ -257,8 +257,8 @@ class Protocol2Board(ArduinoModel):
     """Firmware 1.1: the watchdog, no tables."""
 
     @command("ID", nargs=0)
-    def _cmd_id(self, nums, now):
-        return [self._line("OK ID mitsweep-sweep 1.1 2")]
+    def cmd_id(self, nums, now):
+        return [self.encode_line("OK ID mitsweep-sweep 1.1 2")]
 
 
 def test_profile_capture_on_a_protocol_2_board_fails_before_any_motion(sphere, profile,

@@ -95,20 +95,35 @@ class ArduinoModel(Model):
         return self._pos
 
     # -- output -------------------------------------------------------------------------
-    def _line(self, text: str) -> bytes:
+    def encode_line(self, text: str) -> bytes:
+        """The bytes the board sends for one line of ``text``: its XOR checksum appended
+        when the host turned checksums on (``CHK 1``), then the end of line. A subclass
+        that answers a command its own way (another firmware version) builds its reply
+        with it.
+
+        Parameters
+        ----------
+        text : str
+            The line, ASCII, without its end of line.
+
+        Returns
+        -------
+        bytes
+            What goes on the wire.
+        """
         if self.checksums:
             text = XorChecksum().append(text)
         return text.encode("ascii") + b"\n"
 
     def _event(self, t: float, name: str, pos: int, detail: str = "") -> tuple[float, bytes]:
         text = f"EV {name} {self.micros(t)} {pos}" + (f" {detail}" if detail else "")
-        return t, self._line(text)
+        return t, self.encode_line(text)
 
     def boot(self, now: float) -> list[bytes]:
         # the bootloader runs first, then the sketch prints READY
         self.boot_t = now
         self.schedule(now + self.boot_time_s,
-                      self._line(f"READY {FIRMWARE_NAME} {FIRMWARE_VERSION} {PROTOCOL_VERSION}"))
+                      self.encode_line(f"READY {FIRMWARE_NAME} {FIRMWARE_VERSION} {PROTOCOL_VERSION}"))
         return []
 
     def reset(self, now: float) -> None:
@@ -141,12 +156,12 @@ class ArduinoModel(Model):
         try:
             text = line.decode("ascii")
         except UnicodeDecodeError:
-            return [self._line("ERR SYNTAX non-ASCII")]
+            return [self.encode_line("ERR SYNTAX non-ASCII")]
         if self.checksums:
             try:
                 text = XorChecksum().strip(text)
             except Exception:
-                return [self._line("ERR CHECKSUM")]
+                return [self.encode_line("ERR CHECKSUM")]
         parts = text.split()
         if not parts:
             return []
@@ -158,12 +173,12 @@ class ArduinoModel(Model):
         try:
             nums = [int(a) for a in args]
         except ValueError:
-            return [self._line(f"ERR SYNTAX {word}")]
+            return [self.encode_line(f"ERR SYNTAX {word}")]
         handler, known_args = self.handler(parts)
         if handler is None:
-            return [self._line(f"ERR SYNTAX unknown command {word}")]
+            return [self.encode_line(f"ERR SYNTAX unknown command {word}")]
         if known_args is None:
-            return [self._line(f"ERR SYNTAX {word} takes {self.commands[(word,)][1]} "
+            return [self.encode_line(f"ERR SYNTAX {word} takes {self.commands[(word,)][1]} "
                                f"arguments")]
         replies = handler(nums, now)
         slow = self.take_fault("slow_reply", word)
@@ -176,23 +191,23 @@ class ArduinoModel(Model):
     @command("ID", nargs=0)
     def _cmd_id(self, nums, now):
         return [
-            self._line(f"OK ID {FIRMWARE_NAME} {FIRMWARE_VERSION} {PROTOCOL_VERSION}")]
+            self.encode_line(f"OK ID {FIRMWARE_NAME} {FIRMWARE_VERSION} {PROTOCOL_VERSION}")]
 
     @command("CHK", nargs=1)
     def _cmd_chk(self, nums, now):
         self.checksums = bool(nums[0])
-        return [self._line(f"OK CHK {int(self.checksums)}")]
+        return [self.encode_line(f"OK CHK {int(self.checksums)}")]
 
     @command("PING", nargs=0)
     def _cmd_ping(self, nums, now):
-        return [self._line(f"OK PING {self.micros(now)}")]
+        return [self.encode_line(f"OK PING {self.micros(now)}")]
 
     @command("WATCHDOG", nargs=1)
     def _cmd_watchdog(self, nums, now):
         if not 0 <= nums[0] <= MAX_WATCHDOG_MS:
-            return [self._line("ERR RANGE watchdog ms")]
+            return [self.encode_line("ERR RANGE watchdog ms")]
         self.watchdog_s = nums[0] * 1e-3
-        return [self._line(f"OK WATCHDOG {nums[0]}")]
+        return [self.encode_line(f"OK WATCHDOG {nums[0]}")]
 
     @property
     def exposure_pending(self) -> bool:
@@ -213,7 +228,7 @@ class ArduinoModel(Model):
 
     @command("STATE", nargs=0)
     def _cmd_state(self, nums, now):
-        return [self._line(
+        return [self.encode_line(
             f"OK STATE {self.micros(now)} {self.position(now)} {int(self.homed)} "
             f"{int(self.moving(now))} {int(self.shutter_open)}")]
 
@@ -221,28 +236,28 @@ class ArduinoModel(Model):
     def _cmd_limits(self, nums, now):
         lo, hi = nums
         if lo >= hi:
-            return [self._line("ERR RANGE min must be < max")]
+            return [self.encode_line("ERR RANGE min must be < max")]
         self.limits = (lo, hi)
-        return [self._line(f"OK LIMITS {lo} {hi}")]
+        return [self.encode_line(f"OK LIMITS {lo} {hi}")]
 
     def _check_move(self, target, rate, accel, now):
         if self.moving(now):
-            return [self._line("ERR BUSY moving")]
+            return [self.encode_line("ERR BUSY moving")]
         if not self.homed:
-            return [self._line("ERR HOME not homed")]
+            return [self.encode_line("ERR HOME not homed")]
         if not (1 <= rate <= MAX_STEP_RATE) or accel < 1:
-            return [self._line("ERR RANGE rate or accel")]
+            return [self.encode_line("ERR RANGE rate or accel")]
         if self.limits is None or not (self.limits[0] <= target <= self.limits[1]):
-            return [self._line("ERR LIMIT target outside soft limits")]
+            return [self.encode_line("ERR LIMIT target outside soft limits")]
         return None
 
     @command("HOME", nargs=1)
     def _cmd_home(self, nums, now):
         if self.moving(now):
-            return [self._line("ERR BUSY moving")]
+            return [self.encode_line("ERR BUSY moving")]
         self.homed, self._pos = True, 0
         self.schedule(*self._event(now + self.home_time_s, "HOMED", 0), "homing")
-        return [self._line("OK HOME")]
+        return [self.encode_line("OK HOME")]
 
     def _start_move(self, target, rate, accel, now):
         x0 = self.position(now)
@@ -257,7 +272,7 @@ class ArduinoModel(Model):
             return err
         self._start_move(target, rate, accel, now)
         self.schedule(*self._event(self.move.end_time, "DONE", target))
-        return [self._line("OK MOVE")]
+        return [self.encode_line("OK MOVE")]
 
     @command("SWEEP", nargs=5)
     def _cmd_sweep(self, nums, now):
@@ -271,11 +286,11 @@ class ArduinoModel(Model):
         inside = lambda p: min(x0, target) <= p <= max(x0, target)  # noqa: E731
         if not (inside(open_at) and inside(close_at) and ramp <= d_open < d_close
                 <= mv.length - ramp):
-            return [self._line("ERR RANGE open/close outside the constant-velocity part")]
+            return [self.encode_line("ERR RANGE open/close outside the constant-velocity part")]
         self._start_move(target, rate, accel, now)
         self.sweep_window = (open_at, close_at)
         self._schedule_sweep(mv, x0, target, open_at, close_at, d_open, d_close, now)
-        return [self._line("OK SWEEP")]
+        return [self.encode_line("OK SWEEP")]
 
     def _schedule_sweep(self, mv, x0, target, open_at, close_at, d_open, d_close, now):
         """The events of a sweep under way (``mv``): START, OPEN, POS every period,
@@ -301,27 +316,27 @@ class ArduinoModel(Model):
     @command("TABLE", nargs=1)
     def _cmd_table(self, nums, now):
         if self.moving(now):
-            return [self._line("ERR BUSY moving")]
+            return [self.encode_line("ERR BUSY moving")]
         if not 1 <= nums[0] <= MAX_TABLE_SEGMENTS:
-            return [self._line("ERR RANGE table size")]
+            return [self.encode_line("ERR RANGE table size")]
         self.table_size, self.table = nums[0], []
-        return [self._line(f"OK TABLE {nums[0]}")]
+        return [self.encode_line(f"OK TABLE {nums[0]}")]
 
     @command("SEG", nargs=3)
     def _cmd_seg(self, nums, now):
         i, steps, us = nums
         if self.moving(now):
-            return [self._line("ERR BUSY moving")]
+            return [self.encode_line("ERR BUSY moving")]
         if i != len(self.table) or i >= self.table_size:
-            return [self._line("ERR RANGE segment order")]
+            return [self.encode_line("ERR RANGE segment order")]
         # at most MAX_STEP_RATE steps/s, in integers as the firmware checks
         if not (0 <= steps <= MAX_SEGMENT_STEPS and us >= 1
                 and steps * (1_000_000 // MAX_STEP_RATE) <= us):
-            return [self._line("ERR RANGE segment steps or duration")]
+            return [self.encode_line("ERR RANGE segment steps or duration")]
         self.table.append((steps, us))
         total_steps = sum(k for k, _ in self.table)
         total_us = sum(u for _, u in self.table)
-        return [self._line(f"OK SEG {i} {total_steps} {total_us}")]
+        return [self.encode_line(f"OK SEG {i} {total_steps} {total_us}")]
 
     @command("TSWEEP", nargs=4)
     def _cmd_tsweep(self, nums, now):
@@ -329,7 +344,7 @@ class ArduinoModel(Model):
         table = self.table
         if (not table or len(table) != self.table_size or table[0][0] == 0
                 or table[-1][0] == 0):
-            return [self._line("ERR RANGE no complete table")]
+            return [self.encode_line("ERR RANGE no complete table")]
         rate_in = table[0][0] * 1e6 / table[0][1]
         rate_out = table[-1][0] * 1e6 / table[-1][1]
         if err := self._check_move(target, math.ceil(rate_in), accel, now):
@@ -342,20 +357,20 @@ class ArduinoModel(Model):
         length = abs(target - x0)
         if (d_open < ramp_in or d_close - d_open != sum(k for k, _ in table)
                 or d_close > length - ramp_out):
-            return [self._line("ERR RANGE open/close do not fit the table and its ramps")]
+            return [self.encode_line("ERR RANGE open/close do not fit the table and its ramps")]
         pieces = table_pieces(rate_in, rate_out, accel, d_open, length - d_close,
                               [(k, u * 1e-6) for k, u in table])
         mv = PathMove(x0, sign, now, pieces)
         self.move, self.stopped = mv, False
         self.sweep_window = (open_at, close_at)
         self._schedule_sweep(mv, x0, target, open_at, close_at, d_open, d_close, now)
-        return [self._line("OK TSWEEP")]
+        return [self.encode_line("OK TSWEEP")]
 
     @command("SHUTTER", nargs=2)
     def _cmd_shutter(self, nums, now):
         delay_us, duration_us = nums
         if delay_us < 0 or duration_us < 1:
-            return [self._line("ERR RANGE delay or duration")]
+            return [self.encode_line("ERR RANGE delay or duration")]
         t_open = now + delay_us * 1e-6
         t_close = t_open + duration_us * 1e-6
         late = self.take_fault("late_event")
@@ -365,12 +380,12 @@ class ArduinoModel(Model):
         t_ev, line = self._event(t_close, "CLOSE", pos)
         self.schedule(t_ev + delay, line, "shutter")
         self._set_shutter_plan(t_open, t_close)
-        return [self._line(f"OK SHUTTER {self.micros(now)}")]
+        return [self.encode_line(f"OK SHUTTER {self.micros(now)}")]
 
     @command("CLOSE", nargs=None)
     def _cmd_close(self, nums, now):
         self._close_now(now)
-        return [self._line("OK CLOSE")]
+        return [self.encode_line("OK CLOSE")]
 
     def _close_now(self, now):
         if self.shutter_open:
@@ -390,7 +405,7 @@ class ArduinoModel(Model):
         pos = self.position(now)
         self.move, self._pos, self.stopped = None, pos, True
         self._fault_at = None
-        return [self._line(f"OK STOP {self.micros(now)} {pos}")]
+        return [self.encode_line(f"OK STOP {self.micros(now)} {pos}")]
 
     def arm_motion_faults(self, mv: Move) -> None:
         super().arm_motion_faults(mv)
