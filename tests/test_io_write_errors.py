@@ -21,7 +21,6 @@ from conftest import SCENES, run_cli
 from mitsweep import pipeline
 from mitsweep.cli.main import main
 from mitsweep.io import WriteError, read_exr, write_exr, write_text_atomic
-from mitsweep.io import atomic as atomic_mod
 from mitsweep.io.png import write_png
 from mitsweep.pipeline import build_dataset, load_manifest
 from test_pipeline_dataset import TINY, TINY_OPTS
@@ -148,10 +147,10 @@ def test_injected_error_at_flush_keeps_the_previous_file(tmp_path, monkeypatch, 
     target = tmp_path / f"out.{kind}"
     target.write_bytes(b"previous")
 
-    def fail(path):
+    def fail(fd):
         raise OSError(code, os.strerror(code))
 
-    monkeypatch.setattr(atomic_mod, "_fsync", fail)
+    monkeypatch.setattr(os, "fsync", fail)   # the flush the writer asks of the system
     with pytest.raises(WriteError) as info:
         WRITERS[kind](target)
     assert info.value.errno == code
