@@ -210,9 +210,11 @@ def test_fig5_and_table1_draw_one_set_of_traced_banks(tmp_path, scenes_dir, monk
     tiny = dataclasses.replace(QUICK, table1_rays=2_000, table1_radii=2)
     figs = _SetupFigures(load_setup(scenes_dir / "sphere.toml"), tiny, tmp_path, seed=0,
                          step=lambda msg: None)
+    single, traced_single = figs.ipsf, []
+    monkeypatch.setattr(figs, "ipsf", lambda *a, **kw: traced_single.append(a) or single(*a, **kw))
     figs.fig5()
     figs.table1()
-    assert len(calls) == 1 and not figs._ipsfs
+    assert len(calls) == 1 and not traced_single
     (sections, kw), = drawn_sections
     banks = figs.table1_banks()
     lengths = [hi - lo for lo, hi in kw["ranges"]]
