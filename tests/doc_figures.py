@@ -26,8 +26,15 @@ text above the table names it), the commands run (as a reader would type them, f
 repository's root) and a function that turns their outputs into the table's rows: one
 list per row, one entry per cell: ``None`` for a cell that is not checked (a label, a
 number quoted from the paper, a timing), else the list of numbers the cell must show, in
-order. Numbers are read from a cell as written (``−`` is a minus sign, ``–`` a range's
-dash, ``12,403`` one number; ``±`` and ``°`` are dropped).
+order (``None`` in that list: a number not compared, a timing beside a checked one).
+Numbers are read from a cell as written (``−`` is a minus sign, ``–`` a range's dash,
+``12,403`` one number; ``±`` and ``°`` are dropped).
+
+A figure whose commands take far longer than the tests may (a forty-minute benchmark)
+is checked against their recorded output, committed beside the page and rewritten by
+the command (``Figure.recorded``, e.g. ``docs/benchmarks.json``); the page says so.
+
+``python tests/doc_figures.py`` prints each table's status; the test does too, with ``-s``.
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ _MARKER = re.compile(r"<!--\s*figures:(?P<body>.*?)-->", re.S)
 #: A machine, as a timing table's paragraph must name it.
 MACHINE = re.compile(r"\b(core|cores|CPU|GPU|H200|VM|machine)\b", re.I)
 
-Rows = list[list[list[float] | None]]
+Rows = list[list[list[float | None] | None]]
 
 
 @dataclass(frozen=True)
@@ -66,11 +73,26 @@ class Figure:
         ``rows(outputs) -> Rows``: the table's expected numbers (see the module doc).
     slow : bool
         True when the commands take more than about 10 s together (run with ``-m slow``).
+    recorded : str, optional
+        For commands far too long for the tests (a benchmark of forty minutes): the file,
+        relative to the repository's root, that holds their output as committed, written
+        by the command (e.g. ``docs/benchmarks.json``). The table is checked against it;
+        rerunning the command rewrites it, and then the table must follow.
+    timings : bool
+        Some cells are timings (not compared): the paragraph above must name the machine.
     """
     cites: str
     commands: tuple[str, ...]
     rows: Callable[[list[str]], Rows]
     slow: bool = False
+    recorded: str | None = None
+    timings: bool = False
+
+    def outputs(self) -> list[str]:
+        """The commands' outputs: run now, or as recorded."""
+        if self.recorded is not None:
+            return [(ROOT / self.recorded).read_text(encoding="utf-8")]
+        return [run(c) for c in self.commands]
 
 
 @dataclass
@@ -123,7 +145,7 @@ def _marker(lines: list[str], i: int) -> dict:
         m = _MARKER.fullmatch(lines[k].strip())
         if m:
             out: dict = {}
-            for part in m.group("body").split(";"):
+            for part in re.split(r";\s*(?=tolerance\s*:)", m.group("body")):
                 key, sep, value = part.partition(":")
                 if not out:                     # the first part is the figure itself
                     out["figures"] = part.strip()
@@ -218,6 +240,8 @@ def compare(table: Table, expected: Rows) -> list[str]:
                                 f"{len(shown)} numbers, the command gives {list(want)}")
                 continue
             for w, value in zip(shown, want):
+                if value is None:       # a timing beside a checked number
+                    continue
                 if not (abs(float(w) - value) <= slack(w, tolerance)
                         or (math.isinf(value) and math.isinf(float(w)))):
                     problems.append(f"row {r + 1} {table.header[c]!r}: {w} documented, "
@@ -341,6 +365,44 @@ WEIGHT_BENCH_BLUR = Figure(
     rows=_weight_bench_rows, slow=True)
 
 
+def _bench_render(outputs: list[str]) -> dict:
+    return json.loads(outputs[0])["targets"]["render"]["result"]
+
+
+def _ground_truth_rows(outputs: list[str]) -> Rows:
+    """spp | old CPU s | old two-seed | new CPU s | new two-seed, pinhole at 16 and 64 spp."""
+    found = {(r["spp"], r["method"]): r for r in _bench_render(outputs)["ground_truth"]
+             if r["mode"] == "pinhole"}
+    return [[[spp], None, [found[spp, "old"]["two_seed_psnr_db"]], None,
+             [found[spp, "new"]["two_seed_psnr_db"]]] for spp in (16, 64)]
+
+
+def _mesh_rows(outputs: list[str]) -> Rows:
+    """mesh bound | triangles | sag error | PSF L1 | render s."""
+    rows: Rows = []
+    for r in _bench_render(outputs)["mesh_accuracy"]:
+        if r["mesh"] == "analytic sphere":      # no triangles; no sag error by definition
+            rows.append([None, [], [0.0], [r["psf_l1"]], None])
+        else:
+            bound = float(r["mesh"].split()[-1])
+            rows.append([[bound], [r["triangles"]], [r["sag_error_mm"]], [r["psf_l1"]], None])
+    return rows
+
+
+def _error_vs_time_rows(outputs: list[str]) -> Rows:
+    """continuous and 8 planes: relative RMSE / s at 16, 64 and 256 spp."""
+    rows = _bench_render(outputs)["error_vs_time"]["rows"]
+    return [[None, *([r["continuous_rel_rmse"], None] for r in rows)],
+            [None, *([r["planes_rel_rmse"], None] for r in rows)]]
+
+
+_BENCH = dict(cites="mitsweep bench render", commands=(".venv/bin/mitsweep bench all --json",),
+              recorded="docs/benchmarks.json", timings=True)
+GROUND_TRUTH = Figure(rows=_ground_truth_rows, **_BENCH)
+MESH_ACCURACY = Figure(rows=_mesh_rows, **_BENCH)
+ERROR_VS_TIME = Figure(rows=_error_vs_time_rows, **_BENCH)
+
+
 #: Every checked figure, by the name its page's marker gives.
 FIGURES: dict[str, Figure] = {
     "sweep-ranges": SWEEP_RANGES,
@@ -349,4 +411,26 @@ FIGURES: dict[str, Figure] = {
     "table1-paraboloid": TABLE1_PARABOLOID,
     "calibration-errors": CALIBRATION_ERRORS,
     "weight-bench-blur": WEIGHT_BENCH_BLUR,
+    "bench-render-ground-truth": GROUND_TRUTH,
+    "bench-render-mesh": MESH_ACCURACY,
+    "bench-render-error-vs-time": ERROR_VS_TIME,
 }
+
+
+def report() -> list[str]:
+    """One line per table that shows a number: where it is and how it is checked."""
+    lines = []
+    for t in tables():
+        if t.has_numbers or t.kind != "none":
+            how = t.marker.get("figures", "NO MARKER")
+            if t.kind == "check" and how in FIGURES:
+                figure = FIGURES[how]
+                how += (f" (against {figure.recorded}" if figure.recorded else " (rerun")
+                how += f", tolerance {t.marker.get('tolerance', 'printed')}"
+                how += ", slow)" if figure.slow and not figure.recorded else ")"
+            lines.append(f"{t.where}: {how}")
+    return lines
+
+
+if __name__ == "__main__":
+    print("\n".join(report()))
