@@ -403,6 +403,40 @@ MESH_ACCURACY = Figure(rows=_mesh_rows, **_BENCH)
 ERROR_VS_TIME = Figure(rows=_error_vs_time_rows, **_BENCH)
 
 
+def _demo(setup: str) -> str:
+    """``mitsweep demo`` on a bundled setup, in a temporary directory; prints its report
+    and evaluation as one JSON object."""
+    both = ("import json, sys; print(json.dumps({'report': json.load(open(sys.argv[1])), "
+            "'evaluation': json.load(open(sys.argv[2]))}))")
+    return (f'd=$(mktemp -d) && trap \'rm -rf "$d"\' EXIT && '
+            f'.venv/bin/mitsweep demo --setup scenes/{setup}.toml --out "$d/o" >/dev/null 2>&1 && '
+            f'.venv/bin/python -c "{both}" "$d/o/report.json" "$d/o/evaluation.json"')
+
+
+def _demo_rows(outputs: list[str]) -> Rows:
+    """image | sphere | paraboloid | tilted paraboloid: PSNR (dB) inside the mirror."""
+    psnr = [{k: v["psnr"] for k, v in _json(t)["report"]["evaluation"].items()} for t in outputs]
+    rows: Rows = []
+    for images in (["focused"], ["sweep"], ["edof"], ["stopped"],
+                   ["edof_50lux", "edof_2lux", "edof_0.5lux"],
+                   ["stopped_50lux", "stopped_2lux", "stopped_0.5lux"]):
+        rows.append([None, *([p[i] for i in images] for p in psnr)])
+    return rows
+
+
+def _demo_radius_rows(outputs: list[str]) -> Rows:
+    """radius (px) | per-radius PSNR of the focused image and the EDOF, on the sphere."""
+    scene = _json(outputs[0])["evaluation"]["scenes"]["scene_000"]
+    return [[None, *([p] for p in scene[image]["per_radius"]["psnr"])]
+            for image in ("focused", "edof")]
+
+
+DEMO = Figure(cites="mitsweep demo --setup scenes/NAME.toml",
+              commands=tuple(_demo(s) for s in _SETUPS), rows=_demo_rows, slow=True)
+DEMO_RADIUS = Figure(cites="report.md", commands=(_demo("sphere"),), rows=_demo_radius_rows,
+                     slow=True)
+
+
 #: Every checked figure, by the name its page's marker gives.
 FIGURES: dict[str, Figure] = {
     "sweep-ranges": SWEEP_RANGES,
@@ -411,6 +445,8 @@ FIGURES: dict[str, Figure] = {
     "table1-paraboloid": TABLE1_PARABOLOID,
     "calibration-errors": CALIBRATION_ERRORS,
     "weight-bench-blur": WEIGHT_BENCH_BLUR,
+    "demo-psnr": DEMO,
+    "demo-psnr-per-radius": DEMO_RADIUS,
     "bench-render-ground-truth": GROUND_TRUTH,
     "bench-render-mesh": MESH_ACCURACY,
     "bench-render-error-vs-time": ERROR_VS_TIME,
