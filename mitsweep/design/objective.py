@@ -45,6 +45,7 @@ from scipy import fft as sfft
 
 from ..deconv.noise import SensorNoise
 from ..deconv.wiener import regulariser
+from ..deprecation import renamed_keywords
 
 __all__ = ["WienerModel", "wiener_model", "DeployedWienerModel", "deployed_wiener_model",
            "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
@@ -252,12 +253,13 @@ class DeployedWienerModel:
         return value, grad
 
 
-def deployed_wiener_model(kernels: np.ndarray, depths_mm: ArrayLike, noise: SensorNoise, *,
-                          deploy_depth_mm: float = 500.0, deploy_nsr: float | None = None,
+@renamed_keywords(depths_mm="depths", deploy_depth_mm="deploy_depth")
+def deployed_wiener_model(kernels: np.ndarray, depths: ArrayLike, noise: SensorNoise, *,
+                          deploy_depth: float = 500.0, deploy_nsr: float | None = None,
                           n_fft: int = DEFAULT_FFT_SIZE, n_px: float) -> DeployedWienerModel:
     """The :class:`DeployedWienerModel` of bin-averaged kernels (n_depths, n_points, N,
     K, K): each depth restored with the kernels of the bank depth nearest
-    ``deploy_depth_mm`` (in 1/depth, as :func:`mitsweep.deconv.kernels.select_depth`)
+    ``deploy_depth`` (in 1/depth, as :func:`mitsweep.deconv.kernels.select_depth`)
     and the NSR ``deploy_nsr`` (default the sensor's, :meth:`SensorNoise.nsr` at 0.5:
     then only the kernel's depth differs from :func:`wiener_model`).
 
@@ -265,11 +267,11 @@ def deployed_wiener_model(kernels: np.ndarray, depths_mm: ArrayLike, noise: Sens
     ----------
     kernels : (n_depths, n_points, N, K, K) ndarray
         The plane bank's bin-averaged kernels.
-    depths_mm : array_like
+    depths : array_like
         The bank's depths, mm (n_depths; inf allowed).
     noise : SensorNoise
         The sensor at the design's light level.
-    deploy_depth_mm : float
+    deploy_depth : float
         The depth whose kernels restore every depth, mm (inf allowed; default 500 mm,
         the datasets' bank depth).
     deploy_nsr : float, optional
@@ -282,11 +284,11 @@ def deployed_wiener_model(kernels: np.ndarray, depths_mm: ArrayLike, noise: Sens
     base = wiener_model(kernels, noise, n_fft=n_fft, n_px=n_px)
     k = np.asarray(kernels)
     D, P = k.shape[:2]
-    depths = np.asarray(depths_mm, dtype=float)
+    depths = np.asarray(depths, dtype=float)
     if depths.shape != (D,):
-        raise ValueError(f"depths_mm: need {D} depths, got {depths.shape}")
+        raise ValueError(f"depths: need {D} depths, got {depths.shape}")
     with np.errstate(divide="ignore"):
-        d0 = int(np.argmin(np.abs(1.0 / depths - 1.0 / float(deploy_depth_mm))))
+        d0 = int(np.argmin(np.abs(1.0 / depths - 1.0 / float(deploy_depth))))
     idx = np.array([d0 * P + p for _ in range(D) for p in range(P)])
     c = base.reg / float(noise.nsr(SIGNAL_MEAN))
     reg_f = base.reg if deploy_nsr is None else c * float(deploy_nsr)

@@ -240,7 +240,7 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     def predictor(b: PlaneBank):
         if deployed:
             return deployed_wiener_model(b.kernels, b.depths, noise, n_fft=n_fft, n_px=n_px,
-                                         deploy_depth_mm=deploy_depth,
+                                         deploy_depth=deploy_depth,
                                          deploy_nsr=deploy_nsr)
         return wiener_model(b.kernels, noise, n_fft=n_fft, n_px=n_px)
 
