@@ -100,12 +100,26 @@ class WienerModel:
         return self._combine(t, self.spectra_re), self._combine(t, self.spectra_im)
 
     def mse(self, tau: ArrayLike) -> np.ndarray:
-        """(J,) predicted MSE at exposure fractions ``tau`` (N,), or (B, J) for (B, N)."""
+        """(J,) predicted MSE at exposure fractions ``tau`` (N,), or (B, J) for (B, N).
+
+        Parameters
+        ----------
+        tau : array_like
+            Exposure fractions of the N planes, (N,) summing to 1 (or a batch (B, N) where
+            the method says so).
+        """
         kr, ki = self._transfer(np.asarray(tau, dtype=float))
         return self.noise_var * (self.weight / (kr * kr + ki * ki + self.reg)).sum(axis=-1)
 
     def mse_and_grad(self, tau: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """(J,) MSE and its (J, N) gradient in τ."""
+        """(J,) MSE and its (J, N) gradient in τ.
+
+        Parameters
+        ----------
+        tau : array_like
+            Exposure fractions of the N planes, (N,) summing to 1 (or a batch (B, N) where
+            the method says so).
+        """
         kr, ki = self._transfer(np.asarray(tau, dtype=float))
         d = kr * kr + ki * ki + self.reg
         value = self.noise_var * (self.weight / d).sum(axis=-1)
@@ -116,7 +130,14 @@ class WienerModel:
         return value, grad
 
     def bound_and_grad(self, tau: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """(J,) convex lower bound ``L(τ) <= MSE(τ)`` and its (J, N) gradient."""
+        """(J,) convex lower bound ``L(τ) <= MSE(τ)`` and its (J, N) gradient.
+
+        Parameters
+        ----------
+        tau : array_like
+            Exposure fractions of the N planes, (N,) summing to 1 (or a batch (B, N) where
+            the method says so).
+        """
         y = self._combine(np.asarray(tau, dtype=float), self.magnitude)
         sq = np.sqrt(self.reg)
         lin = y < sq
@@ -220,13 +241,27 @@ class DeployedWienerModel:
         return t, kr, ki, qr, qi, D, nr, ni
 
     def mse(self, tau: ArrayLike) -> np.ndarray:
-        """(J,) deployed MSE at ``tau`` (N,), or (B, J) for (B, N)."""
+        """(J,) deployed MSE at ``tau`` (N,), or (B, J) for (B, N).
+
+        Parameters
+        ----------
+        tau : array_like
+            Exposure fractions of the N planes, (N,) summing to 1 (or a batch (B, N) where
+            the method says so).
+        """
         _, _, _, qr, qi, D, nr, ni = self._parts(tau)
         e = (nr * nr + ni * ni) / (self.reg_true * D * D) + (qr * qr + qi * qi) / (D * D)
         return self.noise_var * (self.weight * e).sum(axis=-1)
 
     def mse_and_grad(self, tau: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """(J,) deployed MSE and its (J, N) gradient in τ (for one τ)."""
+        """(J,) deployed MSE and its (J, N) gradient in τ (for one τ).
+
+        Parameters
+        ----------
+        tau : array_like
+            Exposure fractions of the N planes, (N,) summing to 1 (or a batch (B, N) where
+            the method says so).
+        """
         _, kr, ki, qr, qi, D, nr, ni = self._parts(tau)
         n2, q2 = nr * nr + ni * ni, qr * qr + qi * qi
         Rt = self.reg_true

@@ -54,7 +54,12 @@ EXTENTS = ("fov", "rim")
 def field_radius(setup: Setup, geometry: ReferenceGeometry | None = None) -> float:
     """Image radius (mm, at the reference distance) of the FOV's mirror-zone edge.
 
-    ``geometry``: the setup's reference geometry (default: resolved from the setup).
+    Parameters
+    ----------
+    setup : Setup
+        The camera, mirror and sweep.
+    geometry : ReferenceGeometry, optional
+        The setup's reference geometry (default: resolved from the setup).
     """
     geometry = reference_geometry(setup) if geometry is None else geometry
     pl = placement_of(setup.mirror)
@@ -223,7 +228,15 @@ def extend_to_rim(setup: Setup, bank: IPSFBank, *,
 
 def grid_points(setup: Setup, grid: tuple[int, int]) -> NDArray[np.float64]:
     """(rows·cols, 2) upright (u, v) mm: cell centres of a grid over the sensor, row-major,
-    rows top to bottom."""
+    rows top to bottom.
+
+    Parameters
+    ----------
+    setup : Setup
+        Its sensor's size spans the grid.
+    grid : (int, int)
+        ``(rows, cols)``, each at least 1.
+    """
     rows, cols = (int(x) for x in grid)
     if rows < 1 or cols < 1:
         raise ValueError(f"grid: rows and cols must be >= 1, got {grid!r}")
