@@ -256,6 +256,19 @@ def _check_depth(depth):
     return d
 
 
+def _check_operator(operator: str | None, kind: str, grid: int,
+                    shape: tuple[int, int]) -> None:
+    """Refuse what the operator cannot do with a bank of ``kind`` on an image of ``shape``
+    (before tracing)."""
+    H, W = shape
+    if operator == "polar" and kind != "radial":
+        raise InputError("--operator polar needs a radial bank (an untilted mirror)")
+    max_grid = max(1, min(H, W) // 4)
+    if operator == "grid" and kind == "radial" and grid > max_grid:
+        raise InputError(f"--grid {grid}: at most {max_grid} for a {W}x{H} image "
+                         f"(grid cells of at least 4 px)")
+
+
 def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike | None = None,
                   bank: str | os.PathLike | None = None,
                   record: str | os.PathLike | None = None,
@@ -377,48 +390,44 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     pixels = photo.data
     meta = photo.meta.get("exr_header") or {}
     given = resolve_setup(setup) if setup is not None else None
-    setup = given
-    if setup is None and isinstance(meta.get("setup"), dict):
-        setup = setup_from_dict(meta["setup"])
-    if bank is None and setup is None:
+    photo_setup = given
+    if photo_setup is None and isinstance(meta.get("setup"), dict):
+        photo_setup = setup_from_dict(meta["setup"])
+    if bank is None and photo_setup is None:
         raise InputError(f"{src}: no setup in its metadata; give --setup (the setup the photo "
                          f"was taken with) or --bank")
-    if record is not None and setup is None:
-        raise InputError("--record needs the photo's setup: give --setup")
-    motion = _record_motion(record, setup) if record is not None else None
-    pitch, pitch_from = _resolve_pitch(photo, meta, setup)
+    motion = None
+    if record is not None:
+        if photo_setup is None:
+            raise InputError("--record needs the photo's setup: give --setup")
+        motion = _record_motion(record, photo_setup)
+    pitch, pitch_from = _resolve_pitch(photo, meta, photo_setup)
     H, W = pixels.shape[:2]
     center_given = center is not None
-    center, center_from = _resolve_center(center, setup, (H, W))
-
-    def check_operator(kind: str) -> None:
-        """Refuse what the operator cannot do with a bank of ``kind`` (before tracing)."""
-        if operator == "polar" and kind != "radial":
-            raise InputError("--operator polar needs a radial bank (an untilted mirror)")
-        max_grid = max(1, min(H, W) // 4)
-        if operator == "grid" and kind == "radial" and grid > max_grid:
-            raise InputError(f"--grid {grid}: at most {max_grid} for a {W}x{H} image "
-                             f"(grid cells of at least 4 px)")
+    center, center_from = _resolve_center(center, photo_setup, (H, W))
 
     cache = None
     if bank is not None:
         bank_source = str(bank)
-        bank = load_bank(bank)
-        check_operator(bank.kind)
+        kernels = load_bank(os.fspath(bank))
+        _check_operator(operator, kernels.kind, grid, (H, W))
         if pitch is None:
             logger.warning("%s: no pixel pitch in the metadata; assuming the bank's %g mm",
-                           src, bank.pixel_pitch)
-        check_bank_matches(bank, pixels.shape, pixel_pitch=pitch)
-        identity = _given_bank_identity(bank, _image_optics(meta, given, setup_path, src,
+                           src, kernels.pixel_pitch)
+        check_bank_matches(kernels, pixels.shape, pixel_pitch=pitch)
+        identity = _given_bank_identity(kernels, _image_optics(meta, given, setup_path, src,
                                                             motion), src, force)
     else:
         if force:
             raise InputError("--force applies to a given --bank only")
-        check_operator("radial" if setup.mirror.is_symmetric else "grid")
-        got = _traced_bank(setup, (H, W), pitch, motion, depth, rays, progress, cache_dir)
-        bank, cache = got.bank, {"path": got.path and str(got.path), "traced": got.traced}
+        assert photo_setup is not None  # refused above: no bank and no setup
+        _check_operator(operator, "radial" if photo_setup.mirror.is_symmetric else "grid",
+                        grid, (H, W))
+        got = _traced_bank(photo_setup, (H, W), pitch, motion, depth, rays, progress,
+                           cache_dir)
+        kernels, cache = got.bank, {"path": got.path and str(got.path), "traced": got.traced}
         identity = {"checked_against": "traced for the photo's geometry", "forced": False,
-                    "problem": None, "bank_optics_sha256": optics_fingerprint(bank.optics)}
+                    "problem": None, "bank_optics_sha256": optics_fingerprint(kernels.optics)}
         bank_source = str(got.path) if got.path is not None else "traced (not cached)"
 
     photo.log_warnings()  # the setup, bank and geometry took it: it will be restored
@@ -430,7 +439,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     t0 = time.perf_counter()
     kw = dict(nsr=nsr, prior=prior, depth=depth) if method == "wiener" else \
         dict(nsr=nsr, depth=depth)
-    restored, used, shift = _restore(pixels, bank, method=method, operator=operator,
+    restored, used, shift = _restore(pixels, kernels, method=method, operator=operator,
                                      grid=grid, center=center,
                                      explicit_center=explicit_center, **kw)
     seconds = time.perf_counter() - t0
@@ -439,21 +448,21 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         "command": "deconvolve", "version": __version__, "input": str(src),
         "input_kind": photo.kind, "input_bit_depth": photo.bit_depth,
         "input_warnings": list(photo.warnings),
-        "bank": bank_source, "bank_kind": bank.kind, "bank_cache": cache,
+        "bank": bank_source, "bank_kind": kernels.kind, "bank_cache": cache,
         "method": method, "operator": used,
         "nsr": nsr if nsr is not None else "estimated", "prior": prior,
         "depth_mm": depth if depth is not None else 500.0,
         "center_rc": list(center) if explicit_center else None,
         "center_from": center_from, "window_shift_rc": list(shift) if shift else None,
-        "pixel_pitch": float(bank.pixel_pitch), "pixel_pitch_from": pitch_from,
-        "reference_sensor_distance": float(bank.reference_sensor_distance),
+        "pixel_pitch": float(kernels.pixel_pitch), "pixel_pitch_from": pitch_from,
+        "reference_sensor_distance": float(kernels.reference_sensor_distance),
         "record": None if record is None else os.fspath(record),
         "motion": None if motion is None else motion.as_dict(),
         "bank_identity": identity,
         "input_metadata": meta,
     }
-    if setup is not None:
-        provenance["setup"] = setup_to_dict(setup)
+    if photo_setup is not None:
+        provenance["setup"] = setup_to_dict(photo_setup)
     for key in ("setup", "sweep_range"):
         if key in meta:
             provenance[key] = meta[key]
