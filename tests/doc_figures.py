@@ -413,15 +413,22 @@ def _demo(setup: str) -> str:
             f'.venv/bin/python -c "{both}" "$d/o/report.json" "$d/o/evaluation.json"')
 
 
-def _demo_rows(outputs: list[str]) -> Rows:
-    """image | sphere | paraboloid | tilted paraboloid: PSNR (dB) inside the mirror."""
+def _demo_psnr(outputs: list[str], rows: Sequence[Sequence[str]]) -> Rows:
+    """image | sphere | paraboloid | tilted paraboloid: PSNR (dB) inside the mirror, one
+    row per list of images."""
     psnr = [{k: v["psnr"] for k, v in _json(t)["report"]["evaluation"].items()} for t in outputs]
-    rows: Rows = []
-    for images in (["focused"], ["sweep"], ["edof"], ["stopped"],
-                   ["edof_50lux", "edof_2lux", "edof_0.5lux"],
-                   ["stopped_50lux", "stopped_2lux", "stopped_0.5lux"]):
-        rows.append([None, *([p[i] for i in images] for p in psnr)])
-    return rows
+    return [[None, *([p[i] for i in images] for p in psnr)] for images in rows]
+
+
+def _demo_rows(outputs: list[str]) -> Rows:
+    """The noise-free images: focused, sweep, EDOF, F11."""
+    return _demo_psnr(outputs, (["focused"], ["sweep"], ["edof"], ["stopped"]))
+
+
+def _demo_noisy_rows(outputs: list[str]) -> Rows:
+    """EDOF and F11 at 50 / 2 / 0.5 lux."""
+    return _demo_psnr(outputs, (["edof_50lux", "edof_2lux", "edof_0.5lux"],
+                                ["stopped_50lux", "stopped_2lux", "stopped_0.5lux"]))
 
 
 def _demo_radius_rows(outputs: list[str]) -> Rows:
@@ -433,6 +440,8 @@ def _demo_radius_rows(outputs: list[str]) -> Rows:
 
 DEMO = Figure(cites="mitsweep demo --setup scenes/NAME.toml",
               commands=tuple(_demo(s) for s in _SETUPS), rows=_demo_rows, slow=True)
+DEMO_NOISY = Figure(cites="two runs of the same", commands=DEMO.commands,
+                    rows=_demo_noisy_rows, slow=True)
 DEMO_RADIUS = Figure(cites="report.md", commands=(_demo("sphere"),), rows=_demo_radius_rows,
                      slow=True)
 
@@ -446,6 +455,7 @@ FIGURES: dict[str, Figure] = {
     "calibration-errors": CALIBRATION_ERRORS,
     "weight-bench-blur": WEIGHT_BENCH_BLUR,
     "demo-psnr": DEMO,
+    "demo-psnr-noisy": DEMO_NOISY,
     "demo-psnr-per-radius": DEMO_RADIUS,
     "bench-render-ground-truth": GROUND_TRUTH,
     "bench-render-mesh": MESH_ACCURACY,

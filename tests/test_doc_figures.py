@@ -97,3 +97,15 @@ def test_a_wrong_number_is_caught():
     table = Table(ROOT / "docs" / "x.md", 1, ["a", "b"], [["x", "339.00–364.26 mm"]], "", {})
     assert compare(table, [[None, [339.0, 364.2485]]])
     assert not compare(table, [[None, [339.0, 364.2551]]])
+
+
+def test_a_marker_reads_its_figure_tolerance_and_a_reason_with_semicolons(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("Text `cmd` on a 2-core machine:\n\n<!-- figures: x; tolerance: 1% -->\n"
+                    "| a |\n|---|\n| 1 |\n\n<!-- figures: not checked (one; two) -->\n"
+                    "| b |\n|---|\n| 2 |\n")
+    first, second = tables([page])
+    assert first.marker == {"figures": "x", "tolerance": "1%"} and first.kind == "check"
+    assert first.above == "Text `cmd` on a 2-core machine:"
+    assert second.marker == {"figures": "not checked (one; two)"}
+    assert second.kind == "not checked"
