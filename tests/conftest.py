@@ -68,10 +68,23 @@ def _busy_cores_wanted() -> int:
 #: deadlines (tests/test_rig_*.py): under ``--dist loadgroup`` (scripts/test.sh) they run
 #: in one worker, one at a time and in file order, as in a serial run, while the other
 #: workers keep the CPUs busy, the load CI's serial busy-core pass checks them under.
-#: Every other test is grouped by its module, so that a module's fixtures are built once
-#: (one test per unit built them once per worker: 107 s against 85 s serially and 71 s
-#: by module, for test_calibrate, test_unwarp, test_bank_validation, test_tracer_focus).
+#: A module with fixtures wider than a test (module, class, package or session scope
+#: declared in the module) is one group, so that its fixtures are built once (one test
+#: per unit built them once per worker: 107 s against 85 s serially and 71 s by module,
+#: for test_calibrate, test_unwarp, test_bank_validation, test_tracer_focus); the tests
+#: of every other module are handed out one by one, which balances the workers (one
+#: module of long tests, such as the doc snippets, would otherwise end the run alone).
 RIG_GROUP = "rig"
+SHARED_FIXTURE = ('scope="module"', 'scope="class"', 'scope="package"', 'scope="session"')
+
+#: The slowest groups first (wall seconds of a serial run on the 2-core machine under
+#: load; only the order matters): xdist hands groups out in collection order, so the
+#: longest start first and the short ones fill in at the end.
+SLOWEST_FIRST = ("rig", "test_calibrate_real", "test_doc_snippets", "test_calibrate_limb",
+                 "test_cli_sweep_range", "test_calibrate", "test_architecture",
+                 "test_pipeline_dataset", "test_memory_gate", "test_dataset_runner",
+                 "test_datasets_reader", "test_error_budget", "test_plots",
+                 "test_pipeline_lock", "test_cache_optional", "test_examples")
 
 
 def pytest_configure(config):
@@ -82,10 +95,26 @@ def pytest_configure(config):
                                 f"under -n")
 
 
+def _shares_fixtures(path: Path, seen: dict) -> bool:
+    if path not in seen:
+        text = path.read_text(errors="replace")
+        seen[path] = any(s in text for s in SHARED_FIXTURE)
+    return seen[path]
+
+
+@pytest.hookimpl(tryfirst=True)   # before xdist's own hook, which reads the groups
 def pytest_collection_modifyitems(config, items):
+    seen: dict = {}
     for item in items:
-        rig = item.path.name.startswith("test_rig_")
-        item.add_marker(pytest.mark.xdist_group(RIG_GROUP if rig else item.path.stem))
+        if item.path.name.startswith("test_rig_"):
+            item.add_marker(pytest.mark.xdist_group(RIG_GROUP))
+        elif _shares_fixtures(item.path, seen):
+            item.add_marker(pytest.mark.xdist_group(item.path.stem))
+    if getattr(config.option, "numprocesses", None):
+        rank = {name: i for i, name in enumerate(SLOWEST_FIRST)}
+        last = len(SLOWEST_FIRST)
+        items.sort(key=lambda it: rank.get("rig" if it.path.name.startswith("test_rig_")
+                                           else it.path.stem, last))
 
 
 @pytest.fixture(autouse=True)

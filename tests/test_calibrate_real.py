@@ -92,8 +92,8 @@ def _rough_cases():
         for error in (0.09, -0.35, 0.35):
             marks = [] if error == 0.09 else [pytest.mark.slow]
             why = SETUP_KNOWN_FAILURES.get(e["name"]) or GUESS_FAILURES.get((e["name"], error))
-            if why:
-                marks.append(pytest.mark.xfail(reason=why, strict=True))
+            if why:   # a known miss: checked in CI's slow run, not before every commit
+                marks += [pytest.mark.xfail(reason=why, strict=True), pytest.mark.slow]
             yield pytest.param(e, error, id=f"{e['name']}{error:+.2f}", marks=marks)
 
 

@@ -179,6 +179,7 @@ def tiny_dataset(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow   # one of the longest default tests (15-40 s on 2 cores): in CI's slow run
 def test_budget_command_prints_every_term_per_bin(tiny_dataset, tmp_path):
     out = tmp_path / "budget"
     rc, stdout, stderr = run_cli("budget", tiny_dataset, "--json", "--out", out)

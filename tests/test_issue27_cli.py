@@ -133,6 +133,7 @@ def tiny_dataset(tmp_path_factory):
     return root
 
 
+@pytest.mark.slow   # one of the longest default tests (15-40 s on 2 cores): in CI's slow run
 def test_budget_rim_bank_restores_with_the_bank_traced_to_the_rim(tiny_dataset, tmp_path):
     item = "scene_000/edof_50lux.exr"
     rc, stdout, stderr = run_cli("budget", tiny_dataset, "--item", "edof_50lux", "--json")
@@ -172,6 +173,7 @@ def test_budget_rim_bank_takes_no_value(tiny_dataset):
 
 # -- bench weights -----------------------------------------------------------------------
 
+@pytest.mark.slow   # one of the longest default tests (15-40 s on 2 cores): in CI's slow run
 def test_bench_weights_quick_prints_oracle_against_chosen(capsys):
     rc, stdout, err = _cli(["bench", "weights", "--quick", "--json"], capsys)
     assert rc == 0, err

@@ -220,6 +220,7 @@ def test_huge_panorama_is_refused_before_it_is_made(size, small_photo, tmp_path,
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.slow   # one of the longest default tests (15-40 s on 2 cores): in CI's slow run
 def test_panorama_estimate_covers_the_measured_peak(small_photo, tmp_path):
     """A panorama the gate lets through stays within its estimate (the process's peak,
     interpreter included, against the estimate plus the interpreter's own ~100 MiB),

@@ -7,6 +7,7 @@ from scipy.special import j0, j1
 from mitsweep.optics.diffraction import airy_kernel
 
 
+@pytest.mark.slow   # one of the longest default tests (15-40 s on 2 cores): in CI's slow run
 def test_encircled_energy_in_the_first_ring():
     """Rayleigh's classic: 83.8 % of the energy lies inside r = 1.22 λN (exactly
     1 − J0(x)² − J1(x)² at the first zero). Fine pixels (λN/8) make the pixel

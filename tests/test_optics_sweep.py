@@ -85,6 +85,7 @@ def test_thin_lens_round_trip_and_limits():
 
 # Random valid conics, placements and depth ranges. The FOV is drawn as a fraction of
 # what the mirror reaches, so every example is a valid request.
+@pytest.mark.slow   # one of the longest default tests (24 s on 2 cores): in CI's slow run
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     radius=st.floats(5.0, 200.0),

@@ -8,6 +8,7 @@ import pytest
 from mitsweep.cli.main import main
 
 
+@pytest.mark.slow   # one of the longest default tests (15-40 s on 2 cores): in CI's slow run
 def test_bench_tracer_quick_json(capsys):
     assert main(["bench", "tracer", "--quick", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)
