@@ -10,8 +10,6 @@ at ``[K // 2, K // 2]``; pixels and sensor millimetres convert through
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 import logging
 import math
 from typing import Any
@@ -21,7 +19,8 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from ..deprecation import renamed_keywords
-from ..io.bank import OPTICS_SECTIONS, BankError, IPSFBank, optics_fingerprint, optics_sections
+from ..io.bank import (OPTICS_SECTIONS, BankError, IPSFBank, fill_off_mirror_nodes,
+                       optics_fingerprint, optics_sections)
 from ..optics.pixels import optical_center_px, pixel_to_sensor
 from ..resources import check_allocation
 
@@ -213,31 +212,15 @@ def fill_invalid_nodes(bank: IPSFBank) -> IPSFBank:
     kernel and marks it invalid (``metadata["valid"]``). The product-convolution then
     blends that delta into every pixel of the cells around it, so the mirror's image
     near its rim (on the tilted paraboloid, most of what lies beyond the design FOV) is
-    restored with a kernel part blur, part identity: under-deconvolved. Beyond the rim
-    there is no mirror and no image to restore, so the nearest traced kernel (in the
-    sensor plane) is the bank's best knowledge of the blur at every node, and the cells
-    that straddle the rim get the rim's blur. Radial banks and grid banks with every
-    node valid are returned unchanged; ``metadata["filled_nodes"]`` lists the nodes
-    filled and ``metadata["filled_from"]`` the node each copies.
+    restored with a kernel part blur, part identity: under-deconvolved. The filling is
+    :func:`mitsweep.io.bank.fill_off_mirror_nodes` (the tracer's rim banks use it too).
 
     Parameters
     ----------
     bank : IPSFBank
         The bank; its ``metadata["valid"]`` (one flag per point) marks the traced nodes.
     """
-    valid = np.asarray((bank.metadata or {}).get("valid", []), dtype=bool)
-    if bank.kind != "grid" or valid.size != len(bank.points_uv) or valid.all() \
-            or not valid.any():
-        return bank
-    pts = np.asarray(bank.points_uv, dtype=np.float64)
-    good = np.flatnonzero(valid)
-    bad = np.flatnonzero(~valid)
-    d = np.hypot(pts[bad, None, 0] - pts[None, good, 0], pts[bad, None, 1] - pts[None, good, 1])
-    src = good[np.argmin(d, axis=1)]
-    kernels = np.array(bank.kernels, copy=True)
-    kernels[:, bad] = kernels[:, src]
-    meta = {**bank.metadata, "filled_nodes": bad.tolist(), "filled_from": src.tolist()}
-    return replace(bank, kernels=kernels, metadata=meta)
+    return fill_off_mirror_nodes(bank)
 
 
 def _setup_resolution(meta: dict[str, Any]) -> tuple[int, int] | None:

@@ -43,7 +43,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 from collections.abc import Mapping
@@ -55,7 +55,7 @@ from ..resources import ResourceError, require_regular_file
 from .atomic import atomic_path
 
 __all__ = ["IPSFBank", "save_bank", "load_bank", "BankError", "optics_sections",
-           "optics_fingerprint", "OPTICS_SECTIONS", "bank_kernel_size"]
+           "optics_fingerprint", "OPTICS_SECTIONS", "bank_kernel_size", "fill_off_mirror_nodes"]
 
 BANK_FORMAT = "mitsweep-ipsf-bank/2"
 #: Formats :func:`load_bank` reads; /1 predates the optics fingerprint.
@@ -459,3 +459,36 @@ def bank_kernel_size(pixel_pitch: float) -> int:
     """
     half = int(math.ceil(15 * 0.018 / pixel_pitch))
     return 2 * max(half, 15) + 1
+
+
+def fill_off_mirror_nodes(bank: IPSFBank) -> IPSFBank:
+    """A grid bank whose nodes off the mirror take the kernel of the nearest traced node.
+
+    The tracer gives a grid node whose chief ray misses the mirror a centred delta
+    kernel and marks it invalid (``metadata["valid"]``); the product-convolution would
+    blend that delta into the cells around it, under-deconvolving the mirror's image near
+    its rim. Beyond the rim there is no image to restore, so the nearest traced kernel
+    (in the sensor plane; the first of equally near ones) is the bank's best knowledge
+    of the blur at every node. The nodes stay marked invalid; ``metadata["filled_nodes"]``
+    lists those filled and ``metadata["filled_from"]`` the node each copies. Radial banks
+    and grid banks with every node (or none) valid are returned unchanged. The same
+    filling as :func:`mitsweep.deconv.kernels.fill_invalid_nodes`.
+
+    Parameters
+    ----------
+    bank : IPSFBank
+        The bank; its ``metadata["valid"]`` (one flag per point) marks the traced nodes.
+    """
+    valid = np.asarray((bank.metadata or {}).get("valid", []), dtype=bool)
+    if bank.kind != "grid" or valid.size != len(bank.points_uv) or valid.all() \
+            or not valid.any():
+        return bank
+    pts = np.asarray(bank.points_uv, dtype=np.float64)
+    good = np.flatnonzero(valid)
+    bad = np.flatnonzero(~valid)
+    d = np.hypot(pts[bad, None, 0] - pts[None, good, 0], pts[bad, None, 1] - pts[None, good, 1])
+    src = good[np.argmin(d, axis=1)]
+    kernels = np.array(bank.kernels, copy=True)
+    kernels[:, bad] = kernels[:, src]
+    meta = {**bank.metadata, "filled_nodes": bad.tolist(), "filled_from": src.tolist()}
+    return replace(bank, kernels=kernels, metadata=meta)

@@ -29,7 +29,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .. import __version__
 from ..config import Setup, setup_to_dict
-from ..io.bank import IPSFBank, optics_sections
+from ..io.bank import IPSFBank, fill_off_mirror_nodes, optics_sections
 from ..optics import SweepRange, chief_ray, image_point, placement_of
 from ..optics.motion import MotionProfile
 from ..optics.reference import ReferenceGeometry, reference_geometry
@@ -111,39 +111,6 @@ def rim_radii(radii: ArrayLike, rim: float) -> NDArray[np.float64]:
     step = float(np.median(np.diff(np.sort(r)))) if len(r) > 1 else rim - last
     n = max(1, int(math.ceil((rim - last) / step - 1e-9)))
     return np.linspace(last, rim, n + 1)[1:]
-
-
-def fill_off_mirror_nodes(bank: IPSFBank) -> IPSFBank:
-    """A grid bank whose nodes off the mirror take the kernel of the nearest traced node.
-
-    The tracer gives a grid node whose chief ray misses the mirror a centred delta
-    kernel and marks it invalid (``metadata["valid"]``); the product-convolution would
-    blend that delta into the cells around it, under-deconvolving the mirror's image near
-    its rim. Beyond the rim there is no image to restore, so the nearest traced kernel
-    (in the sensor plane; the first of equally near ones) is the bank's best knowledge
-    of the blur at every node. The nodes stay marked invalid; ``metadata["filled_nodes"]``
-    lists those filled and ``metadata["filled_from"]`` the node each copies. Radial banks
-    and grid banks with every node (or none) valid are returned unchanged. The same
-    filling as :func:`mitsweep.deconv.kernels.fill_invalid_nodes`.
-
-    Parameters
-    ----------
-    bank : IPSFBank
-        The bank; its ``metadata["valid"]`` (one flag per point) marks the traced nodes.
-    """
-    valid = np.asarray((bank.metadata or {}).get("valid", []), dtype=bool)
-    if bank.kind != "grid" or valid.size != len(bank.points_uv) or valid.all() \
-            or not valid.any():
-        return bank
-    pts = np.asarray(bank.points_uv, dtype=np.float64)
-    good = np.flatnonzero(valid)
-    bad = np.flatnonzero(~valid)
-    d = np.hypot(pts[bad, None, 0] - pts[None, good, 0], pts[bad, None, 1] - pts[None, good, 1])
-    src = good[np.argmin(d, axis=1)]
-    kernels = np.array(bank.kernels, copy=True)
-    kernels[:, bad] = kernels[:, src]
-    meta = {**bank.metadata, "filled_nodes": bad.tolist(), "filled_from": src.tolist()}
-    return replace(bank, kernels=kernels, metadata=meta)
 
 
 def _rim_metadata(fov: float, new: NDArray[np.float64]) -> dict[str, Any]:
