@@ -48,7 +48,7 @@ from .resources import require_regular_file
 try:  # Python >= 3.11
     import tomllib
 except ModuleNotFoundError:  # pragma: no cover - Python 3.10
-    import tomli as tomllib  # type: ignore[no-redef]
+    import tomli as tomllib  # type: ignore[no-redef]  # the same module, by its 3.10 name
 
 __all__ = [
     "SetupError",

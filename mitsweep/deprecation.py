@@ -113,7 +113,7 @@ def renamed_fields(**old_to_new: str) -> Callable[[C], C]:
     3.0
     """
     def decorate(cls: C) -> C:
-        init = cls.__init__  # type: ignore[misc]
+        init = cls.__init__  # type: ignore[misc]  # mypy forbids reading __init__ off a class
         owner = cls.__qualname__
 
         @functools.wraps(init)
@@ -122,7 +122,7 @@ def renamed_fields(**old_to_new: str) -> Callable[[C], C]:
                 _take_old(owner, kwargs, old, new, stacklevel=3)
             init(self, *args, **kwargs)
 
-        cls.__init__ = accepting_old  # type: ignore[misc]
+        cls.__init__ = accepting_old  # type: ignore[misc]  # and assigning it: the point here
         for old, new in old_to_new.items():
             RENAMED[f"{cls.__module__}.{owner}.{old}"] = new
             setattr(cls, old, _alias(owner, old, new))

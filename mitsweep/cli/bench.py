@@ -18,7 +18,7 @@ import argparse
 import importlib
 import sys
 
-from ..workflows.bench import (  # noqa: F401
+from ..workflows.bench import (  # noqa: F401  (names the tests and scripts import from the command)
     BENCH_TARGETS,
     TargetMissing,
     missing_module,

@@ -28,7 +28,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..workflows.capture import (  # noqa: F401
+from ..workflows.capture import (  # noqa: F401  (names the tests import from the command)
     EXIT_COMPLETE,
     EXIT_INCOMPLETE_SAFE,
     EXIT_MAYBE_UNSAFE,

@@ -69,7 +69,7 @@ class ArgumentParserError(SystemExit):
 class ArgumentParser(argparse.ArgumentParser):
     """argparse that exits with status 2 and one line (argparse's own convention)."""
 
-    def error(self, message: str) -> NoReturn:  # noqa: D401
+    def error(self, message: str) -> NoReturn:
         sys.stderr.write(f"{self.prog}: error: {message}\n")
         raise ArgumentParserError(message, 2)
 

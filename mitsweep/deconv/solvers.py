@@ -711,8 +711,8 @@ def richardson_lucy(image: np.ndarray, op: BlurOperator, *, iterations: int | No
         row = op.forward(ones).astype(dt, copy=False)
         inv_row = np.where(row > dt.type(1e-6), 1 / np.maximum(row, dt.type(1e-6)),
                            dt.type(1)).astype(dt)
-        forward = lambda x: op.forward(x) * inv_row                    # noqa: E731
-        adjoint = lambda r: op.adjoint(r * inv_row)                    # noqa: E731
+        forward = lambda x: op.forward(x) * inv_row
+        adjoint = lambda r: op.adjoint(r * inv_row)
         norm = adjoint(ones)
     else:
         forward, adjoint = op.forward, op.adjoint

@@ -229,7 +229,7 @@ class CaptureRecord:
                     raise RigError("capture: no stage position samples to place the exposure")
                 return None
             cm = self.clock_map
-            to_host = lambda t_us: cm["host_t_s"] + (t_us - cm["board_t_us"]) * 1e-6  # noqa: E731
+            to_host = lambda t_us: cm["host_t_s"] + (t_us - cm["board_t_us"]) * 1e-6
             h_open, h_close = to_host(ev_open.t_us), to_host(ev_close.t_us)
             st = np.array([s[0] for s in self.stage_samples])
             sx = np.array([s[1] for s in self.stage_samples], dtype=float) / plan.steps_per_mm
@@ -241,7 +241,7 @@ class CaptureRecord:
             # the clock mapping's, plus the larger of the two polls each interpolation
             # uses (a poll's time is known to half its round trip)
             su = np.array([s[2] for s in self.stage_samples])
-            near = lambda h: su[np.clip(np.searchsorted(st, h) + np.array([-1, 0]),  # noqa: E731
+            near = lambda h: su[np.clip(np.searchsorted(st, h) + np.array([-1, 0]),
                                         0, len(st) - 1)].max()
             uncertainty = cm["uncertainty_s"] + max(near(h_open), near(h_close))
             # a profile sample against the plan: its poll's time, the clock mapping, and

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, TypeVar
 from collections.abc import Callable
 
+# re-exported: the errors' home before errors.py (callers import them from here)
 from .errors import PortLost, PortUnavailable, ProtocolError, ReplyTimeout  # noqa: F401
 
 __all__ = ["LogEntry", "CommandLog", "Checksum", "XorChecksum", "ZaberChecksum",

@@ -406,7 +406,7 @@ def deposit_sweeps(buffer: DrJitArray, hits: dict, *, center: Sequence[DrJitArra
     x0, y0 = dr.fma(bu, i_lo, au), dr.fma(bv, i_lo, av)
     dx, dy = bu * (i_hi - i_lo), bv * (i_hi - i_lo)
     if cdf_table is None:
-        cdf = lambda s: s  # noqa: E731 - linear motion: F is linear in i
+        cdf = lambda s: s  # linear motion: F is linear in i
     else:
         cdf = _table_lookup(cdf_table, Float, clip=True)
     lx, hx = _slab(x0, dx, K)

@@ -167,13 +167,13 @@ def numeric_focus(setup: Setup, source: PointSource, *, rays: int = 1 << 16, see
     rad = math.hypot(u, v)
     e_r = np.array([u / rad, v / rad]) if rad > 1e-9 else np.array([1.0, 0.0])
     e_t = np.array([-e_r[1], e_r[0]])
-    foc = lambda e: float(-(e @ c_ab @ e) / (e @ c_bb @ e))  # noqa: E731
+    foc = lambda e: float(-(e @ c_ab @ e) / (e @ c_bb @ e))
     i_r, i_t = foc(e_r), foc(e_t)
     # Real for a pencil from a point (a normal congruence); where the two line foci
     # coincide (an axis point) rounding may leave a conjugate pair: its real part is it.
     lines = np.sort(np.linalg.eigvals(-c_ab @ np.linalg.inv(c_bb)).real)
     f = setup.lens.focal_length
-    to_focus = lambda i: float(object_distance(f, i)) if i > f else math.inf  # noqa: E731
+    to_focus = lambda i: float(object_distance(f, i)) if i > f else math.inf
     return FocusResult(
         radial_sensor=i_r, tangential_sensor=i_t,
         line_foci_sensor=(float(lines[0]), float(lines[1])),
@@ -361,7 +361,7 @@ class StarField:
                 out = np.nonzero(g > 0)[0]
                 if out.size:
                     k = int(out[0])
-                    h = lambda s: float(self.angle(*(self.p0 + s * u)) - self.limit)  # noqa: E731
+                    h = lambda s: float(self.angle(*(self.p0 + s * u)) - self.limit)
                     from scipy.optimize import brentq
 
                     s_b = brentq(h, ss[k - 1], ss[k], xtol=1e-12)
@@ -408,7 +408,7 @@ def _search_disc(foci: _LineFoci, field: StarField, n_rings, depths, which: int,
     :data:`FIELD_TOL_MM` (of focus, and of t, θ times the field's size)."""
     from scipy.optimize import minimize, minimize_scalar
     pts, dt, dth = _polar_grid(n_rings)
-    f = lambda t, th, d: sign * foci(*field.point(t, th), d)[which]  # noqa: E731
+    f = lambda t, th, d: sign * foci(*field.point(t, th), d)[which]
     scored = [(f(t, th, d), t, th, d) for d in depths for t, th in pts]
     best = min(scored)
     best_edge = min(s for s in scored if s[1] == 1.0)

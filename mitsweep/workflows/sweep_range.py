@@ -101,7 +101,7 @@ def compute_sweep_range(setup: Setup | str | os.PathLike, *, fov_deg: float | No
         from ..tracer.focus import traced_sweep_range
 
         field = field or "plane"
-        trace = lambda f: traced_sweep_range(  # noqa: E731
+        trace = lambda f: traced_sweep_range(
             setup, fov_deg=fov_deg, depth_min=result.depth_min,
             depth_max=result.depth_max, field=f)
         traced = trace(field)

@@ -283,7 +283,7 @@ class ArduinoModel(Model):
         mv = Move(x0, target, rate, accel, now)
         ramp = math.ceil(Trapezoid.reaching(rate, accel).ramp_distance)
         d_open, d_close = abs(open_at - x0), abs(close_at - x0)
-        inside = lambda p: min(x0, target) <= p <= max(x0, target)  # noqa: E731
+        inside = lambda p: min(x0, target) <= p <= max(x0, target)
         if not (inside(open_at) and inside(close_at) and ramp <= d_open < d_close
                 <= mv.length - ramp):
             return [self.encode_line("ERR RANGE open/close outside the constant-velocity part")]
