@@ -446,6 +446,31 @@ DEMO_RADIUS = Figure(cites="report.md", commands=(_demo("sphere"),), rows=_demo_
                      slow=True)
 
 
+def _design_rows(outputs: list[str]) -> Rows:
+    """setup | lux | worst, mean MSE lin → opt (dB) | V_avg | worst at (r, l) lin / opt |
+    held-out worst (dB) | bound gap (%) | brute force, per case of scripts/design_study.py."""
+    def db(mse: float) -> float:
+        return -10 * math.log10(mse)
+    rows: Rows = []
+    for r in json.loads(outputs[0]):
+        wl, wo = r["linear_worst_at"], r["optimized_worst_at"]
+        rows.append([None, [r["lux"]],
+                     [db(r["linear_worst_mse"]), db(r["optimized_worst_mse"])],
+                     [db(r["linear_mean_mse"]), db(r["optimized_mean_mse"])],
+                     [r["linear_v_avg"], r["optimized_v_avg"]],
+                     [wl["radius_mm"], wl["depth_mm"], wo["radius_mm"], wo["depth_mm"]],
+                     [db(r["heldout_linear_worst_mse"]), db(r["heldout_optimized_worst_mse"])],
+                     [100 * r["relative_gap"]], None])
+    return rows
+
+
+DESIGN_PREDICTED = Figure(
+    cites="scripts/design_study.py",
+    commands=(".venv/bin/python scripts/design_study.py out/design && "
+              "cp out/design/predicted.json docs/reference/design_study_predicted.json",),
+    rows=_design_rows, recorded="docs/reference/design_study_predicted.json")
+
+
 #: Every checked figure, by the name its page's marker gives.
 FIGURES: dict[str, Figure] = {
     "sweep-ranges": SWEEP_RANGES,
@@ -454,6 +479,7 @@ FIGURES: dict[str, Figure] = {
     "table1-paraboloid": TABLE1_PARABOLOID,
     "calibration-errors": CALIBRATION_ERRORS,
     "weight-bench-blur": WEIGHT_BENCH_BLUR,
+    "design-predicted": DESIGN_PREDICTED,
     "demo-psnr": DEMO,
     "demo-psnr-noisy": DEMO_NOISY,
     "demo-psnr-per-radius": DEMO_RADIUS,
