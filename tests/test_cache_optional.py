@@ -39,7 +39,7 @@ def clean_env(monkeypatch, tmp_path):
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
-    monkeypatch.setattr(cache_mod, "_warned", set())
+    cache_mod.forget_warnings()
     return work
 
 

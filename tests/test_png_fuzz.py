@@ -1,8 +1,8 @@
 """PNG and ICC reading under damaged input: fuzzed, and the regressions that fuzzing found.
 
 16-bit PNGs are decoded by libpng (imagecodecs) and their chunks read by Pillow; what
-mitsweep still parses itself is the IHDR (:func:`mitsweep.io.camera._png_header`) and an
-ICC profile's tone curve (:func:`mitsweep.io.camera._icc_transfer`). Whatever a file
+mitsweep still parses itself is the IHDR (``mitsweep.io.camera``'s own reader) and an
+ICC profile's tone curve (:func:`mitsweep.io.camera.icc_transfer`). Whatever a file
 holds, reading it either gives an image or raises :class:`CameraFileError` /
 :class:`ResourceError` naming the file: never another exception, never a warning. The
 fuzzing is mutational (hypothesis flips, truncates and splices bytes of valid files) and
@@ -22,8 +22,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cli_contract import refused
-from mitsweep.io.camera import (CameraFileError, _icc_transfer, _png16_bytes,
-                                read_camera_image, write_display_image)
+from mitsweep.io.camera import (CameraFileError, icc_transfer, png16_bytes, read_camera_image,
+                                write_display_image)
 from mitsweep.resources import MAX_MEMORY_ENV, ResourceError
 from test_memory_gate import _chunk, png_bytes
 
@@ -34,7 +34,7 @@ RNG = np.random.default_rng(7)
 SEED_IMAGE16 = RNG.integers(0, 65536, (6, 5, 3), dtype=np.uint16)
 #: Valid files the mutations start from: 16-bit RGB (libpng) and 8-bit grey (Pillow).
 SEEDS = {
-    "rgb16": _png16_bytes(SEED_IMAGE16, {"mitsweep": '{"transfer": "linear"}'}),
+    "rgb16": png16_bytes(SEED_IMAGE16, {"mitsweep": '{"transfer": "linear"}'}),
     "grey8": png_bytes(4, 3, 8, 0, zlib.compress(b"".join(
         b"\x00" + bytes(9 * r + c for c in range(4)) for r in range(3)))),
 }
@@ -108,7 +108,7 @@ def test_any_ancillary_chunk_is_read_or_refused(data, tmp_path):
                                st.binary(min_size=128, max_size=128),
                                st.integers(0, 2**32 - 1), st.binary(max_size=300))))
 def test_icc_tone_curve_reader_never_raises(icc):
-    found = _icc_transfer(icc)
+    found = icc_transfer(icc)
     assert found is None or found[0] in ("linear", "gamma", "srgb")
 
 

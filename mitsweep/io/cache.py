@@ -31,7 +31,7 @@ import tempfile
 from pathlib import Path
 
 __all__ = ["CacheSettingError", "CacheUnavailable", "cache_root", "cache_enabled",
-           "cache_dir", "warn_unusable", "CACHE_ON", "CACHE_OFF"]
+           "cache_dir", "warn_unusable", "forget_warnings", "CACHE_ON", "CACHE_OFF"]
 
 logger = logging.getLogger(__name__)
 
@@ -119,6 +119,14 @@ def cache_root() -> Path:
                                f"path, and neither MITSWEEP_CACHE_DIR nor XDG_CACHE_HOME "
                                f"names a folder")
     return home / ".cache" / "mitsweep"
+
+
+def forget_warnings() -> None:
+    """Forget which cache folders :func:`warn_unusable` has warned about, so that each
+    warns once more (a process whose cache setting changed; a test that expects the
+    warning).
+    """
+    _warned.clear()
 
 
 def warn_unusable(folder: Path | str | None, exc: BaseException) -> None:

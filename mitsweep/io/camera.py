@@ -410,8 +410,24 @@ def _decode_transfer(a: np.ndarray, rule: str, gamma: float | None) -> np.ndarra
     return a
 
 
-def _icc_transfer(icc: bytes | None) -> tuple[str, float | None] | None:
-    """``("linear"|"gamma"|"srgb", γ)`` from an ICC profile's gray or red tone curve."""
+def icc_transfer(icc: bytes | None) -> tuple[str, float | None] | None:
+    """``("linear"|"gamma"|"srgb", γ)`` from an ICC profile's gray or red tone curve.
+
+    Parameters
+    ----------
+    icc : bytes or None
+        The profile as embedded in the file (a TIFF's tag 34675, a PNG's iCCP chunk).
+        Any bytes: a damaged profile never raises, it reads as None or as the curve
+        its bytes spell.
+
+    Returns
+    -------
+    (rule, gamma) or None
+        ``("linear", None)`` for an identity curve (no entry, or γ 1 within 1e-3),
+        ``("gamma", γ)`` for a one-entry power curve, ``("srgb", None)`` for a table or
+        a parametric curve; None without a profile, a ``kTRC``/``rTRC`` tag, or when
+        the profile is cut short.
+    """
     if not icc or len(icc) < 132:
         return None
     try:
@@ -460,7 +476,7 @@ def tiff_transfer(page: Any, forced: str | None = None) -> tuple[str, float | No
     if described is not None:
         return described, None, "stated in the ImageDescription"
     icc = page.tags.get(34675)
-    found = _icc_transfer(bytes(icc.value) if icc is not None else None)
+    found = icc_transfer(bytes(icc.value) if icc is not None else None)
     if found is not None:
         return found[0], found[1], "ICC profile"
     return "srgb", None, "integer samples without a profile (default)"
@@ -649,7 +665,7 @@ def _pillow_transfer(info: Mapping, forced: str | None, *, default_reason: str):
     described = _described_transfer(info.get("mitsweep"))
     if described is not None:
         return described, None, "stated in the mitsweep text chunk"
-    found = _icc_transfer(info.get("icc_profile"))
+    found = icc_transfer(info.get("icc_profile"))
     if found is not None:
         return found[0], found[1], "ICC profile"
     if "gamma" in info and "srgb" not in info:  # PNG gAMA: stored value is 1/γ
@@ -757,8 +773,21 @@ def _read_png16(p: Path, header: dict) -> tuple[np.ndarray, str, dict, dict]:
     return a, mode, info, exif
 
 
-def _png16_bytes(img16: np.ndarray, text: Mapping[str, str]) -> bytes:
-    """A 16-bit grey or RGB PNG (filter Up on every row, sRGB chunk, tEXt chunks)."""
+def png16_bytes(img16: np.ndarray, text: Mapping[str, str]) -> bytes:
+    """A 16-bit grey or RGB PNG (filter Up on every row, sRGB chunk, tEXt chunks).
+
+    Parameters
+    ----------
+    img16 : (H, W) or (H, W, 3) ndarray of uint16
+        The samples, written as they are (no transfer applied).
+    text : mapping of str to str
+        ``tEXt`` chunks, keyword to text (Latin-1; a character outside it is replaced).
+
+    Returns
+    -------
+    bytes
+        The whole file.
+    """
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + \
             struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
@@ -842,7 +871,7 @@ def write_display_image(path: str | Path, image: np.ndarray, *, white: float | N
                       default=_json_default)
     with atomic_path(p, suffix=suffix) as tmp:
         if suffix == ".png":
-            tmp.write_bytes(_png16_bytes(img16, {"mitsweep": desc}))
+            tmp.write_bytes(png16_bytes(img16, {"mitsweep": desc}))
         else:
             import tifffile
 
