@@ -87,10 +87,15 @@ GUESS_FAILURES = {("paraboloid_mei.jpg", -0.35): "the mount's inner edge is near
                   ("sphere_pageos_nasa.png", 0.35): "prominence 2.57 < 3 (Mylar hides the top)"}
 
 
+SLOW_PHOTOS = {"sphere_tokyo.jpg"}
+
+
 def _rough_cases():
     for e in PHOTOS:
         for error in (0.09, -0.35, 0.35):
-            marks = [] if error == 0.09 else [pytest.mark.slow]
+            # the default run: the +9% guess on every photo but the largest sphere (1184 px,
+            # ~30 s on 2 cores: in CI's slow run with the ±35% ends)
+            marks = [] if error == 0.09 and e["name"] not in SLOW_PHOTOS else [pytest.mark.slow]
             why = SETUP_KNOWN_FAILURES.get(e["name"]) or GUESS_FAILURES.get((e["name"], error))
             if why:   # a known miss: checked in CI's slow run, not before every commit
                 marks += [pytest.mark.xfail(reason=why, strict=True), pytest.mark.slow]
