@@ -201,9 +201,9 @@ def test_process_worker_killed_mid_task_is_retried(tmp_path, serial):
 
 
 def _restarting():
-    from mitsweep.pipeline.executors import _ProcessPool
+    from mitsweep.pipeline.executors import RestartingProcessPool
 
-    return _ProcessPool(2, initializer=None)  # toy tasks need no renderer
+    return RestartingProcessPool(2, initializer=None)  # toy tasks need no renderer
 
 
 def test_lost_worker_retries_are_bounded_and_a_rerun_resumes(tmp_path, serial):

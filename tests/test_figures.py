@@ -194,7 +194,7 @@ def test_fig5_and_table1_draw_one_set_of_traced_banks(tmp_path, scenes_dir, monk
     periphery curves are those banks' first and last radii (no IPSF traced for Fig. 5)."""
     import mitsweep.plots
     import mitsweep.tracer.table1 as t1
-    from mitsweep.pipeline.figures import QUICK, _SetupFigures
+    from mitsweep.pipeline.figures import QUICK, SetupFigures
 
     calls, drawn_sections = [], []
     traced = t1.table1_banks
@@ -208,8 +208,8 @@ def test_fig5_and_table1_draw_one_set_of_traced_banks(tmp_path, scenes_dir, monk
                         lambda sections, path, **kw: drawn_sections.append((sections, kw)))
     monkeypatch.setattr(mitsweep.plots, "plot_table1", lambda result, path, **kw: None)
     tiny = dataclasses.replace(QUICK, table1_rays=2_000, table1_radii=2)
-    figs = _SetupFigures(load_setup(scenes_dir / "sphere.toml"), tiny, tmp_path, seed=0,
-                         step=lambda msg: None)
+    figs = SetupFigures(load_setup(scenes_dir / "sphere.toml"), tiny, tmp_path, seed=0,
+                        step=lambda msg: None)
     single, traced_single = figs.ipsf, []
     monkeypatch.setattr(figs, "ipsf", lambda *a, **kw: traced_single.append(a) or single(*a, **kw))
     figs.fig5()

@@ -27,10 +27,8 @@ from .executors import EXECUTORS
 from .options import (MAX_BANK_DEPTHS, MAX_LIGHT_LEVELS, MAX_SCENES, MAX_SEED,
                       DatasetOptions, options_from_dict)
 from .runner import LOG_DIR, MANIFEST, SHARD_DIR, DatasetError, Shard
-from .runner import sha256 as _sha256  # the name tests and older callers use
 from .tasks import (DECONV_PRIOR, NOISE_PIXEL_MM, WHITE_PERCENTILE, edof_name, item_names,
                     white_level)
-from .tasks import read_rgb as _read_rgb
 
 __all__ = ["DatasetOptions", "options_from_dict", "build_dataset", "evaluate_dataset",
            "load_manifest", "validate_manifest", "item_names", "dataset_inputs", "MANIFEST",

@@ -61,10 +61,19 @@ def check_scheduler_address(address: str) -> str:
     return str(address).strip()
 
 
-class _ProcessPool(cf.Executor):
+class RestartingProcessPool(cf.Executor):
     """A spawn-context process pool that replaces itself once broken (a process was
-    killed), so that the runner can submit the lost tasks again. ``initializer`` runs
-    in each new process."""
+    killed), so that the runner can submit the lost tasks again: the ``"process"``
+    executor of :func:`open_executor`.
+
+    Parameters
+    ----------
+    jobs : int
+        Worker processes (>= 1).
+    initializer : callable or None, optional
+        Runs in each new process before its first task (default :func:`init_worker`,
+        which sets the renderer up; None: nothing).
+    """
 
     def __init__(self, jobs: int, initializer=init_worker) -> None:
         self._jobs = jobs
@@ -76,6 +85,20 @@ class _ProcessPool(cf.Executor):
                                       mp_context=multiprocessing.get_context("spawn"))
 
     def submit(self, fn, /, *args, **kwargs):
+        """Schedule ``fn(*args, **kwargs)``; a broken pool is first replaced by a new one
+        (logged), the tasks it lost being the caller's to submit again.
+
+        Parameters
+        ----------
+        fn : callable
+            The task, picklable (it runs in another process).
+        *args, **kwargs
+            Its arguments, picklable.
+
+        Returns
+        -------
+        concurrent.futures.Future
+        """
         try:
             return self._pool.submit(fn, *args, **kwargs)
         except cf.BrokenExecutor:
@@ -85,6 +108,15 @@ class _ProcessPool(cf.Executor):
             return self._pool.submit(fn, *args, **kwargs)
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Shut the current pool down (:meth:`concurrent.futures.Executor.shutdown`).
+
+        Parameters
+        ----------
+        wait : bool, optional
+            Wait for the running tasks to finish (default True).
+        cancel_futures : bool, optional
+            Cancel the tasks not yet started (default False).
+        """
         self._pool.shutdown(wait=wait, cancel_futures=cancel_futures)
 
 
@@ -137,7 +169,7 @@ def open_executor(executor: str | cf.Executor = "serial", *, jobs: int = 2,
     if executor == "serial":
         yield None, ()
     elif executor == "process":
-        pool = _ProcessPool(jobs)
+        pool = RestartingProcessPool(jobs)
         try:
             yield pool, ()
         finally:

@@ -247,8 +247,23 @@ def _range_setup(setup: Setup, focus_min: float, focus_max: float):
 
 # -- the computations, each once --------------------------------------------------------
 
-class _SetupFigures:
-    """What the figures of one setup need, computed on first use and then shared."""
+class SetupFigures:
+    """What the figures of one setup need, computed on first use and then shared; each
+    figure a method of its name (:data:`FIGURES`), as :func:`make_figures` draws them.
+
+    Parameters
+    ----------
+    setup : Setup
+        The mirror and camera.
+    quality : FigureQuality
+        How much work each figure gets.
+    out : Path
+        The folder the figures and their data are written to.
+    seed : int
+        Seed of every trace and render.
+    step : callable
+        ``step(message)`` is told each long step (progress).
+    """
 
     def __init__(self, setup: Setup, quality: FigureQuality, out: Path, *, seed: int,
                  step: Callable[[str], object]):
@@ -276,7 +291,22 @@ class _SetupFigures:
 
     def ipsf(self, x: float, depth: float, focus: tuple[float, float] | None = None):
         """The IPSF of the mirror point ``x`` (mm) at ``depth`` over the sweep ``focus``
-        (default the optimal range), traced once."""
+        (default the optimal range), traced once.
+
+        Parameters
+        ----------
+        x : float
+            The mirror point, mm from the centre in the meridional plane.
+        depth : float
+            The point source's depth, mm.
+        focus : (float, float), optional
+            The sweep's focus range (near, far), mm (default the optimal sweep range).
+
+        Returns
+        -------
+        (K, K) ndarray
+            The IPSF, ``K`` the setup's bank kernel size; the same array on each call.
+        """
         from ..optics.reference import reference_geometry
         from ..tracer import TraceSettings, integrated_psf
 
@@ -294,6 +324,24 @@ class _SetupFigures:
         return self._ipsfs[key]
 
     def sections(self, point: FieldPoint, depths, focus=None):
+        """Radial and tangential cross-sections of the IPSFs of ``point`` at ``depths``
+        (:func:`~mitsweep.tracer.metrics.cross_sections`), radial meaning away from the
+        image of the mirror's centre.
+
+        Parameters
+        ----------
+        point : FieldPoint
+            The mirror point and its image.
+        depths : iterable of float
+            Depths of the point source, mm.
+        focus : (float, float), optional
+            The sweep's focus range, mm (default the optimal sweep range).
+
+        Returns
+        -------
+        list of (x, radial, tangential)
+            One per depth.
+        """
         from ..tracer.metrics import cross_sections
 
         angle = _radial_angle(point, self.centre)
@@ -623,7 +671,7 @@ def _table1_md(result: dict, optimal: tuple[float, float] | None = None) -> str:
     return "\n".join(lines)
 
 
-#: Figure order; each name is a method of :class:`_SetupFigures`.
+#: Figure order; each name is a method of :class:`SetupFigures`.
 FIGURES = ("fig6", "fig3", "fig4", "fig5", "table1", "fig8", "fig9", "fig10")
 
 
@@ -663,7 +711,7 @@ def make_figures(setups: Sequence[Setup], out: str | Path, *, quality: FigureQua
                     "seed": seed, "setups": {}}
     t_all = time.perf_counter()
     for setup in setups:
-        figs = _SetupFigures(setup, quality, out, seed=seed, step=step)
+        figs = SetupFigures(setup, quality, out, seed=seed, step=step)
         for name in FIGURES:
             if name == "table1" and not setup.mirror.is_symmetric:
                 continue   # Table 1 measures a radial bank (tracer.table1)
