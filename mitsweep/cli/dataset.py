@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from ..workflows.dataset import build_dataset, scene_options
+from ..workflows.dataset import build_dataset
 from .args import illuminance_lux, positive_int
 from .common import print_json
 from .dataset_args import (family_param, method_names, non_negative_int, scheduler_address,
@@ -69,13 +69,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "most SECONDS) instead of refusing at once")
     add_motion_argument(p)
     p.add_argument("--json", action="store_true", help="print the manifest as JSON")
-
-
-def _scene_options(args, setup) -> dict:
-    """The DatasetOptions fields of the scene options (:func:`scene_options`)."""
-    return scene_options(setup, scenes=args.scenes, family=args.family,
-                         family_params=args.family_param, scenes_from=args.scenes_from,
-                         scene_unit=args.scene_unit)
 
 
 def run(args) -> int:
