@@ -122,7 +122,16 @@ def test_wheel_carries_the_bundled_setups_and_finds_them_installed(tmp_path):
     py = env / "bin" / "python"
     subprocess.run([str(py), "-m", "pip", "install", "-q", "--no-deps", str(wheel)],
                    check=True, capture_output=True, timeout=600)
-    # mitsweep.config and mitsweep.resources need only the standard library.
+    # mitsweep.config and mitsweep.resources need the standard library and NumPy (a
+    # setup's reach is checked when it is read): NumPy from this environment, appended
+    # to the new one's path by a .pth file (no network; the wheel's own mitsweep, in the
+    # new site-packages, comes first on the path).
+    import numpy
+
+    purelib = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()"
+                              "['purelib'])"], check=True, capture_output=True, text=True,
+                             timeout=120).stdout.strip()
+    (Path(purelib) / "outer_numpy.pth").write_text(str(Path(numpy.__file__).parents[1]) + "\n")
     code = ("import json, mitsweep, mitsweep.resources as r, mitsweep.config as c\n"
             "d = r.bundled_scenes_dir()\n"
             "print(json.dumps({'package': mitsweep.__file__, 'dir': str(d),\n"
