@@ -81,8 +81,9 @@ def _class_names(modname, cls):
 
 
 def _is_alias(place: str, name: str) -> bool:
-    return place in RENAMED or any(k.endswith(f"({name})") and place.startswith(k[: -len(name) - 2])
-                                   for k in RENAMED)
+    """A former attribute name kept by ``renamed_fields`` (a former keyword never shows:
+    ``renamed_keywords`` keeps the function's new signature)."""
+    return place in RENAMED
 
 
 def offences(prefix: str = "mitsweep") -> list[str]:
