@@ -37,3 +37,17 @@ def refused(capsys, argv) -> str:
     else:
         assert out == ""
     return lines[0]
+
+
+def run_main(capsys, *args) -> tuple[int, str, str]:
+    """Run ``mitsweep ARGS`` in this process: (exit status, stdout, stderr), as
+    :func:`conftest.run_cli` returns them from a subprocess (which pays ~1 s of Python
+    and Mitsuba start-up per call: kept for what only a new process shows, such as the
+    exit status of ``python -m mitsweep`` itself or a clean environment)."""
+    capsys.readouterr()
+    try:
+        rc = main([str(a) for a in args])
+    except SystemExit as exc:  # argparse's own errors
+        rc = exc.code if isinstance(exc.code, int) else 2
+    out, err = capsys.readouterr()
+    return rc, out, err

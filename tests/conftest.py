@@ -93,6 +93,18 @@ def pytest_configure(config):
         raise pytest.UsageError(f"{BUSY_CORES_ENV} runs every test beside that many "
                                 f"spinning processes: run serially (-p no:xdist), not "
                                 f"under -n")
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        # One BLAS thread per worker: scripts/test.sh starts a worker per core (plus one),
+        # and a second BLAS thread in each would only take turns on the same cores (the
+        # calibration's least-squares fits took twice the CPU time on two). A runtime limit, not
+        # OPENBLAS_NUM_THREADS, so that a test may still raise it
+        # (test_design_determinism runs on 1 and 2 threads).
+        from threadpoolctl import threadpool_limits
+
+        config.stash[_BLAS_LIMIT] = threadpool_limits(limits=1, user_api="blas")
+
+
+_BLAS_LIMIT = pytest.StashKey[object]()
 
 
 def _shares_fixtures(path: Path, seen: dict) -> bool:

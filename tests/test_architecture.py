@@ -13,6 +13,7 @@ in a copy of the tree (``test_checker_reports_planted_import``).
 """
 
 import ast
+import functools
 import shutil
 import subprocess
 import sys
@@ -107,10 +108,17 @@ def _literal_head(node) -> str | None:
     return None
 
 
+@functools.lru_cache(maxsize=None)
+def _nodes(source: str) -> tuple[ast.AST, ...]:
+    """Every node of ``source``'s syntax tree, parsed once per distinct text: the checks
+    below, and each planted case, walk the same ~180 modules again."""
+    return tuple(ast.walk(ast.parse(source)))
+
+
 def imports_of(source: str, module: str, is_package: bool = False):
     """Every import ``module`` (dotted name) makes in ``source``: a list of Import."""
     found = []
-    for node in ast.walk(ast.parse(source)):
+    for node in _nodes(source):
         if isinstance(node, ast.Import):
             found += [Import(a.name, node.lineno, "import") for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -320,7 +328,7 @@ def import_graph(root: Path) -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {}
     for name, (path, is_package) in modules.items():
         edges = set()
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in _nodes(path.read_text()):
             if isinstance(node, ast.ImportFrom):
                 base = _resolve(node.module, node.level, name, is_package)
                 subs = [f"{base}.{a.name}" for a in node.names]
@@ -532,7 +540,7 @@ def long_functions(root: Path, limit: int = MAX_BODY_LINES) -> list[str]:
     excluded) spans more than ``limit`` lines."""
     out = []
     for path in sorted(root.rglob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in _nodes(path.read_text()):
             if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 continue
             body = node.body
@@ -588,7 +596,7 @@ def private_uses(source: str) -> list[str]:
     ``monkeypatch.setattr(obj, "_name", ...)`` included) or in a dotted
     ``"mitsweep.x._name"`` target."""
     found = []
-    for node in ast.walk(ast.parse(source)):
+    for node in _nodes(source):
         if isinstance(node, ast.Import):
             found += [f"{node.lineno}: import {a.name}" for a in node.names
                       if a.name.split(".")[0] == TOP and any(map(_private, a.name.split(".")))]

@@ -4,6 +4,7 @@ import json
 
 import pytest
 
+from cli_contract import run_main
 from conftest import run_cli
 
 JSON_KEYS = {"focus_min_mm", "focus_max_mm", "sensor_start_mm", "sensor_end_mm",
@@ -18,17 +19,18 @@ def test_json_output_has_the_documented_keys(scenes_dir):
     assert 338.0 <= data["focus_min_mm"] <= 340.0 and 363.0 <= data["focus_max_mm"] <= 365.0
 
 
-def test_fov_and_depth_overrides(scenes_dir):
-    rc, out, _ = run_cli("sweep-range", scenes_dir / "sphere.toml", "--json",
+def test_fov_and_depth_overrides(scenes_dir, capsys):
+    rc, out, _ = run_main(capsys, "sweep-range", scenes_dir / "sphere.toml", "--json",
                          "--fov", "180", "--depth", "500", "inf")
     assert rc == 0
     data = json.loads(out)
     assert data["fov_deg"] == 180.0 and data["depth_max_mm"] == "inf"
 
 
-def test_plot_is_written(scenes_dir, tmp_path):
+def test_plot_is_written(scenes_dir, tmp_path, capsys):
     png = tmp_path / "fig6.png"
-    rc, _, err = run_cli("sweep-range", scenes_dir / "paraboloid_tilted.toml", "--plot", png)
+    rc, _, err = run_main(capsys, "sweep-range", scenes_dir / "paraboloid_tilted.toml",
+                          "--plot", png)
     assert rc == 0, err
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
@@ -61,9 +63,9 @@ depth_max = 10000.0
     (dict(fnum=2.8, fov=237, dmin=300), ["--depth", "900", "100"], "--depth: MIN (900) must be <= MAX"),
     (dict(fnum=2.8, fov=237, dmin=300), ["--fov", "-3"], "--fov: must be > 0"),
 ])
-def test_bad_input_exits_2_with_one_line(tmp_path, fmt, args, message):
+def test_bad_input_exits_2_with_one_line(tmp_path, fmt, args, message, capsys):
     path = _write(tmp_path, GOOD.format(**fmt))
-    rc, out, err = run_cli("sweep-range", path, *args)
+    rc, out, err = run_main(capsys, "sweep-range", path, *args)
     assert rc == 2
     assert message in err
     assert len(err.strip().splitlines()) == 1, err
@@ -82,18 +84,18 @@ def test_bad_input_exits_2_with_one_line(tmp_path, fmt, args, message):
     (GOOD.format(fnum=2.8, fov=237, dmin=300) + "focus_min = 45.0\nfocus_max = 400.0\n",
      "sweep.focus_min: must be > lens.focal_length"),
 ])
-def test_bad_setup_files_exit_2(tmp_path, text, message):
-    rc, _, err = run_cli("sweep-range", _write(tmp_path, text))
+def test_bad_setup_files_exit_2(tmp_path, text, message, capsys):
+    rc, _, err = run_main(capsys, "sweep-range", _write(tmp_path, text))
     assert rc == 2 and message in err and "Traceback" not in err
 
 
-def test_missing_file_exits_2(tmp_path):
-    rc, _, err = run_cli("sweep-range", tmp_path / "none.toml")
+def test_missing_file_exits_2(tmp_path, capsys):
+    rc, _, err = run_main(capsys, "sweep-range", tmp_path / "none.toml")
     assert rc == 2 and "no such" in err and "none.toml" in err and "Traceback" not in err
 
 
-def test_unwritable_plot_path_exits_2(scenes_dir, tmp_path):
-    rc, _, err = run_cli("sweep-range", scenes_dir / "sphere.toml", "--plot",
+def test_unwritable_plot_path_exits_2(scenes_dir, tmp_path, capsys):
+    rc, _, err = run_main(capsys, "sweep-range", scenes_dir / "sphere.toml", "--plot",
                          tmp_path / "no" / "such" / "dir" / "f.png")
     assert rc == 2 and "does not exist" in err and "Traceback" not in err
 
@@ -104,16 +106,16 @@ def test_unwritable_plot_path_exits_2(scenes_dir, tmp_path):
     (["--verify", "--field", "disc"], "argument --field: invalid choice: 'disc'"),
     (["--verify", "--field", "mirror"], "the lens does not see all of this field"),
 ])
-def test_bad_field_exits_2_with_one_line(scenes_dir, args, message):
-    rc, _, err = run_cli("sweep-range", scenes_dir / "sphere.toml", *args)
+def test_bad_field_exits_2_with_one_line(scenes_dir, args, message, capsys):
+    rc, _, err = run_main(capsys, "sweep-range", scenes_dir / "sphere.toml", *args)
     assert rc == 2 and message in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1, err
 
 
-def test_plot_onto_the_setup_file_is_refused(scenes_dir, tmp_path):
+def test_plot_onto_the_setup_file_is_refused(scenes_dir, tmp_path, capsys):
     setup = tmp_path / "s.toml"
     setup.write_text((scenes_dir / "sphere.toml").read_text())
-    rc, _, err = run_cli("sweep-range", setup, "--plot", setup)
+    rc, _, err = run_main(capsys, "sweep-range", setup, "--plot", setup)
     assert rc == 2 and "refusing to overwrite an input" in err
     assert setup.read_text() == (scenes_dir / "sphere.toml").read_text()
 
@@ -125,9 +127,9 @@ TRACED_KEYS = {"traced_field", "traced_focus_min_mm", "traced_focus_max_mm",
 @pytest.mark.slow
 @pytest.mark.parametrize("field,farthest,on_rim", [("mirror", 470.979, True),
                                                   ("fov", 391.409, False)])
-def test_verify_reports_the_field_and_where(scenes_dir, field, farthest, on_rim):
-    rc, out, err = run_cli("sweep-range", scenes_dir / "paraboloid_tilted.toml", "--verify",
-                           "--field", field, "--json")
+def test_verify_reports_the_field_and_where(scenes_dir, field, farthest, on_rim, capsys):
+    rc, out, err = run_main(capsys, "sweep-range", scenes_dir / "paraboloid_tilted.toml",
+                            "--verify", "--field", field, "--json")
     assert rc == 0, err
     data = json.loads(out)
     assert TRACED_KEYS <= set(data) and data["traced_field"] == field
@@ -148,8 +150,9 @@ def test_verify_reports_the_field_and_where(scenes_dir, field, farthest, on_rim)
 @pytest.mark.parametrize("scene,lo,hi", [("sphere", 339.00, 364.25),
                                          ("paraboloid", 365.47, 387.11),
                                          ("paraboloid_tilted", 362.84, 389.52)])
-def test_verify_default_field_is_the_papers(scenes_dir, scene, lo, hi):
-    rc, out, err = run_cli("sweep-range", scenes_dir / f"{scene}.toml", "--verify", "--json")
+def test_verify_default_field_is_the_papers(scenes_dir, scene, lo, hi, capsys):
+    rc, out, err = run_main(capsys, "sweep-range", scenes_dir / f"{scene}.toml", "--verify",
+                            "--json")
     assert rc == 0, err
     data = json.loads(out)
     assert data["traced_field"] == "plane"

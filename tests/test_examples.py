@@ -96,6 +96,7 @@ def test_your_scene_through_the_mirror_renders_the_garden_with_depth(tmp_path):
     assert out["psnr_db"]["sweep"] > 22.0 and out["psnr_db"]["restored"] > 20.0
 
 
+@pytest.mark.slow   # 6 s CPU; tests/test_real_photo_guide.py calibrates a real photo by default
 def test_restore_a_real_photo_finds_the_centre_it_was_placed_at(tmp_path):
     """The photo's true centre is known (placed at a sub-pixel offset): found within the
     calibration tests' bar (0.25 px; measured 0.08 px), the rim within 0.5 px."""

@@ -113,6 +113,7 @@ def test_evaluate_scores_every_image(tiny_dataset):
     assert "pinhole" not in scene
 
 
+@pytest.mark.slow   # 6 s CPU starting processes; the thread and Dask executors run by default
 def test_process_executor_gives_the_same_files(tiny_dataset, tmp_path):
     """Same seeds → the same renders, bank and noise, whichever process ran them."""
     from mitsweep.io.bank import load_bank

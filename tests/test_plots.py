@@ -160,7 +160,8 @@ def test_bank_refuses_sections_not_matching_its_depths(tmp_path):
     assert not (tmp_path / "bank.png").exists()
 
 
-@pytest.mark.parametrize("n_rows", [1, 5, 6, 12])
+@pytest.mark.parametrize("n_rows", [pytest.param(n, marks=pytest.mark.slow) for n in (1, 5, 6)]
+                         + [12])   # the crowded table by default; the rest in CI
 def test_table1_png_tick_labels_do_not_overlap(tmp_path, drawn, n_rows):
     path = plots.plot_table1(table1_result(n_rows), tmp_path / "table1.png")
     assert_real_png(path, (11, 4.5))

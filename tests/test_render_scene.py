@@ -62,6 +62,7 @@ def test_unknown_lighting_is_a_setup_error():
         _with_scene("sphere", lighting="sunny")
 
 
+@pytest.mark.slow   # two loads of the paraboloid's 1 M-triangle mesh, ~5 s CPU
 def test_emissive_scene_needs_no_more_than_two_bounces():
     """Depth 2 gives the same image as unlimited depth (surfaces are black emitters)."""
     from mitsweep.render import render_image

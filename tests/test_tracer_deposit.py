@@ -38,7 +38,8 @@ def test_r2_steps_are_the_successive_closest_returns():
 
 
 @pytest.mark.parametrize("count", [1, 15, 16, 591, 592, 593, 4096, 12345, 1 << 14,
-                                   1_000_003, 1 << 24])
+                                   1_000_003,
+                                   pytest.param(1 << 24, marks=pytest.mark.slow)])  # 3 s
 def test_coherent_order_is_a_permutation(count):
     m = backend.drjit_module()
     import drjit as dr
