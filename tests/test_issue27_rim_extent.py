@@ -140,3 +140,24 @@ def test_rim_radii_former_keyword_still_works_with_a_warning():
     with pytest.warns(DeprecationWarning, match="rim_mm"):
         old = rim_radii(bank, rim_mm=3.3)
     np.testing.assert_array_equal(old, rim_radii(bank, rim=3.3))
+
+
+def test_a_rim_bank_is_cached_under_a_key_of_its_own(tmp_path, paraboloid):
+    """``cached_bank(extent="rim")`` traces the rim bank once and reads it back; its key
+    differs from the FOV bank's, whose key is unchanged (no ``extent`` in it)."""
+    from mitsweep.tracer.cache import bank_cache_key, cached_bank
+
+    setup, _fov, rim = paraboloid
+    fov_name, _, fov_trace = bank_cache_key(setup, settings=SETTINGS, n_radii=5)
+    rim_name, _, rim_trace = bank_cache_key(setup, settings=SETTINGS, n_radii=5, extent="rim")
+    assert rim_name != fov_name and "extent" not in fov_trace
+    assert rim_trace == {**fov_trace, "extent": "rim"}
+    first = cached_bank(setup, settings=SETTINGS, n_radii=5, extent="rim", cache_dir=tmp_path)
+    again = cached_bank(setup, settings=SETTINGS, n_radii=5, extent="rim", cache_dir=tmp_path)
+    assert first.traced and not again.traced and first.path == again.path
+    assert first.path.parent.name == rim_name
+    np.testing.assert_array_equal(again.bank.kernels, first.bank.kernels)
+    np.testing.assert_array_equal(again.bank.radii, rim.radii)   # to the rim
+    assert again.bank.metadata["extent"] == "rim"
+    with pytest.raises(ValueError, match="extent: must be one of 'fov', 'rim'"):
+        bank_cache_key(setup, settings=SETTINGS, extent="whole")

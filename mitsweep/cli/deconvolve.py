@@ -67,6 +67,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_photo_arguments(p)
     p.add_argument("--rays", type=positive_int, default=None, metavar="N",
                    help="rays per IPSF when tracing the bank (default 1000000)")
+    p.add_argument("--bank-extent", choices=["fov", "rim"], default="fov",
+                   help="how far a traced bank reaches: the design FOV (default) or the "
+                        "whole mirror image out to its rim (traced, cached under its own key)")
     p.add_argument("--force", action="store_true",
                    help="use a bank traced for other optics (or unchecked ones) anyway; the "
                         "override is logged and recorded in the output's provenance")
@@ -79,7 +82,7 @@ def run(args) -> int:
         method=args.method, operator=args.operator, nsr=args.nsr, prior=args.prior,
         depth=args.depth, grid=args.grid, center=args.center, pixel_pitch=args.pixel_pitch,
         white_balance=args.white_balance, transfer=args.transfer, rays=args.rays,
-        force=args.force, progress=True)
+        force=args.force, bank_extent=args.bank_extent, progress=True)
     s = result.summary
     if args.json:
         print_json(s)

@@ -256,8 +256,8 @@ def ipsf_bank(setup: Setup, *, kind: str = "radial", n_radii: int = 19,
         ``settings.seed + j`` (``metadata["fov_radius_mm"]``, ``"rim_radius_mm"`` and
         ``"rim_points"`` record where the FOV and the rim are); a grid bank's nodes off
         the mirror take the nearest traced node's kernel (:func:`fill_off_mirror_nodes`).
-        ``metadata["extent"]`` records it. The bank cache
-        (:func:`mitsweep.tracer.cache.cached_bank`) holds ``"fov"`` banks.
+        ``metadata["extent"]`` records it, and the bank cache
+        (:func:`mitsweep.tracer.cache.cached_bank`) keys by it.
     **deprecated
         ``rays``, ``kernel_size``, ``seed``, ``method``, ``time_samples``, ``n_planes``:
         the fields of ``settings``, still accepted for one release (DeprecationWarning).

@@ -41,7 +41,7 @@ from ..io.cache import cache_root, warn_unusable
 from ..io.lock import DirectoryLock
 from ..optics.motion import MotionProfile
 from ..optics.reference import reference_geometry
-from .bank import ipsf_bank
+from .bank import EXTENTS, ipsf_bank
 from .kernel import TRACE_REVISION
 from .settings import TraceSettings, settings_from_keywords
 
@@ -94,10 +94,12 @@ def bank_cache_dir(cache_dir: str | Path | None = None) -> Path:
     return Path(cache_dir) if cache_dir is not None else cache_root() / "banks"
 
 
-def _trace_settings(kind, depths, settings: TraceSettings, n_radii, grid) -> dict:
+def _trace_settings(kind, depths, settings: TraceSettings, n_radii, grid,
+                    extent: str = "fov") -> dict:
     """The key's trace settings. Equal to the key of the keyword API this replaced for
     equal settings (``time_samples`` was always the default there, ``n_planes`` absent:
-    :meth:`TraceSettings.cache_fields`), so banks cached before still hit."""
+    :meth:`TraceSettings.cache_fields`), so banks cached before still hit; ``extent``
+    enters the key only where it is not ``"fov"`` (the banks cached before)."""
     out = {"kind": kind, "depths_mm": ["inf" if math.isinf(d) else float(d) for d in depths],
            **settings.cache_fields(),
            "version": __version__, "layout": CACHE_LAYOUT, "trace_revision": TRACE_REVISION}
@@ -105,13 +107,15 @@ def _trace_settings(kind, depths, settings: TraceSettings, n_radii, grid) -> dic
         out["n_radii"] = int(n_radii)
     else:
         out["grid"] = [int(g) for g in grid]
+    if extent != "fov":
+        out["extent"] = extent
     return out
 
 
 def bank_cache_key(setup: Setup, *, motion: MotionProfile | None = None,
                    kind: str | None = None, depths: ArrayLike = (500.0,),
                    settings: TraceSettings | None = None, n_radii: int = 19,
-                   grid: tuple[int, int] = (9, 9), **deprecated: Any
+                   grid: tuple[int, int] = (9, 9), extent: str = "fov", **deprecated: Any
                    ) -> tuple[str, dict, dict]:
     """``(entry name, optics, trace settings)`` of the bank :func:`cached_bank` returns.
 
@@ -120,7 +124,7 @@ def bank_cache_key(setup: Setup, *, motion: MotionProfile | None = None,
 
     Parameters
     ----------
-    setup, motion, kind, depths, settings, n_radii, grid
+    setup, motion, kind, depths, settings, n_radii, grid, extent
         As :func:`cached_bank`.
     **deprecated
         As :func:`cached_bank`.
@@ -140,10 +144,13 @@ def bank_cache_key(setup: Setup, *, motion: MotionProfile | None = None,
     kind = kind or ("radial" if setup.mirror.is_symmetric else "grid")
     if kind not in ("radial", "grid"):
         raise ValueError(f"kind: must be 'radial' or 'grid', got {kind!r}")
+    if extent not in EXTENTS:
+        raise ValueError(f"extent: must be one of {', '.join(map(repr, EXTENTS))}, got "
+                         f"{extent!r}")
     geometry = reference_geometry(setup, motion=motion)
     optics = optics_sections(setup_to_dict(setup), geometry.motion.as_dict())
     depths = [float(d) for d in np.atleast_1d(np.asarray(depths, dtype=float))]
-    trace = _trace_settings(kind, depths, settings, n_radii, grid)
+    trace = _trace_settings(kind, depths, settings, n_radii, grid, extent)
     digest = hashlib.sha256(json.dumps(trace, sort_keys=True).encode()).hexdigest()
     return f"{kind}-{optics_fingerprint(optics)[:16]}-{digest[:12]}", optics, trace
 
@@ -157,7 +164,7 @@ def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
                 kind: str | None = None, depths: ArrayLike = (500.0,),
                 settings: TraceSettings | None = None, n_radii: int = 19,
                 grid: tuple[int, int] = (9, 9), cache_dir: str | Path | None = None,
-                progress: Callable[[], object] | None = None,
+                progress: Callable[[], object] | None = None, extent: str = "fov",
                 **deprecated: Any) -> CachedBank:
     """The IPSF bank of ``setup`` and ``motion``, from the cache or traced into it.
 
@@ -171,6 +178,10 @@ def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
         bank's reference sensor distance (mid-travel).
     kind : {"radial", "grid"}, optional
         Default: radial for rotationally symmetric setups, grid for tilted ones.
+    extent : {"fov", "rim"}
+        As :func:`mitsweep.tracer.ipsf_bank`: ``"rim"`` keeps the bank that covers the
+        whole mirror image under a key of its own (``"fov"`` keys are those of earlier
+        releases: their banks still hit).
     depths, settings, n_radii, grid, progress
         As :func:`mitsweep.tracer.ipsf_bank`; ``settings`` (default ``TraceSettings()``)
         and the optics make the cache key (:func:`bank_cache_key`).
@@ -187,14 +198,15 @@ def cached_bank(setup: Setup, *, motion: MotionProfile | None = None,
     settings = settings_from_keywords(settings, deprecated, caller="cached_bank",
                                       allowed=_CACHE_KEYWORDS)
     name, optics, trace = bank_cache_key(setup, motion=motion, kind=kind, depths=depths,
-                                         settings=settings, n_radii=n_radii, grid=grid)
+                                         settings=settings, n_radii=n_radii, grid=grid,
+                                         extent=extent)
     kw = {"n_radii": n_radii} if trace["kind"] == "radial" else {"grid": tuple(grid)}
 
     def trace_it() -> IPSFBank:
         geometry = reference_geometry(setup, motion=motion)
         bank = ipsf_bank(setup, kind=trace["kind"], depths=depths, settings=settings,
                          motion=geometry.motion, sweep=geometry.sweep, progress=progress,
-                         **kw)
+                         extent=extent, **kw)
         bank.metadata["cache"] = {"entry": name, "trace": trace}
         return bank
 

@@ -158,8 +158,10 @@ def _resolve_center(center, setup, shape) -> tuple[tuple[float, float], str]:
     return optical_center_px(shape), "the image centre"
 
 
-def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir):
-    """The bank of the photo's geometry, from the cache (traced on a miss)."""
+def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir,
+                 extent="fov"):
+    """The bank of the photo's geometry, from the cache (traced on a miss), to the FOV or
+    to the mirror's rim (``extent``)."""
     from ..deconv.spatial import mirror_grid_shape
     from ..io.bank import bank_kernel_size
     from ..tracer.bank import BANK_RAYS
@@ -178,7 +180,7 @@ def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir):
                            depths=(depth if isinstance(depth, float) else 500.0,),
                            settings=TraceSettings(rays=rays or BANK_RAYS,
                                                   kernel_size=bank_kernel_size(pitch)),
-                           grid=grid, cache_dir=cache_dir, progress=step)
+                           grid=grid, cache_dir=cache_dir, progress=step, extent=extent)
 
 
 def _window(image: np.ndarray, center: tuple[float, float]):
@@ -278,7 +280,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
                   center: tuple[float, float] | None = None,
                   pixel_pitch: float | None = None, white_balance: str = "camera",
                   transfer: str | None = None, rays: int | None = None, force: bool = False,
-                  cache_dir: str | os.PathLike | None = None,
+                  cache_dir: str | os.PathLike | None = None, bank_extent: str = "fov",
                   progress: Progress = None) -> WorkflowResult:
     """Restore the EDOF image of a focal-sweep photo (what ``mitsweep deconvolve`` runs).
 
@@ -327,6 +329,12 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     cache_dir : path-like, optional
         Where a traced bank is cached (default: ``MITSWEEP_CACHE_DIR``, else the XDG
         cache; :func:`mitsweep.tracer.cache.cached_bank`).
+    bank_extent : {"fov", "rim"}
+        How far a traced bank reaches (:func:`mitsweep.tracer.ipsf_bank`'s ``extent``):
+        the design FOV (default), or the whole mirror image out to its rim, where the
+        sweep does not bring the scene into focus but the blur is still traced (a grid
+        bank's nodes off the mirror take the nearest traced kernel). Cached under its
+        own key. Not for a given ``bank``.
     progress : None, True or callable
         Progress of a bank trace (:func:`mitsweep.workflows.progress_callback`).
 
@@ -408,6 +416,9 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
 
     cache = None
     if bank is not None:
+        if bank_extent != "fov":
+            raise InputError("--bank-extent applies to a traced bank only: a given --bank "
+                             "reaches as far as it was traced")
         bank_source = str(bank)
         kernels = load_bank(os.fspath(bank))
         _check_operator(operator, kernels.kind, grid, (H, W))
@@ -420,11 +431,13 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     else:
         if force:
             raise InputError("--force applies to a given --bank only")
+        if bank_extent not in ("fov", "rim"):
+            raise InputError(f"--bank-extent: must be fov or rim, got {bank_extent!r}")
         assert photo_setup is not None  # refused above: no bank and no setup
         _check_operator(operator, "radial" if photo_setup.mirror.is_symmetric else "grid",
                         grid, (H, W))
         got = _traced_bank(photo_setup, (H, W), pitch, motion, depth, rays, progress,
-                           cache_dir)
+                           cache_dir, bank_extent)
         kernels, cache = got.bank, {"path": got.path and str(got.path), "traced": got.traced}
         identity = {"checked_against": "traced for the photo's geometry", "forced": False,
                     "problem": None, "bank_optics_sha256": optics_fingerprint(kernels.optics)}
@@ -449,6 +462,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         "input_kind": photo.kind, "input_bit_depth": photo.bit_depth,
         "input_warnings": list(photo.warnings),
         "bank": bank_source, "bank_kind": kernels.kind, "bank_cache": cache,
+        "bank_extent": (kernels.metadata or {}).get("extent", "fov"),
         "method": method, "operator": used,
         "nsr": nsr if nsr is not None else "estimated", "prior": prior,
         "depth_mm": depth if depth is not None else 500.0,
