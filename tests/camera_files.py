@@ -38,14 +38,23 @@ def _rationals(values, denominator: int = 1_000_000) -> tuple[int, ...]:
 
 def write_dng(path, rgb: np.ndarray, *, black: int = 512, white: int = 15000,
               neutral=(1.0, 1.0, 1.0), pitch_mm: float | None = None,
-              model: str = "mitsweep synthetic") -> Path:
+              model: str = "mitsweep synthetic", noise: tuple[float, float] | None = None,
+              noise_profile=None, seed: int = 0) -> Path:
     """Write linear ``rgb`` (H, W, 3) in [0, 1] (times ``neutral`` per channel, the
-    camera's raw response) as a 16-bit RGGB DNG with the given black and white levels."""
+    camera's raw response) as a 16-bit RGGB DNG with the given black and white levels.
+
+    ``noise = (S, O)``: each photosite gets Gaussian noise of variance ``S x + O`` (x
+    the normalised raw value, the DNG convention), drawn with ``seed``.
+    ``noise_profile``: the values of the NoiseProfile tag (51041) to write (pairs
+    (S, O) flattened), e.g. ``noise`` itself; None writes no tag."""
     import tifffile
 
     rgb = np.asarray(rgb, dtype=np.float64) * np.asarray(neutral, dtype=np.float64)
     cfa = mosaic_rggb(np.clip(rgb, 0.0, 1.0))
-    raw = np.round(black + cfa * (white - black)).astype(np.uint16)
+    if noise is not None:
+        S, O = noise
+        cfa = cfa + np.sqrt(S * cfa + O) * np.random.default_rng(seed).standard_normal(cfa.shape)
+    raw = np.clip(np.round(black + cfa * (white - black)), 0, 65535).astype(np.uint16)
     tags = [
         (50706, "B", 4, (1, 4, 0, 0), True),          # DNGVersion
         (50708, "s", 0, model, True),                 # UniqueCameraModel
@@ -59,6 +68,9 @@ def write_dng(path, rgb: np.ndarray, *, black: int = 512, white: int = 15000,
         (50778, "H", 1, 21, True),                    # CalibrationIlluminant1: D65
         (50728, "2I", 3, _rationals(neutral), True),  # AsShotNeutral
     ]
+    if noise_profile is not None:
+        values = tuple(float(v) for v in np.ravel(noise_profile))
+        tags.append((51041, "d", len(values), values, True))   # NoiseProfile
     if pitch_mm is not None:  # EXIF focal-plane resolution in IFD0, pixels per mm
         tags += [(41486, "2I", 1, _rationals([1.0 / pitch_mm], 1000), True),
                  (41487, "2I", 1, _rationals([1.0 / pitch_mm], 1000), True),

@@ -56,6 +56,7 @@ import contextlib
 import json
 import logging
 import math
+import os
 import struct
 import threading
 import zlib
@@ -75,7 +76,7 @@ from ..resources import ResourceError, require_regular_file
 
 __all__ = ["CameraFileError", "CameraImage", "RAW_SUFFIXES", "CAMERA_SUFFIXES",
            "WHITE_BALANCES", "TRANSFERS", "read_camera_image", "write_display_image",
-           "srgb_to_linear", "tiff_transfer"]
+           "srgb_to_linear", "tiff_transfer", "dng_noise_profile", "NOISE_PROFILE_TAG"]
 
 logger = logging.getLogger(__name__)
 
@@ -125,7 +126,10 @@ class CameraImage:
         Bits per sample as stored (8, 16, 32; RAW: the bits the white level needs).
     meta : dict
         ``path``, ``transfer``, ``white_level``, ``black_level``, ``white_balance`` (RAW),
-        ``exif`` (essentials found), ``exr_header`` (EXR), ``pixel_pitch_source``.
+        ``exif`` (essentials found), ``exr_header`` (EXR), ``pixel_pitch_source``;
+        ``noise`` for a RAW whose file states its noise (a DNG's NoiseProfile,
+        :func:`dng_noise_profile`): ``profile`` (the (S, O) pairs), ``sigma`` (per
+        channel of ``data``, carried through LibRaw's development) and ``source``.
     warnings : list of str
         What limits the result (8-bit input, JPEG, clipping, a pitch mismatch); each is
         also logged (:meth:`log_warnings`).
@@ -286,6 +290,8 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
         "camera": dict(use_camera_wb=True), "daylight": dict(use_camera_wb=False),
         "auto": dict(use_auto_wb=True), "none": dict(user_wb=[1.0, 1.0, 1.0, 1.0])}
     wb_args = wb_choices[white_balance]
+    profile = dng_noise_profile(p)
+    noise = None
     try:
         with _library_chatter() as said:
             with rawpy.imread(str(p)) as raw:
@@ -304,6 +310,12 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
                                "daylight": list(raw.daylight_whitebalance),
                                "none": [1.0, 1.0, 1.0, 1.0]}.get(white_balance)
                 pattern = raw.color_desc.decode("ascii", "replace")
+                if profile is not None:
+                    noise = _profile_through_libraw(raw, profile, rgb, black, white,
+                                                    dict(gamma=(1, 1), no_auto_bright=True,
+                                                         output_bps=16, user_flip=0,
+                                                         output_color=rawpy.ColorSpace.sRGB,
+                                                         adjust_maximum_thr=0.0, **wb_args))
     except (CameraFileError, ResourceError):
         raise
     except (rawpy.LibRawError, OSError, ValueError) as exc:
@@ -329,7 +341,89 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
     meta = {"transfer": "linear", "white_level": white, "black_level": black,
             "white_balance": {"mode": white_balance, "multipliers": multipliers},
             "color_space": "linear sRGB primaries", "cfa_colors": pattern, "exif": exif}
+    if noise is not None:
+        meta["noise"] = noise
     return data, max(1, math.ceil(math.log2(white + 1))), meta, pitch
+
+
+#: The DNG tag NoiseProfile: per CFA plane (or one for all), the pair (S, O) of the
+#: noise variance ``S x + O`` of a raw value ``x`` normalised to [0, 1] between the
+#: black and the white level (DNG 1.3+, written by phones and by Adobe's converter).
+NOISE_PROFILE_TAG = 51041
+
+
+def dng_noise_profile(path: str | os.PathLike) -> list[tuple[float, float]] | None:
+    """The (S, O) pairs of a DNG's NoiseProfile tag (:data:`NOISE_PROFILE_TAG`), looked
+    for in every IFD and sub-IFD; None where the file has none (or is no TIFF).
+
+    Parameters
+    ----------
+    path : path-like
+        The camera file.
+
+    Returns
+    -------
+    list of (float, float) or None
+        One pair per CFA plane, or one pair for all planes; each S ≥ 0, O ≥ 0 (a
+        profile with a negative or non-finite value is ignored, with a log line).
+    """
+    try:
+        import tifffile
+
+        with _library_chatter():
+            with tifffile.TiffFile(os.fspath(path)) as tf:
+                pages = list(tf.pages)
+                for page in list(pages):
+                    pages += list(getattr(page, "pages", None) or [])
+                for page in pages:
+                    tags = getattr(page, "tags", None)   # a TiffFrame has none
+                    tag = None if tags is None else tags.get(NOISE_PROFILE_TAG)
+                    if tag is not None:
+                        values = np.asarray(tag.value, dtype=np.float64).ravel()
+                        break
+                else:
+                    return None
+    except Exception as exc:  # noqa: BLE001 - optional metadata; the image is read apart
+        logger.debug("%s: no NoiseProfile through tifffile (%s)", path, exc)
+        return None
+    if len(values) < 2 or len(values) % 2 or not np.all(np.isfinite(values)) \
+            or np.any(values < 0):
+        logger.info("%s: NoiseProfile %s is not (S, O) pairs >= 0: not used", path,
+                    values.tolist())
+        return None
+    return [(float(a), float(b)) for a, b in values.reshape(-1, 2)]
+
+
+def _profile_through_libraw(raw, profile, clean, black, white, args) -> dict:
+    """The file's noise profile carried through LibRaw's own pipeline (black level,
+    white balance, demosaicking, colour matrix) by simulation: the raw photosites get
+    noise of the profile's variance (fixed seed), are developed again with the same
+    settings, and the difference from the clean development is the noise of the image
+    :func:`read_camera_image` returns. Returns ``{"profile", "sigma", "source"}`` with
+    ``sigma`` per output channel in the image's units (white level 1), measured over
+    the pixels clipped in neither development."""
+    visible = raw.raw_image_visible
+    colours = np.asarray(raw.raw_colors_visible)
+    pairs = np.asarray(profile if len(profile) > 1 else profile * 4, dtype=np.float64)
+    plane = np.where(colours == 3, 1, colours)        # the second green is plane 1
+    plane = np.minimum(plane, len(pairs) - 1)
+    blk = np.asarray(black, dtype=np.float64)[np.minimum(colours, len(black) - 1)]
+    span = float(white) - blk
+    orig = visible.copy()
+    x = np.clip((orig - blk) / span, 0.0, 1.0)
+    sd = np.sqrt(pairs[plane, 0] * x + pairs[plane, 1]) * span
+    rng = np.random.default_rng(0)
+    visible[...] = np.clip(np.round(orig + sd * rng.standard_normal(orig.shape)), 0,
+                           np.iinfo(visible.dtype).max).astype(visible.dtype)
+    try:
+        noisy = raw.postprocess(**args)
+    finally:
+        visible[...] = orig
+    ok = (clean < 65535).all(axis=-1) & (noisy < 65535).all(axis=-1)
+    diff = (noisy.astype(np.float64) - clean.astype(np.float64))[ok] / 65535.0
+    sigma = [float(v) for v in diff.std(axis=0)] if diff.size else [0.0] * clean.shape[-1]
+    return {"profile": [list(p) for p in profile], "sigma": sigma,
+            "source": "DNG NoiseProfile, developed by LibRaw (simulated)"}
 
 
 #: EXIF and TIFF tags kept in ``meta["exif"]`` (tifffile's names).

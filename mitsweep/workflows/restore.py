@@ -19,6 +19,7 @@ import os
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,6 +27,10 @@ from .. import __version__
 from ..config import Setup, setup_from_dict, setup_to_dict
 from ._base import (InputError, Progress, WorkflowResult, progress_callback, resolve_setup)
 from ._paths import check_outputs
+
+if TYPE_CHECKING:
+    from ..io.bank import IPSFBank
+    from ..tracer.cache import CachedBank
 
 __all__ = ["restore_photo", "OPERATORS", "OUTPUT_SUFFIXES", "split_method"]
 
@@ -162,6 +167,8 @@ def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir,
                  extent="fov"):
     """The bank of the photo's geometry, from the cache (traced on a miss), to the FOV or
     to the mirror's rim (``extent``)."""
+    if extent not in ("fov", "rim"):
+        raise InputError(f"--bank-extent: must be fov or rim, got {extent!r}")
     from ..deconv.spatial import mirror_grid_shape
     from ..io.bank import bank_kernel_size
     from ..tracer.bank import BANK_RAYS
@@ -181,6 +188,32 @@ def _traced_bank(setup, shape, pitch, motion, depth, rays, progress, cache_dir,
                            settings=TraceSettings(rays=rays or BANK_RAYS,
                                                   kernel_size=bank_kernel_size(pitch)),
                            grid=grid, cache_dir=cache_dir, progress=step, extent=extent)
+
+
+def _file_noise(meta: dict) -> tuple[float | None, str]:
+    """The noise σ the photo's file states (a DNG's NoiseProfile developed as the image
+    was, :func:`mitsweep.io.camera.read_camera_image`), the RMS over its channels, and
+    where it came from; ``(None, "estimated from the image")`` where the file states
+    none."""
+    noise = meta.get("noise") or {}
+    if not noise.get("sigma"):
+        return None, "estimated from the image"
+    sigma = np.asarray(noise["sigma"], dtype=np.float64)
+    return float(np.sqrt(np.mean(np.square(sigma)))), str(noise["source"])
+
+
+def _photo_bank(got: CachedBank) -> tuple[IPSFBank, dict, dict, str]:
+    """``(bank, cache record, identity record, source)`` of a bank traced for the photo
+    (:func:`_traced_bank`'s :class:`~mitsweep.tracer.cache.CachedBank`)."""
+    from ..io.bank import optics_fingerprint
+
+    kernels = got.bank
+    assert kernels.optics is not None  # a traced bank records the optics it was traced for
+    identity = {"checked_against": "traced for the photo's geometry", "forced": False,
+                "problem": None, "bank_optics_sha256": optics_fingerprint(kernels.optics)}
+    source = str(got.path) if got.path is not None else "traced (not cached)"
+    return kernels, {"path": got.path and str(got.path), "traced": got.traced}, identity, \
+        source
 
 
 def _window(image: np.ndarray, center: tuple[float, float]):
@@ -373,7 +406,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     """
     from ..deconv.kernels import check_bank_matches
     from ..io import write_exr
-    from ..io.bank import load_bank, optics_fingerprint
+    from ..io.bank import load_bank
     from ..io.camera import CameraFileError, read_camera_image, write_display_image
 
     depth = _check_depth(depth)
@@ -431,17 +464,12 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     else:
         if force:
             raise InputError("--force applies to a given --bank only")
-        if bank_extent not in ("fov", "rim"):
-            raise InputError(f"--bank-extent: must be fov or rim, got {bank_extent!r}")
         assert photo_setup is not None  # refused above: no bank and no setup
         _check_operator(operator, "radial" if photo_setup.mirror.is_symmetric else "grid",
                         grid, (H, W))
-        got = _traced_bank(photo_setup, (H, W), pitch, motion, depth, rays, progress,
-                           cache_dir, bank_extent)
-        kernels, cache = got.bank, {"path": got.path and str(got.path), "traced": got.traced}
-        identity = {"checked_against": "traced for the photo's geometry", "forced": False,
-                    "problem": None, "bank_optics_sha256": optics_fingerprint(kernels.optics)}
-        bank_source = str(got.path) if got.path is not None else "traced (not cached)"
+        kernels, cache, identity, bank_source = _photo_bank(
+            _traced_bank(photo_setup, (H, W), pitch, motion, depth, rays, progress,
+                         cache_dir, bank_extent))
 
     photo.log_warnings()  # the setup, bank and geometry took it: it will be restored
     explicit_center = center_given or center_from != "the image centre"
@@ -452,6 +480,9 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     t0 = time.perf_counter()
     kw = dict(nsr=nsr, prior=prior, depth=depth) if method == "wiener" else \
         dict(nsr=nsr, depth=depth)
+    noise, noise_from = _file_noise(photo.meta)
+    if noise is not None:
+        kw["noise"] = noise
     restored, used, shift = _restore(pixels, kernels, method=method, operator=operator,
                                      grid=grid, center=center,
                                      explicit_center=explicit_center, **kw)
@@ -465,6 +496,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         "bank_extent": (kernels.metadata or {}).get("extent", "fov"),
         "method": method, "operator": used,
         "nsr": nsr if nsr is not None else "estimated", "prior": prior,
+        "noise_sigma": noise, "noise_from": noise_from,
         "depth_mm": depth if depth is not None else 500.0,
         "center_rc": list(center) if explicit_center else None,
         "center_from": center_from, "window_shift_rc": list(shift) if shift else None,
