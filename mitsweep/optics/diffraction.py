@@ -13,7 +13,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.special import j1
 
 __all__ = ["airy_kernel", "add_diffraction", "WAVELENGTH_MM"]
 
@@ -43,6 +42,9 @@ def airy_kernel(f_number: float, pixel_pitch: float, *, wavelength: float = WAVE
                     ("wavelength", wavelength)):
         if not (v > 0 and math.isfinite(v)):
             raise ValueError(f"{name}: must be > 0, got {v!r}")
+    from scipy.special import j1   # here: SciPy's special functions take 0.16 s to import,
+    # and every command line imports this module (through mitsweep.pipeline)
+
     lam_n = wavelength * f_number
     half = max(1, int(math.ceil(rings * lam_n / pixel_pitch)))
     k = 2 * half + 1

@@ -74,13 +74,17 @@ class RimOutline:
         return math.sqrt(area / math.pi) / pixel_pitch
 
 
-def _resample_closed(points: np.ndarray, n: int) -> np.ndarray:
-    """``n`` points evenly spaced by arc length along a closed polyline (N, 2)."""
+def _resample_closed(points: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` points evenly spaced by arc length along a closed polyline (N, 2), and for
+    each the index of the polyline's vertex nearest along the arc."""
     closed = np.vstack([points, points[:1]])
     seg = np.linalg.norm(np.diff(closed, axis=0), axis=1)
     s = np.concatenate([[0.0], np.cumsum(seg)])
     t = np.linspace(0.0, s[-1], n, endpoint=False)
-    return np.stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])], axis=-1)
+    after = np.clip(np.searchsorted(s, t, side="right"), 1, len(s) - 1)
+    nearest = np.where(t - s[after - 1] <= s[after] - t, after - 1, after) % len(points)
+    return np.stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])],
+                    axis=-1), nearest
 
 
 def predicted_outline(setup: Setup, *, sensor_distance: float | None = None,
@@ -130,13 +134,13 @@ def predicted_outline(setup: Setup, *, sensor_distance: float | None = None,
     surf = placement.surface(rho_edge * np.cos(phi), rho_edge * np.sin(phi))
     u, v = image_point(chief_ray(placement, surf), sensor_distance)
     dense = np.stack([u, v], axis=-1)
-    uv = _resample_closed(dense, n_points)
+    uv, nearest = _resample_closed(dense, n_points)
     tangent = np.roll(uv, -1, axis=0) - np.roll(uv, 1, axis=0)
     normal = np.stack([tangent[:, 1], -tangent[:, 0]], axis=-1)
     normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
     centroid = uv.mean(axis=0)
     normal *= np.where(np.sum((uv - centroid) * normal, axis=-1) < 0, -1.0, 1.0)[:, None]
-    # Which resampled points are rim (not limb): nearest dense sample's flag.
-    nearest = np.argmin(np.linalg.norm(dense[None, ::4] - uv[:, None], axis=-1), axis=1)
+    # Which resampled points are rim (not limb): the flag of the dense sample nearest
+    # along the outline (the nearest in the plane, found over all pairs, cost 0.1 s).
     return RimOutline(uv=uv, normal_uv=normal, sensor_distance=float(sensor_distance),
-                      on_rim=~hidden[::4][nearest])
+                      on_rim=~hidden[nearest])
