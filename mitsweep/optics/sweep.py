@@ -14,6 +14,7 @@ evaluated; over the zone a dense grid is refined by a bounded 1-D minimisation.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass
 
@@ -267,6 +268,34 @@ def mirror_zone(setup: Setup, fov_deg: float | None = None, *, reach_only: bool 
     return MirrorZone(start, float(end_fov), fov, reach)
 
 
+def _zone_and_extremes(setup: Setup, fov_deg: float | None, depths: tuple[float, ...]
+                       ) -> tuple[MirrorZone, float, dict[str, object], float,
+                                  dict[str, object]]:
+    """The mirror zone and the nearest and farthest focal images (each with where it
+    lies) of :func:`optimal_sweep_range`, remembered for the last
+    :data:`_EXTREMES_CACHED` setups (a pure function of frozen values: a calibration
+    or a bank asks for the same setup's range dozens of times, 60 ms each)."""
+    try:
+        return _zone_and_extremes_cached(setup, fov_deg, depths)
+    except TypeError:   # a setup built with unhashable values (a list for a tuple)
+        return _zone_and_extremes_cached.__wrapped__(setup, fov_deg, depths)
+
+
+_EXTREMES_CACHED = 64
+
+
+@functools.lru_cache(maxsize=_EXTREMES_CACHED)
+def _zone_and_extremes_cached(setup, fov_deg, depths):
+    zone = mirror_zone(setup, fov_deg)
+    if setup.sweep.focus_min is not None and setup.sweep.focus_max is not None:
+        # both or neither (mitsweep.config.Sweep checks it)
+        given = {"surface": "given", "rho_mm": float("nan"), "depth_mm": float("nan")}
+        return zone, setup.sweep.focus_min, given, setup.sweep.focus_max, dict(given)
+    fmin, at_min = _extreme(setup, zone, depths, +1.0)
+    fmax, at_max = _extreme(setup, zone, depths, -1.0)
+    return zone, fmin, at_min, fmax, at_max
+
+
 def _extreme(setup, zone: MirrorZone, depths, sign: float) -> tuple[float, dict[str, object]]:
     """Min (sign=+1) or max (sign=−1) of D_m, D_s over the zone and the end depths."""
     xs = zone.grid()
@@ -323,21 +352,11 @@ def optimal_sweep_range(setup: Setup, *, fov_deg: float | None = None,
         raise SetupError(f"sweep.depth_min: must be <= depth_max ({dmax:g} mm), got {dmin:g}")
     if fov_deg is not None and not (0 < fov_deg < 360):
         raise SetupError(f"sweep.fov_deg: must be in (0, 360), got {fov_deg:g}")
-    zone = mirror_zone(setup, fov_deg)
     depths = (dmin, dmax) if dmin != dmax else (dmin,)
-    fmin: float
-    fmax: float
-    at_min: dict[str, object]
-    at_max: dict[str, object]
-    if setup.sweep.focus_min is not None and setup.sweep.focus_max is not None:
-        # both or neither (mitsweep.config.Sweep checks it)
-        fmin, fmax = setup.sweep.focus_min, setup.sweep.focus_max
-        at_min = at_max = {"surface": "given", "rho_mm": float("nan"), "depth_mm": float("nan")}
-        source = "setup"
-    else:
-        fmin, at_min = _extreme(setup, zone, depths, +1.0)
-        fmax, at_max = _extreme(setup, zone, depths, -1.0)
-        source = "optimal"
+    zone, fmin, at_min, fmax, at_max = _zone_and_extremes(setup, fov_deg, depths)
+    at_min, at_max = dict(at_min), dict(at_max)   # the caller's own, not the cache's
+    source = "setup" if setup.sweep.focus_min is not None \
+        and setup.sweep.focus_max is not None else "optimal"
     f = setup.lens.focal_length
     if not fmin > f:
         raise SetupError(f"sweep: the nearest focal image lies at {fmin:.3f} mm from the lens, "
