@@ -99,5 +99,16 @@ def _run_free(args) -> int:
         f"fit              {out['points_used']} of {out['points_total']} outline points, rms "
         f"{out['residual_rms_px']:.3f} px (centre standard error "
         f"{out['center_standard_error_px']:.3f} px)",
+        *_ellipse_lines(out.get("ellipse")),
         "setup skeleton:", *out["setup_skeleton"].splitlines()]))
     return 0
+
+
+def _ellipse_lines(e: dict | None) -> list[str]:
+    if not e:
+        return []
+    (a, b), (row, col) = e["semi_axes_px"], e["center_px"]
+    verdict = "no circle: a tilted view?" if e["significant"] else "a circle within the fit"
+    return [f"ellipse          semi-axes {a:.3f} x {b:.3f} px at {e['angle_deg']:.1f} deg, "
+            f"centre row {row:.3f}, col {col:.3f} px, rms {e['residual_rms_px']:.3f} px "
+            f"({verdict})"]

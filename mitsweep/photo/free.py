@@ -22,8 +22,8 @@ from .coarse import coarse_search, search_scales
 from .image import fill_void, photo_void, reduce_by
 from .rim import CalibrationError, NoMirrorError, RimFit, fit_rim, working_luminance
 
-__all__ = ["find_circle", "circle_outline", "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE",
-           "CANDIDATES"]
+__all__ = ["find_circle", "circle_outline", "ellipse_of_edges", "MIN_RADIUS_SHARE",
+           "MAX_RADIUS_SHARE", "CANDIDATES", "ELLIPSE_SIGNIFICANCE", "ELLIPSE_MIN_PX"]
 
 logger = logging.getLogger(__name__)
 
@@ -112,6 +112,68 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
     step = 1.0 + 2.0 / radius  # two reduced pixels' worth of scale
     fit = fit_rim(image, circle_outline(radius * f), 1.0, scale_range=(1.0 / step, step))
     return fit, radius * f * fit.scale
+
+
+#: The outline is reported as an ellipse (a tilted view) where its semi-axes differ by
+#: more than this many standard errors of the circle fit's centre (the same edge points
+#: fix both, to about the same precision) and by more than :data:`ELLIPSE_MIN_PX`.
+ELLIPSE_SIGNIFICANCE = 3.0
+#: Smallest difference of the semi-axes (px) reported as an ellipse: the calibration's bar
+#: for the centre (a noiseless drawn circle of radius 148 px reads 0.04 px, its sampling
+#: on the pixel grid).
+ELLIPSE_MIN_PX = 0.25
+
+
+def ellipse_of_edges(fit: RimFit) -> dict | None:
+    """The ellipse through a circle fit's edge points (scikit-image's direct
+    least-squares ``EllipseModel``): what a circle leaves out where the camera does not
+    look straight at an untilted mirror.
+
+    Parameters
+    ----------
+    fit : RimFit
+        A circle fit (:func:`find_circle`), its inliers' edge points
+        (``edge_points_px``, row, col).
+
+    Returns
+    -------
+    dict or None
+        JSON-ready: ``center_px`` [row, col], ``semi_axes_px`` [major, minor],
+        ``angle_deg`` (the major axis from the column axis, counter-clockwise as
+        displayed, in [0, 180)),
+        ``axis_ratio`` (minor / major), ``residual_rms_px`` (the points' distances from
+        the ellipse) and ``significant`` (the semi-axes differ by more than
+        :data:`ELLIPSE_SIGNIFICANCE` times the circle's centre standard error and more
+        than :data:`ELLIPSE_MIN_PX`); None where fewer than 8 points or the fit fails.
+    """
+    from skimage.measure import EllipseModel
+
+    pts = np.asarray(fit.edge_points_px, dtype=np.float64)
+    if len(pts) < 8:
+        return None
+    xy = pts[:, ::-1]                      # x = column, y = row (down)
+    if hasattr(EllipseModel, "from_estimate"):
+        model = EllipseModel.from_estimate(xy)
+        if not model:
+            return None
+        (xc, yc), (a, b), theta = model.center, model.axis_lengths, model.theta
+    else:  # scikit-image < 0.26
+        model = EllipseModel()
+        if not model.estimate(xy):
+            return None
+        xc, yc, a, b, theta = model.params
+    xc, yc, a, b, theta = (float(v) for v in (xc, yc, a, b, theta))
+    if not all(math.isfinite(v) for v in (xc, yc, a, b, theta)) or min(a, b) <= 0:
+        return None
+    if b > a:
+        a, b, theta = b, a, theta + math.pi / 2
+    # theta turns x toward y (down): clockwise as displayed
+    angle = math.degrees(-theta) % 180.0
+    rms = float(np.sqrt(np.mean(model.residuals(xy) ** 2)))
+    se = fit.center_se_px if math.isfinite(fit.center_se_px) else math.inf
+    return {"center_px": [yc, xc], "semi_axes_px": [a, b], "angle_deg": angle,
+            "axis_ratio": b / a, "residual_rms_px": rms,
+            "significant": bool(a - b > max(ELLIPSE_SIGNIFICANCE * se, ELLIPSE_MIN_PX))}
 
 
 def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float

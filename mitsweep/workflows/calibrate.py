@@ -132,7 +132,10 @@ def find_mirror_circle(photo: str | os.PathLike, *, pixel_pitch: float | None = 
     WorkflowResult
         ``value``: the circle fit (:func:`mitsweep.photo.free.find_circle`'s).
         ``summary``: what ``mitsweep calibrate --free --json`` prints (``center_px``,
-        ``radius_px``, ``center_offset_px``, ``setup_skeleton``, fit statistics...).
+        ``radius_px``, ``center_offset_px``, ``setup_skeleton``, fit statistics, and
+        ``ellipse``: the ellipse through the same edge points,
+        :func:`mitsweep.photo.free.ellipse_of_edges`, whose ``significant`` says the
+        outline is no circle: a tilted view).
         ``provenance``: ``photo``, ``kind``, ``bit_depth``, ``version``.
 
     Raises
@@ -149,7 +152,7 @@ def find_mirror_circle(photo: str | os.PathLike, *, pixel_pitch: float | None = 
     """
     from ..io.camera import read_camera_image
     from ..optics.pixels import optical_center_px
-    from ..photo.free import find_circle
+    from ..photo.free import ellipse_of_edges, find_circle
 
     check_outputs([photo], [])
     image = read_camera_image(os.fspath(photo), log_warnings=False, pixel_pitch=pixel_pitch,
@@ -171,6 +174,7 @@ def find_mirror_circle(photo: str | os.PathLike, *, pixel_pitch: float | None = 
            "residual_rms_px": fit.residual_rms_px,
            "center_standard_error_px": fit.center_se_px,
            "setup_skeleton": "\n".join(skeleton) + "\n",
+           "ellipse": ellipse_of_edges(fit),
            "warnings": list(image.warnings)}
     provenance = {"workflow": "find_mirror_circle", "version": __version__,
                   "photo": str(photo), "kind": image.kind, "bit_depth": image.bit_depth}

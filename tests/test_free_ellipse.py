@@ -1,0 +1,67 @@
+"""``calibrate --free`` reports the ellipse through the circle fit's edge points
+(:func:`mitsweep.photo.free.ellipse_of_edges`): a slightly tilted view's outline is an
+ellipse, and a circle's stays a circle. The photos are drawn here, supersampled, with
+their outline known exactly."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from cli_contract import run_main
+from mitsweep.photo.free import ellipse_of_edges, find_circle
+
+SIDE, CENTRE = 400, (201.3, 188.7)
+#: The same centre in mitsweep's pixel coordinates (a pixel's centre is its index; the
+#: drawing below puts pixel i's centre at i + 0.5).
+TRUE_CENTRE_PX = (CENTRE[0] - 0.5, CENTRE[1] - 0.5)
+
+
+def _photo(a: float, b: float, angle_deg: float, k: int = 4) -> np.ndarray:
+    """A textured bright disc bounded by the ellipse (semi-axes a, b px, the major axis
+    ``angle_deg`` counter-clockwise from the column axis as displayed) on a dark textured
+    background, each pixel the mean of k x k samples."""
+    sub = (np.arange(SIDE * k) + 0.5) / k
+    rows, cols = np.meshgrid(sub, sub, indexing="ij")
+    dy, dx = rows - CENTRE[0], cols - CENTRE[1]
+    t = math.radians(angle_deg)
+    along = dx * math.cos(t) - dy * math.sin(t)       # rows point down: -dy is up
+    across = dx * math.sin(t) + dy * math.cos(t)
+    inside = (along / a) ** 2 + (across / b) ** 2 <= 1.0
+    texture = 0.5 + 0.15 * np.sin(rows / 7.0) * np.cos(cols / 11.0)
+    img = np.where(inside, 0.35 + texture, 0.08 + 0.04 * np.sin((rows + cols) / 9.0))
+    return img.reshape(SIDE, k, SIDE, k).mean(axis=(1, 3))
+
+
+@pytest.mark.parametrize("a, b, angle", [(150.0, 146.0, 30.0), (149.0, 146.5, 120.0)])
+def test_a_slightly_tilted_view_is_reported_as_its_ellipse(a, b, angle):
+    fit, _radius = find_circle(_photo(a, b, angle))
+    e = ellipse_of_edges(fit)
+    assert e is not None and e["significant"]
+    # measured: semi-axes within 0.035 px, angle 0.14 deg, centre 0.01 px
+    np.testing.assert_allclose(e["semi_axes_px"], (a, b), atol=0.1)
+    assert abs((e["angle_deg"] - angle + 90) % 180 - 90) < 0.5
+    assert np.abs(np.asarray(e["center_px"]) - TRUE_CENTRE_PX).max() < 0.05
+    assert e["residual_rms_px"] < 0.5 * fit.residual_rms_px     # the circle left 5-7x more
+
+
+def test_a_circle_stays_a_circle():
+    fit, radius = find_circle(_photo(148.0, 148.0, 0.0))
+    e = ellipse_of_edges(fit)
+    assert e is not None and not e["significant"]
+    # measured: axis ratio 0.99975, radius 0.007 px off
+    assert e["axis_ratio"] > 0.999 and abs(radius - 148.0) < 0.05
+
+
+def test_free_cli_prints_the_ellipse(tmp_path, capsys):
+    path = tmp_path / "tilted.png"
+    Image.fromarray(np.round(_photo(150.0, 146.0, 30.0) * 255).astype(np.uint8)).save(path)
+    rc, out, err = run_main(capsys, "calibrate", path, "--free")
+    assert rc == 0, err
+    line = next(ln for ln in out.splitlines() if ln.startswith("ellipse"))
+    assert "no circle: a tilted view?" in line
+    a, b = (float(v) for v in line.split("semi-axes ")[1].split(" px")[0].split(" x "))
+    assert abs(a - 150.0) < 0.25 and abs(b - 146.0) < 0.25
