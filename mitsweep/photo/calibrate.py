@@ -15,7 +15,7 @@ from ..config import Setup
 from ..optics.outline import predicted_outline
 from ..optics.pixels import optical_center_px
 from ..optics.reference import reference_geometry
-from .coarse import COARSE_SCALE_STEP
+from .coarse import COARSE_SCALE_STEP, MAX_CANDIDATES
 from .rim import PLAUSIBLE_SCALE, CalibrationError, RimFit, SetupMismatchError, fit_rim
 
 __all__ = ["Calibration", "calibrate_photo", "WARN_SCALE", "WIDE_SCALES",
@@ -163,7 +163,7 @@ def _implied_vertex_distance(setup, pitch: float, radius_px: float) -> float | N
 
 def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | None = None,
                     plausible_scale: float = PLAUSIBLE_SCALE,
-                    fit_roll: bool = False) -> Calibration:
+                    fit_roll: bool = False, starts: int = MAX_CANDIDATES) -> Calibration:
     """Calibrate a photograph of the setup's mirror: centre, rim size, what it implies.
 
     Parameters
@@ -179,6 +179,9 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
         :data:`WARN_SCALE` the calibration warns with the pitch or distance it implies).
     fit_roll : bool
         Fit the camera's roll too (tilted mirrors), see :func:`fit_rim`.
+    starts : int
+        Starting points of the rim search refined at most, see :func:`fit_rim` (1: the
+        outline nearest the prediction only, faster where the setup is nearly right).
 
     Returns
     -------
@@ -206,11 +209,13 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
     outline = predicted_outline(setup)
     predicted = outline.equivalent_radius_px(pitch)
     try:
-        fit = fit_rim(image, outline, pitch, scale_range=plausible, fit_roll=fit_roll)
+        fit = fit_rim(image, outline, pitch, scale_range=accepted, fit_roll=fit_roll,
+                      starts=starts)
     except CalibrationError as within:
         # a mirror far off the predicted size is a wrong setup, not a missing mirror
         try:
-            fit = fit_rim(image, outline, pitch, scale_range=WIDE_SCALES, fit_roll=fit_roll)
+            fit = fit_rim(image, outline, pitch, scale_range=WIDE_SCALES, fit_roll=fit_roll,
+                          starts=starts)
         except CalibrationError:
             raise within from None
         if accepted[0] <= fit.scale <= accepted[1]:  # found on the second look after all

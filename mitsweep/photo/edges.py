@@ -17,8 +17,8 @@ import math
 
 import numpy as np
 
-__all__ = ["edge_offsets", "gaussian_peak", "edge_prominence", "EDGE_PEAK_HALF_WIDTH_PX",
-           "PROMINENCE_TRIM"]
+__all__ = ["edge_offsets", "edge_candidates", "gaussian_peak", "edge_prominence",
+           "EDGE_PEAK_HALF_WIDTH_PX", "PROMINENCE_TRIM"]
 
 #: Half-width (px) of the top of the derivative lobe fitted by a Gaussian to locate the
 #: edge (:func:`gaussian_peak`). Measured on Mitsuba sweep renders of the tilted
@@ -107,6 +107,44 @@ def edge_offsets(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
         centroid = (wgt * t[None, :]).sum(axis=1) / total
         width = np.sqrt((wgt * (t[None, :] - centroid[:, None]) ** 2).sum(axis=1) / total)
     return off, step_size, np.where(np.isfinite(off), width, np.nan)
+
+
+def edge_candidates(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
+                    pts: np.ndarray, nrm: np.ndarray, half: float, floor: float,
+                    k: int = 4) -> np.ndarray:
+    """(N, k) offsets along each normal of its ``k`` strongest edges of either sign
+    (local maxima of the absolute derivative, to a quarter pixel; NaN where fewer stand
+    above ``floor``), for :func:`mitsweep.photo.robust.consensus_lstsq`.
+
+    Parameters
+    ----------
+    lum_s, centre, scale, pts, nrm, half
+        As :func:`edge_offsets`.
+    floor : float
+        Smallest derivative (per px) of an edge counted.
+    k : int
+        Candidates per normal at most.
+    """
+    from scipy.ndimage import map_coordinates
+
+    step = 0.25
+    t = np.arange(-half, half + step / 2, step)
+    coords = (np.asarray(centre)[None, :] + scale * pts)[:, None, :] \
+        + t[None, :, None] * nrm[:, None, :]
+    H, W = lum_s.shape
+    inside = np.all((coords[..., 0] >= 0) & (coords[..., 0] <= H - 1)
+                    & (coords[..., 1] >= 0) & (coords[..., 1] <= W - 1), axis=1)
+    prof = map_coordinates(lum_s, [coords[..., 0].ravel(), coords[..., 1].ravel()],
+                           order=1, mode="nearest").reshape(coords.shape[:2])
+    d = np.abs(np.gradient(prof, step, axis=1))
+    peak = np.zeros_like(d, dtype=bool)
+    peak[:, 1:-1] = (d[:, 1:-1] >= d[:, :-2]) & (d[:, 1:-1] > d[:, 2:]) \
+        & (d[:, 1:-1] > floor)
+    strength = np.where(peak, d, -np.inf)
+    top = np.argsort(-strength, axis=1)[:, :k]
+    out = np.where(np.take_along_axis(peak, top, axis=1), t[top], np.nan)
+    out[~inside] = np.nan
+    return out
 
 
 def gaussian_peak(ds: np.ndarray, t: np.ndarray, at: np.ndarray,

@@ -110,7 +110,9 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
                 fit.center_px[0] * f + (f - 1) / 2, fit.center_px[1] * f + (f - 1) / 2,
                 radius * f)
     step = 1.0 + 2.0 / radius  # two reduced pixels' worth of scale
-    fit = fit_rim(image, circle_outline(radius * f), 1.0, scale_range=(1.0 / step, step))
+    # one start: the candidate is chosen already, at its own size
+    fit = fit_rim(image, circle_outline(radius * f), 1.0, scale_range=(1.0 / step, step),
+                  starts=1)
     return fit, radius * f * fit.scale
 
 
@@ -195,7 +197,8 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
         logger.info("free search candidate: centre (%.1f, %.1f) px, radius %.1f px "
                     "(score %.3g)", *centre, radius, score)
         try:
-            fit = fit_rim(image, circle_outline(radius), 1.0, scale_range=(0.96, 1.04))
+            fit = fit_rim(image, circle_outline(radius), 1.0, scale_range=(0.96, 1.04),
+                          starts=1)   # this search compares its candidates itself
         except CalibrationError as exc:
             failures.append(str(exc))
             continue

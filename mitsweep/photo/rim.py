@@ -17,6 +17,16 @@ mirror's; ``fit_roll``). Three steps:
    must lie on it within :data:`MAX_RESIDUAL_RMS_PX`; otherwise :class:`CalibrationError`
    says which test failed. The centre's standard error is reported.
 
+A setup that is only roughly right (a guessed pitch or distance, ±35%) leaves other
+outlines near the predicted one: a mount's inner edge, a concentric edge of the
+reflection. Steps 2 and 3 therefore run from each of the coarse search's starting points
+(:func:`mitsweep.photo.coarse.coarse_candidates`, the first being the outline nearest the
+prediction), twice: once from each normal's strongest edge, once from the outline that
+most normals show *an* edge on (RANSAC over the edges,
+:func:`mitsweep.photo.robust.consensus_lstsq`), which finds a dim stretch of rim beside a
+strong edge of the reflection. Of the fits validated, the first is kept unless another
+explains edges markedly better (:func:`fit_support`, :data:`CLEARLY_BETTER`).
+
 What the photo does not show is left out: exact zeros (what a renderer skipped,
 :func:`mitsweep.photo.image.photo_void`) are filled from the nearest shown pixel, so the
 border of a render cropped to the mirror's window is no edge, and outline points there
@@ -34,18 +44,21 @@ import numpy as np
 from ..optics.outline import RimOutline
 from ..deprecation import renamed_keywords
 from ..resources import check_allocation
-from .coarse import COARSE_RADIUS_PX, COARSE_SCALE_STEP, coarse_search, search_scales
-from .edges import edge_offsets, edge_prominence
+from .coarse import (COARSE_RADIUS_PX, COARSE_SCALE_STEP, MAX_CANDIDATES, coarse_candidates,
+                     coarse_search, search_scales)
+from .edges import edge_candidates, edge_offsets, edge_prominence
 from .image import fill_void, luminance, noise_sigma, photo_void, smooth
-from .robust import EDGE_CORRELATION_PX, centre_standard_error, tukey_lstsq
+from .robust import (EDGE_CORRELATION_PX, centre_standard_error, consensus_lstsq,
+                     tukey_lstsq)
 
 __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim",
            "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
            "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
            "RESIDUAL_WIDTH_SHARE", "RESIDUAL_RADIUS_SHARE", "PLAUSIBLE_SCALE",
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE", "LIMB_INSIDE_SHARE",
-           "MAX_LIMB_COHERENCE",
-           "fit_edges"]
+           "MAX_LIMB_COHERENCE", "CONSENSUS_EDGES", "CONSENSUS_TOLERANCE_PX",
+           "CLEARLY_BETTER", "SUPPORT_RMS_FLOOR_PX", "SETTLED_SHARE", "SETTLED_RMS_PX",
+           "fit_edges", "fit_support", "choose_fit", "unbeatable", "settled"]
 
 logger = logging.getLogger(__name__)
 
@@ -111,6 +124,24 @@ LIMB_INSIDE_SHARE = 0.05
 #: an edge one sign all round (a holder's dark ring 8 px outside the synthetic sphere's
 #: rim: 0.87; the dark line of the real sphere_lamp: 0.83).
 MAX_LIMB_COHERENCE = 0.6
+#: Edges per normal offered to the consensus start (:func:`_consensus_start`).
+CONSENSUS_EDGES = 4
+#: A normal agrees with a consensus outline when one of its edges lies within this
+#: (px), or half of :data:`RESIDUAL_RADIUS_SHARE` of the radius where that is more.
+CONSENSUS_TOLERANCE_PX = 1.5
+#: Of the fits refined from several starting points, the best supported
+#: (:func:`fit_support`) replaces the coarse search's own where its support is this many
+#: times larger (:func:`choose_fit`); otherwise the outline nearest the prediction is kept.
+CLEARLY_BETTER = 1.25
+#: Residual RMS (px) below which a fit counts as exact in :func:`fit_support`: edges are
+#: placed to ~0.1-0.3 px, so tighter residuals say nothing more of which outline it is.
+SUPPORT_RMS_FLOOR_PX = 0.25
+#: A first fit explaining this share of the outline's points within
+#: :data:`SETTLED_RMS_PX` is kept without refining the other starting points
+#: (:func:`settled`).
+SETTLED_SHARE = 0.9
+#: See :data:`SETTLED_SHARE` (px).
+SETTLED_RMS_PX = 0.5
 
 
 class CalibrationError(ValueError):
@@ -166,6 +197,9 @@ class RimFit:
         The residual RMS the fit was allowed, px.
     limb : bool
         Whether the outline was found as a limb without an edge.
+    prominence : float
+        How much the fitted outline stands out from what lies beside it
+        (:func:`mitsweep.photo.edges.edge_prominence`; NaN for a limb fit).
     """
 
     center_px: tuple[float, float]
@@ -180,6 +214,7 @@ class RimFit:
     edge_width_px: float = math.nan
     residual_tolerance_px: float = math.nan
     limb: bool = False
+    prominence: float = math.nan
 
 
 def _rotated(v: np.ndarray, angle: float) -> np.ndarray:
@@ -236,7 +271,7 @@ def working_luminance(image: np.ndarray, min_side: int) -> np.ndarray:
 def fit_rim(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
             scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
             max_iterations: int = 30, edge_half_width_px: float | None = None,
-            fit_roll: bool = False) -> RimFit:
+            fit_roll: bool = False, starts: int = MAX_CANDIDATES) -> RimFit:
     """Find the predicted outline in a photograph (see the module docstring, and for a
     limb :func:`_limb_or_edge`); parameters, result and errors as :func:`fit_edges`.
 
@@ -256,19 +291,26 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
         Half-width of the edge search along each normal (default: from the outline size).
     fit_roll : bool
         Also fit the camera's roll about its axis (a tilted mirror's outline shows it).
+    starts : int
+        The coarse search's starting points refined at most (see the module docstring);
+        1 refines only the outline nearest the prediction from each normal's strongest
+        edge: faster, for a setup known to be right within a few per cent.
     """
     if outline.on_rim.any():
         return fit_edges(image, outline, pixel_pitch, scale_range=scale_range,
                          max_iterations=max_iterations,
-                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll)
+                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll,
+                         starts=starts)
     return _limb_or_edge(image, outline, pixel_pitch, scale_range=scale_range,
                          max_iterations=max_iterations,
-                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll)
+                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll,
+                         starts=starts)
 
 
 def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
                   scale_range: tuple[float, float], max_iterations: int,
-                  edge_half_width_px: float | None, fit_roll: bool) -> RimFit:
+                  edge_half_width_px: float | None, fit_roll: bool,
+                  starts: int = MAX_CANDIDATES) -> RimFit:
     """A limb outline (a hemisphere's, where the photo may show no edge): the limb's
     own fit (:func:`mitsweep.photo.limb.fit_limb`: the step of the fine-detail energy,
     then the sign-agnostic step of the mean) where it finds one, unless the edge fit
@@ -283,7 +325,8 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
     try:
         edge = fit_edges(image, outline, pitch, scale_range=scale_range,
                          max_iterations=max_iterations,
-                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll)
+                         edge_half_width_px=edge_half_width_px, fit_roll=fit_roll,
+                         starts=starts)
     except CalibrationError as exc:
         refused = exc
     lum = working_luminance(image, 8)
@@ -330,7 +373,7 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
 def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
             scale_range: tuple[float, float] = (1 - PLAUSIBLE_SCALE, 1 + PLAUSIBLE_SCALE),
             max_iterations: int = 30, edge_half_width_px: float | None = None,
-            fit_roll: bool = False) -> RimFit:
+            fit_roll: bool = False, starts: int = MAX_CANDIDATES) -> RimFit:
     """Find the predicted outline in a photograph (see the module docstring).
 
     Parameters
@@ -357,6 +400,8 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
         whose faint rim then reads as a 0.5-0.75 deg roll and the axis 0.26-0.31 px off,
         against 0.10-0.13 px without): fit it for a camera that may be turned on its
         mount.
+    starts : int
+        As :func:`fit_rim`.
 
     Returns
     -------
@@ -368,6 +413,9 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
         When too few outline points show a consistent edge or the residual is large:
         the photo does not show the mirror the setup describes.
     """
+    if not (isinstance(starts, int) and starts >= 1):
+        raise ValueError(f"starts must be a whole number of starting points, at least 1; "
+                         f"got {starts!r}")
     lum = working_luminance(image, 8)
     pts, nrm = outline.offsets_px(pixel_pitch)
     radius = outline.equivalent_radius_px(pixel_pitch)
@@ -379,8 +427,8 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
     shown = ~void
     if void.any() and shown.any():
         filled = fill_void(lum, void)
-        centre, scale, coarse_score = coarse_search(filled, pts, nrm, scales)
-        hidden = _in_void(void, centre, scale, pts)
+        begin = coarse_candidates(filled, pts, nrm, scales, max_candidates=starts)
+        hidden = _in_void(void, begin[0][0], begin[0][1], pts)
         if hidden.mean() > 1.0 - MIN_INLIER_FRACTION:
             # exact zeros around most of the rim: a clipped black background, not a
             # renderer's skipped pixels; the rim's edge against it is real
@@ -388,33 +436,186 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
                         "outside the photo", 100 * hidden.mean())
             void[:] = False
             shown[:] = True
-            centre, scale, coarse_score = coarse_search(lum, pts, nrm, scales)
+            begin = coarse_candidates(lum, pts, nrm, scales, max_candidates=starts)
         else:
             logger.info("%d px of exact zeros treated as outside the photo (%.0f%% of the "
                         "outline)", int(void.sum()), 100 * hidden.mean())
             lum = filled
     else:
-        centre, scale, coarse_score = coarse_search(lum, pts, nrm, scales)
-    logger.info("coarse rim search: centre (%.1f, %.1f) px, scale %.3f (score %.3g)",
-                *centre, scale, coarse_score)
-    half = edge_half_width_px or max(4.0, 0.015 * radius * scale)
-    lum_s = smooth(lum, PROFILE_SMOOTHING_PX)
-    sigma = noise_sigma(lum, shown)
-    n = len(pts)
+        begin = coarse_candidates(lum, pts, nrm, scales, max_candidates=starts)
+    work = _Work(lum_s=smooth(lum, PROFILE_SMOOTHING_PX), sigma=noise_sigma(lum, shown),
+                 void=void, pts=pts, nrm=nrm, radius=radius, pitch=pixel_pitch,
+                 half=edge_half_width_px, max_iterations=max_iterations,
+                 fit_roll=bool(fit_roll) and float(np.sqrt(np.mean(
+                     _roll_column(pts, nrm) ** 2))) > ROLL_OBSERVABLE * radius)
+    fits: list[RimFit] = []
+    refusals: list[NoMirrorError] = []
+    for i, (centre, scale, coarse_score) in enumerate(begin):
+        logger.info("coarse rim search, start %d: centre (%.1f, %.1f) px, scale %.3f "
+                    "(score %.3g)", i, *centre, scale, coarse_score)
+        for consensus in (False, True)[:1 if starts == 1 else 2]:
+            try:
+                fit = _refine(work, centre, scale, consensus=consensus)
+            except NoMirrorError as exc:
+                logger.info("start %d%s refused: %s", i, " (consensus)" if consensus
+                            else "", exc)
+                refusals.append(exc)
+                continue
+            fits.append(fit)
+            if settled(fits[0]):
+                break
+        if fits and settled(fits[0]):
+            logger.info("the first fit explains its edges so well that it is kept: %d of "
+                        "%d starts refined", i + 1, len(begin))
+            break
+    if not fits:
+        raise refusals[0]
+    return choose_fit(fits)
+
+
+@dataclass(frozen=True)
+class _Work:
+    """What every refinement of one photo shares (:func:`_refine`)."""
+
+    lum_s: np.ndarray
+    sigma: float
+    void: np.ndarray
+    pts: np.ndarray
+    nrm: np.ndarray
+    radius: float
+    pitch: float
+    half: float | None
+    max_iterations: int
+    fit_roll: bool
+
+
+def fit_support(fit: RimFit) -> float:
+    """How well a fit is supported: the edge points it explains over their RMS residual
+    (floored at :data:`SUPPORT_RMS_FLOOR_PX`): many edges, tightly on the outline. An
+    outline through whatever edges lie within the search window (texture, a reflection's
+    content) explains many points loosely; a rim explains them to a fraction of a
+    pixel.
+
+    Parameters
+    ----------
+    fit : RimFit
+        A validated fit.
+    """
+    return fit.points_used / max(fit.residual_rms_px, SUPPORT_RMS_FLOOR_PX)
+
+
+def unbeatable(fit: RimFit) -> bool:
+    """Whether no fit could be :data:`CLEARLY_BETTER` supported than ``fit``
+    (:func:`fit_support`: none explains more than all the points, or any to below
+    :data:`SUPPORT_RMS_FLOOR_PX`): the other starting points need not be refined, and
+    the result is the same.
+
+    Parameters
+    ----------
+    fit : RimFit
+        The first validated fit.
+    """
+    return CLEARLY_BETTER * fit_support(fit) >= fit.points_total / SUPPORT_RMS_FLOOR_PX
+
+
+def settled(fit: RimFit) -> bool:
+    """Whether ``fit``, the first validated, is kept without refining the other starting
+    points: :func:`unbeatable`, or explaining :data:`SETTLED_SHARE` of the outline's
+    points within :data:`SETTLED_RMS_PX` RMS. An outline of something else rarely fits
+    that tightly all round (the distractors on the real photos of ``tests/data/real``
+    fit at 2.4-3.7 px); the renders' rims fit at 0.1-0.4 px.
+
+    Parameters
+    ----------
+    fit : RimFit
+        The first validated fit.
+    """
+    return unbeatable(fit) or (fit.residual_rms_px <= SETTLED_RMS_PX
+                               and fit.points_used >= SETTLED_SHARE * fit.points_total)
+
+
+def choose_fit(fits: list[RimFit]) -> RimFit:
+    """The fit kept of those refined from the coarse search's starting points (the first
+    is :func:`coarse_search`'s, the outline nearest the prediction): the first, unless
+    the best supported (:func:`fit_support`) has :data:`CLEARLY_BETTER` times its
+    support.
+
+    Parameters
+    ----------
+    fits : list of RimFit
+        The validated fits, the first from the outline nearest the prediction.
+    """
+    for f in fits:
+        logger.info("candidate fit: centre (%.2f, %.2f) px, scale %.4f, %d points, rms "
+                    "%.3f px, prominence %.2f, support %.0f", *f.center_px, f.scale,
+                    f.points_used, f.residual_rms_px, f.prominence, fit_support(f))
+    best = max(fits, key=fit_support)
+    return best if fit_support(best) > CLEARLY_BETTER * fit_support(fits[0]) else fits[0]
+
+
+def _consensus_start(work: _Work, centre: tuple[float, float], scale: float,
+                    search: float) -> tuple[tuple[float, float], float] | None:
+    """The outline (centre, scale) near a starting point that the most normals show an
+    edge on, any of their :data:`CONSENSUS_EDGES` strongest within ``search`` px
+    (:func:`mitsweep.photo.robust.consensus_lstsq`, agreeing within
+    :data:`CONSENSUS_TOLERANCE_PX` or a share of the radius); None where no outline
+    gets :data:`MIN_INLIER_FRACTION` of the normals.
+
+    Parameters
+    ----------
+    work : _Work
+        The photo's shared arrays.
+    centre : (float, float)
+        Starting centre ``(row, col)``, px.
+    scale : float
+        Starting scale.
+    search : float
+        Half-width of the window along each normal, px.
+    """
+    pts, nrm = work.pts, work.nrm
+    cand = edge_candidates(work.lum_s, centre, scale, pts, nrm, search, work.sigma,
+                           k=CONSENSUS_EDGES)
+    A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])
+    tol = max(CONSENSUS_TOLERANCE_PX, 0.5 * RESIDUAL_RADIUS_SHARE * work.radius * scale)
+    x, chosen = consensus_lstsq(A, cand, tol)
+    agree = int(np.isfinite(chosen).sum())
+    if not np.all(np.isfinite(x)) or agree < MIN_INLIER_FRACTION * len(pts):
+        logger.info("consensus start: none (%d normals agree)", agree)
+        return None
+    logger.info("consensus start: %d of %d normals agree within %.2f px: moved by (%.2f, "
+                "%.2f) px, scale %+.4f", agree, len(pts), tol, x[0], x[1], x[2])
+    return (centre[0] + float(x[0]), centre[1] + float(x[1])), scale + float(x[2])
+
+
+def _refine(work: _Work, centre: tuple[float, float], scale: float, *,
+            consensus: bool = False) -> RimFit:
+    """Refine one starting point to sub-pixel edges and validate it (steps 2 and 3 of
+    the module docstring); :class:`NoMirrorError` where the outline found fails a test.
+    With ``consensus``, the first step is the outline most normals show an edge on
+    (:func:`_consensus_start`) rather than the fit of each normal's strongest edge."""
+    pts0, nrm0, radius, pixel_pitch = work.pts, work.nrm, work.radius, work.pitch
+    void, lum_s, sigma, fit_roll = work.void, work.lum_s, work.sigma, work.fit_roll
+    half = work.half or max(4.0, 0.015 * radius * scale)
+    n = len(pts0)
     off = np.full(n, np.nan)
     used = np.zeros(n, bool)
     rms = math.inf
     it = 0
     # The camera's roll about its axis turns the outline about the axis point: a circle
     # about the axis does not show it, a tilted mirror's outline does.
-    pts0, nrm0 = pts, nrm
+    pts, nrm = pts0, nrm0
     roll = 0.0
-    fit_roll = bool(fit_roll) and float(np.sqrt(np.mean(_roll_column(pts, nrm) ** 2))) \
-        > ROLL_OBSERVABLE * radius
     # The first window covers the coarse search's steps: a reduced pixel and a scale step.
     factor = max(1, int(radius / COARSE_RADIUS_PX))
     search = max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
-    for _ in range(max_iterations):
+    if consensus:
+        moved = _consensus_start(work, centre, scale, search)
+        if moved is None:
+            raise NoMirrorError("no mirror found: no outline near this start that most "
+                                "normals show an edge on")
+        centre, scale = moved
+        search = half
+    for it in range(1, work.max_iterations + 1):  # noqa: B007 (passes made, reported)
         pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
         off, strength, width = edge_offsets(lum_s, centre, scale, pts, nrm, search,
                                          outermost=search <= half)
@@ -487,4 +688,5 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
                   points_used=n_used, points_total=n, residual_rms_px=rms,
                   edge_points_px=edges[used], iterations=it, center_se_px=centre_se,
                   roll_deg=math.degrees(roll) if fit_roll else None,
-                  edge_width_px=edge_width, residual_tolerance_px=tolerance)
+                  edge_width_px=edge_width, residual_tolerance_px=tolerance,
+                  prominence=prominence)
