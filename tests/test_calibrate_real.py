@@ -78,22 +78,23 @@ SETUP_KNOWN_FAILURES = {
 #: rim is one of them, paraboloid_mei at -35%) and the best supported fit wins; what
 #: still fails:
 GUESS_FAILURES = {
-    # the rim departs from a circle by 2.6 px RMS (> 2.4 px allowed) and is refused;
-    # the mount's edge (radius ~240 px, rms 2.45 px) is kept: 17 px off
-    ("omni_kaidan.jpg", 0.09): "the rim is refused (no circle), the mount's edge kept",
     # found at +9% only: the draped Mylar hides the limb's top
     ("sphere_pageos_nasa.png", -0.35): "prominence 2.67 < 3 (Mylar hides the top)",
     ("sphere_pageos_nasa.png", 0.35): "prominence 2.57 < 3 (Mylar hides the top)"}
 
 
-SLOW_PHOTOS = {"sphere_tokyo.jpg"}
+#: Photos whose +9% guess runs in CI's slow run only: the largest sphere (1184 px, ~30 s
+#: on 2 cores), omni_kaidan and sphere_pageos_nasa (~10 s each: their outline is found
+#: only after the other starting points are refined and refused; sphere_lamp keeps a
+#: real limb in the default run).
+SLOW_PHOTOS = {"sphere_tokyo.jpg", "omni_kaidan.jpg", "sphere_pageos_nasa.png"}
 
 
 def _rough_cases():
     for e in PHOTOS:
         for error in (0.09, -0.35, 0.35):
-            # the default run: the +9% guess on every photo but the largest sphere (1184 px,
-            # ~30 s on 2 cores: in CI's slow run with the ±35% ends)
+            # the default run: the +9% guess on every photo but SLOW_PHOTOS (in CI's slow
+            # run with the ±35% ends)
             marks = [] if error == 0.09 and e["name"] not in SLOW_PHOTOS else [pytest.mark.slow]
             why = SETUP_KNOWN_FAILURES.get(e["name"]) or GUESS_FAILURES.get((e["name"], error))
             if why:   # a known miss: checked in CI's slow run, not before every commit

@@ -168,8 +168,9 @@ def coarse_candidates(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
 
     out = [(full(row, col), float(scales[j]), float(local[j]))]
     taken = [(j, row, col)]
+    # (a featureless photo scores nothing anywhere: its maxima are no outlines)
     is_max = (volume == maximum_filter(volume, size=(3, 3, 3), mode="nearest")) \
-        & (volume >= 0.5 * top)
+        & (volume >= 0.5 * top) & (volume > 0.0)
     found = np.argwhere(is_max)
     order = np.argsort(-volume[tuple(found.T)], kind="stable")
     for qq, r, c in found[order]:

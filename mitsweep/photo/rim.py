@@ -58,6 +58,7 @@ __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", 
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE", "LIMB_INSIDE_SHARE",
            "MAX_LIMB_COHERENCE", "CONSENSUS_EDGES", "CONSENSUS_TOLERANCE_PX",
            "CLEARLY_BETTER", "SUPPORT_RMS_FLOOR_PX", "SETTLED_SHARE", "SETTLED_RMS_PX",
+           "START_PASSES",
            "fit_edges", "fit_support", "choose_fit", "unbeatable", "settled"]
 
 logger = logging.getLogger(__name__)
@@ -142,6 +143,11 @@ SUPPORT_RMS_FLOOR_PX = 0.25
 SETTLED_SHARE = 0.9
 #: See :data:`SETTLED_SHARE` (px).
 SETTLED_RMS_PX = 0.5
+#: Passes within which a refinement other than the first (the outline nearest the
+#: prediction, from its strongest edges) must converge to count: one that keeps moving
+#: is wandering between outlines (a mount's edge and a rim that is no circle; the rims
+#: of the real photos converge in 5-14 passes, the renders' in 3-5).
+START_PASSES = 15
 
 
 class CalibrationError(ValueError):
@@ -455,7 +461,8 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
                     "(score %.3g)", i, *centre, scale, coarse_score)
         for consensus in (False, True)[:1 if starts == 1 else 2]:
             try:
-                fit = _refine(work, centre, scale, consensus=consensus)
+                fit = _refine(work, centre, scale, consensus=consensus,
+                              passes=None if i == 0 and not consensus else START_PASSES)
             except NoMirrorError as exc:
                 logger.info("start %d%s refused: %s", i, " (consensus)" if consensus
                             else "", exc)
@@ -588,7 +595,7 @@ def _consensus_start(work: _Work, centre: tuple[float, float], scale: float,
 
 
 def _refine(work: _Work, centre: tuple[float, float], scale: float, *,
-            consensus: bool = False) -> RimFit:
+            consensus: bool = False, passes: int | None = None) -> RimFit:
     """Refine one starting point to sub-pixel edges and validate it (steps 2 and 3 of
     the module docstring); :class:`NoMirrorError` where the outline found fails a test.
     With ``consensus``, the first step is the outline most normals show an edge on
@@ -615,7 +622,9 @@ def _refine(work: _Work, centre: tuple[float, float], scale: float, *,
                                 "normals show an edge on")
         centre, scale = moved
         search = half
-    for it in range(1, work.max_iterations + 1):  # noqa: B007 (passes made, reported)
+    limit = work.max_iterations if passes is None else min(passes, work.max_iterations)
+    converged = False
+    for it in range(1, limit + 1):  # noqa: B007 (passes made, reported)
         pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
         off, strength, width = edge_offsets(lum_s, centre, scale, pts, nrm, search,
                                          outermost=search <= half)
@@ -659,7 +668,10 @@ def _refine(work: _Work, centre: tuple[float, float], scale: float, *,
         resolution = max(1e-3, STEP_SHARE_OF_SE * rms * math.sqrt(2.0 / indep))
         if np.abs(x[:2]).max() < resolution and \
                 max(abs(x[2]), abs(d_roll)) * radius < resolution:
+            converged = True
             break
+    if passes is not None and not converged:
+        raise NoMirrorError(f"no mirror found: the outline did not settle in {limit} passes")
     pts, nrm = _rotated(pts0, roll), _rotated(nrm0, roll)
     n_used = int(used.sum())
     prominence = edge_prominence(lum_s, centre, scale, pts, nrm, half, radius * scale)
