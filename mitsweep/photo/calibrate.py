@@ -212,11 +212,10 @@ def calibrate_photo(image: np.ndarray, setup: Setup, *, pixel_pitch: float | Non
         fit = fit_rim(image, outline, pitch, scale_range=accepted, fit_roll=fit_roll,
                       starts=starts)
     except CalibrationError as within:
-        # a mirror far off the predicted size is a wrong setup, not a missing mirror; the
-        # second look, for the message, takes the outline nearest the prediction only
+        # a mirror far off the predicted size is a wrong setup, not a missing mirror
         try:
             fit = fit_rim(image, outline, pitch, scale_range=WIDE_SCALES, fit_roll=fit_roll,
-                          starts=1)
+                          starts=starts)
         except CalibrationError:
             raise within from None
         if accepted[0] <= fit.scale <= accepted[1]:  # found on the second look after all
