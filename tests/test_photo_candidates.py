@@ -49,8 +49,10 @@ def test_consensus_finds_the_outline_the_strongest_edges_miss():
     truth = np.array([3.0, -2.0, 0.05])
     A, cand = _misleading_candidates(1, truth, wrong_share=0.7)
     x, chosen = consensus_lstsq(A, cand, tolerance=1.0)
+    # the true offsets carry 0.1 px noise over 360 rows: the fit's own spread is ~0.01,
+    # so 0.05 is ~5 sd; a wrong outline is off by pixels
     np.testing.assert_allclose(x, truth, atol=0.05)
-    assert np.isfinite(chosen).mean() > 0.95
+    assert np.isfinite(chosen).mean() > 0.95   # every row has its true offset in reach
     # the baseline it replaces: least squares on each row's strongest edge is far off
     naive, *_ = np.linalg.lstsq(A, cand[:, 0], rcond=None)
     assert np.abs(naive[:2] - truth[:2]).max() > 0.5
@@ -106,11 +108,13 @@ def test_candidates_offer_the_rim_beside_a_nearer_concentric_edge():
     scales = search_scales(0.65, 2.0)
     starts = coarse_candidates(img, pts, nrm, scales)
     assert starts[0] == coarse_search(img, pts, nrm, scales)
+    # radii to the coarse scale step (4%: 2.6 px at 66, 3.6 px at 90) ...
     assert abs(60.0 * starts[0][1] - 66.0) < 3.0
     radii = [60.0 * s for _, s, _ in starts]
-    near_rim = [i for i, r in enumerate(radii) if abs(r - 90.0) < 3.0]
+    near_rim = [i for i, r in enumerate(radii) if abs(r - 90.0) < 4.0]
     assert near_rim, radii
     (row, col), _, score = starts[near_rim[0]]
+    # ... and the centre to the reduced pixel (1 px here: a 60 px outline is not reduced)
     assert max(abs(row - centre[0]), abs(col - centre[1])) <= 2.0
     assert score > starts[0][2]     # stronger, but farther from the prediction
     assert len(starts) <= 6 and all(s[2] >= 0.5 * max(t[2] for t in starts) for s in starts)
@@ -124,11 +128,13 @@ def test_each_concentric_edge_is_one_candidate(centre):
     pts, nrm = _circle(720, 150.0)
     starts = coarse_candidates(img, pts, nrm, search_scales(0.65, 2.2))
     radii = np.array([150.0 * s for _, s, _ in starts])
+    # a 150 px outline is searched reduced by 4: two reduced pixels are 8 px, and a
+    # coarse scale step 9 px at 225 (the other maxima are off-centre, tangent circles)
     concentric = [(row, col) for (row, col), _, _ in starts
                   if math.hypot(row - centre[0], col - centre[1]) < 8.0]
     assert len(concentric) == 2, starts
     assert np.sum(np.abs(radii - 225.0) < 10.0) == 1
-    assert np.sum(np.abs(radii - 300.0) < 10.0) == 1
+    assert np.sum(np.abs(radii - 300.0) < 13.0) == 1
 
 
 def _fit(points: int, rms: float) -> RimFit:
@@ -167,3 +173,15 @@ def test_a_first_fit_no_other_could_replace_ends_the_search(points, rms, stop):
     (1307, 3.24, False)])    # a mount's edge nearer the guess
 def test_a_tight_first_fit_is_kept_without_the_others(points, rms, stop):
     assert settled(_fit(points, rms)) == stop
+
+
+@pytest.mark.parametrize("starts", [0, -1, 1.5, "6"])
+def test_starts_must_be_a_whole_number_of_at_least_one(starts):
+    from mitsweep.config import load_setup
+    from mitsweep.photo import calibrate_photo
+
+    from conftest import SCENES
+
+    setup = load_setup(SCENES / "paraboloid.toml")
+    with pytest.raises(ValueError, match="starts must be a whole number"):
+        calibrate_photo(np.zeros((64, 64)), setup, starts=starts)

@@ -192,13 +192,7 @@ def coarse_search(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
 
     Parameters
     ----------
-    lum : (H, W) ndarray
-        Linear luminance of the photo.
-    pts : (N, 2) ndarray
-        The predicted outline's points as ``(row, col)`` offsets from the axis, px.
-    nrm : (N, 2) ndarray
-        Their outward unit normals, ``(row, col)``.
-    scales : (S,) ndarray
-        The outline sizes tried, relative to ``pts`` (:func:`search_scales`).
+    lum, pts, nrm, scales
+        As :func:`score_volume`.
     """
     return coarse_candidates(lum, pts, nrm, scales, max_candidates=1)[0]

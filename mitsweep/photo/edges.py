@@ -31,6 +31,25 @@ EDGE_PEAK_HALF_WIDTH_PX = 0.5
 PROMINENCE_TRIM = 0.2
 
 
+def _profiles(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
+              pts: np.ndarray, nrm: np.ndarray, half: float,
+              step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The luminance along each normal, ``step`` px apart within ``half`` px of the
+    outline (bilinear): the positions ``t``, the (N, T) profiles, and which profiles lie
+    wholly inside the photo."""
+    from scipy.ndimage import map_coordinates
+
+    t = np.arange(-half, half + step / 2, step)
+    base = np.asarray(centre)[None, :] + scale * pts
+    coords = base[:, None, :] + t[None, :, None] * nrm[:, None, :]
+    H, W = lum_s.shape
+    inside = np.all((coords[..., 0] >= 0) & (coords[..., 0] <= H - 1)
+                    & (coords[..., 1] >= 0) & (coords[..., 1] <= W - 1), axis=1)
+    prof = map_coordinates(lum_s, [coords[..., 0].ravel(), coords[..., 1].ravel()],
+                           order=1, mode="nearest").reshape(coords.shape[:2])
+    return t, prof, inside
+
+
 def edge_offsets(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
                  pts: np.ndarray, nrm: np.ndarray, half: float, *,
                  outermost: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -59,17 +78,8 @@ def edge_offsets(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
     outermost : bool
         Take the outermost strong peak instead of the highest (see above).
     """
-    from scipy.ndimage import map_coordinates
-
     step = 0.25
-    t = np.arange(-half, half + step / 2, step)
-    base = np.asarray(centre)[None, :] + scale * pts
-    coords = base[:, None, :] + t[None, :, None] * nrm[:, None, :]
-    H, W = lum_s.shape
-    inside = np.all((coords[..., 0] >= 0) & (coords[..., 0] <= H - 1)
-                    & (coords[..., 1] >= 0) & (coords[..., 1] <= W - 1), axis=1)
-    prof = map_coordinates(lum_s, [coords[..., 0].ravel(), coords[..., 1].ravel()],
-                           order=1, mode="nearest").reshape(coords.shape[:2])
+    t, prof, inside = _profiles(lum_s, centre, scale, pts, nrm, half, step)
     d = np.gradient(prof, step, axis=1)
     sign = np.sign(np.sum(d, axis=1, keepdims=True))
     sign[sign == 0] = 1.0
@@ -125,17 +135,8 @@ def edge_candidates(lum_s: np.ndarray, centre: tuple[float, float], scale: float
     k : int
         Candidates per normal at most.
     """
-    from scipy.ndimage import map_coordinates
-
     step = 0.25
-    t = np.arange(-half, half + step / 2, step)
-    coords = (np.asarray(centre)[None, :] + scale * pts)[:, None, :] \
-        + t[None, :, None] * nrm[:, None, :]
-    H, W = lum_s.shape
-    inside = np.all((coords[..., 0] >= 0) & (coords[..., 0] <= H - 1)
-                    & (coords[..., 1] >= 0) & (coords[..., 1] <= W - 1), axis=1)
-    prof = map_coordinates(lum_s, [coords[..., 0].ravel(), coords[..., 1].ravel()],
-                           order=1, mode="nearest").reshape(coords.shape[:2])
+    t, prof, inside = _profiles(lum_s, centre, scale, pts, nrm, half, step)
     d = np.abs(np.gradient(prof, step, axis=1))
     peak = np.zeros_like(d, dtype=bool)
     peak[:, 1:-1] = (d[:, 1:-1] >= d[:, :-2]) & (d[:, 1:-1] > d[:, 2:]) \
