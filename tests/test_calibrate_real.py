@@ -30,10 +30,17 @@ from conftest import SCENES
 #: Photos on which ``--free`` does not find the reference outline yet, and why (measured
 #: with this release; strict: a fix must update this list).
 FREE_KNOWN_FAILURES = {
-    "dome_store_bright_rim.jpg": "finds the dome's second, concentric edge (13 px out)",
+    "dome_store_bright_rim.jpg": "the outline is slightly elliptical (axes ~595/587 px): "
+                                 "the circle fits 1.4 px from the reference's in column "
+                                 "(tolerance 1.09 px)",
     "sphere_pageos_nasa.png": "the draped Mylar hides the limb's top; prominence 2.7 < 3",
     "omni_kaidan.jpg": "the rim departs from a circle by 2.6 px RMS (1.2% of its radius)",
 }
+
+#: Photos whose ``--free`` search runs in the default run (the others, 2-4 s each, in
+#: CI's slow run): a limb, a paraboloid's rim and, through the CLI
+#: (test_free_cli_prints_the_circle_and_a_setup_skeleton), a rim cut by the frame.
+FREE_DEFAULT = {"sphere_lamp.jpg", "paraboloid_mei.jpg"}
 
 PHOTOS = corpus(with_outline=True)
 
@@ -44,10 +51,15 @@ def _read(entry) -> np.ndarray:
         return read_camera_image(entry["path"]).data
 
 
-@pytest.mark.parametrize("entry", [
-    pytest.param(e, id=e["name"], marks=[pytest.mark.xfail(
-        reason=FREE_KNOWN_FAILURES[e["name"]], strict=True)]
-        if e["name"] in FREE_KNOWN_FAILURES else []) for e in PHOTOS])
+def _free_marks(name: str) -> list:
+    marks = [] if name in FREE_DEFAULT else [pytest.mark.slow]
+    if name in FREE_KNOWN_FAILURES:
+        marks.append(pytest.mark.xfail(reason=FREE_KNOWN_FAILURES[name], strict=True))
+    return marks
+
+
+@pytest.mark.parametrize("entry", [pytest.param(e, id=e["name"], marks=_free_marks(e["name"]))
+                                   for e in PHOTOS])
 def test_free_calibration_finds_the_reference_circle(entry):
     fit, radius = find_circle(_read(entry))
     tol = entry["tolerance_px"]
@@ -68,9 +80,7 @@ def _rough_setup(entry, shape, error: float):
 
 
 #: Rough-setup calibrations that do not meet the reference's tolerance yet, and why.
-SETUP_KNOWN_FAILURES = {
-    "dome_store_bright_rim.jpg": "the dome's second, concentric edge",
-}
+SETUP_KNOWN_FAILURES: dict[str, str] = {}
 
 
 #: Misses at some guesses only (the photo calibrates at the others). Each of the coarse
@@ -80,14 +90,20 @@ SETUP_KNOWN_FAILURES = {
 GUESS_FAILURES = {
     # found at +9% only: the draped Mylar hides the limb's top
     ("sphere_pageos_nasa.png", -0.35): "prominence 2.67 < 3 (Mylar hides the top)",
-    ("sphere_pageos_nasa.png", 0.35): "prominence 2.57 < 3 (Mylar hides the top)"}
+    ("sphere_pageos_nasa.png", 0.35): "prominence 2.57 < 3 (Mylar hides the top)",
+    # found at +9% only (0.7 px off in column): the outline is slightly elliptical (axes
+    # ~595/587 px), and the circle found from the other guesses is 1.37 px off
+    ("dome_store_bright_rim.jpg", -0.35): "elliptical outline: the circle 1.37 px off",
+    ("dome_store_bright_rim.jpg", 0.35): "elliptical outline: the circle 1.37 px off"}
 
 
 #: Photos whose +9% guess runs in CI's slow run only: the largest sphere (1184 px, ~30 s
-#: on 2 cores), omni_kaidan and sphere_pageos_nasa (~10 s each: their outline is found
-#: only after the other starting points are refined and refused; sphere_lamp keeps a
-#: real limb in the default run).
-SLOW_PHOTOS = {"sphere_tokyo.jpg", "omni_kaidan.jpg", "sphere_pageos_nasa.png"}
+#: on 2 cores), omni_kaidan, sphere_pageos_nasa and the dome (7-10 s each: their outline
+#: is found only after the other starting points are refined and refused), and
+#: paraboloid_mei (5 s; paraboloid_mei_2, the same rig, stays). The default run keeps a
+#: real limb (sphere_lamp), a paraboloid's rim and a rim cut by the frame.
+SLOW_PHOTOS = {"sphere_tokyo.jpg", "omni_kaidan.jpg", "sphere_pageos_nasa.png",
+               "dome_store_bright_rim.jpg", "paraboloid_mei.jpg"}
 
 
 def _rough_cases():

@@ -9,6 +9,7 @@ one starts.
 
 import hashlib
 import json
+import logging
 import os
 import signal
 import socket
@@ -54,15 +55,37 @@ def test_wait_gives_up_after_its_timeout(tmp_path):
         assert time.monotonic() - t0 >= 0.5      # it waited the 0.5 s asked, not less
 
 
-def test_record_left_by_a_dead_holder_is_taken_over(tmp_path, caplog):
+class _Messages(logging.Handler):
+    """The messages one logger emits, whatever other tests in this process did to the
+    loggers above it (their levels, handlers or propagation: caplog listens at the root,
+    and a suite run once lost this warning there)."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.DEBUG)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+def test_record_left_by_a_dead_holder_is_taken_over(tmp_path):
     # What a SIGKILLed run leaves: its record in a file nobody holds a flock on.
     dead = {"pid": 999999, "host": "elsewhere", "since": "2026-01-01T00:00:00+00:00",
             "command": "mitsweep dataset x"}
     (tmp_path / LOCK_FILE).write_text(json.dumps(dead))
-    with DirectoryLock(tmp_path) as lock:
-        assert lock.taken_over == dead
-        assert json.loads((tmp_path / LOCK_FILE).read_text())["pid"] == os.getpid()
-    assert "pid 999999 on elsewhere" in caplog.text and "without releasing" in caplog.text
+    log = logging.getLogger("mitsweep.io.lock")
+    heard, level = _Messages(), log.level
+    log.addHandler(heard)
+    log.setLevel(logging.WARNING)  # what it says at WARNING, whatever its parents' levels
+    try:
+        with DirectoryLock(tmp_path) as lock:
+            assert lock.taken_over == dead
+            assert json.loads((tmp_path / LOCK_FILE).read_text())["pid"] == os.getpid()
+    finally:
+        log.removeHandler(heard)
+        log.setLevel(level)
+    assert any("pid 999999 on elsewhere" in m and "without releasing" in m
+               for m in heard.messages), heard.messages
 
 
 def _start_dataset(setup: Path, root: Path, *extra: str) -> subprocess.Popen:

@@ -74,8 +74,12 @@ PHOTOS: dict[str, dict] = {
         format="jpeg", mirror="sphere", outline="rim", bright_rim=True,
         camera="Google Pixel 6 Pro",
         note="convex shop-surveillance dome seen from below; the ceiling lights make a "
-             "bright ring along the rim; profile assumed spherical (not stated)",
-        spec=dict(centre_guess=(609, 613), annulus=(566, 592), sigma=2.0, threshold=1.5,
+             "bright ring along the rim; profile assumed spherical (not stated). The "
+             "outline is the outer edge of the grazing-reflection band against the "
+             "ceiling (an annulus of 566-592 px first took a stripe inside the band, "
+             "12 px in); it is slightly elliptical (axes ~595/587 px), so circle fits "
+             "that weigh its sectors differently differ by ~1-2 px",
+        spec=dict(centre_guess=(611, 612), annulus=(582, 604), sigma=2.0, threshold=1.5,
                   exclude_deg=[]),
     ),
     "sphere_pageos_nasa.png": dict(

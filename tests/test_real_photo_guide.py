@@ -6,12 +6,14 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import pytest
 from real_corpus import corpus
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "guide" / "real-photo.md"
 
 
+@pytest.mark.slow  # 11-14 s: in CI's slow run (the default run keeps the real photos' own tests)
 def test_the_real_photo_guide_runs_and_finds_the_reference_centre(monkeypatch, capsys):
     blocks = re.findall(r"```python\n(.*?)```", PAGE.read_text(encoding="utf-8"), re.S)
     assert len(blocks) == 1
