@@ -490,3 +490,38 @@ def test_calibrate_finds_a_rendered_sweep_placed_off_centre(tmp_path, capsys, na
     want = np.asarray(optical_center_px((H, W))) + np.array([top, left]) + np.array(sub)
     assert np.abs(np.asarray(out["center_px"]) - want).max() < CENTRE_TOL_PX
     assert abs(out["rim_radius_px"] - out["predicted_rim_radius_px"]) < RADIUS_TOL_PX
+
+
+def test_free_on_a_raw_finds_the_circle_and_a_skeleton_that_calibrates(tmp_path, capsys,
+                                                                      photos):
+    """``calibrate --free`` on a Bayer DNG (demosaicked by LibRaw) that states its pixel
+    pitch in EXIF: the circle within the calibration bars of the known outline, the
+    skeleton carries the file's pitch, and a setup made from that skeleton calibrates
+    the same photo without a warning about its scale."""
+    setup = small_setup("paraboloid")
+    lin = np.clip(photos("paraboloid") / photos("paraboloid").max() * 0.9, 0, 1)
+    photo = write_dng(tmp_path / "photo.dng", lin, pitch_mm=SMALL.pixel_pitch,
+                      noise=(2e-4, 1e-6))
+    assert main(["calibrate", str(photo), "--free", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    # EXIF states the pitch as a rational resolution (pixels per mm, to 1e-6 here)
+    assert out["kind"] == "raw"
+    assert out["pixel_pitch_mm"] == pytest.approx(SMALL.pixel_pitch, rel=1e-4)
+    assert np.abs(np.asarray(out["center_px"]) - true_centre()).max() < CENTRE_TOL_PX
+    truth = predicted_outline(setup).equivalent_radius_px(SMALL.pixel_pitch)
+    assert abs(out["radius_px"] - truth) < RADIUS_TOL_PX
+    assert not out["ellipse"]["significant"]          # a paraboloid seen on its axis
+    # the skeleton states the file's pitch and completes the bundled paraboloid's setup
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib
+
+    sensor = tomllib.loads(out["setup_skeleton"])["sensor"]
+    assert sensor["pixel_pitch"] == pytest.approx(SMALL.pixel_pitch, rel=1e-4)
+    made = replace(setup, sensor=replace(setup.sensor, resolution=tuple(sensor["resolution"]),
+                                         pixel_pitch=sensor["pixel_pitch"],
+                                         center_offset_px=tuple(sensor["center_offset_px"])))
+    cal = calibrate_json(capsys, photo, "--setup", setup_file(tmp_path, made))
+    assert np.abs(np.asarray(cal["center_px"]) - true_centre()).max() < CENTRE_TOL_PX
+    assert not any("pixel pitch would be" in w for w in cal["warnings"])
