@@ -310,12 +310,16 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
                                "daylight": list(raw.daylight_whitebalance),
                                "none": [1.0, 1.0, 1.0, 1.0]}.get(white_balance)
                 pattern = raw.color_desc.decode("ascii", "replace")
+                source = "DNG NoiseProfile, developed by LibRaw (simulated)"
+                if profile is None:
+                    profile, source = _estimated_profile(p, raw, black, white)
                 if profile is not None:
                     noise = _profile_through_libraw(raw, profile, rgb, black, white,
                                                     dict(gamma=(1, 1), no_auto_bright=True,
                                                          output_bps=16, user_flip=0,
                                                          output_color=rawpy.ColorSpace.sRGB,
                                                          adjust_maximum_thr=0.0, **wb_args))
+                    noise["source"] = source
     except (CameraFileError, ResourceError):
         raise
     except (rawpy.LibRawError, OSError, ValueError) as exc:
@@ -394,6 +398,27 @@ def dng_noise_profile(path: str | os.PathLike) -> list[tuple[float, float]] | No
     return [(float(a), float(b)) for a, b in values.reshape(-1, 2)]
 
 
+def _estimated_profile(p: Path, raw, black, white) -> tuple[list | None, str]:
+    """A RAW's noise line estimated from its own photosites
+    (:func:`mitsweep.io.raw_noise.estimate_raw_noise`) where the file states none, and
+    where it came from; ``(None, "")`` where the estimate is refused (its bins scatter
+    off a noise line by more than :data:`mitsweep.io.raw_noise.MAX_SCATTER`: texture,
+    not noise, in the flattest blocks)."""
+    from .raw_noise import MAX_SCATTER, estimate_raw_noise
+
+    est = estimate_raw_noise(raw.raw_image_visible, raw.raw_colors_visible, black, white)
+    if est is None or not est["rms_rel"] <= MAX_SCATTER:
+        logger.info("%s: no NoiseProfile, and the photosites' noise could not be told from "
+                    "texture (%s): the noise is estimated from the image", p,
+                    "too few flat blocks" if est is None
+                    else f"bins {est['rms_rel']:.2f} RMS off the line")
+        return None, ""
+    (S, O), = est["profile"]
+    return est["profile"], (f"estimated from the RAW's photosites (S {S:.3g}, O {O:.3g}; "
+                            f"bins {est['rms_rel']:.2f} RMS off the line), developed by "
+                            f"LibRaw (simulated)")
+
+
 def _profile_through_libraw(raw, profile, clean, black, white, args) -> dict:
     """The file's noise profile carried through LibRaw's own pipeline (black level,
     white balance, demosaicking, colour matrix) by simulation: the raw photosites get
@@ -420,8 +445,11 @@ def _profile_through_libraw(raw, profile, clean, black, white, args) -> dict:
     finally:
         visible[...] = orig
     ok = (clean < 65535).all(axis=-1) & (noisy < 65535).all(axis=-1)
-    diff = (noisy.astype(np.float64) - clean.astype(np.float64))[ok] / 65535.0
-    sigma = [float(v) for v in diff.std(axis=0)] if diff.size else [0.0] * clean.shape[-1]
+    # one channel at a time, in float32 (differences of 16-bit values are exact there):
+    # a 24 MP photo's float64 difference of all three would be 0.6 GB
+    sigma = [float(np.std(noisy[..., c][ok].astype(np.float32) - clean[..., c][ok],
+                          dtype=np.float64) / 65535.0) if ok.any() else 0.0
+             for c in range(clean.shape[-1])]
     return {"profile": [list(p) for p in profile], "sigma": sigma,
             "source": "DNG NoiseProfile, developed by LibRaw (simulated)"}
 
