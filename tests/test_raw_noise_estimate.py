@@ -15,6 +15,8 @@ import warnings
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import rawpy
 from camera_files import write_dng
 from skimage import data, transform
@@ -109,3 +111,22 @@ def test_texture_is_not_taken_for_noise(tmp_path):
         path = write_dng(tmp_path / f"{name}.dng", rgb, noise=noise, seed=4)
         assert _estimate(path)["rms_rel"] > MAX_SCATTER, name
         assert "noise" not in _read(path).meta, name
+
+
+@settings(max_examples=60, deadline=None)
+@given(h=st.integers(2, 80), w=st.integers(2, 80), black=st.integers(0, 4000),
+       span=st.integers(0, 60000), level=st.floats(0.0, 1.2), sd=st.floats(0.0, 0.3),
+       seed=st.integers(0, 2**16))
+def test_any_photosites_give_a_line_or_none(h, w, black, span, level, sd, seed):
+    """Tiny, constant, clipped, black or noisy mosaics, a white level at or below the
+    black: None or a line with finite S, O >= 0; never an error or a NaN."""
+    rng = np.random.default_rng(seed)
+    white = black + span
+    raw = np.clip(np.round(black + span * (level + sd * rng.standard_normal((h, w)))), 0,
+                  65535).astype(np.uint16)
+    colours = np.tile(np.array([[0, 1], [3, 2]]), ((h + 1) // 2, (w + 1) // 2))[:h, :w]
+    est = estimate_raw_noise(raw, colours, [black] * 4, white)
+    if est is not None:
+        (S, O), = est["profile"]
+        assert np.isfinite(S) and np.isfinite(O) and S >= 0 and O >= 0
+        assert all(np.isfinite(b[1]) and b[1] >= 0 for b in est["bins"])
