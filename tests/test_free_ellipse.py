@@ -12,6 +12,7 @@ import pytest
 from PIL import Image
 
 from cli_contract import run_main
+from mitsweep.photo import NoMirrorError
 from mitsweep.photo.free import ellipse_of_edges, find_circle
 
 SIDE, CENTRE = 400, (201.3, 188.7)
@@ -46,6 +47,27 @@ def test_a_slightly_tilted_view_is_reported_as_its_ellipse(a, b, angle):
     assert abs((e["angle_deg"] - angle + 90) % 180 - 90) < 0.5
     assert np.abs(np.asarray(e["center_px"]) - TRUE_CENTRE_PX).max() < 0.05
     assert e["residual_rms_px"] < 0.5 * fit.residual_rms_px     # the circle left 5-7x more
+
+
+@pytest.mark.parametrize("a, b, angle", [(150.0, 141.0, 30.0), (150.0, 130.0, 120.0),
+                                         (150.0, 110.0, 60.0)])
+def test_a_tilted_view_no_circle_explains_is_found_as_its_ellipse(a, b, angle):
+    """Axis ratios 0.94, 0.87, 0.73 (views tilted by ~20, 30 and 43 degrees): no circle is
+    accepted, and the ellipse search finds the outline; measured: semi-axes within
+    0.02 px, angle 0.1 deg, centre 0.02 px."""
+    fit, radius = find_circle(_photo(a, b, angle))
+    e = ellipse_of_edges(fit)
+    assert e is not None and e["significant"]
+    np.testing.assert_allclose(e["semi_axes_px"], (a, b), atol=0.1)
+    assert abs((e["angle_deg"] - angle + 90) % 180 - 90) < 0.5
+    assert np.abs(np.asarray(fit.center_px) - TRUE_CENTRE_PX).max() < 0.05
+    assert abs(radius - math.sqrt(a * b)) < 0.1         # the circle of the same area
+    assert fit.residual_rms_px < 0.5                     # the outline is the ellipse
+
+
+def test_an_ellipse_flatter_than_the_search_allows_is_refused_naming_both():
+    with pytest.raises(NoMirrorError, match="nor an ellipse of axis ratio 0.7 or more"):
+        find_circle(_photo(150.0, 90.0, 45.0))
 
 
 def test_a_circle_stays_a_circle():

@@ -8,6 +8,16 @@ longer one (a rim clipped by the frame is larger than the frame), each on a copy
 for that octave; the strongest candidates are refined and validated as a setup's
 outline is (:func:`mitsweep.photo.rim.fit_rim`), and the validated one whose edge stands
 out most from its surroundings is kept.
+
+A camera that does not look straight at an untilted mirror sees its outline as an
+ellipse; up to a tilt of about 9 degrees a circle still explains it (and
+:func:`ellipse_of_edges` reports the ellipse through the circle's edge points). Where no
+circle is accepted, the strongest candidates are looked at again as ellipses: the
+strongest edge along each normal of the candidate's circle, within a window wide enough
+for an axis ratio of :data:`MIN_AXIS_RATIO`, gives points that a RANSAC ellipse
+(scikit-image) turns into an elliptical outline, which is refined and validated as any
+outline is; the ellipse through the refined edge points then reshapes the outline, for at
+most :data:`ELLIPSE_ROUNDS` rounds.
 """
 
 from __future__ import annotations
@@ -20,10 +30,11 @@ import numpy as np
 from ..optics.outline import RimOutline
 from .coarse import coarse_search, search_scales
 from .image import fill_void, photo_void, reduce_by
-from .rim import CalibrationError, NoMirrorError, RimFit, fit_rim, working_luminance
+from .rim import CalibrationError, NoMirrorError, RimFit, fit_rim, settled, working_luminance
 
-__all__ = ["find_circle", "circle_outline", "ellipse_of_edges", "MIN_RADIUS_SHARE",
-           "MAX_RADIUS_SHARE", "CANDIDATES", "ELLIPSE_SIGNIFICANCE", "ELLIPSE_MIN_PX"]
+__all__ = ["find_circle", "circle_outline", "ellipse_outline", "ellipse_of_edges",
+           "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "ELLIPSE_SIGNIFICANCE",
+           "ELLIPSE_MIN_PX", "MIN_AXIS_RATIO", "ELLIPSE_ROUNDS", "ELLIPSE_TRIALS"]
 
 logger = logging.getLogger(__name__)
 
@@ -40,6 +51,14 @@ CANDIDATES = 6
 FREE_WORKING_SIDE_PX = 1024
 #: Outline points of the circle template.
 N_POINTS = 1440
+#: Smallest minor-to-major axis ratio the ellipse search allows for (a view tilted by up
+#: to ~45 degrees): it sets the window searched for edges around a candidate circle.
+MIN_AXIS_RATIO = 0.7
+#: Rounds of reshaping an elliptical outline (fit, ellipse through its edge points) at most.
+ELLIPSE_ROUNDS = 4
+#: An elliptical outline has settled when a round moves its centre and semi-axes by less
+#: than this, px.
+ELLIPSE_SETTLED_PX = 0.02
 
 
 def circle_outline(radius_px: float, n_points: int = N_POINTS) -> RimOutline:
@@ -59,6 +78,31 @@ def circle_outline(radius_px: float, n_points: int = N_POINTS) -> RimOutline:
                       on_rim=np.ones(n_points, bool))
 
 
+def ellipse_outline(a_px: float, b_px: float, angle_deg: float,
+                    n_points: int = N_POINTS) -> RimOutline:
+    """An ellipse about the axis as a :class:`RimOutline` at pitch 1 mm: semi-axes
+    ``a_px`` and ``b_px``, the first at ``angle_deg`` from the column axis,
+    counter-clockwise as displayed (:func:`ellipse_of_edges`' convention).
+
+    Parameters
+    ----------
+    a_px, b_px : float
+        The semi-axes, px.
+    angle_deg : float
+        The direction of the ``a_px`` axis, degrees.
+    n_points : int
+        Points on the ellipse (evenly spaced in its parameter).
+    """
+    t = np.linspace(0.0, 2.0 * math.pi, n_points, endpoint=False)
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    rot = np.array([[c, -s], [s, c]])           # u right, v up: counter-clockwise
+    uv = np.stack([a_px * np.cos(t), b_px * np.sin(t)], axis=-1) @ rot.T
+    nrm = np.stack([np.cos(t) / a_px, np.sin(t) / b_px], axis=-1)
+    nrm = (nrm / np.linalg.norm(nrm, axis=1, keepdims=True)) @ rot.T
+    return RimOutline(uv=uv, normal_uv=nrm, sensor_distance=math.nan,
+                      on_rim=np.ones(n_points, bool))
+
+
 def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | None = None
                 ) -> tuple[RimFit, float]:
     """The mirror's circular outline in a photo, without a setup.
@@ -75,9 +119,11 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
     -------
     fit : RimFit
         ``center_px`` the circle's centre (row, col); ``scale`` times the returned
-        radius' template, see ``radius_px``.
+        radius' template, see ``radius_px``. Where the outline was found as an ellipse
+        (see the module docstring), its centre, and :func:`ellipse_of_edges` gives its
+        axes.
     radius_px : float
-        The circle's radius.
+        The circle's radius (an ellipse's: the radius of the circle of its area).
 
     Raises
     ------
@@ -103,12 +149,17 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
     # shorter side; only the winner is refined at full resolution.
     f = max(1, min(H, W) // FREE_WORKING_SIDE_PX)
     if f == 1:
-        return _best_circle(lum, image, lo, hi)
+        fit, radius, shape = _best_circle(lum, image, lo, hi)
+        return fit, radius
     small = reduce_by(lum, f)
-    fit, radius = _best_circle(small, small, lo / f, hi / f)
+    fit, radius, shape = _best_circle(small, small, lo / f, hi / f)
     logger.info("free search at 1/%d: centre (%.1f, %.1f) px, radius %.1f px", f,
                 fit.center_px[0] * f + (f - 1) / 2, fit.center_px[1] * f + (f - 1) / 2,
                 radius * f)
+    if shape is not None:   # an ellipse: its axes at full resolution, reshaped there
+        a, b, angle = shape
+        fit = _reshaped_ellipse(image, (a * f, b * f, angle))
+        return fit, _equivalent_radius(fit)
     step = 1.0 + 2.0 / radius  # two reduced pixels' worth of scale
     # one start: the candidate is chosen already, at its own size
     fit = fit_rim(image, circle_outline(radius * f), 1.0, scale_range=(1.0 / step, step),
@@ -148,30 +199,13 @@ def ellipse_of_edges(fit: RimFit) -> dict | None:
         :data:`ELLIPSE_SIGNIFICANCE` times the circle's centre standard error and more
         than :data:`ELLIPSE_MIN_PX`); None where fewer than 8 points or the fit fails.
     """
-    from skimage.measure import EllipseModel
-
     pts = np.asarray(fit.edge_points_px, dtype=np.float64)
     if len(pts) < 8:
         return None
-    xy = pts[:, ::-1]                      # x = column, y = row (down)
-    if hasattr(EllipseModel, "from_estimate"):
-        model = EllipseModel.from_estimate(xy)
-        if not model:
-            return None
-        (xc, yc), (a, b), theta = model.center, model.axis_lengths, model.theta
-    else:  # scikit-image < 0.26
-        model = EllipseModel()
-        if not model.estimate(xy):
-            return None
-        xc, yc, a, b, theta = model.params
-    xc, yc, a, b, theta = (float(v) for v in (xc, yc, a, b, theta))
-    if not all(math.isfinite(v) for v in (xc, yc, a, b, theta)) or min(a, b) <= 0:
+    params = _ellipse_params(pts[:, ::-1])     # x = column, y = row (down)
+    if params is None:
         return None
-    if b > a:
-        a, b, theta = b, a, theta + math.pi / 2
-    # theta turns x toward y (down): clockwise as displayed
-    angle = math.degrees(-theta) % 180.0
-    rms = float(np.sqrt(np.mean(model.residuals(xy) ** 2)))
+    xc, yc, a, b, angle, rms = params
     se = fit.center_se_px if math.isfinite(fit.center_se_px) else math.inf
     return {"center_px": [yc, xc], "semi_axes_px": [a, b], "angle_deg": angle,
             "axis_ratio": b / a, "residual_rms_px": rms,
@@ -179,9 +213,11 @@ def ellipse_of_edges(fit: RimFit) -> dict | None:
 
 
 def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
-                 ) -> tuple[RimFit, float]:
+                 ) -> tuple[RimFit, float, tuple[float, float, float] | None]:
     """Coarse candidates per octave of radius in ``[lo, hi]`` (searched on ``lum``), each
-    refined and validated on ``image``; the best explained one."""
+    refined and validated on ``image``; the best explained one, as ``(fit, radius,
+    None)``, or, where no circle is accepted, the best ellipse (:func:`_best_ellipse`:
+    ``(fit, radius, (a, b, angle_deg))``)."""
     candidates = []
     base = lo * math.sqrt(2.0)
     while base / math.sqrt(2.0) < hi:
@@ -206,8 +242,163 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
         key = (fit.points_used / fit.points_total) * radius / max(fit.residual_rms_px, 0.1)
         if best is None or key > best[0]:
             best = (key, fit, radius * fit.scale)
-    if best is None:
-        raise NoMirrorError(f"no mirror found: no circle of radius {lo:.0f}-{hi:.0f} px "
-                            f"stands out as a mirror's outline (the strongest candidate: "
-                            f"{failures[0].removeprefix('no mirror found: ')})")
-    return best[1], best[2]
+    if best is not None:
+        return best[1], best[2], None
+    found = _best_ellipse(lum, image, candidates[:CANDIDATES])
+    if found is not None:
+        return found
+    raise NoMirrorError(f"no mirror found: no circle of radius {lo:.0f}-{hi:.0f} px "
+                        f"stands out as a mirror's outline, nor an ellipse of axis ratio "
+                        f"{MIN_AXIS_RATIO:g} or more (the strongest candidate: "
+                        f"{failures[0].removeprefix('no mirror found: ')})")
+
+
+def _equivalent_radius(fit: RimFit) -> float:
+    """The radius of the circle of the area of a fit's elliptical outline."""
+    e = ellipse_of_edges(fit)
+    return math.sqrt(e["semi_axes_px"][0] * e["semi_axes_px"][1]) if e else math.nan
+
+
+def _best_ellipse(lum: np.ndarray, image: np.ndarray, candidates: list
+                  ) -> tuple[RimFit, float, tuple[float, float, float]] | None:
+    """The coarse candidates looked at again as ellipses (see the module docstring): the
+    best explained validated one, as ``(fit, radius, (a, b, angle_deg))``, or None."""
+    from .edges import edge_offsets
+    from .image import smooth
+    from .rim import PROFILE_SMOOTHING_PX
+
+    lum_s = smooth(lum, PROFILE_SMOOTHING_PX)
+    best = None
+    for _score, centre, radius in candidates:
+        pts, nrm = circle_outline(radius, n_points=720).offsets_px(1.0)
+        half = (1.0 - MIN_AXIS_RATIO) * radius + 2.0
+        off, _strength, _width = edge_offsets(lum_s, centre, 1.0, pts, nrm, half)
+        ok = np.isfinite(off)
+        if ok.sum() < 20:
+            continue
+        edges = np.asarray(centre)[None, :] + pts[ok] + off[ok, None] * nrm[ok]
+        start = _ransac_ellipse(edges, threshold=max(1.5, 0.01 * radius))
+        if start is None:
+            continue
+        (row, col), a, b, angle = start
+        if b < MIN_AXIS_RATIO * a:
+            continue
+        try:
+            fit = _reshaped_ellipse(image, (a, b, angle))
+        except CalibrationError as exc:
+            logger.info("ellipse candidate (%.1f, %.1f) px, axes %.1f x %.1f px refused: %s",
+                        row, col, a, b, exc)
+            continue
+        e = ellipse_of_edges(fit)
+        if e is None:
+            continue
+        a, b = e["semi_axes_px"]
+        key = (fit.points_used / fit.points_total) * math.sqrt(a * b) \
+            / max(fit.residual_rms_px, 0.1)
+        if best is None or key > best[0]:
+            best = (key, fit, math.sqrt(a * b), (a, b, e["angle_deg"]))
+        if settled(fit):   # explains its edges so well that no other candidate is looked at
+            break
+    return None if best is None else best[1:]
+
+
+def _reshaped_ellipse(image: np.ndarray, shape: tuple[float, float, float]) -> RimFit:
+    """An elliptical outline of ``shape`` (a, b, angle_deg) refined and validated
+    (:func:`mitsweep.photo.rim.fit_rim`), reshaped to the ellipse through its edge points
+    until it settles (:data:`ELLIPSE_ROUNDS`, :data:`ELLIPSE_SETTLED_PX`)."""
+    a, b, angle = shape
+    fit, before = None, None
+    for _ in range(ELLIPSE_ROUNDS):
+        fit = fit_rim(image, ellipse_outline(a, b, angle), 1.0, scale_range=(0.97, 1.03),
+                      starts=1)
+        e = ellipse_of_edges(fit)
+        if e is None:
+            break
+        now = np.array([*e["center_px"], *e["semi_axes_px"]])
+        a, b = e["semi_axes_px"]
+        angle = e["angle_deg"]
+        if before is not None and np.abs(now - before).max() < ELLIPSE_SETTLED_PX:
+            break
+        before = now
+    assert fit is not None
+    return fit
+
+
+#: RANSAC draws of five edge points for an ellipse (fixed seed).
+ELLIPSE_TRIALS = 400
+
+
+def _conic_distance(conic: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """First-order (Sampson) distance of points from the conic ``A x^2 + B xy + C y^2 +
+    D x + E y + F = 0``: its value over its gradient's length."""
+    x, y = xy[:, 0], xy[:, 1]
+    A, B, C, D, E, F = conic
+    q = A * x * x + B * x * y + C * y * y + D * x + E * y + F
+    gx, gy = 2 * A * x + B * y + D, B * x + 2 * C * y + E
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.abs(q) / np.hypot(gx, gy)
+
+
+def _ransac_ellipse(points_rc: np.ndarray, threshold: float
+                    ) -> tuple[tuple[float, float], float, float, float] | None:
+    """A RANSAC ellipse through edge points (row, col): conics through 5 points drawn at
+    random (:data:`ELLIPSE_TRIALS`, fixed seed), scored by the points within
+    ``threshold`` px (first-order distance), the best refitted on its inliers by
+    scikit-image's direct least squares: ``((row, col), a, b, angle_deg)``, ``a >= b``;
+    None where no ellipse has 20 inliers."""
+    xy = points_rc[:, ::-1].astype(np.float64)
+    mu, sd = xy.mean(axis=0), float(xy.std()) or 1.0
+    z = (xy - mu) / sd                      # conditioned
+    design = np.column_stack([z[:, 0] ** 2, z[:, 0] * z[:, 1], z[:, 1] ** 2, z[:, 0], z[:, 1],
+                              np.ones(len(z))])
+    rng = np.random.default_rng(0)
+    best, best_n = None, 0
+    for _ in range(ELLIPSE_TRIALS):
+        pick = rng.choice(len(z), 5, replace=False)
+        conic = np.linalg.svd(design[pick])[2][-1]
+        if conic[1] ** 2 - 4.0 * conic[0] * conic[2] >= 0:    # not an ellipse
+            continue
+        inl = _conic_distance(conic, z) * sd < threshold
+        n = int(inl.sum())
+        if n > best_n:
+            best, best_n = inl, n
+    if best is None or best_n < 20:
+        return None
+    params = _ellipse_params(xy[best])
+    if params is None:
+        return None
+    xc, yc, a, b, angle, _rms = params
+    return (yc, xc), a, b, angle
+
+
+def _ellipse_params(xy: np.ndarray) -> tuple[float, float, float, float, float, float] | None:
+    """The direct least-squares ellipse through (x = col, y = row) points: ``(xc, yc, a,
+    b, angle_deg, rms)``, ``a >= b``, the angle of ``a`` counter-clockwise as displayed
+    in [0, 180); None where the fit fails."""
+    from skimage.measure import EllipseModel
+
+    if hasattr(EllipseModel, "from_estimate"):
+        model = EllipseModel.from_estimate(xy)
+        if not model:
+            return None
+        (xc, yc), (a, b), theta = model.center, model.axis_lengths, model.theta
+    else:  # scikit-image < 0.26
+        model = EllipseModel()
+        if not model.estimate(xy):
+            return None
+        xc, yc, a, b, theta = model.params
+    xc, yc, a, b, theta = (float(v) for v in (xc, yc, a, b, theta))
+    if not all(math.isfinite(v) for v in (xc, yc, a, b, theta)) or min(a, b) <= 0:
+        return None
+    if b > a:
+        a, b, theta = b, a, theta + math.pi / 2
+    # the points' distances from the ellipse, to first order (scikit-image's exact
+    # residuals solve a small optimisation per point: 0.4 s for 1440 points)
+    ct, st = math.cos(theta), math.sin(theta)
+    u = (xy[:, 0] - xc) * ct + (xy[:, 1] - yc) * st     # along a
+    v = -(xy[:, 0] - xc) * st + (xy[:, 1] - yc) * ct    # along b
+    q = (u / a) ** 2 + (v / b) ** 2 - 1.0
+    grad = 2.0 * np.hypot(u / a ** 2, v / b ** 2)
+    rms = float(np.sqrt(np.mean((q / grad) ** 2)))
+    # theta turns x toward y (down): clockwise as displayed
+    return xc, yc, a, b, math.degrees(-theta) % 180.0, rms
