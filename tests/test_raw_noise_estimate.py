@@ -130,3 +130,17 @@ def test_any_photosites_give_a_line_or_none(h, w, black, span, level, sd, seed):
         (S, O), = est["profile"]
         assert np.isfinite(S) and np.isfinite(O) and S >= 0 and O >= 0
         assert all(np.isfinite(b[1]) and b[1] >= 0 for b in est["bins"])
+
+
+def test_a_reader_that_weighs_nothing_skips_the_noise(tmp_path, coffee):
+    """``read_camera_image(noise=False)`` (calibrate, unwarp) neither estimates nor
+    develops the noise: the image is the same, ``meta`` has no ``noise``."""
+    blurred = coffee[1]
+    for name, tag in (("bare", None), ("tagged", (2e-4, 4e-6))):
+        path = write_dng(tmp_path / f"{name}.dng", blurred, noise=(2e-4, 4e-6),
+                         noise_profile=tag, seed=2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            full, lean = read_camera_image(path), read_camera_image(path, noise=False)
+        assert "noise" in full.meta and "noise" not in lean.meta, name
+        np.testing.assert_array_equal(full.data, lean.data)

@@ -177,7 +177,7 @@ def srgb_to_linear(x: ArrayLike) -> np.ndarray:
 
 def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
                       white_balance: str = "camera", transfer: str | None = None,
-                      log_warnings: bool = True) -> CameraImage:
+                      log_warnings: bool = True, noise: bool = True) -> CameraImage:
     """Read a camera file as a linear float32 image.
 
     Parameters
@@ -194,6 +194,12 @@ def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
         Log the image's warnings now (default). A command that may still refuse the
         photo passes False and calls :meth:`CameraImage.log_warnings` once it accepts
         it, so that a refusal is the only line the user sees.
+    noise : bool
+        RAW only: develop the file's noise into ``meta["noise"]`` (its NoiseProfile, or
+        the noise line estimated from its photosites,
+        :func:`mitsweep.io.raw_noise.estimate_raw_noise`), which takes a second LibRaw
+        development (on a 24 MP DNG it more than triples the read time). A reader that
+        does not weigh a restoration (calibration, unwarping) passes False.
 
     Returns
     -------
@@ -228,8 +234,10 @@ def read_camera_image(path: str | Path, *, pixel_pitch: float | None = None,
     reader = {"raw": _read_raw, "tiff": _read_tiff, "png": _read_png, "jpeg": _read_jpeg,
               "exr": _read_exr}[kind]
     warnings: list[str] = []
+    extra = {"noise": bool(noise)} if kind == "raw" else {}
     data, bit_depth, meta, file_pitch = reader(p, warnings=warnings,
-                                               white_balance=white_balance, transfer=transfer)
+                                               white_balance=white_balance, transfer=transfer,
+                                               **extra)
     data = _as_image(np.asarray(data), p, warnings)
     if not np.all(np.isfinite(data)):
         raise CameraFileError(f"{p}: holds NaN or infinite values")
@@ -281,7 +289,7 @@ def _raw_error(p: Path, exc: BaseException, said: list[str]) -> CameraFileError:
                            f"{'; ' + told if told else ''})")
 
 
-def _read_raw(p: Path, *, warnings, white_balance, transfer):
+def _read_raw(p: Path, *, warnings, white_balance, transfer, noise=True):
     import rawpy
 
     if transfer not in (None, "linear"):
@@ -290,7 +298,8 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
         "camera": dict(use_camera_wb=True), "daylight": dict(use_camera_wb=False),
         "auto": dict(use_auto_wb=True), "none": dict(user_wb=[1.0, 1.0, 1.0, 1.0])}
     wb_args = wb_choices[white_balance]
-    profile = dng_noise_profile(p)
+    develop_noise = noise
+    profile = dng_noise_profile(p) if develop_noise else None
     noise = None
     try:
         with _library_chatter() as said:
@@ -311,7 +320,7 @@ def _read_raw(p: Path, *, warnings, white_balance, transfer):
                                "none": [1.0, 1.0, 1.0, 1.0]}.get(white_balance)
                 pattern = raw.color_desc.decode("ascii", "replace")
                 source = "DNG NoiseProfile, developed by LibRaw (simulated)"
-                if profile is None:
+                if profile is None and develop_noise:
                     profile, source = _estimated_profile(p, raw, black, white)
                 if profile is not None:
                     noise = _profile_through_libraw(raw, profile, rgb, black, white,

@@ -86,7 +86,8 @@ def calibrate_camera(photo: str | os.PathLike, setup: Setup | str | os.PathLike,
     check_outputs([photo, setup_path], {"--write": write})
     setup = resolve_setup(setup)
     image = read_camera_image(os.fspath(photo), log_warnings=False, pixel_pitch=pixel_pitch,
-                              white_balance=white_balance, transfer=transfer)
+                              white_balance=white_balance, transfer=transfer,
+                              noise=False)   # no restoration is weighted here
     pitch = image.pixel_pitch or setup.sensor.pixel_pitch
     pitch_source = image.meta.get("pixel_pitch_source") or "setup"
     cal = calibrate_photo(image.data, setup, pixel_pitch=pitch, fit_roll=fit_roll)
@@ -156,7 +157,8 @@ def find_mirror_circle(photo: str | os.PathLike, *, pixel_pitch: float | None = 
 
     check_outputs([photo], [])
     image = read_camera_image(os.fspath(photo), log_warnings=False, pixel_pitch=pixel_pitch,
-                              white_balance=white_balance, transfer=transfer)
+                              white_balance=white_balance, transfer=transfer,
+                              noise=False)   # no restoration is weighted here
     fit, radius = find_circle(image.data)
     image.log_warnings()
     H, W = image.shape

@@ -125,7 +125,8 @@ def unwarp_image(image: str | os.PathLike, out: str | os.PathLike, *, projection
         raise InputError(f"--size {size[0]} {size[1]}: at least 2 x 2")
     # its warnings are logged once the photo is accepted: a refusal is the only line
     photo = read_camera_image(src, pixel_pitch=pixel_pitch, white_balance=white_balance,
-                              transfer=transfer, log_warnings=False)
+                              transfer=transfer, log_warnings=False,
+                              noise=False)   # no restoration is weighted here
     meta = photo.meta.get("exr_header") or {}
     if setup is not None:
         setup = resolve_setup(setup)
