@@ -34,7 +34,6 @@ FREE_KNOWN_FAILURES = {
                                  "the circle fits 1.4 px from the reference's in column "
                                  "(tolerance 1.09 px)",
     "sphere_pageos_nasa.png": "the draped Mylar hides the limb's top; prominence 2.7 < 3",
-    "omni_kaidan.jpg": "the rim departs from a circle by 2.6 px RMS (1.2% of its radius)",
 }
 
 #: Photos whose ``--free`` search runs in the default run (the others, 2-4 s each, in

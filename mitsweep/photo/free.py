@@ -7,7 +7,9 @@ The coarse search (:mod:`mitsweep.photo.coarse`) runs once per octave of radius,
 longer one (a rim clipped by the frame is larger than the frame), each on a copy reduced
 for that octave; the strongest candidates are refined and validated as a setup's
 outline is (:func:`mitsweep.photo.rim.fit_rim`), and the validated one whose edge stands
-out most from its surroundings is kept.
+out most from its surroundings is kept. Where none is accepted at its own size (a
+candidate can be a ring inside the mirror's image), each is searched again as a rough
+setup's prediction would be (:data:`WIDE_LOOK`, several starts).
 
 A camera that does not look straight at an untilted mirror sees its outline as an
 ellipse; up to a tilt of about 9 degrees a circle still explains it (and
@@ -28,15 +30,21 @@ import math
 import numpy as np
 
 from ..optics.outline import RimOutline
-from .coarse import coarse_search, search_scales
+from .coarse import MAX_CANDIDATES, coarse_search, search_scales
 from .image import fill_void, photo_void, reduce_by
-from .rim import CalibrationError, NoMirrorError, RimFit, fit_rim, settled, working_luminance
+from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit, fit_rim, settled,
+                  working_luminance)
 
 __all__ = ["find_circle", "circle_outline", "ellipse_outline", "ellipse_of_edges",
            "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "ELLIPSE_SIGNIFICANCE",
-           "ELLIPSE_MIN_PX", "MIN_AXIS_RATIO", "ELLIPSE_ROUNDS", "ELLIPSE_TRIALS"]
+           "ELLIPSE_MIN_PX", "MIN_AXIS_RATIO", "WIDE_LOOK", "ELLIPSE_ROUNDS", "ELLIPSE_TRIALS"]
 
 logger = logging.getLogger(__name__)
+
+#: Scales (relative to a coarse candidate's radius) of the second look, where no candidate
+#: is accepted at its own size: the range a rough setup's prediction is searched over
+#: (:data:`mitsweep.photo.rim.PLAUSIBLE_SCALE`).
+WIDE_LOOK = (1.0 / (1.0 + PLAUSIBLE_SCALE), 1.0 / (1.0 - PLAUSIBLE_SCALE))
 
 #: Smallest outline radius searched, as a share of the photo's shorter side.
 MIN_RADIUS_SHARE = 0.08
@@ -228,22 +236,30 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
         candidates.append((score, centre, base * scale))
         base *= 2.0
     candidates.sort(key=lambda c: -c[0])
-    best, failures = None, []
-    for score, centre, radius in candidates[:CANDIDATES]:
-        logger.info("free search candidate: centre (%.1f, %.1f) px, radius %.1f px "
-                    "(score %.3g)", *centre, radius, score)
-        try:
-            fit = fit_rim(image, circle_outline(radius), 1.0, scale_range=(0.96, 1.04),
-                          starts=1)   # this search compares its candidates itself
-        except CalibrationError as exc:
-            failures.append(str(exc))
-            continue
-        # the outline explained best: most points, least scatter relative to its size
-        key = (fit.points_used / fit.points_total) * radius / max(fit.residual_rms_px, 0.1)
-        if best is None or key > best[0]:
-            best = (key, fit, radius * fit.scale)
-    if best is not None:
-        return best[1], best[2], None
+    failures: list[str] = []
+    # First each candidate at its own size, one start (this search compares its
+    # candidates itself); where none is accepted, a second look at each as a rough
+    # setup's prediction is searched (a coarse candidate can be a ring inside the mirror's
+    # image, a tenth smaller than its outline: omni_kaidan.jpg in tests/data/real).
+    for scale_range, starts in (((0.96, 1.04), 1), (WIDE_LOOK, MAX_CANDIDATES)):
+        best = None
+        for score, centre, radius in candidates[:CANDIDATES]:
+            logger.info("free search candidate: centre (%.1f, %.1f) px, radius %.1f px "
+                        "(score %.3g), scales %.2f-%.2f", *centre, radius, score,
+                        *scale_range)
+            try:
+                fit = fit_rim(image, circle_outline(radius), 1.0, scale_range=scale_range,
+                              starts=starts)
+            except CalibrationError as exc:
+                failures.append(str(exc))
+                continue
+            # the outline explained best: most points, least scatter relative to its size
+            size = radius * fit.scale
+            key = (fit.points_used / fit.points_total) * size / max(fit.residual_rms_px, 0.1)
+            if best is None or key > best[0]:
+                best = (key, fit, size)
+        if best is not None:
+            return best[1], best[2], None
     found = _best_ellipse(lum, image, candidates[:CANDIDATES])
     if found is not None:
         return found
