@@ -471,6 +471,27 @@ DESIGN_PREDICTED = Figure(
     rows=_design_rows, recorded="docs/reference/design_study_predicted.json")
 
 
+def _photo_corpus_rows(outputs: list[str]) -> Rows:
+    """photo | mirror, outline | size, format | reference centre | radius | tolerance |
+    error (time) of --free and the +9 %, -35 %, +35 % setups, per photo of
+    scripts/photo_corpus.py (times not compared)."""
+    rows: Rows = []
+    for r in json.loads(outputs[0]):
+        runs = [r["runs"][k] for k in ("free", "+0.09", "-0.35", "+0.35")]
+        rows.append([None, None, list(r["size_px"]), list(r["centre_px"]), [r["radius_px"]],
+                     [r["tolerance_px"]],
+                     *([None] if run["error_px"] is None else [run["error_px"], None]
+                       for run in runs)])
+    return rows
+
+
+PHOTO_CORPUS = Figure(
+    cites="scripts/photo_corpus.py",
+    commands=(".venv/bin/python scripts/photo_corpus.py "
+              "--json docs/reference/photo_corpus.json",),
+    rows=_photo_corpus_rows, recorded="docs/reference/photo_corpus.json", timings=True)
+
+
 #: Every checked figure, by the name its page's marker gives.
 FIGURES: dict[str, Figure] = {
     "sweep-ranges": SWEEP_RANGES,
@@ -480,6 +501,7 @@ FIGURES: dict[str, Figure] = {
     "calibration-errors": CALIBRATION_ERRORS,
     "weight-bench-blur": WEIGHT_BENCH_BLUR,
     "design-predicted": DESIGN_PREDICTED,
+    "photo-corpus": PHOTO_CORPUS,
     "demo-psnr": DEMO,
     "demo-psnr-noisy": DEMO_NOISY,
     "demo-psnr-per-radius": DEMO_RADIUS,
