@@ -113,18 +113,24 @@ def test_convex_bound_is_below_the_mse_and_convex(small):
         assert np.all(lm <= 0.5 * (la + lb) * (1 + 1e-12))
 
 
-@pytest.mark.parametrize("objective", ["worst", "mean"])
-def test_optimiser_improves_on_uniform_feasibly_and_is_certified(small, objective):
+@pytest.mark.parametrize("objective, weighted", [("worst", False), ("mean", False),
+                                                  ("mean", True)])
+def test_optimiser_improves_on_uniform_feasibly_and_is_certified(small, objective, weighted):
     bank, model, limits = small
     widths = bank.widths
     uniform = np.full(16, 1 / 16)
-    reduce = np.max if objective == "worst" else np.mean
-    sol = local_optimum(model, widths, limits, objective=objective)
-    again = local_optimum(model, widths, limits, objective=objective)
+    # weighted: a mean that leans on some kernels (as the image's area weights do)
+    w = np.linspace(1.0, 5.0, model.n_kernels) if weighted else None
+    if objective == "worst":
+        reduce = np.max
+    else:
+        reduce = np.mean if w is None else (lambda m: float(m @ w) / w.sum())
+    sol = local_optimum(model, widths, limits, objective=objective, weights=w)
+    again = local_optimum(model, widths, limits, objective=objective, weights=w)
     np.testing.assert_array_equal(sol.tau, again.tau)  # deterministic
     assert stage_feasible(sol.tau, widths, limits)
     assert sol.value <= reduce(model.mse(uniform))
-    bound, _ = certified_lower_bound(model, widths, limits, objective=objective)
+    bound, _ = certified_lower_bound(model, widths, limits, objective=objective, weights=w)
     assert bound <= sol.value
     # the written profile is one the stage can follow, through the file's own check
     assert sol.value == pytest.approx(reduce(model.mse(sol.tau)), rel=1e-12)
@@ -139,6 +145,31 @@ def test_brute_force_agrees_with_the_optimiser_on_a_small_problem(small):
     assert res["feasible_points"] > 10
     assert res["agrees"] and res["same_optimum"]
     assert res["lower_bound"] <= res["local_value"] <= res["lattice_best"] * (1 + 1e-9)
+
+
+def test_brute_force_agrees_with_the_optimiser_on_a_weighted_mean(small):
+    bank, _, limits = small
+    coarse = bank.coarsened(4)
+    noise = paper_fig10_settings(0.0064, 0.5)["sweep"]
+    model = wiener_model(coarse.kernels, noise, n_fft=32, n_px=512)
+    w = np.arange(1.0, model.n_kernels + 1.0) ** 2
+    res = brute_force(model, coarse.widths, limits, steps=12, objective="mean", weights=w)
+    assert res["agrees"] and res["same_optimum"]
+    assert res["lower_bound"] <= res["local_value"] <= res["lattice_best"] * (1 + 1e-9)
+    with pytest.raises(ValueError, match="weights: must be"):
+        local_optimum(model, coarse.widths, limits, objective="mean", weights=-w)
+
+
+def test_image_area_weights_are_the_annuli_each_radius_stands_for():
+    from mitsweep.design import image_area_weights
+
+    r = np.linspace(0.0, 4.0, 5)                      # cells 0-.5, .5-1.5, ..., 3.5-4
+    w = image_area_weights(np.stack([r, 0 * r], axis=1), symmetric=True)
+    area = np.array([0.25, 1.5 ** 2 - 0.25, 2.5 ** 2 - 1.5 ** 2, 3.5 ** 2 - 2.5 ** 2,
+                     16 - 3.5 ** 2])
+    np.testing.assert_allclose(w, area / 16.0)
+    grid = np.random.default_rng(0).random((7, 2))
+    np.testing.assert_allclose(image_area_weights(grid, symmetric=False), np.full(7, 1 / 7))
 
 
 def test_uniform_is_the_only_design_when_the_stage_is_at_its_limit(small, sweep):

@@ -94,8 +94,8 @@ def run(args) -> int:
         f"(r {w_lin['radius_mm']:.2f} mm, l {w_lin['depth_mm']:g} mm) -> optimised "
         f"{report['optimized_worst_mse']:.4g} (r {w_opt['radius_mm']:.2f} mm, "
         f"l {w_opt['depth_mm']:g} mm)",
-        f"mean MSE           linear {report['linear_mean_mse']:.4g} -> optimised "
-        f"{report['optimized_mean_mse']:.4g}",
+        f"image mean MSE     linear {report['linear_image_mean_mse']:.4g} -> optimised "
+        f"{report['optimized_image_mean_mse']:.4g} (points weighted by their image area)",
         f"V_avg              linear {report['linear_v_avg']:.4g} -> optimised "
         f"{report['optimized_v_avg']:.4g}",
         f"velocity           {report['velocity_mm_s'][0]:.3g} .. {report['velocity_mm_s'][1]:.3g}"

@@ -37,8 +37,9 @@ on the problem coarsened to 6 bins.
 from .objective import WienerModel, wiener_model
 from .optimize import StageLimits, brute_force, certified_lower_bound, local_optimum
 from .planes import PlaneBank, plane_bank, plane_psfs
-from .sweep import SweepDesign, design_depths, design_points, design_sweep
+from .sweep import SweepDesign, design_depths, design_points, design_sweep, image_area_weights
 
-__all__ = ["design_sweep", "SweepDesign", "design_depths", "design_points", "PlaneBank",
-           "plane_bank", "plane_psfs", "WienerModel", "wiener_model", "StageLimits",
-           "local_optimum", "certified_lower_bound", "brute_force"]
+__all__ = ["design_sweep", "SweepDesign", "design_depths", "design_points",
+           "image_area_weights", "PlaneBank", "plane_bank", "plane_psfs", "WienerModel",
+           "wiener_model", "StageLimits", "local_optimum", "certified_lower_bound",
+           "brute_force"]

@@ -1,8 +1,9 @@
 """Choosing the exposure fractions τ: a local optimiser, a certified bound, brute force.
 
 The problem (docs in :mod:`mitsweep.design`): over bins of widths ``Δi_k`` (mm), find
-``τ`` minimising ``max_j MSE_j(τ)`` (``objective="worst"``) or ``mean_j MSE_j(τ)``
-(``"mean"``) subject to
+``τ`` minimising ``max_j MSE_j(τ)`` (``objective="worst"``) or the weighted mean
+``Σ_j w_j MSE_j(τ)`` (``"mean"``; ``w`` in the simplex, uniform unless given: the design
+weighs each field point by the image area it stands for) subject to
 
 - the exposure: ``Σ_k τ_k = 1`` (the exposure ``T`` is fixed);
 - the stage's velocity: ``v_k = Δi_k / (τ_k T) <= v_max``, i.e. ``τ_k >= Δi_k / (v_max T)``
@@ -115,8 +116,20 @@ class Solution:
     info: dict
 
 
-def _reduce(mse: np.ndarray, objective: str) -> float:
-    return float(mse.max() if objective == "worst" else mse.mean())
+def _reduce(mse: np.ndarray, objective: str, weights: np.ndarray | None = None) -> float:
+    if objective == "worst":
+        return float(mse.max())
+    return float(mse.mean() if weights is None else mse @ weights)
+
+
+def _checked_weights(weights: ArrayLike | None, n_kernels: int) -> np.ndarray | None:
+    """The mean objective's weights, normalised to sum to 1 (None: uniform)."""
+    if weights is None:
+        return None
+    w = np.asarray(weights, dtype=float).ravel()
+    if w.size != n_kernels or not np.all(np.isfinite(w)) or np.any(w < 0) or w.sum() <= 0:
+        raise ValueError(f"weights: must be {n_kernels} finite values >= 0, not all 0")
+    return w / w.sum()
 
 
 def _velocity_accel(tau, widths, limits: StageLimits):
@@ -202,7 +215,7 @@ def _accel_constraints(tau_lin, widths, limits: StageLimits):
 
 
 def _solve(value_grad, tau_lin, widths, limits, objective, x0, *, accel: bool,
-           maxiter: int = 400):
+           maxiter: int = 400, weights: np.ndarray | None = None):
     """SLSQP from ``x0``; returns (x, result). ``value_grad(tau) -> (J,), (J, N)``."""
     n = tau_lin.size
     x_lo = limits.tau_min(widths) / tau_lin
@@ -215,7 +228,7 @@ def _solve(value_grad, tau_lin, widths, limits, objective, x0, *, accel: bool,
         return memo["value"]
 
     v0, _ = memo_value_grad(tau_lin)
-    scale = _reduce(v0, objective)
+    scale = _reduce(v0, objective, weights)
     cons = [{"type": "eq", "fun": lambda z: np.array([tau_lin @ z[:n] - 1.0]),
              "jac": lambda z: np.concatenate([tau_lin, np.zeros(z.size - n)])[None, :]}]
     if accel and n > 1:
@@ -246,11 +259,12 @@ def _solve(value_grad, tau_lin, widths, limits, objective, x0, *, accel: bool,
     else:
         def f(z):
             val, _ = memo_value_grad(tau_lin * z)
-            return float(val.mean() / scale)
+            return _reduce(val, "mean", weights) / scale
 
         def fj(z):
             _, grad = memo_value_grad(tau_lin * z)
-            return grad.mean(axis=0) * tau_lin / scale
+            g = grad.mean(axis=0) if weights is None else weights @ grad
+            return g * tau_lin / scale
 
         z0 = np.asarray(x0, dtype=float)
         bounds = [(lo, None) for lo in x_lo]
@@ -277,7 +291,7 @@ def _starts(n: int, x_lo: float) -> dict[str, np.ndarray]:
 
 def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
                   objective: str = "worst", extra_starts: dict | None = None,
-                  acceleration: bool = True) -> Solution:
+                  acceleration: bool = True, weights: ArrayLike | None = None) -> Solution:
     """The best τ SLSQP finds from the fixed starts (module docstring), stage-feasible.
 
     ``acceleration=False`` drops the acceleration limit (a diagnostic: how much of the
@@ -297,6 +311,9 @@ def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
         More starting points, name → τ.
     acceleration : bool, optional
         Enforce the acceleration limit.
+    weights : array_like, optional
+        The mean objective's weight of each of the model's J (depth, point) pairs
+        (normalised; default uniform).
 
     Returns
     -------
@@ -308,6 +325,7 @@ def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
         raise ValueError(f"objective: must be one of {', '.join(OBJECTIVES)}, got {objective!r}")
     widths = np.asarray(widths, dtype=float)
     tau_lin = widths / widths.sum()
+    w = _checked_weights(weights, model.n_kernels)
     t0 = time.perf_counter()
     x_lo = float((limits.tau_min(widths) / tau_lin).max())
     starts = _starts(widths.size, x_lo)
@@ -318,11 +336,11 @@ def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
     iterations = 0
     for name, x0 in starts.items():
         x, res = _solve(model.mse_and_grad, tau_lin, widths, limits, objective, x0,
-                        accel=acceleration)
+                        accel=acceleration, weights=w)
         iterations += int(res.nit)
         tau = tau_lin * x
         ok = stage_feasible(tau, widths, limits, acceleration=acceleration)
-        value = _reduce(model.mse(tau), objective)
+        value = _reduce(model.mse(tau), objective, w)
         reached[name] = value if ok else None
         logger.debug("start %s: %s, value %.6g, feasible %s", name, res.message, value, ok)
         if ok and (best is None or value < best[1]):
@@ -336,7 +354,8 @@ def local_optimum(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
 
 
 def certified_lower_bound(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
-                          objective: str = "worst") -> tuple[float, dict]:
+                          objective: str = "worst", weights: ArrayLike | None = None
+                          ) -> tuple[float, dict]:
     """A lower bound on ``min_τ objective(MSE(τ))`` over the feasible set (docstring).
 
     Parameters
@@ -349,6 +368,8 @@ def certified_lower_bound(model: WienerModel, widths: ArrayLike, limits: StageLi
         The exposure and the stage's limits.
     objective : {"worst", "mean"}, optional
         Minimise the largest or the mean MSE over points × depths.
+    weights : array_like, optional
+        The mean objective's weights, as :func:`local_optimum`'s.
 
     Returns
     -------
@@ -359,9 +380,10 @@ def certified_lower_bound(model: WienerModel, widths: ArrayLike, limits: StageLi
     """
     widths = np.asarray(widths, dtype=float)
     tau_lin = widths / widths.sum()
+    w = _checked_weights(weights, model.n_kernels)
     t0 = time.perf_counter()
     x, _ = _solve(model.bound_and_grad, tau_lin, widths, limits, objective,
-                  np.ones(widths.size), accel=False)
+                  np.ones(widths.size), accel=False, weights=w)
     tau_bar = tau_lin * x
     L, G = model.bound_and_grad(tau_bar)           # (J,), (J, N)
     tmin = limits.tau_min(widths)
@@ -369,7 +391,8 @@ def certified_lower_bound(model: WienerModel, widths: ArrayLike, limits: StageLi
     # D[j, m] = ∇L_j(τ̄)·(s_m − τ̄), s_m = τ_min + free e_m: the Ω's vertices
     D = free * G + (G @ (tmin - tau_bar))[:, None]
     if objective == "mean":
-        bound = float(L.mean() + D.mean(axis=0).min())
+        wm = np.full(L.size, 1.0 / L.size) if w is None else w
+        bound = float(L @ wm + (wm @ D).min())
     else:
         J, N = D.shape
         # variables (λ_1..λ_J, z): maximise L·λ + z, z <= D[:, m]·λ for every m
@@ -384,7 +407,7 @@ def certified_lower_bound(model: WienerModel, widths: ArrayLike, limits: StageLi
         lam /= lam.sum()
         # re-evaluate the bound at the LP's λ (not its reported value)
         bound = float(L @ lam + (lam @ D).min())
-    return bound, {"relaxed_value": _reduce(L, objective), "relaxed_tau": tau_bar,
+    return bound, {"relaxed_value": _reduce(L, objective, w), "relaxed_tau": tau_bar,
                    "seconds": time.perf_counter() - t0}
 
 
@@ -401,7 +424,8 @@ def _compositions(total: int, parts: int):
 
 
 def brute_force(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
-                objective: str = "worst", steps: int = 16, batch: int = 64) -> dict:
+                objective: str = "worst", steps: int = 16, batch: int = 64,
+                weights: ArrayLike | None = None) -> dict:
     """Exhaustive search on a lattice against the local optimiser, on a small problem.
 
     The lattice: ``τ = τ_min + (1 − Σ τ_min) q``, ``q`` every point of the simplex with
@@ -423,6 +447,8 @@ def brute_force(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
         Lattice resolution: coordinates in multiples of ``1/steps``.
     batch : int, optional
         Lattice points evaluated per vectorised batch.
+    weights : array_like, optional
+        The mean objective's weights, as :func:`local_optimum`'s.
 
     Returns
     -------
@@ -436,6 +462,7 @@ def brute_force(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
     """
     widths = np.asarray(widths, dtype=float)
     n = widths.size
+    w = _checked_weights(weights, model.n_kernels)
     t0 = time.perf_counter()
     tmin = limits.tau_min(widths)
     free = 1.0 - tmin.sum()
@@ -446,12 +473,13 @@ def brute_force(model: WienerModel, widths: ArrayLike, limits: StageLimits, *,
     values = np.empty(len(feas))
     for b in range(0, len(feas), batch):
         mse = model.mse(feas[b:b + batch])        # (B, J)
-        values[b:b + batch] = mse.max(axis=1) if objective == "worst" else mse.mean(axis=1)
+        values[b:b + batch] = mse.max(axis=1) if objective == "worst" else (
+            mse.mean(axis=1) if w is None else mse @ w)
     k = int(np.argmin(values))
-    local = local_optimum(model, widths, limits, objective=objective)
+    local = local_optimum(model, widths, limits, objective=objective, weights=w)
     from_lattice = local_optimum(model, widths, limits, objective=objective,
-                                 extra_starts={"lattice": feas[k]})
-    bound, _ = certified_lower_bound(model, widths, limits, objective=objective)
+                                 extra_starts={"lattice": feas[k]}, weights=w)
+    bound, _ = certified_lower_bound(model, widths, limits, objective=objective, weights=w)
     best = float(values[k])
     refined = from_lattice.info["starts"].get("lattice")
     return {"bins": n, "steps": int(steps), "lattice_points": int(len(taus)),

@@ -26,8 +26,8 @@ from .optimize import (OBJECTIVES, StageLimits, brute_force, certified_lower_bou
                        local_optimum, stage_feasible)
 from .planes import DEFAULT_PLANE_RAYS, DEFAULT_SUB_PLANES, PlaneBank, plane_bank
 
-__all__ = ["SweepDesign", "design_sweep", "design_depths", "design_points", "V_DEPTHS_MM",
-           "MIN_PLANES", "RESTORATIONS"]
+__all__ = ["SweepDesign", "design_sweep", "design_depths", "design_points",
+           "image_area_weights", "V_DEPTHS_MM", "MIN_PLANES", "RESTORATIONS"]
 
 logger = logging.getLogger(__name__)
 
@@ -129,6 +129,32 @@ def design_points(setup: Setup, i_ref: float, geometry: ReferenceGeometry, *, n_
     return np.asarray(pts, dtype=float)
 
 
+def image_area_weights(points: np.ndarray, symmetric: bool) -> np.ndarray:
+    """Each field point's share of the image it stands for: an untilted mirror's radii
+    ``0 … R`` (:func:`design_points`) the annuli between their midpoints (area
+    ``π (r_hi² − r_lo²)``: the outer radii stand for most pixels), a tilted mirror's grid
+    points equal shares (the cells of a regular grid). The mean objective weighs the
+    predicted MSE by them, so that it is the mean over the image's pixels, as a PSNR
+    over the image is, rather than over the design points.
+
+    Parameters
+    ----------
+    points : (P, 2) ndarray
+        The design's field points, mm (:func:`design_points`).
+    symmetric : bool
+        Whether they are an untilted mirror's radii (along ``u``).
+    """
+    points = np.asarray(points, dtype=float)
+    if not symmetric or len(points) < 2:
+        return np.full(len(points), 1.0 / len(points))
+    r = np.hypot(points[:, 0], points[:, 1])
+    mid = 0.5 * (r[1:] + r[:-1])
+    lo = np.concatenate([[0.0], mid])
+    hi = np.concatenate([mid, [r[-1]]])
+    area = hi ** 2 - lo ** 2
+    return area / area.sum()
+
+
 def _where(mse, points, depths) -> dict:
     d, p = np.unravel_index(int(np.argmax(mse)), mse.shape)
     u, v = (float(x) for x in points[p])
@@ -169,7 +195,9 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     noise : mitsweep.deconv.SensorNoise
         The sensor at the design's light level.
     objective : {"worst", "mean"}
-        Minimise the largest or the mean predicted MSE over field points × depths.
+        Minimise the largest predicted MSE over field points × depths, or the mean over
+        the image: the depths alike, each field point weighted by the image area it
+        stands for (:func:`image_area_weights`).
     n_planes : int
         Bins N of the span (>= 8).
     span : (start, end), optional
@@ -246,6 +274,15 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
 
     model = predictor(bank)
     shape = (len(depths), len(points))
+    point_weights = image_area_weights(points, setup.mirror.is_symmetric)
+    weights = np.tile(point_weights, len(depths)) / len(depths)   # kernels: depth-major
+    w = weights if objective == "mean" else None
+
+    def image_mean(m: np.ndarray) -> float:
+        return float(np.ravel(m) @ weights)
+
+    def reduced(m: np.ndarray) -> float:
+        return float(m.max()) if objective == "worst" else image_mean(m)
     # the uniform sweep over the optimal range, same exposure: the baseline
     optimal = span is None or (np.isclose(start, sweep.sensor_start, rtol=0, atol=1e-12)
                                   and np.isclose(end, sweep.sensor_end, rtol=0, atol=1e-12))
@@ -258,30 +295,32 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         mse_lin, kernels_lin = _linear_over_the_optimal_range(
             setup, sweep, N, depths, shape, trace_bank, predictor, n_radii=n_radii, grid=grid)
         lin_feasible = True
-    sol = local_optimum(model, widths, limits, objective=objective)
+    sol = local_optimum(model, widths, limits, objective=objective, weights=w)
     if deployed:
         bound, bound_info = None, {"relaxed_value": None}
     else:
-        bound, bound_info = certified_lower_bound(model, widths, limits, objective=objective)
-    free = local_optimum(model, widths, limits, objective=objective, acceleration=False)
+        bound, bound_info = certified_lower_bound(model, widths, limits, objective=objective,
+                                                  weights=w)
+    free = local_optimum(model, widths, limits, objective=objective, acceleration=False,
+                         weights=w)
     t_opt = time.perf_counter() - t0
     brute = None
     if brute_force_steps and not deployed:     # its check holds the convex bound's
         small = bank.coarsened(_BRUTE_BINS)
         brute = brute_force(predictor(small),
                             small.widths, limits, objective=objective,
-                            steps=brute_force_steps)
+                            steps=brute_force_steps, weights=w)
     # uniform τ is in the design's feasible set only when the span is the optimal range
     uniform_value = None
     if optimal and lin_feasible:
-        uniform_value = float(mse_lin.max() if objective == "worst" else mse_lin.mean())
+        uniform_value = reduced(mse_lin)
     tau = sol.tau
     times = np.concatenate([[0.0], np.cumsum(tau)])
     times[-1] = 1.0
     profile = MotionProfile.tabulated(times, edges)
     mse = sol.mse.reshape(shape)
     value = sol.value
-    lin_value = float(mse_lin.max() if objective == "worst" else mse_lin.mean())
+    lin_value = reduced(mse_lin)
     returns_linear = bool(deployed and optimal and lin_feasible and value >= lin_value)
     if returns_linear:
         # under the deployed restoration no profile the optimiser found beats linear
@@ -307,6 +346,11 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         "optimized_worst_psnr_db": _psnr(float(mse.max())),
         "linear_mean_psnr_db": _psnr(float(mse_lin.mean())),
         "optimized_mean_psnr_db": _psnr(float(mse.mean())),
+        "point_weights": point_weights.tolist(),
+        "linear_image_mean_mse": image_mean(mse_lin),
+        "optimized_image_mean_mse": image_mean(mse),
+        "linear_image_mean_psnr_db": _psnr(image_mean(mse_lin)),
+        "optimized_image_mean_psnr_db": _psnr(image_mean(mse)),
         "linear_v_avg": v_lin, "optimized_v_avg": v_opt, "v_avg_depths_mm": v_depths,
         "linear_worst_at": _where(mse_lin, points, depths),
         "optimized_worst_at": _where(mse, points, depths),
