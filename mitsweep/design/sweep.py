@@ -155,6 +155,24 @@ def image_area_weights(points: np.ndarray, symmetric: bool) -> np.ndarray:
     return area / area.sum()
 
 
+def _predicted_errors(mse_lin: np.ndarray, mse: np.ndarray, points, depths,
+                      point_weights: np.ndarray) -> dict:
+    """A design report's predicted errors of the linear and the optimised profile
+    (``(depths, points)`` MSE arrays): worst, mean over points × depths, mean over the
+    image (:func:`image_area_weights`), where the worst lies, and per point."""
+    out: dict = {"point_weights": point_weights.tolist()}
+    for which, m in (("linear", mse_lin), ("optimized", mse)):
+        image_mean = float(np.mean(m @ point_weights))
+        out.update({f"{which}_worst_mse": float(m.max()), f"{which}_mean_mse": float(m.mean()),
+                    f"{which}_image_mean_mse": image_mean,
+                    f"{which}_worst_psnr_db": _psnr(float(m.max())),
+                    f"{which}_mean_psnr_db": _psnr(float(m.mean())),
+                    f"{which}_image_mean_psnr_db": _psnr(image_mean),
+                    f"{which}_worst_at": _where(m, points, depths)})
+    out["per_point"] = {"linear_mse": mse_lin.tolist(), "optimized_mse": mse.tolist()}
+    return out
+
+
 def _where(mse, points, depths) -> dict:
     d, p = np.unravel_index(int(np.argmax(mse)), mse.shape)
     u, v = (float(x) for x in points[p])
@@ -340,21 +358,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         "span_mm": [start, end], "optimal_range_mm": [sweep.sensor_start, sweep.sensor_end],
         "exposure_s": T, "noise": noise.as_dict(), "depths_mm": list(depths),
         "points_uv_mm": points.tolist(),
-        "linear_worst_mse": float(mse_lin.max()), "optimized_worst_mse": float(mse.max()),
-        "linear_mean_mse": float(mse_lin.mean()), "optimized_mean_mse": float(mse.mean()),
-        "linear_worst_psnr_db": _psnr(float(mse_lin.max())),
-        "optimized_worst_psnr_db": _psnr(float(mse.max())),
-        "linear_mean_psnr_db": _psnr(float(mse_lin.mean())),
-        "optimized_mean_psnr_db": _psnr(float(mse.mean())),
-        "point_weights": point_weights.tolist(),
-        "linear_image_mean_mse": image_mean(mse_lin),
-        "optimized_image_mean_mse": image_mean(mse),
-        "linear_image_mean_psnr_db": _psnr(image_mean(mse_lin)),
-        "optimized_image_mean_psnr_db": _psnr(image_mean(mse)),
+        **_predicted_errors(mse_lin, mse, points, depths, point_weights),
         "linear_v_avg": v_lin, "optimized_v_avg": v_opt, "v_avg_depths_mm": v_depths,
-        "linear_worst_at": _where(mse_lin, points, depths),
-        "optimized_worst_at": _where(mse, points, depths),
-        "per_point": {"linear_mse": mse_lin.tolist(), "optimized_mse": mse.tolist()},
         "tau": tau.tolist(), "edges_mm": edges.tolist(),
         "velocity_mm_s": [float(velocity.min()), float(velocity.max())],
         "max_acceleration_mm_s2": float(np.abs(accel).max()) if accel.size else 0.0,
