@@ -166,7 +166,8 @@ def _mitsweep(args: list[str]) -> str:
 def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path, *,
                       planes: int, rays: int, tables_only: bool = False,
                       restoration: str = "matched", objective: str = "worst",
-                      deploy_nsr: dict | None = None) -> dict:
+                      deploy_nsr: dict | None = None, grid: tuple[int, int] = (5, 5),
+                      radii: int = 9) -> dict:
     """The linear profile and one designed per light level (worst-case objective, as
     ``mitsweep design-sweep`` by default), as motion-profile files under ``out``, and the
     designs' reports. A profile whose file and report exist from an earlier run with the
@@ -190,6 +191,8 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
         key.update(restoration=restoration, objective=objective)
     if objective == "mean":   # the mean over the image (points weighted by their area)
         key.update(mean="image area")
+    if tuple(grid) != (5, 5) or radii != 9:   # not design_sweep's default field points
+        key.update(grid=list(grid), radii=radii)
     out.mkdir(parents=True, exist_ok=True)
     linear = out / f"{name}_linear.json"
     save_motion_file(linear, MotionProfile.linear(sweep.sensor_start, sweep.sensor_end),
@@ -216,10 +219,11 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
         if restoration == "deployed":
             nsr = (deploy_nsr or {}).get(lux)
             d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank,
-                             restoration="deployed", objective=objective, deploy_nsr=nsr)
+                             restoration="deployed", objective=objective, deploy_nsr=nsr,
+                             grid=tuple(grid), n_radii=radii)
         else:
             d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank,
-                             objective=objective)
+                             objective=objective, grid=tuple(grid), n_radii=radii)
         bank = d.bank
         save_motion_file(path, d.profile, exposure_s=d.exposure_s,
                          provenance={"generator": "scripts/design_study.py", "setup": name,
@@ -262,7 +266,8 @@ def _same_ground_truth(a: Path, b: Path, scenes: int) -> bool:
 def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, seed: int,
                    family: str, spp: list[str] | None, resolution: int | None, planes: int,
                    rays: int, tables_only: bool = False, restoration: str = "matched",
-                   objective: str = "worst") -> list[dict]:
+                   objective: str = "worst", grid: tuple[int, int] = (5, 5),
+                   radii: int = 9) -> list[dict]:
     """Datasets rendered with the linear and each designed profile, deconvolved with their
     own banks and scored (``mitsweep dataset --motion`` and ``mitsweep evaluate``); one
     row per (setup, lux) case.
@@ -306,7 +311,8 @@ def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, se
         t0 = time.perf_counter()
         prof = designed_profiles(sfile, name, luxes, out / "profiles", planes=planes,
                                  rays=rays, tables_only=tables_only, restoration=restoration,
-                                 objective=objective, deploy_nsr=deploy_nsr)
+                                 objective=objective, deploy_nsr=deploy_nsr, grid=grid,
+                                 radii=radii)
         t_design = time.perf_counter() - t0
         for tag, mfile in [("linear", prof["linear"]),
                            *((f"opt_{lux:g}lux", prof["designs"][lux][0]) for lux in luxes)]:
@@ -578,6 +584,8 @@ def main(argv=None) -> int:
                            "profile")
     mode.add_argument("--all", action="store_true",
                       help="measure the nine cases (3 setups x 50, 2, 0.5 lux)")
+    p.add_argument("--setups", nargs="+", choices=SETUPS, default=list(SETUPS),
+                   help="with --all: these setups only")
     p.add_argument("--scenes", type=int, default=3, help="scenes per case (default 3)")
     p.add_argument("--family", choices=("room", "procedural"), default="room")
     p.add_argument("--spp", nargs=4, metavar=("PINHOLE", "FOCUSED", "SWEEP", "STOPPED"),
@@ -618,11 +626,12 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if a.measured or a.all:
         cases = [(a.measured[0], float(a.measured[1]))] if a.measured else \
-            [(n, lux) for n in SETUPS for lux in LUX]
+            [(n, lux) for n in a.setups for lux in LUX]
         rows = measured_cases(out, cases, scenes=a.scenes, seed=a.seed, family=a.family,
                               spp=a.spp, resolution=a.resolution, planes=a.planes,
                               rays=a.rays, tables_only=a.tables_only,
-                              restoration=a.restoration, objective=a.objective)
+                              restoration=a.restoration, objective=a.objective,
+                              grid=tuple(a.grid), radii=a.radii)
         text = measured_table(rows)
         if a.diagnose:
             diagnose(out, rows, resolution=a.resolution)
