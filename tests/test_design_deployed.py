@@ -71,8 +71,14 @@ def test_a_deployed_design_beats_linear_under_its_model_or_returns_linear():
                                 n_px=float(np.sqrt(np.prod(setup.sensor.resolution))))
     assert r["linear_mean_mse"] == pytest.approx(float(dep.mse(d.tau_linear).mean()),
                                                  rel=1e-9)
-    # the mean minimised is over the image: the outer radius stands for 3/4 of it
-    assert r["point_weights"] == pytest.approx([0.25, 0.75])
+    # the mean minimised is over the image, to the rim's image beyond the FOV (centre,
+    # FOV's edge, then radii at the same spacing to the rim), each radius weighted by the
+    # annulus it stands for
+    rad = np.hypot(*d.points_uv.T)
+    assert len(rad) >= 3 and rad[-1] > rad[1] and np.all(np.diff(rad) > 0)
+    mid = (rad[1:] + rad[:-1]) / 2
+    area = np.diff(np.concatenate([[0.0], mid, [rad[-1]]]) ** 2)
+    assert r["point_weights"] == pytest.approx(area / rad[-1] ** 2, rel=1e-9)
     w = np.tile(r["point_weights"], 3) / 3
     assert r["linear_image_mean_mse"] == pytest.approx(float(dep.mse(d.tau_linear) @ w),
                                                        rel=1e-9)

@@ -18,7 +18,7 @@ from ..deconv.noise import SensorNoise
 from ..optics import optimal_sweep_range
 from ..optics.motion import MotionProfile
 from ..optics.reference import ReferenceGeometry, reference_geometry
-from ..tracer.bank import field_radius, grid_points
+from ..tracer.bank import field_radius, grid_points, rim_field_radius, rim_radii
 from ..tracer.metrics import v_avg
 from ..tracer.source import source_from_image
 from .objective import DEFAULT_FFT_SIZE, deployed_wiener_model, wiener_model
@@ -97,9 +97,12 @@ def design_depths(setup: Setup) -> list[float]:
 
 
 def design_points(setup: Setup, i_ref: float, geometry: ReferenceGeometry, *, n_radii: int,
-                  grid: tuple[int, int]) -> np.ndarray:
+                  grid: tuple[int, int], to_rim: bool = False) -> np.ndarray:
     """Field points: ``n_radii`` radii from the centre to the FOV's edge (untilted), or
     the centres of a grid over the sensor that see the mirror (tilted; the 2-D field).
+    ``to_rim``: an untilted mirror's radii go on at their spacing beyond the FOV to the
+    image of the mirror's rim (:func:`mitsweep.tracer.bank.rim_field_radius`), where
+    the sweep does not reach focus but the image still has pixels.
 
     Parameters
     ----------
@@ -113,9 +116,13 @@ def design_points(setup: Setup, i_ref: float, geometry: ReferenceGeometry, *, n_
         Radii of an untilted mirror's field.
     grid : tuple of int
         ``(rows, cols)`` of a tilted mirror's grid.
+    to_rim : bool
+        Radii beyond the FOV to the rim's image (untilted mirrors).
     """
     if setup.mirror.is_symmetric:
         r = np.linspace(0.0, field_radius(setup, geometry), int(n_radii))
+        if to_rim:
+            r = np.concatenate([r, rim_radii(r, rim_field_radius(setup, geometry))])
         return np.stack([r, np.zeros_like(r)], axis=1)
     pts = []
     for u, v in grid_points(setup, grid):
@@ -270,7 +277,9 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     motion_lin = MotionProfile.linear(start, end)
     geom = reference_geometry(setup, sweep=sweep, motion=motion_lin)
     i_ref = geom.sensor_distance
-    points = design_points(setup, i_ref, geom, n_radii=n_radii, grid=grid)
+    # the image's mean has pixels beyond the FOV (29 % of the paraboloid's mirror image)
+    points = design_points(setup, i_ref, geom, n_radii=n_radii, grid=grid,
+                           to_rim=objective == "mean")
     trace_bank = functools.partial(plane_bank, rays=rays, kernel_size=kernel_size, seed=seed,
                                    sub_planes=sub_planes, progress=progress)
     if bank is None:
@@ -296,11 +305,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     weights = np.tile(point_weights, len(depths)) / len(depths)   # kernels: depth-major
     w = weights if objective == "mean" else None
 
-    def image_mean(m: np.ndarray) -> float:
-        return float(np.ravel(m) @ weights)
-
     def reduced(m: np.ndarray) -> float:
-        return float(m.max()) if objective == "worst" else image_mean(m)
+        return float(m.max()) if objective == "worst" else float(np.ravel(m) @ weights)
     # the uniform sweep over the optimal range, same exposure: the baseline
     optimal = span is None or (np.isclose(start, sweep.sensor_start, rtol=0, atol=1e-12)
                                   and np.isclose(end, sweep.sensor_end, rtol=0, atol=1e-12))
@@ -311,7 +317,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         lin_feasible = stage_feasible(tau_lin, widths, limits)
     else:
         mse_lin, kernels_lin = _linear_over_the_optimal_range(
-            setup, sweep, N, depths, shape, trace_bank, predictor, n_radii=n_radii, grid=grid)
+            setup, sweep, N, depths, shape, trace_bank, predictor, n_radii=n_radii, grid=grid,
+            rim_points=points if objective == "mean" and setup.mirror.is_symmetric else None)
         lin_feasible = True
     sol = local_optimum(model, widths, limits, objective=objective, weights=w)
     if deployed:
@@ -417,14 +424,20 @@ def _checked_design_inputs(setup: Setup, sweep, span, objective: str, restoratio
 
 
 def _linear_over_the_optimal_range(setup: Setup, sweep, N: int, depths, shape, trace_bank,
-                                   predictor, *, n_radii: int, grid: tuple[int, int]):
+                                   predictor, *, n_radii: int, grid: tuple[int, int],
+                                   rim_points: np.ndarray | None = None):
     """The baseline of a design over another span: the linear sweep over the optimal
     range, traced on its own planes and points; its predicted MSE (``shape``) and its
-    kernels."""
+    kernels. ``rim_points``: the design's radii to the rim, scaled to this geometry's rim
+    (the same count)."""
     lin_edges = np.linspace(sweep.sensor_start, sweep.sensor_end, N + 1)
     lin_geom = reference_geometry(setup, sweep=sweep)
-    lin_points = design_points(setup, lin_geom.sensor_distance, lin_geom,
-                               n_radii=n_radii, grid=grid)
+    if rim_points is not None:
+        lin_points = rim_points * (rim_field_radius(setup, lin_geom)
+                                   / float(np.hypot(*rim_points.T).max()))
+    else:
+        lin_points = design_points(setup, lin_geom.sensor_distance, lin_geom,
+                                   n_radii=n_radii, grid=grid)
     lin_bank = trace_bank(setup, lin_points, depths, lin_edges,
                           reference_sensor_distance=lin_geom.sensor_distance)
     lw = lin_bank.widths
