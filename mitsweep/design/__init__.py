@@ -23,8 +23,10 @@ mean 0.5, relative exposure, white = 1) under the sensor noise at the given ligh
 
 ``P̂_{p,l,k}`` the transfer function of the PSF averaged over bin k (traced,
 :mod:`mitsweep.design.planes`) on an n × n DFT grid, ``n_px`` the sensor's size in
-pixels. ``objective="worst"`` minimises ``max_{p,l} MSE_{p,l}``, ``"mean"`` the mean,
-subject to ``Σ τ_k = 1``, the stage's velocity (``Δi_k / (τ_k T) <= rig.max_velocity``)
+pixels. ``objective="worst"`` minimises ``max_{p,l} MSE_{p,l}``, ``"mean"`` the mean
+over the image, ``Σ_p w_p mean_l MSE_{p,l}`` (``w_p`` the share of the image point ``p``
+stands for, :func:`image_area_weights`; an untilted mirror's radii then reach the rim's
+image beyond the FOV), subject to ``Σ τ_k = 1``, the stage's velocity (``Δi_k / (τ_k T) <= rig.max_velocity``)
 and acceleration (``|v_{k+1} − v_k| <= rig.acceleration · min(τ_k, τ_{k+1}) T``, the
 velocity change made within the shorter of the two bins, as the rig's plan requires;
 imposed as it stands, not linearised). The uniform sweep (τ_k = 1/N) is the paper's linear sweep.
