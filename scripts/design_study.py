@@ -44,7 +44,7 @@ SETUPS = ("sphere", "paraboloid", "paraboloid_tilted")
 LUX = (50.0, 2.0, 0.5)
 
 
-def predicted(out: Path, *, planes: int, rays: int, grid: tuple[int, int],
+def predicted(out: Path, *, planes: int, rays: int, grid: tuple[int, int] | None,
               radii: int) -> list[dict]:
     from mitsweep.config import load_setup
     from mitsweep.deconv import paper_fig10_settings
@@ -166,7 +166,7 @@ def _mitsweep(args: list[str]) -> str:
 def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path, *,
                       planes: int, rays: int, tables_only: bool = False,
                       restoration: str = "matched", objective: str = "worst",
-                      deploy_nsr: dict | None = None, grid: tuple[int, int] = (5, 5),
+                      deploy_nsr: dict | None = None, grid: tuple[int, int] | None = None,
                       radii: int = 9) -> dict:
     """The linear profile and one designed per light level (worst-case objective, as
     ``mitsweep design-sweep`` by default), as motion-profile files under ``out``, and the
@@ -191,8 +191,10 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
         key.update(restoration=restoration, objective=objective)
     if objective == "mean":   # the mean over the image (points weighted by their area)
         key.update(mean="image area")
-    if tuple(grid) != (5, 5) or radii != 9:   # not design_sweep's default field points
-        key.update(grid=list(grid), radii=radii)
+    if grid is not None or radii != 9:   # not design_sweep's default field points
+        key.update(grid=None if grid is None else list(grid), radii=radii)
+    if restoration == "deployed" and not setup.mirror.is_symmetric:
+        key.update(field="grid bank nodes and cell centres, blended filters")
     out.mkdir(parents=True, exist_ok=True)
     linear = out / f"{name}_linear.json"
     save_motion_file(linear, MotionProfile.linear(sweep.sensor_start, sweep.sensor_end),
@@ -220,10 +222,11 @@ def designed_profiles(setup_path: Path, name: str, luxes: list[float], out: Path
             nsr = (deploy_nsr or {}).get(lux)
             d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank,
                              restoration="deployed", objective=objective, deploy_nsr=nsr,
-                             grid=tuple(grid), n_radii=radii)
+                             grid=None if grid is None else tuple(grid), n_radii=radii)
         else:
             d = design_sweep(setup, noise=noise, n_planes=planes, rays=rays, bank=bank,
-                             objective=objective, grid=tuple(grid), n_radii=radii)
+                             objective=objective, grid=None if grid is None else tuple(grid),
+                             n_radii=radii)
         bank = d.bank
         save_motion_file(path, d.profile, exposure_s=d.exposure_s,
                          provenance={"generator": "scripts/design_study.py", "setup": name,
@@ -266,7 +269,7 @@ def _same_ground_truth(a: Path, b: Path, scenes: int) -> bool:
 def measured_cases(out: Path, cases: list[tuple[str, float]], *, scenes: int, seed: int,
                    family: str, spp: list[str] | None, resolution: int | None, planes: int,
                    rays: int, tables_only: bool = False, restoration: str = "matched",
-                   objective: str = "worst", grid: tuple[int, int] = (5, 5),
+                   objective: str = "worst", grid: tuple[int, int] | None = None,
                    radii: int = 9) -> list[dict]:
     """Datasets rendered with the linear and each designed profile, deconvolved with their
     own banks and scored (``mitsweep dataset --motion`` and ``mitsweep evaluate``); one
@@ -576,7 +579,7 @@ def main(argv=None) -> int:
     p.add_argument("out")
     p.add_argument("--planes", type=int, default=64)
     p.add_argument("--rays", type=int, default=1 << 16)
-    p.add_argument("--grid", type=int, nargs=2, default=(5, 5))
+    p.add_argument("--grid", type=int, nargs=2, default=None)
     p.add_argument("--radii", type=int, default=9)
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--measured", nargs=2, metavar=("SETUP", "LUX"),
@@ -631,7 +634,7 @@ def main(argv=None) -> int:
                               spp=a.spp, resolution=a.resolution, planes=a.planes,
                               rays=a.rays, tables_only=a.tables_only,
                               restoration=a.restoration, objective=a.objective,
-                              grid=tuple(a.grid), radii=a.radii)
+                              grid=None if a.grid is None else tuple(a.grid), radii=a.radii)
         text = measured_table(rows)
         if a.diagnose:
             diagnose(out, rows, resolution=a.resolution)
@@ -643,7 +646,8 @@ def main(argv=None) -> int:
         (out / "measured.md").write_text(text, encoding="utf-8")
         print(text)
         return 0
-    rows = predicted(out, planes=a.planes, rays=a.rays, grid=tuple(a.grid), radii=a.radii)
+    rows = predicted(out, planes=a.planes, rays=a.rays,
+                     grid=None if a.grid is None else tuple(a.grid), radii=a.radii)
     text = table(rows)
     (out / "predicted.md").write_text(text)
     print(text)

@@ -45,8 +45,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="motion-profile file to write")
     p.add_argument("--radii", type=positive_int, default=9,
                    help="field radii from the centre to the FOV's edge (9; untilted mirrors)")
-    p.add_argument("--grid", type=positive_int, nargs=2, default=(5, 5), metavar=("ROWS", "COLS"),
-                   help="grid of field points over the sensor (5 5; tilted mirrors)")
+    p.add_argument("--grid", type=positive_int, nargs=2, default=None, metavar=("ROWS", "COLS"),
+                   help="tilted mirrors: grid of field points over the sensor (default 5 5); "
+                        "with --restoration deployed, the grid bank restoring the images "
+                        "(default the datasets', 11 11 for the tilted paraboloid), its nodes "
+                        "and cell centres the field points")
     p.add_argument("--depth", type=depth_mm, nargs="+", metavar="MM",
                    help="depths, mm (default: the setup's depth range's ends and the V_avg "
                         "depths 500, 1000, 5000, 10000 within it)")

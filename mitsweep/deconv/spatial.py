@@ -31,7 +31,8 @@ from .kernels import check_bank_matches, select_depth
 from .wiener import (check_image_values, check_nsr, estimate_nsr, wiener_deconvolve,
                      wiener_memory_bytes, working_dtype)
 
-__all__ = ["mirror_grid_shape", "hat_weights", "grid_axes_px", "grid_windows", "product_convolve",
+__all__ = ["mirror_grid_shape", "grid_bank_shape", "hat_weights", "grid_axes_px", "grid_windows",
+           "product_convolve",
            "scatter_blur", "grid_kernel_field", "spatially_varying_blur",
            "spatially_varying_deconvolve"]
 
@@ -79,6 +80,22 @@ def mirror_grid_shape(setup: Setup, *, nodes_across: int = MIRROR_GRID_NODES,
     n = int(np.ceil(int(nodes_across) * ratio - 1e-9))
     n = max(1, min(n, int(max_cells), max(1, min(W, H) // 4)))
     return n, n
+
+
+def grid_bank_shape(setup: Setup, grid: tuple[int, int] = (9, 9)) -> tuple[int, int]:
+    """(rows, cols) of the grid bank a dataset restores with: ``grid`` (the datasets'
+    default 9 x 9), refined to :func:`mirror_grid_shape` where the mirror's image covers
+    only part of the frame (a tilted mirror: 11 x 11 for the tilted paraboloid).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The image's geometry.
+    grid : (int, int)
+        The grid asked for, ``(rows, cols)``.
+    """
+    fine = mirror_grid_shape(setup)
+    return max(int(grid[0]), int(fine[0])), max(int(grid[1]), int(fine[1]))
 
 
 def hat_weights(x: np.ndarray, nodes: np.ndarray) -> np.ndarray:

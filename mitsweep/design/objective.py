@@ -47,8 +47,8 @@ from ..deconv.noise import SensorNoise
 from ..deconv.wiener import regulariser
 from ..deprecation import renamed_keywords
 
-__all__ = ["WienerModel", "wiener_model", "DeployedWienerModel", "deployed_wiener_model",
-           "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
+__all__ = ["WienerModel", "wiener_model", "DeployedWienerModel", "BlendedWienerModel",
+           "deployed_wiener_model", "DEFAULT_FFT_SIZE", "SIGNAL_MEAN"]
 
 #: DFT grid of the MSE sum (steps of 1/32 cycle/pixel; a 31 px kernel fits). Measured on
 #: the paraboloid at 50 and 0.5 lux: uniform and optimised worst-case MSE within 0.1 % of
@@ -288,10 +288,115 @@ class DeployedWienerModel:
         return value, grad
 
 
+@dataclass(frozen=True)
+class BlendedWienerModel:
+    r"""The deployed restoration's MSE where a point is restored by a blend of other
+    points' filters: the spatially varying deconvolution of a grid bank
+    (:func:`mitsweep.deconv.spatial.spatially_varying_deconvolve`) restores a pixel
+    between grid nodes with :math:`G = \sum_b a_b G_b`, the hat-weighted Wiener filters
+    :math:`G_b = Q_b^*/(|Q_b|^2 + R_f)` of the nodes' kernels :math:`Q_b` at the deployed
+    depth, while the pixel's own blur is :math:`K`. With :math:`E = 1 - G K`,
+
+    .. math:: \mathrm{MSE}(τ) = \frac{σ^2}{n^2}\sum_{f\ne 0}
+              \frac{|E|^2}{R_t} + |G|^2 ,
+
+    which is :class:`DeployedWienerModel`'s MSE when the blend is the point's own node
+    (one filter, weight 1). Between nodes it counts what a design at the nodes alone
+    does not see: a profile whose kernels change fast across the field is restored with
+    its neighbours' filters.
+
+    Attributes
+    ----------
+    spectra_re, spectra_im : (J, N, F) ndarray
+        Blur spectra :math:`\hat P_{d,k}` of each kernel j = (depth, point).
+    filters : (B, N, F) complex ndarray
+        :math:`\hat Q_{b,k}` of the B filter sources (the nodes at the deployed depth;
+        a node off the mirror holds a delta kernel, spectrum 1).
+    blend_index : (J, M) int ndarray
+        The filters each kernel's restoration blends.
+    blend_weight : (J, M) ndarray
+        Their weights :math:`a_b` (rows summing to 1).
+    weight, reg_true, reg_filter : (F,) ndarray
+    noise_var : float
+    """
+
+    spectra_re: np.ndarray
+    spectra_im: np.ndarray
+    filters: np.ndarray
+    blend_index: np.ndarray
+    blend_weight: np.ndarray
+    weight: np.ndarray
+    reg_true: np.ndarray
+    reg_filter: np.ndarray
+    noise_var: float
+
+    @property
+    def n_kernels(self) -> int:
+        return self.spectra_re.shape[0]
+
+    def _parts(self, t: np.ndarray):
+        c = WienerModel._combine
+        k = c(t, self.spectra_re) + 1j * c(t, self.spectra_im)          # (J, F)
+        q = np.matmul(t, self.filters)                                  # (B, F)
+        d = (q * q.conj()).real + self.reg_filter
+        g_b = q.conj() / d
+        g = np.einsum("jm,jmf->jf", self.blend_weight, g_b[self.blend_index])
+        return k, q, d, g
+
+    def mse(self, tau: ArrayLike) -> np.ndarray:
+        """(J,) MSE at ``tau`` (N,), or (B, J) for a batch (B, N).
+
+        Parameters
+        ----------
+        tau : array_like
+            Exposure fractions of the N planes, (N,) summing to 1 (or a batch (B, N)).
+        """
+        t = np.asarray(tau, dtype=float)
+        if t.ndim == 2:
+            return np.stack([self.mse(row) for row in t])
+        k, _, _, g = self._parts(t)
+        e = 1.0 - g * k
+        err = (e * e.conj()).real / self.reg_true + (g * g.conj()).real
+        return self.noise_var * (self.weight * err).sum(axis=-1)
+
+    def mse_and_grad(self, tau: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """(J,) MSE and its (J, N) gradient in τ (for one τ).
+
+        Parameters
+        ----------
+        tau : array_like
+            Exposure fractions of the N planes, (N,) summing to 1.
+        """
+        t = np.asarray(tau, dtype=float)
+        k, q, d, g = self._parts(t)
+        e = 1.0 - g * k
+        s = self.noise_var * self.weight
+        value = (s * ((e * e.conj()).real / self.reg_true + (g * g.conj()).real)).sum(axis=-1)
+        # dMSE = 2 Re Σ_f s [-(E* G / R_t) dK + (G* - E* K / R_t) dG]
+        c = -s * e.conj() * g / self.reg_true                          # (J, F)
+        grad = 2.0 * (np.matmul(self.spectra_re, c.real[:, :, None])[..., 0]
+                      - np.matmul(self.spectra_im, c.imag[:, :, None])[..., 0])
+        h = s * (g.conj() - e.conj() * k / self.reg_true)              # (J, F)
+        # dG_b/dτ_k = α_b Q*_bk - β_b Q_bk, α_b = R_f/D_b², β_b = (Q_b*)²/D_b²
+        alpha = self.reg_filter / (d * d)
+        beta = q.conj() ** 2 / (d * d)
+        for m in range(self.blend_index.shape[1]):
+            b, a = self.blend_index[:, m], self.blend_weight[:, m]
+            for node in np.unique(b[a != 0]):
+                rows = np.flatnonzero((b == node) & (a != 0))
+                hr = h[rows] * a[rows, None]
+                z = (alpha[node] * hr) @ self.filters[node].conj().T \
+                    - (beta[node] * hr) @ self.filters[node].T
+                grad[rows] += 2.0 * z.real
+        return value, grad
+
+
 @renamed_keywords(depths_mm="depths", deploy_depth_mm="deploy_depth")
 def deployed_wiener_model(kernels: np.ndarray, depths: ArrayLike, noise: SensorNoise, *,
                           deploy_depth: float = 500.0, deploy_nsr: float | None = None,
-                          n_fft: int = DEFAULT_FFT_SIZE, n_px: float) -> DeployedWienerModel:
+                          n_fft: int = DEFAULT_FFT_SIZE, n_px: float,
+                          blend: tuple[np.ndarray, np.ndarray] | None = None
+                          ) -> DeployedWienerModel | BlendedWienerModel:
     """The :class:`DeployedWienerModel` of bin-averaged kernels (n_depths, n_points, N,
     K, K): each depth restored with the kernels of the bank depth nearest
     ``deploy_depth`` (in 1/depth, as :func:`mitsweep.deconv.kernels.select_depth`)
@@ -315,6 +420,11 @@ def deployed_wiener_model(kernels: np.ndarray, depths: ArrayLike, noise: SensorN
         DFT grid of the MSE sum.
     n_px : float
         The restored image's size, px (the prior's scale).
+    blend : (index, weight), optional
+        Each point restored by a blend of nodes' filters (a grid bank's spatially varying
+        deconvolution): ``index`` (n_points, M) the points whose kernels at the deployed
+        depth are the nodes (-1: a node off the mirror, a delta kernel), ``weight``
+        (n_points, M) their hat weights. Then a :class:`BlendedWienerModel`.
     """
     base = wiener_model(kernels, noise, n_fft=n_fft, n_px=n_px)
     k = np.asarray(kernels)
@@ -327,8 +437,31 @@ def deployed_wiener_model(kernels: np.ndarray, depths: ArrayLike, noise: SensorN
     idx = np.array([d0 * P + p for _ in range(D) for p in range(P)])
     c = base.reg / float(noise.nsr(SIGNAL_MEAN))
     reg_f = base.reg if deploy_nsr is None else c * float(deploy_nsr)
+    if blend is not None:
+        return _blended(base, blend, d0, D, P, reg_f)
     return DeployedWienerModel(spectra_re=base.spectra_re, spectra_im=base.spectra_im,
                                deployed_re=np.ascontiguousarray(base.spectra_re[idx]),
                                deployed_im=np.ascontiguousarray(base.spectra_im[idx]),
                                weight=base.weight, reg_true=base.reg, reg_filter=reg_f,
                                noise_var=base.noise_var)
+
+
+def _blended(base: WienerModel, blend, d0: int, D: int, P: int,
+             reg_f: np.ndarray) -> BlendedWienerModel:
+    """:func:`deployed_wiener_model`'s :class:`BlendedWienerModel`: the filters are the
+    points' spectra at the deployed depth ``d0`` and, last, a delta kernel's (1)."""
+    index, weight = (np.asarray(x) for x in blend)
+    if index.shape != weight.shape or index.ndim != 2 or index.shape[0] != P:
+        raise ValueError(f"blend: need (index, weight) of shape ({P}, M), got "
+                         f"{index.shape} and {weight.shape}")
+    if np.any(index < -1) or np.any(index >= P):
+        raise ValueError(f"blend: indices must be points 0..{P - 1} or -1 (delta)")
+    spec = base.spectra_re[d0 * P:(d0 + 1) * P] + 1j * base.spectra_im[d0 * P:(d0 + 1) * P]
+    delta = np.ones((1,) + spec.shape[1:], dtype=complex)
+    filters = np.concatenate([spec, delta])
+    idx = np.where(index < 0, P, index).astype(np.intp)
+    return BlendedWienerModel(spectra_re=base.spectra_re, spectra_im=base.spectra_im,
+                              filters=filters, blend_index=np.tile(idx, (D, 1)),
+                              blend_weight=np.tile(weight.astype(float), (D, 1)),
+                              weight=base.weight, reg_true=base.reg, reg_filter=reg_f,
+                              noise_var=base.noise_var)

@@ -15,6 +15,7 @@ import numpy as np
 from ..config import Setup, SetupError
 from ..deprecation import renamed_fields, renamed_keywords
 from ..deconv.noise import SensorNoise
+from ..deconv.spatial import grid_bank_shape
 from ..optics import optimal_sweep_range
 from ..optics.motion import MotionProfile
 from ..optics.reference import ReferenceGeometry, reference_geometry
@@ -136,6 +137,66 @@ def design_points(setup: Setup, i_ref: float, geometry: ReferenceGeometry, *, n_
     return np.asarray(pts, dtype=float)
 
 
+def blended_grid_points(setup: Setup, i_ref: float, grid: tuple[int, int]
+                        ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """A tilted mirror's field points under the deployed restoration: the nodes of the
+    grid bank it is restored with (cell centres of a ``grid`` over the sensor,
+    :func:`mitsweep.tracer.bank.grid_points`) and the centres of the cells between
+    them, those that see the mirror, with the blend of node filters that restores each
+    (:func:`mitsweep.deconv.spatial.spatially_varying_deconvolve`): a node its own, a
+    cell centre the four corners' at 1/4 each (-1: a corner off the mirror, whose bank
+    kernel is a delta). Nodes and centres are a regular (checkerboard) sampling of the
+    image: equal shares of it.
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The mirror, lens and sensor.
+    i_ref : float
+        Reference sensor distance, mm.
+    grid : (int, int)
+        The grid bank's ``(rows, cols)`` (:func:`mitsweep.deconv.spatial.grid_bank_shape`).
+
+    Returns
+    -------
+    points : (P, 2) ndarray
+        Nodes first, then cell centres, (u, v) mm.
+    blend : (index (P, 4), weight (P, 4))
+        Each point's filters (point indices of nodes, -1 off the mirror) and weights.
+    """
+    rows, cols = (int(g) for g in grid)
+    nodes = grid_points(setup, (rows, cols)).reshape(rows, cols, 2)
+
+    def sees(u: float, v: float) -> bool:
+        try:
+            source_from_image(setup, u, v, 1000.0, reference_sensor_distance=i_ref)
+        except ValueError:
+            return False
+        return True
+
+    node_id = -np.ones((rows, cols), dtype=int)
+    points: list[np.ndarray] = []
+    index: list[list[int]] = []
+    weight: list[list[float]] = []
+    for r in range(rows):
+        for c in range(cols):
+            if sees(*(float(x) for x in nodes[r, c])):
+                node_id[r, c] = len(points)
+                points.append(nodes[r, c])
+                index.append([len(points) - 1, -1, -1, -1])
+                weight.append([1.0, 0.0, 0.0, 0.0])
+    for r in range(rows - 1):
+        for c in range(cols - 1):
+            centre = nodes[r:r + 2, c:c + 2].reshape(4, 2).mean(axis=0)
+            if sees(float(centre[0]), float(centre[1])):
+                points.append(centre)
+                index.append(node_id[r:r + 2, c:c + 2].ravel().tolist())
+                weight.append([0.25] * 4)
+    if not points:
+        raise SetupError("design: no grid point sees the mirror")
+    return np.asarray(points, dtype=float), (np.asarray(index), np.asarray(weight))
+
+
 def image_area_weights(points: np.ndarray, symmetric: bool) -> np.ndarray:
     """Each field point's share of the image it stands for: an untilted mirror's radii
     ``0 … R`` (:func:`design_points`) the annuli between their midpoints (area
@@ -204,7 +265,7 @@ def _v_avg(kernels, depths) -> tuple[float, list]:
 @renamed_keywords(span_mm="span", deploy_depth_mm="deploy_depth")
 def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
                  n_planes: int = 64, span: tuple[float, float] | None = None,
-                 n_radii: int = 9, grid: tuple[int, int] = (5, 5),
+                 n_radii: int = 9, grid: tuple[int, int] | None = None,
                  depths: Sequence[float] | None = None, rays: int = DEFAULT_PLANE_RAYS,
                  kernel_size: int = 31, seed: int = 0, n_fft: int = DEFAULT_FFT_SIZE,
                  sub_planes: int = DEFAULT_SUB_PLANES, brute_force_steps: int = 16,
@@ -229,7 +290,11 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         Sensor distances the sweep runs between, mm (default: the optimal range,
         ``sensor_start`` → ``sensor_end``). The exposure is the setup's sweep exposure
         over the optimal range either way.
-    n_radii, grid : field points (:func:`design_points`).
+    n_radii, grid : field points (:func:`design_points`; ``grid`` default 5 x 5). Under
+        the deployed restoration a tilted mirror's ``grid`` is the grid bank's it is
+        restored with (default :func:`mitsweep.deconv.spatial.grid_bank_shape`, as
+        datasets use), its nodes and cell centres the points
+        (:func:`blended_grid_points`).
     depths : sequence of float, optional
         Default :func:`design_depths`.
     rays, kernel_size, seed, sub_planes : the plane banks (:func:`plane_bank`).
@@ -277,9 +342,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     motion_lin = MotionProfile.linear(start, end)
     geom = reference_geometry(setup, sweep=sweep, motion=motion_lin)
     i_ref = geom.sensor_distance
-    # the image's mean has pixels beyond the FOV (29 % of the paraboloid's mirror image)
-    points = design_points(setup, i_ref, geom, n_radii=n_radii, grid=grid,
-                           to_rim=objective == "mean")
+    deployed = restoration == "deployed"
+    points, blend, grid = _field(setup, geom, deployed, objective, n_radii, grid)
     trace_bank = functools.partial(plane_bank, rays=rays, kernel_size=kernel_size, seed=seed,
                                    sub_planes=sub_planes, progress=progress)
     if bank is None:
@@ -290,13 +354,12 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     widths = bank.widths
     n_px = math.sqrt(setup.sensor.resolution[0] * setup.sensor.resolution[1])
     t0 = time.perf_counter()
-    deployed = restoration == "deployed"
 
     def predictor(b: PlaneBank):
         if deployed:
             return deployed_wiener_model(b.kernels, b.depths, noise, n_fft=n_fft, n_px=n_px,
                                          deploy_depth=deploy_depth,
-                                         deploy_nsr=deploy_nsr)
+                                         deploy_nsr=deploy_nsr, blend=blend)
         return wiener_model(b.kernels, noise, n_fft=n_fft, n_px=n_px)
 
     model = predictor(bank)
@@ -317,7 +380,8 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
         lin_feasible = stage_feasible(tau_lin, widths, limits)
     else:
         mse_lin, kernels_lin = _linear_over_the_optimal_range(
-            setup, sweep, N, depths, shape, trace_bank, predictor, n_radii=n_radii, grid=grid,
+            setup, sweep, N, depths, shape, trace_bank, predictor, n_radii=n_radii,
+            grid=grid or (5, 5), points=points if blend is not None else None,
             rim_points=points if objective == "mean" and setup.mirror.is_symmetric else None)
         lin_feasible = True
     sol = local_optimum(model, widths, limits, objective=objective, weights=w)
@@ -359,8 +423,10 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     report = {
         "setup": setup.name, "objective": objective, "planes": N,
         "restoration": restoration,
-        "deploy": ({"depth_mm": float(deploy_depth), "nsr": deploy_nsr} if deployed
-                   else None),
+        "deploy": ({"depth_mm": float(deploy_depth), "nsr": deploy_nsr,
+                    "grid_bank": None if blend is None or grid is None
+                    else [int(g) for g in grid]}
+                   if deployed else None),
         "returns_linear": returns_linear,
         "span_mm": [start, end], "optimal_range_mm": [sweep.sensor_start, sweep.sensor_end],
         "exposure_s": T, "noise": noise.as_dict(), "depths_mm": list(depths),
@@ -384,6 +450,21 @@ def design_sweep(setup: Setup, *, noise: SensorNoise, objective: str = "worst",
     return SweepDesign(profile=profile, tau=tau, tau_linear=tau_lin, edges=edges,
                        exposure_s=T, mse=mse, mse_linear=mse_lin, points_uv=points,
                        depths=np.asarray(depths), report=report, bank=bank)
+
+
+def _field(setup: Setup, geom: ReferenceGeometry, deployed: bool, objective: str,
+           n_radii: int, grid: tuple[int, int] | None):
+    """:func:`design_sweep`'s field points, their blend of filters (None: each its own)
+    and the grid they come from."""
+    if deployed and not setup.mirror.is_symmetric:
+        # restored between the bank's nodes by a blend of their filters
+        grid = grid or grid_bank_shape(setup)
+        points, blend = blended_grid_points(setup, geom.sensor_distance, grid)
+        return points, blend, grid
+    # the image's mean has pixels beyond the FOV (29 % of the paraboloid's mirror image)
+    grid = grid or (5, 5)
+    return design_points(setup, geom.sensor_distance, geom, n_radii=n_radii, grid=grid,
+                         to_rim=objective == "mean"), None, grid
 
 
 def _checked_design_inputs(setup: Setup, sweep, span, objective: str, restoration: str,
@@ -425,14 +506,17 @@ def _checked_design_inputs(setup: Setup, sweep, span, objective: str, restoratio
 
 def _linear_over_the_optimal_range(setup: Setup, sweep, N: int, depths, shape, trace_bank,
                                    predictor, *, n_radii: int, grid: tuple[int, int],
-                                   rim_points: np.ndarray | None = None):
+                                   rim_points: np.ndarray | None = None,
+                                   points: np.ndarray | None = None):
     """The baseline of a design over another span: the linear sweep over the optimal
     range, traced on its own planes and points; its predicted MSE (``shape``) and its
     kernels. ``rim_points``: the design's radii to the rim, scaled to this geometry's rim
-    (the same count)."""
+    (the same count); ``points``: the design's own (a grid bank's nodes and centres)."""
     lin_edges = np.linspace(sweep.sensor_start, sweep.sensor_end, N + 1)
     lin_geom = reference_geometry(setup, sweep=sweep)
-    if rim_points is not None:
+    if points is not None:
+        lin_points = points
+    elif rim_points is not None:
         lin_points = rim_points * (rim_field_radius(setup, lin_geom)
                                    / float(np.hypot(*rim_points.T).max()))
     else:

@@ -597,10 +597,9 @@ def bank_grid(opts: DatasetOptions, setup: Setup | None) -> list[int]:
     grid = [int(g) for g in opts.grid]
     if setup is None or setup.mirror.is_symmetric:
         return grid
-    from ..deconv.spatial import mirror_grid_shape
+    from ..deconv.spatial import grid_bank_shape
 
-    fine = mirror_grid_shape(setup)
-    return [max(grid[0], int(fine[0])), max(grid[1], int(fine[1]))]
+    return list(grid_bank_shape(setup, (grid[0], grid[1])))
 
 
 def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:

@@ -104,7 +104,7 @@ def _plot_design(design, path: str | os.PathLike) -> None:
 def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLike, *,
                           lux: float = 50.0, objective: str = "worst", planes: int = 64,
                           span: tuple[float, float] | None = None, radii: int = 9,
-                          grid: tuple[int, int] = (5, 5),
+                          grid: tuple[int, int] | None = None,
                           depths: Sequence[float] | None = None, rays: int = 1 << 16,
                           kernel_size: int = 31, seed: int = 0, brute_force_steps: int = 16,
                           plot: str | os.PathLike | None = None,
@@ -133,7 +133,8 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
         ``span_mm`` (still accepted, with a DeprecationWarning).
     radii, grid
         Field points: radii from the centre to the FOV's edge (untilted mirrors), or a
-        grid over the sensor (tilted mirrors).
+        grid over the sensor (tilted mirrors; default 5 x 5, and under the deployed
+        restoration the grid bank's, :func:`mitsweep.design.design_sweep`).
     depths : sequence of float, optional
         Depths, mm (default: the depth range's ends and the V_avg depths within it).
     rays, kernel_size, seed
@@ -207,7 +208,9 @@ def design_motion_profile(setup: Setup | str | os.PathLike, out: str | os.PathLi
         design = design_sweep(setup, noise=noise, objective=objective, n_planes=planes,
                               span=None if span is None else
                               (float(span[0]), float(span[1])),
-                              n_radii=radii, grid=(int(grid[0]), int(grid[1])), depths=depths,
+                              n_radii=radii,
+                              grid=None if grid is None else (int(grid[0]), int(grid[1])),
+                              depths=depths,
                               rays=rays,
                               kernel_size=kernel_size, seed=seed,
                               brute_force_steps=brute_force_steps, progress=step,
