@@ -43,7 +43,7 @@ def test_design_sweep_deployed_restoration_reaches_the_design_and_the_file(tmp_p
     assert rc == 0, err
     rep = json.loads(stdout)
     assert rep["restoration"] == "deployed"
-    assert rep["deploy"] == {"depth_mm": 1000.0, "nsr": 0.01}
+    assert rep["deploy"] == {"depth_mm": 1000.0, "nsr": 0.01, "grid_bank": None}
     # the deployed objective has no certified bound: none is claimed
     assert rep["certificate"]["lower_bound"] is None
     assert rep["certificate"]["brute_force"] is None
@@ -73,7 +73,7 @@ def test_design_sweep_deployed_defaults_are_the_datasets(tmp_path, capsys):
                             "deployed", "--out", tmp_path / "p.json", "--json"], capsys)
     assert rc == 0, err
     rep = json.loads(stdout)
-    assert rep["deploy"] == {"depth_mm": 500.0, "nsr": None}
+    assert rep["deploy"] == {"depth_mm": 500.0, "nsr": None, "grid_bank": None}
     d = design_sweep(load_setup(PARABOLOID), noise=paper_fig10_settings(NOISE_PIXEL_MM, 2.0)[
         "sweep"], objective="mean", n_planes=8, n_radii=2, depths=[300.0, 10000.0],
         rays=4096, restoration="deployed")

@@ -11,7 +11,9 @@ The span (default: the optimal sweep range, paper Eq. 8–9) is cut into N equal
 sensor distance; ``τ_k`` is the fraction of the exposure ``T`` (fixed: the setup's sweep
 exposure over the optimal range) spent in bin k, at constant velocity there. For every
 field point ``p`` (radii 0 .. the FOV's edge; for a tilted mirror, grid points over the
-sensor that see the mirror) and depth ``l`` (the setup's depth range's ends and the
+sensor that see the mirror, and under the deployed restoration the nodes of the grid bank
+that restores the image and its cell centres, :func:`~mitsweep.design.sweep.blended_grid_points`)
+and depth ``l`` (the setup's depth range's ends and the
 paper's V_avg depths 0.5, 1, 5, 10 m within it) the predicted error is the per-pixel
 Wiener MSE of a natural image (power spectrum ``∝ 1/|f|²``, variance ``σ_s² = 0.5²``,
 mean 0.5, relative exposure, white = 1) under the sensor noise at the given light level
