@@ -492,6 +492,36 @@ PHOTO_CORPUS = Figure(
     rows=_photo_corpus_rows, recorded="docs/reference/photo_corpus.json", timings=True)
 
 
+#: The terms of scripts/budget_study.py's table, in its column order.
+_BUDGET_TERMS = ("information", "depth", "mismatch", "monte_carlo", "sensor", "weight")
+
+
+def _budget_rows(outputs: list[str]) -> Rows:
+    """image | region | pixels | each term (MSE x 1e4, – where not measured) | total |
+    PSNR: per budget of scripts/budget_study.py, the whole mirror then each radial bin."""
+    def cells(terms: dict, mse: float, psnr: float | None) -> list:
+        return [*(None if terms.get(t) is None else [1e4 * terms[t]] for t in _BUDGET_TERMS),
+                [1e4 * mse], None if psnr is None else [psnr]]
+    rows: Rows = []
+    for b in _json(outputs[0])["budgets"].values():
+        t, r = b["total"], b["per_radius"]
+        rows.append([None, None, [t["pixels"]], *cells(t["terms"], t["mse"], t["psnr"])])
+        e = r["edges_px"]
+        for i, n in enumerate(r["pixels"]):
+            if n:
+                rows.append([None, [e[i], e[i + 1]], [n],
+                             *cells({k: v[i] for k, v in r["terms"].items()}, r["mse"][i],
+                                    r["psnr"][i])])
+    return rows
+
+
+BUDGET_STUDY = Figure(
+    cites="scripts/budget_study.py",
+    commands=(".venv/bin/python scripts/budget_study.py OUT "
+              "--json docs/reference/budget_study.json",),
+    rows=_budget_rows, recorded="docs/reference/budget_study.json")
+
+
 #: Every checked figure, by the name its page's marker gives.
 FIGURES: dict[str, Figure] = {
     "sweep-ranges": SWEEP_RANGES,
@@ -502,6 +532,7 @@ FIGURES: dict[str, Figure] = {
     "weight-bench-blur": WEIGHT_BENCH_BLUR,
     "design-predicted": DESIGN_PREDICTED,
     "photo-corpus": PHOTO_CORPUS,
+    "budget-study": BUDGET_STUDY,
     "demo-psnr": DEMO,
     "demo-psnr-noisy": DEMO_NOISY,
     "demo-psnr-per-radius": DEMO_RADIUS,
