@@ -157,7 +157,11 @@ def test_the_blended_gradient_matches_finite_differences(kernels):
 
 
 @pytest.mark.parametrize("blend", [(np.array([[0], [2]]), np.ones((2, 1))),
-                                   (np.array([[0, 1]]), np.ones((1, 2)))])
+                                   (np.array([[0, 1]]), np.ones((1, 2))),
+                                   (np.array([[0, 1], [1, 0]]), np.full((2, 2), 0.4)),
+                                   (np.array([[0, 1], [1, 0]]), np.array([[1.5, -0.5],
+                                                                          [0.5, 0.5]])),
+                                   (np.array([[0], [1]]), np.array([[np.nan], [1.0]]))])
 def test_a_blend_that_does_not_name_points_is_refused(kernels, blend):
     with pytest.raises(ValueError, match="blend"):
         deployed_wiener_model(kernels, [300.0, 500.0, 2000.0], NOISE, n_fft=16, n_px=256,
@@ -199,3 +203,32 @@ def test_a_tilted_mirrors_deployed_field_is_the_grid_banks_nodes_and_cell_centre
     assert d.report["deploy"]["grid_bank"] == [3, 3]
     assert len(d.points_uv) <= 9 + 4
     assert d.report["optimized_image_mean_mse"] <= d.report["linear_image_mean_mse"] * (1 + 1e-12)
+
+
+def test_the_blended_model_stays_finite_on_extreme_kernels_and_profiles():
+    """Delta kernels (an in-focus plane), flat ones (far out of focus), a profile that
+    dwells on one plane and weights at the ends of [0, 1]: the MSE and its gradient
+    stay finite and the MSE non-negative."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=40, deadline=None)
+    @given(seed=st.integers(0, 2 ** 16), dwell=st.integers(-1, 5),
+           w=st.floats(0.0, 1.0), flat=st.booleans())
+    def check(seed, dwell, w, flat):
+        rng = np.random.default_rng(seed)
+        k = rng.random((2, 2, 6, 7, 7)) ** 8
+        if flat:
+            k[:, 1] = 1.0
+        k[0, 0, :] = 0.0
+        k[0, 0, :, 3, 3] = 1.0                           # an in-focus delta
+        k /= k.sum(axis=(-2, -1), keepdims=True)
+        model = deployed_wiener_model(k, [300.0, 500.0], NOISE, n_fft=16, n_px=256,
+                                      deploy_nsr=1e-6,
+                                      blend=(np.array([[0, 1], [1, -1]]),
+                                             np.array([[w, 1 - w], [1 - w, w]])))
+        tau = np.eye(6)[dwell] if dwell >= 0 else np.full(6, 1 / 6)
+        value, grad = model.mse_and_grad(tau)
+        assert np.all(np.isfinite(value)) and np.all(value >= 0)
+        assert np.all(np.isfinite(grad))
+    check()

@@ -456,6 +456,10 @@ def _blended(base: WienerModel, blend, d0: int, D: int, P: int,
                          f"{index.shape} and {weight.shape}")
     if np.any(index < -1) or np.any(index >= P):
         raise ValueError(f"blend: indices must be points 0..{P - 1} or -1 (delta)")
+    w = np.asarray(weight, dtype=float)
+    if not np.all(np.isfinite(w)) or np.any(w < 0) or not np.allclose(w.sum(axis=1), 1.0,
+                                                                       rtol=0, atol=1e-9):
+        raise ValueError("blend: weights must be finite, >= 0 and sum to 1 for each point")
     spec = base.spectra_re[d0 * P:(d0 + 1) * P] + 1j * base.spectra_im[d0 * P:(d0 + 1) * P]
     delta = np.ones((1,) + spec.shape[1:], dtype=complex)
     filters = np.concatenate([spec, delta])
