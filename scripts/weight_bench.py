@@ -166,8 +166,9 @@ def main(argv: list[str] | None = None) -> int:
         print(format_rows(synth, ("before", "model", "blind")))
     if data:
         print("datasets (Wiener, natural prior, as the pipeline restores); "
-              "before: max(variance estimate, model NSR at 0.5); after: noise model + spectrum")
-        print(format_rows(data, ("before", "after")))
+              "before: max(variance estimate, model NSR at 0.5); after: noise model + the "
+              "frame's spectrum; mirror: noise model + the mirror's spectrum")
+        print(format_rows(data, ("before", "after", "mirror")))
     if photos:
         print("photos (restore_photo, polar Wiener, natural prior); before: the former "
               "default (discrepancy principle); default: restore_photo without nsr now")

@@ -91,6 +91,21 @@ def test_wiener_takes_its_nsr_from_the_noise_model(noisy_sweep, calls, tmp_path)
     np.testing.assert_array_equal(seen, noisy)  # in the renders' units
 
 
+def test_a_task_may_read_the_spectrum_over_the_mirror(noisy_sweep, calls, tmp_path):
+    """``weights="mirror"``: model_nsr with the mirror's spectrum, and the image records
+    the rule."""
+    path, model = noisy_sweep
+    params = dict(restore_params("wiener"), weights="mirror")
+    tasks.restore(TINY, tmp_path / "edof.exr", image=path, bank=tmp_path / "bank.npz",
+                  ground_truth=tmp_path / "pinhole.exr", **params)
+    (seen, kw), = calls
+    noisy, _, meta = tasks.read_rgb(path)
+    assert kw["nsr"] == pytest.approx(model_nsr(noisy, BANK, model, level=meta["white_level"],
+                                                mask=np.ones((32, 32), bool),
+                                                spectrum="mirror"))
+    assert tasks.read_rgb(tmp_path / "edof.exr")[2]["nsr_rule"] == "mirror"
+
+
 def test_older_manifests_wiener_tasks_keep_their_rule(noisy_sweep, calls, tmp_path):
     """A task without ``weights`` (older manifests' params) keeps the former rule."""
     path, model = noisy_sweep

@@ -10,10 +10,10 @@ import pytest
 import scipy.fft as sfft
 
 from mitsweep.deconv import SensorNoise, polar_deconvolve
-from mitsweep.deconv.synthetic import synthetic_radial_bank
+from mitsweep.deconv.synthetic import synthetic_grid_bank, synthetic_radial_bank
 from mitsweep.deconv.weight_bench import independent_blur_problem, weight_rows
 from mitsweep.deconv.weights import (blind_nsr, kernel_shares, model_nsr, noise_variance,
-                                     wiener_risk)
+                                     ring_spectrum, spectrum_window, wiener_risk)
 from mitsweep.deconv.wiener import natural_prior_scale
 
 N = 256
@@ -117,3 +117,72 @@ def test_model_nsr_refuses_what_it_cannot_use(blur_case):
     with pytest.raises(ValueError, match="noise sigma must be"):
         model_nsr(y, bank, -1.0)
     assert math.isfinite(model_nsr(np.zeros_like(y), bank, 0.01, unexplained=False))
+
+
+def disk_mask(n: int, radius: float) -> np.ndarray:
+    yy, xx = np.mgrid[:n, :n]
+    return np.hypot(yy - n / 2, xx - n / 2) < radius
+
+
+def test_a_window_reads_white_noise_inside_it_whatever_lies_outside():
+    """White noise of σ = 0.1 inside a disk and a bright, sharp checkerboard outside:
+    through the disk's taper every ring reads σ² (within the periodogram's own scatter,
+    ±10-20 % per ring here), where the frame's spectrum is the checkerboard's."""
+    n = 256
+    rng = np.random.default_rng(3)
+    mask = disk_mask(n, 90)
+    yy, xx = np.mgrid[:n, :n]
+    board = 5.0 * (((yy // 4) + (xx // 4)) % 2)
+    img = np.where(mask, 0.1 * rng.standard_normal((n, n)), board)
+    f, p = ring_spectrum(img, window=spectrum_window(mask))
+    ok = (f > 0.1) & (f < 0.5)             # rings of a few hundred independent values
+    np.testing.assert_allclose(p[ok], 0.01, rtol=0.25)
+    assert np.mean(p[ok]) == pytest.approx(0.01, rel=0.05)
+    _, p_frame = ring_spectrum(img)
+    assert p_frame[ok].max() > 10 * 0.01
+    with pytest.raises(ValueError, match="window must be"):
+        ring_spectrum(img, window=-np.ones((n, n)))
+    with pytest.raises(ValueError, match="window must be"):
+        ring_spectrum(img, window=np.ones((n, n - 1)))
+
+
+def test_the_mirrors_spectrum_ignores_what_lies_outside_the_mirror(blur_case):
+    """With the noise known (σ, nothing estimated from the image), the NSR of
+    ``spectrum="mirror"`` depends on the mirror's pixels only; the frame's rule
+    changes with the content outside."""
+    p = blur_case
+    y, bank, mask = p["blurred"], p["bank"], p["mask"]
+    rng = np.random.default_rng(0)
+    other = np.where(mask, y, rng.uniform(0, 1, y.shape))
+    kw = dict(mask=mask, unexplained=False)
+    assert model_nsr(other, bank, p["sigma"], spectrum="mirror", **kw) == pytest.approx(
+        model_nsr(y, bank, p["sigma"], spectrum="mirror", **kw), rel=1e-9)
+    frame_a = model_nsr(y, bank, p["sigma"], spectrum="frame", **kw)
+    frame_b = model_nsr(other, bank, p["sigma"], spectrum="frame", **kw)
+    assert abs(math.log(frame_a / frame_b)) > 0.1
+    # with every pixel restored the two rules are one
+    full = np.ones(y.shape, bool)
+    assert model_nsr(y, bank, p["sigma"], mask=full, spectrum="mirror") == model_nsr(
+        y, bank, p["sigma"], mask=full, spectrum="frame")
+    with pytest.raises(ValueError, match="spectrum must be 'mirror' or 'frame'"):
+        model_nsr(y, bank, p["sigma"], spectrum="disk")
+
+
+def test_kernel_shares_without_stand_ins_drop_the_nodes_off_the_mirror():
+    bank = synthetic_grid_bank((64, 64), (3, 3), size=5)
+    valid = np.ones(9, bool)
+    valid[[0, 2]] = False
+    from dataclasses import replace
+
+    marked = replace(bank, metadata={**bank.metadata, "valid": valid.tolist()})
+    w_all = kernel_shares(marked, (64, 64))
+    w_traced = kernel_shares(marked, (64, 64), stand_ins=False)
+    assert w_all[0] > 0 and w_traced[0] == 0 and w_traced[2] == 0
+    assert w_traced.sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(w_traced[valid], w_all[valid] / w_all[valid].sum())
+    # a bank that marks nothing, or nothing valid, keeps every share
+    np.testing.assert_array_equal(kernel_shares(bank, (64, 64), stand_ins=False),
+                                  kernel_shares(bank, (64, 64)))
+    none = replace(bank, metadata={**bank.metadata, "valid": [False] * 9})
+    np.testing.assert_array_equal(kernel_shares(none, (64, 64), stand_ins=False),
+                                  kernel_shares(none, (64, 64)))

@@ -185,8 +185,10 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
             from ..deconv.weights import model_nsr
 
             # as tasks.restore would have made it with this bank (its weight rule)
+            rule = "mirror" if meta.get("nsr_rule") == "mirror" else "frame"
             weight = model_nsr(observed, bank, SensorNoise.from_dict(noise) if noise else None,
-                               mask=mask > 0.5, level=level) if method == "wiener" else None
+                               mask=mask > 0.5, level=level,
+                               spectrum=rule) if method == "wiener" else None
             restored = None
         b = error_budget(gt / level, observed / level, bank, clean_observed=clean / level,
                          second_seed=second, restored=restored, depth=depth,

@@ -439,9 +439,12 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
 
 #: The dataset's rule for the restorations' weights (a restore task's ``weights``):
 #: ``"model"``, Wiener's NSR of least expected error from the image's noise model and its
-#: own spectrum (:func:`mitsweep.deconv.weights.model_nsr`); ``"estimated"``, the former
-#: rule (max of the model's NSR at exposure 0.5 and the image's variance-based estimate),
-#: which older manifests' tasks (no ``weights`` in their parameters) still run.
+#: own spectrum (:func:`mitsweep.deconv.weights.model_nsr`, the whole frame's spectrum);
+#: ``"mirror"``, the same with the spectrum of the mirror's image (``spectrum="mirror"``;
+#: a task may name it, none is planned with it yet: docs/guide/weights.md); and
+#: ``"estimated"``, the former rule (max of the model's NSR at exposure 0.5 and the
+#: image's variance-based estimate), which older manifests' tasks (no ``weights`` in
+#: their parameters) still run.
 WEIGHT_RULE = "model"
 
 
@@ -457,13 +460,14 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     records it, in relative exposure: at the image's mean exposure over the mirror)
     and, where larger, what blur and prior leave unexplained in it (the render's Monte
     Carlo noise, the bank's mismatch: GCV), over the mirror's image (the ``mask.Y`` AOV
-    of ``ground_truth``, the pinhole render). Without a noise model (a noise-free
-    sweep) that second part is all there is. Measured on the bundled setups at 256 px
-    (sphere, paraboloid, tilted paraboloid; noise-free, 50, 2 and 0.5 lux): within
-    0.21 dB of the oracle NSR everywhere, where the former rule lost up to 0.39 dB
-    (docs/guide/weights.md).
+    of ``ground_truth``, the pinhole render; the spectrum is the whole frame's). Without a
+    noise model (a noise-free sweep) that second part is all there is. The losses
+    against the oracle NSR are measured in docs/guide/weights.md.
 
-    ``weights="estimated"``: the former rule, for older manifests' tasks: NSR = max(
+    ``weights="mirror"``: the same with the spectrum read over the mirror's image
+    (``model_nsr(..., spectrum="mirror")``).
+
+    ``weights="estimated"``: the rule before that, for older manifests' tasks: NSR = max(
     ``nsr``, the image's variance-based estimate).
 
     The prior-based methods (RL, TV, hyper-Laplacian) get the noise model itself too
@@ -490,8 +494,8 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
         The image's noise model, ``SensorNoise.as_dict()`` (None: a noise-free sweep).
     ground_truth : Path, optional
         The scene's pinhole render, whose ``mask.Y`` bounds the NSR's estimate
-        (``weights="model"``).
-    weights : {"estimated", "model"}
+        (``weights="model"`` or ``"mirror"``).
+    weights : {"estimated", "model", "mirror"}
         The weight rule (above); ``"estimated"`` is the default of the tasks of older
         manifests, which do not record it.
 
@@ -510,10 +514,11 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..io.bank import load_bank
 
-    if weights not in ("model", "estimated"):
-        raise ValueError(f"restore: weights must be 'model' or 'estimated', got {weights!r}")
+    if weights not in ("mirror", "model", "estimated"):
+        raise ValueError("restore: weights must be 'mirror', 'model' or 'estimated', "
+                         f"got {weights!r}")
     img, _, meta = read_rgb(image)
-    if noise is not None and method == "wiener" and weights != "model":
+    if noise is not None and method == "wiener" and weights == "estimated":
         raise ValueError("restore: method 'wiener' takes its noise as nsr, not noise=")
     if noise is not None and (meta.get("noise") != noise or "white_level" not in meta):
         raise DatasetError(f"{Path(image).name}: its metadata does not record the noise "
@@ -523,7 +528,7 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     model = SensorNoise.from_dict(noise) if noise is not None else None
     level = np.float32(meta["white_level"]) if noise is not None else np.float32(1.0)
     record: dict[str, Any] = {}
-    if weights == "model":
+    if weights in ("model", "mirror"):
         from ..deconv.weights import model_nsr
 
         mask = None
@@ -531,8 +536,9 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
             chans = read_rgb(ground_truth)[1]
             mask = chans["mask.Y"] > 0.5 if "mask.Y" in chans else None
         details: dict = {}
-        used = model_nsr(img, ipsf, model, mask=mask, level=float(level), details=details)
-        record = {"nsr_rule": "model", "noise_variance": details["noise_variance"]}
+        used = model_nsr(img, ipsf, model, mask=mask, level=float(level), details=details,
+                         spectrum="frame" if weights == "model" else "mirror")
+        record = {"nsr_rule": weights, "noise_variance": details["noise_variance"]}
     else:
         estimated = estimate_nsr(img)
         used = max(estimated, nsr) if nsr is not None else estimated

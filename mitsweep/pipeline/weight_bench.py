@@ -5,9 +5,10 @@ For every scene's noise-free sweep and noisy sweep of a complete dataset,
 prior, the bank's 500-mm kernels) with the oracle NSR
 (:func:`mitsweep.deconv.budget.oracle_weight`), with the former rule (``before``: the
 larger of the image's variance-based estimate and the noise model's NSR at exposure
-0.5) and with the dataset's rule now (``after``:
-:func:`mitsweep.deconv.weights.model_nsr` with the image's noise model and mirror
-mask), and reports each one's PSNR loss against the oracle, in one process.
+0.5), with the dataset's rule now (``after``: :func:`mitsweep.deconv.weights.model_nsr`
+with the image's noise model and mirror mask, the whole frame's spectrum) and with the
+same read over the mirror's image (``mirror``: ``spectrum="mirror"``), and reports each
+one's PSNR loss against the oracle, in one process.
 """
 
 from __future__ import annotations
@@ -50,8 +51,9 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) ->
     -------
     list of dict
         Per sweep image (noise-free first, then by decreasing light level), the row of
-        :func:`mitsweep.deconv.weight_bench.weight_rows` for the weights ``before`` and
-        ``after``, with ``case``: the dataset's folder name, the scene, the image.
+        :func:`mitsweep.deconv.weight_bench.weight_rows` for the weights ``before``,
+        ``after`` and ``mirror``, with ``case``: the dataset's folder name, the scene,
+        the image.
     """
     from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..deconv.weight_bench import weight_rows
@@ -78,11 +80,13 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) ->
             if noise is not None:
                 before = max(before, noise.nsr(0.5))
             after = model_nsr(img, bank, noise, mask=mask, level=level)
+            mirror = model_nsr(img, bank, noise, mask=mask, level=level, spectrum="mirror")
             x = (img / level).astype(np.float32)
 
             def restore(im, w):
                 return deconvolve(im, bank, method="wiener", weight=w, prior=DECONV_PRIOR)
 
-            r = weight_rows(x, truth, restore, {"before": before, "after": after}, mask=mask)
+            r = weight_rows(x, truth, restore, {"before": before, "after": after,
+                                                 "mirror": mirror}, mask=mask)
             rows.append({"case": f"{root.name} {scene} {Path(name).stem}", **r})
     return rows
