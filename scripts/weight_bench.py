@@ -163,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     if synth:
         print("independent spatially varying blur (polar Wiener, natural prior); "
               "loss = oracle - chosen, dB")
-        print(format_rows(synth, ("before", "model", "blind")))
+        print(format_rows(synth, ("before", "model", "blind", "mirror")))
     if data:
         print("datasets (Wiener, natural prior, as the pipeline restores); "
               "before: max(variance estimate, model NSR at 0.5); after: noise model + the "

@@ -348,14 +348,14 @@ CALIBRATION_ERRORS = Figure(
 
 
 def _weight_bench_rows(outputs: list[str]) -> Rows:
-    """case (size px, σ) | oracle NSR | oracle dB | before, model, blind loss (dB)."""
+    """case (size px, σ) | oracle NSR | oracle dB | before, model, blind, mirror loss (dB)."""
     rows: Rows = []
     for case in _json(outputs[0])["independent_blur"]:
         size, sigma = re.fullmatch(r"independent blur (\d+) px, sigma ([\d.e-]+)",
                                    case["case"]).groups()
         rows.append([[float(size), float(sigma)], [case["oracle"]["weight"]],
                      [case["oracle"]["psnr_db"]],
-                     *([case[k]["loss_db"]] for k in ("before", "model", "blind"))])
+                     *([case[k]["loss_db"]] for k in ("before", "model", "blind", "mirror"))])
     return rows
 
 

@@ -183,12 +183,13 @@ def test_bench_weights_quick_prints_oracle_against_chosen(capsys):
     for case in res["cases"].values():
         oracle = case["oracle"]
         assert oracle["nsr"] > 0 and math.isfinite(oracle["psnr_db"])
-        for rule in ("before", "model", "blind"):
+        for rule in ("before", "model", "blind", "mirror"):
             c = case[rule]
             assert c["loss_db"] == pytest.approx(oracle["psnr_db"] - c["psnr_db"], abs=1e-12)
             assert c["loss_db"] > -0.01                 # the oracle is the best NSR
         # issue 27's target for the new rules: within 0.3 dB of the oracle
         assert case["model"]["loss_db"] < 0.3 and case["blind"]["loss_db"] < 0.3
+        assert case["mirror"]["loss_db"] < 0.3
     # the baseline, in the same run: the former rule loses more at sigma = 0.005
     c = res["cases"]["256px_sigma_0.005"]
     assert c["before"]["loss_db"] > c["model"]["loss_db"] + 0.3

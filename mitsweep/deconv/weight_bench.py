@@ -7,8 +7,9 @@ spatially varying blur that is *not* the deconvolver's model: a 49 × 49 product
 convolution of the synthetic IPSF field, restored by the polar method with a 19-radius
 bank, white Gaussian noise σ); :func:`synthetic_weight_bench` runs it at each size and σ,
 with the former blind estimate (``nsr=None``: σ²/variance), the noise-model NSR
-(:func:`~mitsweep.deconv.weights.model_nsr` with the known σ) and the new blind one
-(:func:`~mitsweep.deconv.weights.blind_nsr`), side by side in one process. The datasets'
+(:func:`~mitsweep.deconv.weights.model_nsr` with the known σ), the new blind one
+(:func:`~mitsweep.deconv.weights.blind_nsr`) and the noise-model NSR on the disk's own
+spectrum (``spectrum="mirror"``), side by side in one process. The datasets'
 version is :func:`mitsweep.pipeline.weight_bench.dataset_weight_bench`;
 ``scripts/weight_bench.py`` prints both.
 """
@@ -106,8 +107,9 @@ def synthetic_weight_bench(sizes: Sequence[int] = (512,),
                            seed: int = 0) -> list[dict]:
     """:func:`weight_rows` on :func:`independent_blur_problem` for each size and σ:
     ``before`` (polar Wiener's ``nsr=None``, the variance-based estimate), ``model``
-    (the known σ) and ``blind`` (nothing known). One row per case, with ``seconds``
-    of each new rule's NSR choice.
+    (the known σ), ``blind`` (nothing known) and ``mirror`` (the known σ, the spectrum
+    read over the disk: ``model_nsr(..., spectrum="mirror")``). One row per case, with
+    ``seconds`` of the model and blind rules' NSR choice.
 
     Parameters
     ----------
@@ -136,9 +138,10 @@ def synthetic_weight_bench(sizes: Sequence[int] = (512,),
             def restore(x: np.ndarray, w: float, bank=bank) -> np.ndarray:
                 return polar_deconvolve(x, bank, nsr=w)
 
+            mirror = model_nsr(y, bank, sigma, mask=mask, spectrum="mirror")
             r = weight_rows(y, p["sharp"], restore,
-                            {"before": estimate_nsr(y), "model": model, "blind": blind},
-                            mask=mask)
+                            {"before": estimate_nsr(y), "model": model, "blind": blind,
+                             "mirror": mirror}, mask=mask)
             rows.append({"case": f"independent blur {size} px, sigma {sigma:g}",
                          "model_seconds": t1 - t0, "blind_seconds": t2 - t1, **r})
     return rows

@@ -69,7 +69,8 @@ def weight_bench(options: SimpleNamespace) -> dict:
         per case (``"256px_sigma_0.005"``) the ``oracle``'s ``nsr`` and ``psnr_db``, and
         for each rule (``before``: the former blind estimate, the baseline; ``model``:
         :func:`~mitsweep.deconv.weights.model_nsr` with the known σ; ``blind``:
-        :func:`~mitsweep.deconv.weights.blind_nsr`) its ``nsr``, ``psnr_db`` and
+        :func:`~mitsweep.deconv.weights.blind_nsr`; ``mirror``: ``model_nsr`` with the
+        spectrum read over the disk) its ``nsr``, ``psnr_db`` and
         ``loss_db`` (oracle − chosen), and ``model_seconds``, ``blind_seconds``.
     """
     from ..deconv.weight_bench import synthetic_weight_bench
@@ -81,7 +82,7 @@ def weight_bench(options: SimpleNamespace) -> dict:
                                   rows, strict=True):
         case: dict = {"oracle": {"nsr": row["oracle"]["weight"],
                                  "psnr_db": row["oracle"]["psnr_db"]}}
-        for rule in ("before", "model", "blind"):
+        for rule in ("before", "model", "blind", "mirror"):
             case[rule] = {"nsr": row[rule]["weight"], "psnr_db": row[rule]["psnr_db"],
                           "loss_db": row[rule]["loss_db"]}
         case["model_seconds"] = row["model_seconds"]
@@ -91,7 +92,9 @@ def weight_bench(options: SimpleNamespace) -> dict:
             "rules": {"before": "polar Wiener's nsr=None: sigma^2 over the image variance "
                                 "(the former rule, the baseline)",
                       "model": "deconv.weights.model_nsr with the known sigma",
-                      "blind": "deconv.weights.blind_nsr (nothing known)"},
+                      "blind": "deconv.weights.blind_nsr (nothing known)",
+                      "mirror": "deconv.weights.model_nsr with the known sigma and the "
+                                "spectrum read over the disk (spectrum='mirror')"},
             "cases": cases}
 
 
