@@ -90,9 +90,6 @@ SETUP_KNOWN_FAILURES: dict[str, str] = {}
 #: rim is one of them, paraboloid_mei at -35%) and the best supported fit wins; what
 #: still fails:
 GUESS_FAILURES = {
-    # found at +9% only: the draped Mylar hides the limb's top
-    ("sphere_pageos_nasa.png", -0.35): "prominence 2.67 < 3 (Mylar hides the top)",
-    ("sphere_pageos_nasa.png", 0.35): "prominence 2.57 < 3 (Mylar hides the top)",
     # found at +9% only (0.7 px off in column): the outline is slightly elliptical (axes
     # ~595/587 px), and the circle found from the other guesses is 1.37 px off
     ("dome_store_bright_rim.jpg", -0.35): "elliptical outline: the circle 1.37 px off",

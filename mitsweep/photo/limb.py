@@ -297,21 +297,23 @@ def _ridge_starts(gy, gx, lum_s, centre, r_lo, r_hi, predicted, shown=None):
     """Radii of the ridges of the azimuthal mean squared radial derivative in
     ``[r_lo, r_hi]``: the peaks at least :data:`RIDGE_SHARE` as prominent as the most
     prominent (over the median within 6% of the radius), nearest ``predicted`` first."""
-    band = 0.5 * (r_hi - r_lo) + 4.0
     mid = 0.5 * (r_lo + r_hi)
+    step = 0.5
+    k = max(2, round(0.06 * mid / step))
+    # the profile reaches a median window beyond both ends, so that a ridge at the
+    # range's end is judged as one inside it
+    band = 0.5 * (r_hi - r_lo) + k * step + 4.0
     y, x, s, m, (r0, c0) = _radial_gradient_sq(lum_s, gy, gx, centre, mid, band)
     if shown is not None:
         keep = shown[r0[0]:r0[1], c0[0]:c0[1]][m]
         y, x, s = y[keep], x[keep], s[keep]
     r = np.hypot(y - centre[0], x - centre[1])
-    step = 0.5
     bins = np.arange(mid - band, mid + band + step, step)
     idx = np.clip(np.digitize(r, bins) - 1, 0, len(bins) - 2)
     n = np.bincount(idx, minlength=len(bins) - 1)
     with np.errstate(invalid="ignore", divide="ignore"):
         prof = np.log(np.bincount(idx, weights=s, minlength=len(bins) - 1) / n)
     rc = 0.5 * (bins[:-1] + bins[1:])
-    k = max(2, round(0.06 * mid / step))
     cand = []
     for i in range(k, len(prof) - k):
         if not r_lo <= rc[i] <= r_hi or not np.isfinite(prof[i]):
@@ -351,7 +353,8 @@ def _step_coherence(lum_s, centre, scale, pts, nrm, good) -> float:
 
 def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
              nrm: np.ndarray, scale_range: tuple[float, float], *,
-             shown: np.ndarray | None = None, iterations: int = 6) -> LimbFit | None:
+             shown: np.ndarray | None = None, iterations: int = 6,
+             near_px: float | None = None) -> LimbFit | None:
     """Find a circular limb (see the module docstring) about ``centre`` (row, col; good
     to a few px), its size within ``scale_range`` times the outline ``pts`` (N, 2
     offsets from the axis, px, with outward normals ``nrm``). None where neither cue
@@ -372,6 +375,11 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
         Pixels the photo shows (a render's skipped pixels are not).
     iterations : int
         Refinement passes of the step fit at most.
+    near_px : float, optional
+        Where the fine-detail energy shows no step, the ridges nearest this radius (px)
+        are tried first (default the outline's own size; an outline found otherwise,
+        such as an edge fit refused for its contrast, is a better guess where the
+        setup is far off).
     """
     radius0 = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
     r_lo, r_hi = radius0 * scale_range[0], radius0 * scale_range[1]
@@ -390,8 +398,9 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     if step >= STRONG_ENERGY_STEP:
         starts = [(c, R)]
     else:  # no render noise to go by: the ridges, nearest the prediction first
+        near = radius0 if near_px is None else float(near_px)
         starts = [(centre, r) for r in _ridge_starts(gy, gx, lum_r, centre, r_lo, r_hi,
-                                                     radius0, shown)[:MAX_RIDGE_STARTS]]
+                                                     near, shown)[:MAX_RIDGE_STARTS]]
     for c0, R0 in starts:
         c, R, height, _ = _ridge_fit(gy, gx, lum_r, c0, R0, band, shown)
         if height >= MIN_RIDGE and r_lo / 1.04 <= R <= r_hi * 1.04:

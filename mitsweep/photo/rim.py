@@ -155,7 +155,18 @@ class CalibrationError(ValueError):
 
 
 class NoMirrorError(CalibrationError):
-    """No outline of the mirror's shape stands out in the photo."""
+    """No outline of the mirror's shape stands out in the photo.
+
+    ``outline`` is the outline a refusal was about, ``(centre (row, col), radius)`` in
+    px, where it was a well-fitted outline refused for its contrast alone (its edges no
+    more prominent than their surroundings, :data:`MIN_EDGE_PROMINENCE`): a start for
+    a fit that does not go by edges (a limb's, :func:`_limb_or_edge`); else None.
+    """
+
+    def __init__(self, message: str, *,
+                 outline: tuple[tuple[float, float], float] | None = None) -> None:
+        super().__init__(message)
+        self.outline = outline
 
 
 class SetupMismatchError(CalibrationError):
@@ -323,7 +334,10 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
     (:func:`fit_edges`) finds an edge at it or outside it (a real ball's dark rim):
     an edge fit more than :data:`LIMB_INSIDE_SHARE` of the radius inside a limb found
     whose step has no consistent sign (:data:`MAX_LIMB_COHERENCE`) is an edge of the
-    reflection (the rendered room's boards, 14% inside), not the outline."""
+    reflection (the rendered room's boards, 14% inside), not the outline. The limb fit
+    starts from the edge fit's centre, or, where that was refused, the coarse search's,
+    then the outline the edge fit refused for its contrast alone
+    (:attr:`NoMirrorError.outline`: its centre, and its size for the limb's ridges)."""
     from .limb import fit_limb
 
     edge: RimFit | None = None
@@ -343,15 +357,25 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
         lum = fill_void(lum, void)
     else:
         shown = None
+    faint = getattr(refused, "outline", None)
     radius = outline.equivalent_radius_px(pitch)
     if edge is not None:
-        start = edge.center_px
+        tries: list[tuple[tuple[float, float], float | None]] = [(edge.center_px, None)]
     else:
-        start, _, _ = coarse_search(lum, pts, nrm, search_scales(*scale_range))
-    limb = fit_limb(lum, start, pts, nrm, scale_range, shown=shown)
-    if limb is not None and not scale_range[0] * 0.96 <= limb.radius_px / radius \
-            <= scale_range[1] * 1.04:
-        limb = None
+        tries = [(coarse_search(lum, pts, nrm, search_scales(*scale_range))[0], None)]
+        if faint is not None:
+            # then an outline fitted all round but refused for its contrast alone (the
+            # PAGEOS balloon's limb, whose top the draped Mylar hides: 9-10 px from the
+            # coarse search's start, and 54% larger than a setup 35% off predicts)
+            tries.append(faint)
+    limb = None
+    for start, near in tries:
+        limb = fit_limb(lum, start, pts, nrm, scale_range, shown=shown, near_px=near)
+        if limb is not None and not scale_range[0] * 0.96 <= limb.radius_px / radius \
+                <= scale_range[1] * 1.04:
+            limb = None
+        if limb is not None:
+            break
     if limb is None or (edge is not None
                         and (edge.scale * radius >= (1.0 - LIMB_INSIDE_SHARE) * limb.radius_px
                              or limb.step_coherence > MAX_LIMB_COHERENCE)):
@@ -681,7 +705,8 @@ def _refine(work: _Work, centre: tuple[float, float], scale: float, *,
         raise NoMirrorError(
             f"no mirror found: the best outline found (radius {radius * scale:.1f} px) is "
             f"no clearer an edge than its surroundings (prominence {prominence:.2f}, need "
-            f"{MIN_EDGE_PROMINENCE:g}); check that the photo shows the mirror of this setup")
+            f"{MIN_EDGE_PROMINENCE:g}); check that the photo shows the mirror of this setup",
+            outline=((float(centre[0]), float(centre[1])), float(radius * scale)))
     centre_se = centre_standard_error(A[inl], res[inl], n_used / n * radius * scale
                                        * 2.0 * math.pi) if inl.any() else math.inf
     logger.info("rim fit: centre standard error %.3f px", centre_se)
