@@ -7,6 +7,10 @@ and on each dataset given (:func:`mitsweep.pipeline.weight_bench.dataset_weight_
 
     .venv/bin/python scripts/weight_bench.py --sizes 512 2048 --datasets DIR [DIR ...]
 
+``--calibration-scene K`` adds the ``calibrated`` weight on datasets of two scenes or
+more: the bank's mismatch profile measured on scene K, the other scenes restored with it
+(:func:`mitsweep.deconv.weights.mismatch_share`).
+
 ``--photos DIR`` adds the photos' restoration (:func:`mitsweep.workflows.restore_photo`,
 ``mitsweep deconvolve`` without ``--nsr``) on three renders of
 ``examples/your_scene_through_the_mirror.py`` (rendered into DIR, reused there): the
@@ -147,13 +151,18 @@ def main(argv: list[str] | None = None) -> int:
                          "renders, made in DIR (reused)")
     ap.add_argument("--photo-datasets", type=Path, nargs="*", default=[], metavar="DIR",
                     help="also the photos' rules on these datasets' sweep images")
+    ap.add_argument("--calibration-scene", type=int, metavar="K",
+                    help="also the 'calibrated' weight: the bank's mismatch profile "
+                         "measured on each dataset's scene K (its noise-free sweep and "
+                         "truth), the other scenes restored with it")
     ap.add_argument("--json", action="store_true", help="print the rows as JSON")
     a = ap.parse_args(argv)
     from mitsweep.deconv.weight_bench import format_rows, synthetic_weight_bench
     from mitsweep.pipeline.weight_bench import dataset_weight_bench
 
     synth = synthetic_weight_bench(a.sizes, a.sigmas) if a.sizes else []
-    data = [r for d in a.datasets for r in dataset_weight_bench(d)]
+    data = [r for d in a.datasets
+            for r in dataset_weight_bench(d, calibration_scene=a.calibration_scene)]
     photos = (photo_rows(a.photos) if a.photos else []) + [
         r for d in a.photo_datasets for r in dataset_photo_rows(d)]
     if a.json:
@@ -167,8 +176,11 @@ def main(argv: list[str] | None = None) -> int:
     if data:
         print("datasets (Wiener, natural prior, as the pipeline restores); "
               "before: max(variance estimate, model NSR at 0.5); after: noise model + the "
-              "frame's spectrum; mirror: noise model + the mirror's spectrum")
-        print(format_rows(data, ("before", "after", "mirror")))
+              "frame's spectrum; mirror: noise model + the mirror's spectrum"
+              + ("; calibrated: noise model + the mismatch profile of scene "
+                 f"{a.calibration_scene}" if a.calibration_scene is not None else ""))
+        print(format_rows(data, ("before", "after", "mirror")
+                          + (("calibrated",) if a.calibration_scene is not None else ())))
     if photos:
         print("photos (restore_photo, polar Wiener, natural prior); before: the former "
               "default (discrepancy principle); default: restore_photo without nsr now")

@@ -19,7 +19,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import scipy.fft as sfft
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -45,19 +44,8 @@ def residual_rows(directory: Path, every: int = 3) -> list[tuple[float, float, f
     keep = shares > 0
     L = 128
     H2 = np.tensordot(shares[keep], W._kernel_power(bank.kernels[0][keep].astype(float), L), 1)
-    fq = sfft.fftfreq(L)
-    fr = np.hypot(fq[:, None], fq[None, :]).ravel()
-    H2r = np.interp(f, *_ring_means(fr, H2.ravel(), f))
+    H2r = W.ring_average(H2, f)
     return [(f[i], P[i], H2r[i], P[i] - H2r[i] * T[i]) for i in range(0, len(f), every)]
-
-
-def _ring_means(fr: np.ndarray, values: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    edges = np.r_[0.0, (f[:-1] + f[1:]) / 2, fr.max() + 1e-9]
-    idx = np.clip(np.searchsorted(edges, fr, side="right") - 1, 0, len(f) - 1)
-    cnt = np.bincount(idx, minlength=len(f))
-    mean = np.bincount(idx, weights=values, minlength=len(f)) / np.maximum(cnt, 1)
-    ok = cnt > 0
-    return f[ok], mean[ok]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -53,6 +53,7 @@ import functools
 import logging
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft as sfft
@@ -66,7 +67,8 @@ from .noise import SensorNoise
 from .wiener import (DEFAULT_NSR_FLOOR, MAX_NSR, estimate_noise_sigma, fast_shape,
                      natural_prior_scale)
 
-__all__ = ["noise_variance", "kernel_shares", "ring_spectrum", "spectrum_window",
+__all__ = ["noise_variance", "kernel_shares", "ring_spectrum", "ring_average",
+           "spectrum_window", "mismatch_share", "MismatchProfile", "calibrate_mismatch",
            "wiener_risk", "model_nsr",
            "blind_nsr", "blind_noise_variance", "high_frequency_floor",
            "unexplained_variance"]
@@ -276,6 +278,196 @@ def spectrum_window(mask: np.ndarray, *, taper_px: float = 4.0) -> np.ndarray:
     return ndimage.gaussian_filter(core.astype(np.float64), float(taper_px)) * m
 
 
+def ring_average(values: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """``values`` on an FFT grid (``(M, N)``, full ``fft2`` layout, frequencies of
+    :func:`scipy.fft.fftfreq`) averaged over the rings of :func:`ring_spectrum` whose
+    mean frequencies are ``f`` (each grid frequency to the ring whose centre it is
+    nearest; a ring that no grid frequency reaches takes its neighbours' value).
+
+    Parameters
+    ----------
+    values : (M, N) ndarray
+        A function of frequency on the FFT grid (a kernel's ``|K|²``).
+    f : (n,) ndarray
+        The rings' mean frequencies, cycles/px, increasing.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    fq0, fq1 = sfft.fftfreq(v.shape[0]), sfft.fftfreq(v.shape[1])
+    fr = np.hypot(fq0[:, None], fq1[None, :]).ravel()
+    f = np.asarray(f, dtype=np.float64)
+    edges = np.r_[0.0, (f[:-1] + f[1:]) / 2, max(float(fr.max()), float(f[-1])) + 1e-9]
+    idx = np.clip(np.searchsorted(edges, fr, side="right") - 1, 0, len(f) - 1)
+    cnt = np.bincount(idx, minlength=len(f))
+    total = np.bincount(idx, weights=v.ravel(), minlength=len(f))
+    ok = cnt > 0
+    return np.interp(f, f[ok], total[ok] / cnt[ok])
+
+
+@_one_blas_thread
+def mismatch_share(sweep: np.ndarray, truth: np.ndarray, bank: IPSFBank, *,
+                   mask: np.ndarray, depth: float | str | None = None,
+                   center: tuple[float, float] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    r"""The share of a render's spectrum that its bank's blur of the truth does not
+    explain, ring by ring: a bank's *mismatch profile*, measured where the truth is
+    known (a rendered scene), for :func:`model_nsr`'s ``mismatch``.
+
+    Over the mirror's image (through :func:`spectrum_window`), with :math:`P(f)` the
+    noise-free sweep's ring periodogram, :math:`T(f)` the truth's and
+    :math:`ar H^2(f)` the traced kernels' mean transfer
+    (:func:`kernel_shares`, ``stand_ins=False``):
+    :math:`u(f) = \mathrm{clip}((P - ar H^2 T)/P, 0, 1)`. It holds everything the
+    model leaves out (the render's Monte Carlo noise, the kernels' sampling, depth and
+    field, occlusion), and is correlated with the image: it scales with the image's own
+    spectrum, so a share measured on one scene of a setup carries to another
+    (docs/guide/weights.md measures it held out).
+
+    Parameters
+    ----------
+    sweep : (H, W) or (H, W, C) ndarray
+        A noise-free sweep render (linear values).
+    truth : ndarray
+        Its sharp image (the pinhole render), the shape of ``sweep``, same units.
+    bank : IPSFBank
+        The bank the restorations use.
+    mask : (H, W) bool ndarray
+        The mirror's image.
+    depth : float, "mean" or None
+        The bank depth, as in :func:`~mitsweep.deconv.kernels.select_depth` (default
+        500 mm).
+    center : (float, float), optional
+        The pole (row, col), px, of a radial bank (default the optical axis).
+
+    Returns
+    -------
+    f, share : (n,) ndarray
+        The rings' mean frequencies (cycles/px) and the unexplained share, in [0, 1].
+    """
+    y = np.asarray(sweep, dtype=np.float64)
+    x = np.asarray(truth, dtype=np.float64)
+    if y.shape != x.shape:
+        raise ValueError(f"sweep and truth must have one shape, got {y.shape} and {x.shape}")
+    window = spectrum_window(_mask(y, mask))
+    f, P = ring_spectrum(y, window=window)
+    _, T = ring_spectrum(x, window=window)
+    kernels = select_depth(bank, depth).astype(np.float64)
+    shares = kernel_shares(bank, y.shape, mask=mask, center=center, stand_ins=False)
+    keep = shares > 0
+    L = max(128, 4 * int(kernels.shape[-1]))
+    H2 = ring_average(np.tensordot(shares[keep], _kernel_power(kernels[keep], L), 1), f)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where(P > 0, (P - H2 * T) / P, 0.0)
+    return f, np.clip(share, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class MismatchProfile:
+    """A bank's mismatch profile, calibrated on a render with its truth
+    (:func:`calibrate_mismatch`), for :func:`model_nsr`'s ``mismatch``.
+
+    Attributes
+    ----------
+    f : (n,) ndarray
+        Ring frequencies, cycles/px.
+    share : (n,) ndarray
+        The unexplained share of the render's spectrum (:func:`mismatch_share`).
+    scale : float
+        How much of it acts on the restoration as noise: the factor on ``share`` with
+        which :func:`model_nsr` chooses the calibration render's oracle NSR (below 1
+        where part of what the model leaves unexplained is signal, a blur weaker than
+        the bank's mean).
+    oracle_nsr : float
+        That oracle NSR.
+    """
+
+    f: np.ndarray
+    share: np.ndarray
+    scale: float
+    oracle_nsr: float
+
+    def scaled(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(f, min(scale · share, 1))``: the share that counts as noise."""
+        return self.f, np.clip(self.scale * np.asarray(self.share), 0.0, 1.0)
+
+    def to_dict(self) -> dict:
+        """JSON-ready (lists and floats), for :meth:`from_dict`."""
+        return {"f": np.asarray(self.f).tolist(), "share": np.asarray(self.share).tolist(),
+                "scale": float(self.scale), "oracle_nsr": float(self.oracle_nsr)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> MismatchProfile:
+        """The profile of :meth:`to_dict`'s output.
+
+        Parameters
+        ----------
+        d : dict
+            With ``f``, ``share``, ``scale`` and ``oracle_nsr``.
+        """
+        return cls(np.asarray(d["f"], dtype=np.float64),
+                   np.asarray(d["share"], dtype=np.float64), float(d["scale"]),
+                   float(d["oracle_nsr"]))
+
+
+def calibrate_mismatch(sweep: np.ndarray, truth: np.ndarray, bank: IPSFBank, *,
+                       mask: np.ndarray,
+                       restore: Callable[[np.ndarray, float], np.ndarray] | None = None,
+                       depth: float | str | None = None,
+                       center: tuple[float, float] | None = None) -> MismatchProfile:
+    """Calibrate the weight rule on a render whose truth is known: the bank's
+    :func:`mismatch_share` on the noise-free ``sweep``, and the factor on it with which
+    :func:`model_nsr` chooses that render's oracle NSR (the best by search against
+    ``truth``, :func:`mitsweep.deconv.budget.oracle_weight`). Measured once per rig
+    (setup and bank) on a rendered scene, it sets the weight of its other images:
+    docs/guide/weights.md measures it held out (another scene, every light level).
+
+    Parameters
+    ----------
+    sweep : (H, W) or (H, W, C) ndarray
+        A noise-free sweep render, linear values.
+    truth : ndarray
+        Its sharp image (pinhole render), the shape of ``sweep``, same units.
+    bank : IPSFBank
+        The bank the restorations use.
+    mask : (H, W) bool ndarray
+        The mirror's image (the error is scored there).
+    restore : callable, optional
+        ``restore(image, nsr) -> restored``: the restoration the weight is for (default
+        Wiener with the natural prior and ``bank``,
+        :func:`mitsweep.deconv.restore.deconvolve`).
+    depth, center
+        As :func:`mismatch_share`.
+    """
+    from .budget import oracle_weight
+    from .restore import deconvolve
+
+    y = np.asarray(sweep, dtype=np.float32)
+    if restore is None:
+        def restore(im: np.ndarray, w: float) -> np.ndarray:
+            return deconvolve(im, bank, method="wiener", weight=w, prior="natural")
+    f, share = mismatch_share(y, truth, bank, mask=mask, depth=depth, center=center)
+    oracle, _, _ = oracle_weight(y, np.asarray(truth, dtype=np.float64), restore,
+                                 mask=np.asarray(mask, bool))
+
+    def chosen(log_scale: float) -> float:
+        u = np.clip(math.exp(log_scale) * share, 0.0, 1.0)
+        return model_nsr(y, bank, None, mask=mask, depth=depth, center=center,
+                         mismatch=(f, u))
+
+    # the chosen NSR grows with the scale: bisect its log between 1e-3 and 1e3
+    lo, hi = math.log(1e-3), math.log(1e3)
+    for _ in range(MISMATCH_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chosen(mid) < oracle else (lo, mid)
+    scale = math.exp(0.5 * (lo + hi))
+    logger.info("mismatch profile: oracle NSR %.3g, scale %.3g", oracle, scale)
+    return MismatchProfile(f=f, share=share, scale=scale, oracle_nsr=float(oracle))
+
+
+#: Bisections of the log scale in :func:`calibrate_mismatch` (over 1e-3 to 1e3: 20 give
+#: the scale to 0.001 %).
+MISMATCH_BISECTIONS = 20
+
+
 def _kernel_power(kernels: np.ndarray, L: int) -> np.ndarray:
     """(n, L, L) |K|² of unit-sum kernels on an L × L frequency grid."""
     K = kernels.shape[-1]
@@ -292,7 +484,8 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
                 depth: float | str | None = None,
                 center: tuple[float, float] | None = None, n_px: float | None = None,
                 bounds: tuple[float, float] = (1e-10, MAX_NSR),
-                window: np.ndarray | None = None
+                window: np.ndarray | None = None,
+                unexplained_share: tuple[np.ndarray, np.ndarray] | None = None
                 ) -> tuple[float, Callable[[float], float]]:
     r"""The natural-prior NSR of least expected error for ``image`` with noise
     variance ``noise_var`` (its units²), and the risk function (module docstring).
@@ -323,6 +516,11 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
     window : (H, W) ndarray, optional
         The taper the spectrum is read through (:func:`ring_spectrum`; default the
         whole frame). ``floor_var`` is then the noise under it.
+    unexplained_share : (f, share), optional
+        A mismatch profile (:func:`mismatch_share`): that share of the periodogram above
+        the noise floor counts as error the restoration passes on, like noise but with
+        the image's own spectrum, not as signal; the rest is the blurred signal.
+        Default none: only ``noise_var``.
 
     Returns
     -------
@@ -346,14 +544,21 @@ def wiener_risk(image: np.ndarray, bank: IPSFBank, noise_var: float, *,
     f_ring, p_ring = ring_spectrum(img, window=window)
     var = float(noise_var)
     floor = var if floor_var is None else float(floor_var)
-    S = np.maximum(np.interp(fr, f_ring, p_ring) - floor, 0.0) / np.maximum(Hbar, 1e-12)
+    above = np.maximum(np.interp(fr, f_ring, p_ring) - floor, 0.0)
+    err: float | np.ndarray = var
+    if unexplained_share is not None:
+        uf, us = (np.asarray(a, dtype=np.float64) for a in unexplained_share)
+        u = np.clip(np.interp(fr, uf, us), 0.0, 1.0)
+        err = var + u * above
+        above = (1.0 - u) * above
+    S = above / np.maximum(Hbar, 1e-12)
     n = float(np.sqrt(img.shape[0] * img.shape[1])) if n_px is None else float(n_px)
     c = natural_prior_scale(n) * fr * fr
 
     def risk_log(t: float) -> float:
         R = math.exp(t) * c
         den = H2 + R
-        e = (R * R * S + H2 * var) / (den * den)
+        e = (R * R * S + H2 * err) / (den * den)
         return float(np.dot(w, e.mean(axis=(1, 2))))
 
     lo, hi = (math.log(float(b)) for b in bounds)
@@ -469,7 +674,9 @@ def model_nsr(image: np.ndarray, bank: IPSFBank,
               depth: float | str | None = None,
               center: tuple[float, float] | None = None, n_px: float | None = None,
               unexplained: bool = True, details: dict | None = None,
-              spectrum: str = "frame") -> float:
+              spectrum: str = "frame",
+              mismatch: MismatchProfile | tuple[np.ndarray, np.ndarray] | None = None
+              ) -> float:
     r"""Wiener's natural-prior NSR for ``image`` from its noise and its own spectrum.
 
     The NSR of least expected error (:func:`wiener_risk`) with the noise variance of
@@ -505,6 +712,18 @@ def model_nsr(image: np.ndarray, bank: IPSFBank,
         docs/guide/weights.md; not the default yet (it loses more on the 256-px tilted
         paraboloid). Without a mask, or with one that selects every pixel, the two
         agree.
+    mismatch : MismatchProfile or (f, share), optional
+        The bank's mismatch profile, calibrated on another render of the setup with its
+        truth (:func:`calibrate_mismatch`; its :meth:`~MismatchProfile.scaled` share),
+        or a share as is (:func:`mismatch_share`): what the model leaves unexplained is
+        then that share of the image's own spectrum (colored, as a render's mismatch
+        is) instead of white noise of the cross-validated variance; the spectrum is read
+        over the mirror (``spectrum`` is ignored; ``mask`` is required) and the noise
+        is the model's (``noise``) plus ``extra_variance``. With ``noise`` None the
+        image is taken to be as noisy as the render the profile was measured on (whose
+        Monte Carlo noise the profile holds): give a photo's sensor noise as a model
+        or a σ. Measured against the oracle, held out, in
+        docs/guide/weights.md.
 
     Returns
     -------
@@ -515,6 +734,10 @@ def model_nsr(image: np.ndarray, bank: IPSFBank,
         raise ValueError(f"spectrum must be 'mirror' or 'frame', got {spectrum!r}")
     img = np.asarray(image)
     m = _mask(img, mask)
+    if mismatch is not None:
+        return _profiled_nsr(img, bank, noise, m, mismatch, level=level,
+                             extra_variance=extra_variance, depth=depth, center=center,
+                             n_px=n_px, details=details)
     mirror = spectrum == "mirror" and mask is not None and not m.all()
     window = spectrum_window(m) if mirror else None
     # what the model does not hold, measured on the image: white noise (wavelet and
@@ -536,6 +759,34 @@ def model_nsr(image: np.ndarray, bank: IPSFBank,
         details.update(noise_variance=var, frame_noise_variance=frame,
                        expected_mse=risk(nsr))
     logger.info("model NSR %.3g (noise variance %.3g)", nsr, var)
+    return nsr
+
+
+def _profiled_nsr(img: np.ndarray, bank: IPSFBank, noise: SensorNoise | float | None,
+                  m: np.ndarray,
+                  mismatch: MismatchProfile | tuple[np.ndarray, np.ndarray], *,
+                  level: float, extra_variance: float, depth: float | str | None,
+                  center: tuple[float, float] | None, n_px: float | None,
+                  details: dict | None) -> float:
+    """:func:`model_nsr` with a mismatch profile (its ``mismatch``)."""
+    pair = mismatch.scaled() if isinstance(mismatch, MismatchProfile) else mismatch
+    f, share = (np.asarray(a, dtype=np.float64) for a in pair)
+    if f.ndim != 1 or f.shape != share.shape or len(f) < 2 or not (
+            np.all(np.isfinite(f)) and np.all(np.isfinite(share))) \
+            or np.any(np.diff(f) <= 0):
+        raise ValueError("mismatch must be (f, share): two finite 1-D arrays of one length "
+                         "(at least 2), f increasing (mismatch_share gives them)")
+    if m.all():
+        raise ValueError("mismatch needs the mirror's mask: the profile is read over it")
+    # noise None: as noisy as the render the profile was measured on (its Monte Carlo
+    # noise is in the profile); a blind estimate would count that noise twice
+    var = (0.0 if noise is None
+           else noise_variance(img, noise, mask=m, level=level)) + float(extra_variance)
+    nsr, risk = wiener_risk(img, bank, var, mask=m, depth=depth, center=center, n_px=n_px,
+                            window=spectrum_window(m), unexplained_share=(f, share))
+    if details is not None:
+        details.update(noise_variance=var, frame_noise_variance=var, expected_mse=risk(nsr))
+    logger.info("model NSR %.3g with a mismatch profile (noise variance %.3g)", nsr, var)
     return nsr
 
 

@@ -161,6 +161,13 @@ class NoMirrorError(CalibrationError):
     px, where it was a well-fitted outline refused for its contrast alone (its edges no
     more prominent than their surroundings, :data:`MIN_EDGE_PROMINENCE`): a start for
     a fit that does not go by edges (a limb's, :func:`_limb_or_edge`); else None.
+
+    Parameters
+    ----------
+    message : str
+        What was not found, and why (one line, shown to the user).
+    outline : ((float, float), float), optional
+        The refused outline's centre (row, col) and radius, px (see above).
     """
 
     def __init__(self, message: str, *,

@@ -8,7 +8,11 @@ larger of the image's variance-based estimate and the noise model's NSR at expos
 0.5), with the dataset's rule now (``after``: :func:`mitsweep.deconv.weights.model_nsr`
 with the image's noise model and mirror mask, the whole frame's spectrum) and with the
 same read over the mirror's image (``mirror``: ``spectrum="mirror"``), and reports each
-one's PSNR loss against the oracle, in one process.
+one's PSNR loss against the oracle, in one process. With a ``calibration_scene``, that
+scene's noise-free sweep and truth calibrate the bank's mismatch profile
+(:func:`mitsweep.deconv.weights.calibrate_mismatch`) and the other scenes are also
+restored with it (``calibrated``: ``model_nsr(..., mismatch=profile)``): held out, as a rig's
+profile measured on renders would be used on its photos.
 """
 
 from __future__ import annotations
@@ -36,7 +40,8 @@ def _lux(name: str) -> float:
     return float(match["lux"] or "inf")
 
 
-def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) -> list[dict]:
+def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None,
+                         calibration_scene: int | None = None) -> list[dict]:
     """The weights of each sweep image of a dataset against the oracle.
 
     Parameters
@@ -45,15 +50,20 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) ->
         A complete dataset (``mitsweep dataset``; its items are checked as for
         :func:`~mitsweep.pipeline.evaluate_dataset`).
     scenes : int, optional
-        Only the first so many scenes (default: all).
+        Only the first so many scenes (default: all; the calibration scene is not
+        counted among them).
+    calibration_scene : int, optional
+        The scene (its index) whose noise-free sweep and truth give the mismatch
+        profile of the ``calibrated`` weight; it is not itself restored. Default: no
+        ``calibrated`` column.
 
     Returns
     -------
     list of dict
         Per sweep image (noise-free first, then by decreasing light level), the row of
         :func:`mitsweep.deconv.weight_bench.weight_rows` for the weights ``before``,
-        ``after`` and ``mirror``, with ``case``: the dataset's folder name, the scene,
-        the image.
+        ``after``, ``mirror`` (and ``calibrated``), with ``case``: the dataset's folder
+        name, the scene, the image.
     """
     from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..deconv.weight_bench import weight_rows
@@ -64,6 +74,13 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) ->
     files = checked_items(root, load_manifest(root))
     bank = load_bank(files[BANK])
     scene_dirs = sorted({Path(n).parent.name for n in files if "/" in n})
+    profile = None
+    if calibration_scene is not None:
+        if not 0 <= calibration_scene < len(scene_dirs) or len(scene_dirs) < 2:
+            raise ValueError(f"calibration_scene must be one of the dataset's scenes "
+                             f"(0..{len(scene_dirs) - 1}) and leave another to restore; "
+                             f"got {calibration_scene!r}")
+        profile = _profile(files, bank, scene_dirs.pop(calibration_scene))
     rows = []
     for scene in scene_dirs[:scenes]:
         gt, chans, _ = read_finite(files[f"{scene}/pinhole.exr"])
@@ -81,12 +98,32 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None) ->
                 before = max(before, noise.nsr(0.5))
             after = model_nsr(img, bank, noise, mask=mask, level=level)
             mirror = model_nsr(img, bank, noise, mask=mask, level=level, spectrum="mirror")
+            candidates = {"before": before, "after": after, "mirror": mirror}
+            if profile is not None:
+                candidates["calibrated"] = model_nsr(img / level, bank, noise, mask=mask,
+                                                     mismatch=profile)
             x = (img / level).astype(np.float32)
 
             def restore(im, w):
                 return deconvolve(im, bank, method="wiener", weight=w, prior=DECONV_PRIOR)
 
-            r = weight_rows(x, truth, restore, {"before": before, "after": after,
-                                                 "mirror": mirror}, mask=mask)
+            r = weight_rows(x, truth, restore, candidates, mask=mask)
             rows.append({"case": f"{root.name} {scene} {Path(name).stem}", **r})
     return rows
+
+
+def _profile(files: dict, bank, scene: str):
+    """The bank's mismatch profile calibrated on ``scene``'s noise-free sweep and truth
+    (:func:`mitsweep.deconv.weights.calibrate_mismatch`, the dataset's restoration)."""
+    from ..deconv import deconvolve
+    from ..deconv.weights import calibrate_mismatch
+
+    gt, chans, _ = read_finite(files[f"{scene}/pinhole.exr"])
+    level = white_level(gt, chans["mask.Y"])
+    sweep, _, _ = read_finite(files[f"{scene}/sweep.exr"])
+
+    def restore(im, w):
+        return deconvolve(im, bank, method="wiener", weight=w, prior=DECONV_PRIOR)
+
+    return calibrate_mismatch(sweep / level, gt / level, bank, mask=chans["mask.Y"] > 0.5,
+                              restore=restore)
