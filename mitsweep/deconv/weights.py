@@ -314,9 +314,9 @@ def mismatch_share(sweep: np.ndarray, truth: np.ndarray, bank: IPSFBank, *,
 
     Over the mirror's image (through :func:`spectrum_window`), with :math:`P(f)` the
     noise-free sweep's ring periodogram, :math:`T(f)` the truth's and
-    :math:`ar H^2(f)` the traced kernels' mean transfer
+    :math:`\bar H^2(f)` the traced kernels' mean transfer
     (:func:`kernel_shares`, ``stand_ins=False``):
-    :math:`u(f) = \mathrm{clip}((P - ar H^2 T)/P, 0, 1)`. It holds everything the
+    :math:`u(f) = \mathrm{clip}((P - \bar H^2 T)/P, 0, 1)`. It holds everything the
     model leaves out (the render's Monte Carlo noise, the kernels' sampling, depth and
     field, occlusion), and is correlated with the image: it scales with the image's own
     spectrum, so a share measured on one scene of a setup carries to another
