@@ -414,8 +414,9 @@ def calibrate_mismatch(sweep: np.ndarray, truth: np.ndarray, bank: IPSFBank, *,
                        depth: float | str | None = None,
                        center: tuple[float, float] | None = None) -> MismatchProfile:
     """Calibrate the weight rule on a render whose truth is known: the bank's
-    :func:`mismatch_share` on the noise-free ``sweep``, and the factor on it with which
-    :func:`model_nsr` chooses that render's oracle NSR (the best by search against
+    :func:`mismatch_share` on the noise-free ``sweep``, and the factor on it (within
+    :data:`MISMATCH_SCALE_RANGE`) with which :func:`model_nsr` chooses that render's
+    oracle NSR (the best by search against
     ``truth``, :func:`mitsweep.deconv.budget.oracle_weight`). Measured once per rig
     (setup and bank) on a rendered scene, it sets the weight of its other images:
     docs/guide/weights.md measures it held out (another scene, every light level).
@@ -448,24 +449,29 @@ def calibrate_mismatch(sweep: np.ndarray, truth: np.ndarray, bank: IPSFBank, *,
     oracle, _, _ = oracle_weight(y, np.asarray(truth, dtype=np.float64), restore,
                                  mask=np.asarray(mask, bool))
 
-    def chosen(log_scale: float) -> float:
-        u = np.clip(math.exp(log_scale) * share, 0.0, 1.0)
-        return model_nsr(y, bank, None, mask=mask, depth=depth, center=center,
-                         mismatch=(f, u))
+    from scipy.optimize import brentq
 
-    # the chosen NSR grows with the scale: bisect its log between 1e-3 and 1e3
-    lo, hi = math.log(1e-3), math.log(1e3)
-    for _ in range(MISMATCH_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if chosen(mid) < oracle else (lo, mid)
-    scale = math.exp(0.5 * (lo + hi))
+    def excess(log_scale: float) -> float:
+        """log(chosen NSR / oracle NSR): it grows with the scale."""
+        u = np.clip(math.exp(log_scale) * share, 0.0, 1.0)
+        return math.log(model_nsr(y, bank, None, mask=mask, depth=depth, center=center,
+                                  mismatch=(f, u)) / oracle)
+
+    lo, hi = (math.log(b) for b in MISMATCH_SCALE_RANGE)
+    if excess(lo) >= 0:
+        t = lo
+    elif excess(hi) <= 0:
+        t = hi
+    else:   # to 1 % in the scale, as the NSR search itself
+        t = float(brentq(excess, lo, hi, xtol=0.01))
+    scale = math.exp(t)
     logger.info("mismatch profile: oracle NSR %.3g, scale %.3g", oracle, scale)
     return MismatchProfile(f=f, share=share, scale=scale, oracle_nsr=float(oracle))
 
 
-#: Bisections of the log scale in :func:`calibrate_mismatch` (over 1e-3 to 1e3: 20 give
-#: the scale to 0.001 %).
-MISMATCH_BISECTIONS = 20
+#: The scales :func:`calibrate_mismatch` searches (where no scale in it gives the oracle
+#: NSR, the nearer end).
+MISMATCH_SCALE_RANGE = (1e-3, 1e3)
 
 
 def _kernel_power(kernels: np.ndarray, L: int) -> np.ndarray:
