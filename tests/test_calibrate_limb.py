@@ -204,18 +204,40 @@ def test_a_limb_at_the_end_of_the_searched_sizes_is_found():
     pts, nrm = circle_outline(200.0).offsets_px(1.0)
     fit = fit_limb(lum, (352.0, 346.0), pts, nrm, (0.7, 1.52))
     assert fit is not None
-    assert fit.radius_px == pytest.approx(radius, abs=0.5)
-    assert np.hypot(*np.subtract(fit.center_px, centre)) < 0.25
+    # the issue's bars on a limb (radius 0.5 px, centre 0.25 px), as for the renders
+    assert fit.radius_px == pytest.approx(radius, abs=RADIUS_TOL_PX)
+    assert np.hypot(*np.subtract(fit.center_px, centre)) < CENTRE_TOL_PX
 
 
 def test_a_refusal_for_contrast_alone_carries_the_outline_it_fitted():
-    """The edge fit's refusal of a well-fitted but faint outline says where it was (the
-    limb fit's second start); other refusals carry none."""
-    from mitsweep.photo.rim import NoMirrorError
+    """The edge fit's refusal of an outline fitted all round but faint says where it was
+    (the limb fit's second start): on the real photo without a mirror, a circle on a
+    building's facade; a refusal for want of edges (a flat image) carries none."""
+    import re
+    import warnings
 
-    assert NoMirrorError("no mirror found").outline is None
-    exc = NoMirrorError("no mirror found: faint", outline=((1.0, 2.0), 3.0))
-    assert exc.outline == ((1.0, 2.0), 3.0) and str(exc) == "no mirror found: faint"
+    from real_corpus import corpus
+
+    from mitsweep.io.camera import read_camera_image
+    from mitsweep.photo.free import circle_outline
+    from mitsweep.photo.rim import NoMirrorError, fit_rim
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        img = read_camera_image(corpus(with_outline=False)[0]["path"]).data
+    with pytest.raises(NoMirrorError, match="no clearer an edge") as faint:
+        fit_rim(img, circle_outline(76.0), 1.0, starts=1)
+    (row, col), radius = faint.value.outline
+    H, W = img.shape[:2]
+    assert 0 <= row < H and 0 <= col < W
+    # the radius the message names (to its 0.1 px), within the sizes searched (±35 %)
+    named = float(re.search(r"radius ([0-9.]+) px", str(faint.value)).group(1))
+    assert radius == pytest.approx(named, abs=0.05)
+    assert 76.0 / 1.35 <= radius <= 76.0 * 1.35
+    flat = 0.3 + 0.01 * np.random.default_rng(0).random((200, 200, 3))
+    with pytest.raises(NoMirrorError, match="show an edge") as none:
+        fit_rim(flat, circle_outline(60.0), 1.0, starts=1)
+    assert none.value.outline is None
 
 
 @pytest.mark.xfail(strict=True, reason=(

@@ -100,8 +100,8 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None,
             mirror = model_nsr(img, bank, noise, mask=mask, level=level, spectrum="mirror")
             candidates = {"before": before, "after": after, "mirror": mirror}
             if profile is not None:
-                candidates["calibrated"] = model_nsr(img / level, bank, noise, mask=mask,
-                                                     mismatch=profile)
+                candidates["calibrated"] = model_nsr(img, bank, noise, mask=mask,
+                                                     level=level, mismatch=profile)
             x = (img / level).astype(np.float32)
 
             def restore(im, w):
