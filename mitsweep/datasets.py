@@ -354,11 +354,13 @@ class MitsweepDataset:
 
 def _catalogue(manifest: dict) -> tuple[tuple[str, ...], tuple[str, ...]]:
     """The scenes (``scene_000`` ...) of a manifest, by index, and the image names every
-    one of them holds, sorted."""
+    one of them holds, sorted (the calibration scene is none of them)."""
+    from .pipeline.tasks import is_scene_item
+
     per_scene: dict[str, set[str]] = {}
     for name in manifest["items"]:
         parts = PurePosixPath(name).parts
-        if len(parts) == 2 and parts[1].endswith(".exr"):
+        if is_scene_item(name) and parts[1].endswith(".exr"):
             per_scene.setdefault(parts[0], set()).add(parts[1][:-len(".exr")])
     scenes = tuple(sorted(per_scene, key=_scene_index))
     names = set.intersection(*per_scene.values()) if per_scene else set()

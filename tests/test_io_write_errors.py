@@ -227,9 +227,10 @@ def test_dataset_with_injected_enospc_leaves_a_consistent_manifest(tmp_path, mon
                                                                    capsys):
     root = tmp_path / "ds"
     setup = tiny_setup_toml(tmp_path)
-    # The first two EXRs (pinhole, focused) are written, the third fails.
+    # The first four EXRs (the calibration scene's pinhole and sweep, the scene's pinhole
+    # and focused) are written, the fifth fails.
     _fail_exr_writes(monkeypatch, 'Failed to write pixel data to image file "{filename}". '
-                                  'No space left on device.', after=2)
+                                  'No space left on device.', after=4)
     rc = main(["dataset", str(setup), "--out", str(root), "--spp", "1", "1", "1", "1",
                "--lux", "50"])
     err = capsys.readouterr().err.strip().splitlines()
@@ -237,8 +238,9 @@ def test_dataset_with_injected_enospc_leaves_a_consistent_manifest(tmp_path, mon
     assert err[-1] == (f"mitsweep: error: cannot write {root / 'scene_000' / 'sweep.exr'}: "
                        f"{ENOSPC_TEXT}")
     manifest = _assert_consistent_partial_dataset(root)
-    assert set(manifest["items"]) == {"bank.npz", "scene_000/pinhole.exr",
-                                      "scene_000/focused.exr"}
+    assert set(manifest["items"]) == {"bank.npz", "calibration/pinhole.exr",
+                                      "calibration/sweep.exr", "calibration/mismatch.json",
+                                      "scene_000/pinhole.exr", "scene_000/focused.exr"}
     assert not (root / "scene_000" / "sweep.exr").exists()
 
 
@@ -247,6 +249,7 @@ def test_dataset_on_a_full_tmpfs_leaves_a_consistent_manifest(tmpfs):
     with pytest.raises(WriteError) as info:
         build_dataset(TINY, root, TINY_OPTS, progress=False)
     assert info.value.errno == errno.ENOSPC
-    assert Path(info.value.filename).parent in (root, root / "scene_000")
+    assert Path(info.value.filename).parent in (root, root / "calibration",
+                                                root / "scene_000")
     manifest = _assert_consistent_partial_dataset(root)
     assert 1 <= len(manifest["items"]) < len(pipeline.item_names(TINY_OPTS))

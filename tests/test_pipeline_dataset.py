@@ -11,6 +11,7 @@ from conftest import run_cli
 from mitsweep import pipeline
 from mitsweep.pipeline import tasks
 from mitsweep.config import DEFAULT_SETUP, Sensor
+from mitsweep.io.bank import load_bank
 from mitsweep.pipeline import (DatasetError, DatasetOptions, build_dataset, evaluate_dataset,
                                load_manifest)
 
@@ -19,7 +20,8 @@ from mitsweep.pipeline import (DatasetError, DatasetOptions, build_dataset, eval
 TINY = replace(DEFAULT_SETUP, sensor=Sensor(resolution=(48, 48), pixel_pitch=0.18))
 TINY_OPTS = DatasetOptions(scenes=1, spp={"pinhole": 2, "focused": 2, "sweep": 4, "stopped": 2},
                            bank_rays=1 << 14, light_levels_lux=(50.0,))
-EXPECTED = {"bank.npz", "scene_000/pinhole.exr", "scene_000/focused.exr",
+EXPECTED = {"bank.npz", "calibration/pinhole.exr", "calibration/sweep.exr",
+            "calibration/mismatch.json", "scene_000/pinhole.exr", "scene_000/focused.exr",
             "scene_000/sweep.exr", "scene_000/stopped.exr", "scene_000/edof.exr",
             "scene_000/sweep_50lux.exr", "scene_000/stopped_50lux.exr",
             "scene_000/edof_50lux.exr"}
@@ -45,7 +47,7 @@ def test_dataset_holds_every_item_with_checksums(tiny_dataset):
 def test_rerun_skips_complete_items(tiny_dataset, monkeypatch):
     root, manifest = tiny_dataset
     calls = []
-    for fn in ("render", "trace_bank", "add_noise", "restore"):
+    for fn in ("render", "trace_bank", "add_noise", "restore", "calibrate_weights"):
         monkeypatch.setattr(tasks, fn, lambda *a, _fn=fn, **k: calls.append(_fn))
     again = build_dataset(TINY, root, TINY_OPTS, progress=False)
     assert calls == []
@@ -218,3 +220,63 @@ def test_a_dataset_with_a_motion_profile_renders_and_traces_that_motion(tmp_path
     assert meta["motion"]["kind"] == "tabulated" and lin_meta["motion"]["kind"] != "tabulated"
     with pytest.raises(DatasetError, match="motion"):
         replace(TINY_OPTS, motion={"times": [0.0, 1.0], "positions_mm": [a, a]})
+
+
+# -- the calibration scene: the weights' mismatch profile, measured held out -----------
+
+def test_the_calibration_scene_is_held_out_and_gives_the_restorations_profile(tiny_dataset):
+    from mitsweep.datasets import open_dataset
+    from mitsweep.deconv.weights import MismatchProfile
+
+    root, manifest = tiny_dataset
+    calib = tasks.read_rgb(root / "calibration" / "pinhole.exr")
+    scene = tasks.read_rgb(root / "scene_000" / "pinhole.exr")
+    # another scene variation (texture layout), the same rig: the truths differ, the
+    # mirror's image does not
+    assert calib[2]["scene_index"] == tasks.CALIBRATION_SCENE
+    assert np.abs(calib[0] - scene[0]).mean() > 0.05 * scene[0].mean()
+    np.testing.assert_array_equal(calib[1]["mask.Y"], scene[1]["mask.Y"])
+    assert manifest["items"]["calibration/sweep.exr"]["params"]["seed"] == \
+        TINY_OPTS.seed + tasks.CALIBRATION_SCENE
+    # the profile the restorations read is calibration_profile's on those renders
+    profile = MismatchProfile.from_dict(json.loads((root / tasks.MISMATCH).read_text()))
+    again = tasks.calibration_profile(root / "calibration" / "pinhole.exr",
+                                      root / "calibration" / "sweep.exr",
+                                      load_bank(root / "bank.npz"))
+    np.testing.assert_allclose(profile.share, again.share)
+    assert profile.scale == pytest.approx(again.scale)
+    assert np.all((profile.share >= 0) & (profile.share <= 1)) and profile.scale > 0
+    for item in ("edof", "edof_50lux"):
+        meta = tasks.read_rgb(root / "scene_000" / f"{item}.exr")[2]
+        assert meta["nsr_rule"] == "calibrated" and meta["nsr"] > 0
+        assert manifest["items"][f"scene_000/{item}.exr"]["params"]["mismatch"] == tasks.MISMATCH
+    # and it is no scene of the dataset: the reader and the evaluation list scene_000 only
+    assert open_dataset(root).scenes == ("scene_000",)
+    assert list(evaluate_dataset(root)["scenes"]) == ["scene_000"]
+
+
+def test_a_dataset_restored_under_the_former_rule_redoes_only_its_restorations(tmp_path,
+                                                                              monkeypatch):
+    """A manifest of the ``model`` rule (before the calibration scene): a rerun adds the
+    calibration scene and restores again; renders and noisy images stay as they are."""
+    root = tmp_path / "ds"
+    build_dataset(TINY, root, TINY_OPTS, progress=False)
+    manifest = json.loads((root / pipeline.MANIFEST).read_text())
+    for name in [n for n in manifest["items"] if n.startswith("calibration/")]:
+        del manifest["items"][name]
+    for name, item in manifest["items"].items():
+        if item["params"].get("weights") == "calibrated":
+            item["params"]["weights"] = "model"
+            del item["params"]["mismatch"]
+    (root / pipeline.MANIFEST).write_text(json.dumps(manifest))
+    kept = {n: (root / n).read_bytes() for n in manifest["items"] if "edof" not in n}
+    # such a dataset is still complete and valid: it is read and scored as it is
+    assert load_manifest(root)["complete"] is True
+    assert list(evaluate_dataset(root)["scenes"]) == ["scene_000"]
+    again = build_dataset(TINY, root, TINY_OPTS, progress=False)
+    redone = {n for n, item in again["items"].items()
+              if manifest["items"].get(n, {}).get("params") != item["params"]}
+    assert redone == {"calibration/pinhole.exr", "calibration/sweep.exr",
+                      "calibration/mismatch.json", "scene_000/edof.exr",
+                      "scene_000/edof_50lux.exr"}
+    assert all((root / n).read_bytes() == b for n, b in kept.items())

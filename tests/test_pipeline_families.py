@@ -15,7 +15,7 @@ import pytest
 
 from mitsweep.pipeline import (DatasetError, DatasetOptions, build_dataset, evaluate_dataset,
                                load_manifest, options_from_dict)
-from mitsweep.pipeline import tasks
+from mitsweep.pipeline import options as pipeline_options, tasks
 from mitsweep.pipeline.dataset import scene_files_from
 from mitsweep.pipeline.runner import sha256
 from mitsweep.render.procedural import resolve_params
@@ -103,10 +103,14 @@ def test_procedural_scenes_are_in_the_render_parameters():
     assert opts.family_params == resolve_params(objects=12)  # stored resolved
     assert options_from_dict(json.loads(json.dumps(opts.as_dict()))) == opts
     sources = {t.name: t.params["scene_source"] for t in tasks.plan(opts) if t.fn is tasks.render}
-    assert len(sources) == 3 * 4
+    assert len(sources) == 3 * 4 + 2   # and the calibration scene's pinhole and sweep
     for name, src in sources.items():
-        i = int(name.split("/")[0].split("_")[1])
+        folder = name.split("/")[0]
+        i = tasks.CALIBRATION_SCENE if folder == tasks.CALIBRATION_DIR \
+            else int(folder.split("_")[1])
         assert src == {"family": "procedural", "seed": 10 + i, "params": opts.family_params}
+    # the calibration scene is none of the dataset's, however many it grows to
+    assert tasks.CALIBRATION_SCENE >= pipeline_options.MAX_SCENES
 
 
 @pytest.mark.parametrize("kw,message", [

@@ -23,7 +23,7 @@ from .dataset import load_manifest
 from .evaluation import DEPTH_BANDS_MM, checked_items, read_finite
 from .runner import DatasetError
 from ..io.bank import IPSFBank
-from .tasks import BANK, DECONV_PRIOR, white_level
+from .tasks import BANK, CALIBRATION_DIR, DECONV_PRIOR, calibration_profile, white_level
 
 __all__ = ["dataset_budget", "budget_items", "budget_json"]
 
@@ -124,8 +124,9 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
         mirror's rim, :func:`mitsweep.pipeline.rim.rim_bank`, or with its off-mirror
         grid nodes filled, :func:`mitsweep.deconv.kernels.fill_invalid_nodes`): the
         EDOF image is then restored again from its input with it, with the dataset's
-        weight rule (Wiener: :func:`mitsweep.deconv.weights.model_nsr`), so the budget
-        says what that bank would have given.
+        weight rule (Wiener: :func:`mitsweep.deconv.weights.model_nsr`; the calibrated
+        rule's profile calibrated again for this bank on the calibration scene), so the
+        budget says what that bank would have given.
 
     Returns
     -------
@@ -147,6 +148,7 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
     other_bank = bank is not None
     bank = load_bank(files[BANK]) if bank is None else bank
     out: dict[str, Any] = {"dataset": str(root), "second_seed": second_seed, "budgets": {}}
+    profile = None   # the calibrated weight's profile for another bank, made when needed
     for name in names:
         scene = Path(name).parent.name
         method = _edof_method(name)
@@ -184,11 +186,18 @@ def dataset_budget(directory: str | Path, *, items: list[str] | None = None,
         if other_bank:
             from ..deconv.weights import model_nsr
 
-            # as tasks.restore would have made it with this bank (its weight rule)
-            rule = "mirror" if meta.get("nsr_rule") == "mirror" else "frame"
+            # as tasks.restore would have made it with this bank (its weight rule; a
+            # calibrated one calibrated again, on the calibration scene, for this bank)
+            rule: dict[str, Any] = {
+                "spectrum": "mirror" if meta.get("nsr_rule") == "mirror" else "frame"}
+            if meta.get("nsr_rule") == "calibrated" and method == "wiener":
+                if profile is None:
+                    profile = calibration_profile(files[f"{CALIBRATION_DIR}/pinhole.exr"],
+                                                  files[f"{CALIBRATION_DIR}/sweep.exr"], bank)
+                rule["mismatch"] = profile
             weight = model_nsr(observed, bank, SensorNoise.from_dict(noise) if noise else None,
                                mask=mask > 0.5, level=level,
-                               spectrum=rule) if method == "wiener" else None
+                               **rule) if method == "wiener" else None
             restored = None
         b = error_budget(gt / level, observed / level, bank, clean_observed=clean / level,
                          second_seed=second, restored=restored, depth=depth,

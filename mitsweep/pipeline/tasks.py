@@ -24,6 +24,13 @@ changes its scene's parameters, so a rerun redoes that scene. A room dataset who
 setup names its own ``[scene] file`` holds that scene's digests in its render
 parameters the same way (``setup_scene``).
 
+Weights: the restorations' Wiener NSR comes from the image's noise model and the bank's
+mismatch profile (:data:`WEIGHT_RULE`), calibrated once per dataset on a scene outside
+it (:data:`CALIBRATION_DIR`: the pinhole and noise-free sweep of scene variation
+:data:`CALIBRATION_SCENE`, shared by every shard like the bank, then
+:data:`MISMATCH`). That scene is no dataset scene: evaluation, budgets, the dataset reader
+and the benches list ``scene_*`` folders only.
+
 Radiometry: renders are linear radiance. Relative exposure 1.0 (the noise model's
 reference level, reflectance ``SensorNoise.reflectance`` under the scene illuminance) is
 the 99th percentile of the ground truth inside the mirror's image; all images of a scene
@@ -46,13 +53,15 @@ from ..io.exr import stack_channels
 from ..render.api import MODE_SAMPLERS, MODES  # render imports Mitsuba only when rendering
 from ..resources import FileTypeError
 from ..io.scene_files import SceneFileError, changed_files, scene_digests
-from .options import DatasetOptions
+from .options import MAX_SCENES, MAX_SEED, DatasetOptions
 from .runner import DatasetError, Task, sha256
 
 __all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source",
            "setup_scene_digests", "trace_bank",
            "add_noise", "restore", "edof_name", "NOISE_PIXEL_MM", "DECONV_PRIOR", "WEIGHT_RULE",
-           "WHITE_PERCENTILE", "BANK"]
+           "WHITE_PERCENTILE", "BANK", "CALIBRATION_DIR", "CALIBRATION_SCENE", "MISMATCH",
+           "calibrate_weights", "calibration_profile", "is_scene_item", "read_mismatch",
+           "WEIGHT_RULES"]
 
 logger = logging.getLogger(__name__)
 
@@ -67,6 +76,20 @@ NOISE_PIXEL_MM = 0.0064
 DECONV_PRIOR = "natural"
 #: The dataset's IPSF bank (one for every scene).
 BANK = "bank.npz"
+
+#: The calibration scene's folder: its pinhole and noise-free sweep renders and the
+#: bank's mismatch profile (:data:`MISMATCH`), shared tasks (group None) as the bank.
+CALIBRATION_DIR = "calibration"
+
+#: The calibration scene's index: scene variation ``MAX_SCENES`` (texture layout
+#: ``scene.texture_seed + MAX_SCENES``, procedural seed ``seed + MAX_SCENES``), which no
+#: dataset scene has (indices run below :data:`~mitsweep.pipeline.options.MAX_SCENES`),
+#: so the weight is calibrated held out however many scenes a dataset grows to. An XML
+#: dataset calibrates on the setup's own scene (the room, or its ``[scene] file``).
+CALIBRATION_SCENE = MAX_SCENES
+
+#: The bank's mismatch profile (:class:`mitsweep.deconv.weights.MismatchProfile`, JSON).
+MISMATCH = f"{CALIBRATION_DIR}/mismatch.json"
 #: Run information the renderer puts in its metadata that differs between runs: it
 #: goes to the task's log, not into the file.
 _RENDER_TIMINGS = ("render_s", "load_and_render_s", "aov_s")
@@ -438,22 +461,154 @@ def add_noise(setup: Setup, out: Path, *, ground_truth: Path, image: Path, lux: 
 
 
 #: The dataset's rule for the restorations' weights (a restore task's ``weights``):
-#: ``"model"``, Wiener's NSR of least expected error from the image's noise model and its
-#: own spectrum (:func:`mitsweep.deconv.weights.model_nsr`, the whole frame's spectrum);
-#: ``"mirror"``, the same with the spectrum of the mirror's image (``spectrum="mirror"``;
-#: a task may name it, none is planned with it yet: docs/guide/weights.md); and
-#: ``"estimated"``, the former rule (max of the model's NSR at exposure 0.5 and the
-#: image's variance-based estimate), which older manifests' tasks (no ``weights`` in
-#: their parameters) still run.
-WEIGHT_RULE = "model"
+#: ``"calibrated"``, Wiener's NSR of least expected error from the image's noise model
+#: and the bank's mismatch profile calibrated on the calibration scene
+#: (:func:`mitsweep.deconv.weights.model_nsr` with ``mismatch=``; within 0.07 dB of the
+#: oracle held out on the bundled setups: docs/guide/weights.md). The rules of earlier
+#: manifests, which a task may still name: ``"model"``, the same without a profile, the
+#: whole frame's spectrum; ``"mirror"``, that with the mirror's spectrum
+#: (``spectrum="mirror"``); and ``"estimated"``, the first rule (max of the model's NSR
+#: at exposure 0.5 and the image's variance-based estimate), which manifests whose
+#: tasks record no ``weights`` ran.
+WEIGHT_RULE = "calibrated"
+
+#: Every weight rule a restore task takes.
+WEIGHT_RULES = ("calibrated", "model", "mirror", "estimated")
+
+
+def is_scene_item(name: str) -> bool:
+    """Whether an item (``scene_000/sweep.exr``) lies in a dataset scene's folder, not
+    the bank or the calibration scene.
+
+    Parameters
+    ----------
+    name : str
+        The item's name in the manifest.
+
+    Returns
+    -------
+    bool
+        True for ``scene_NNN/...``.
+    """
+    parts = name.split("/")
+    return len(parts) == 2 and parts[0].startswith("scene_") and parts[0][6:].isdigit()
+
+
+def calibration_profile(truth: Path, sweep: Path, bank: Any):
+    """The bank's mismatch profile on a scene's pinhole render and noise-free sweep,
+    for the dataset's restoration (Wiener, :data:`DECONV_PRIOR`;
+    :func:`mitsweep.deconv.weights.calibrate_mismatch`), both divided by the scene's
+    white level.
+
+    Parameters
+    ----------
+    truth : Path
+        The pinhole render, with its ``mask.Y`` AOV.
+    sweep : Path
+        The noise-free sweep render of the same scene.
+    bank : IPSFBank
+        The bank the restorations use.
+
+    Returns
+    -------
+    mitsweep.deconv.weights.MismatchProfile
+        The profile.
+
+    Raises
+    ------
+    DatasetError
+        The pinhole render has no ``mask.Y`` channel.
+    """
+    from ..deconv import deconvolve
+    from ..deconv.weights import calibrate_mismatch
+
+    gt, chans, _ = read_rgb(truth)
+    if "mask.Y" not in chans:
+        raise DatasetError(f"{truth}: no mask.Y channel (the mirror mask AOV)")
+    level = white_level(gt, chans["mask.Y"])
+    img = read_rgb(sweep)[0]
+
+    def restore(im: np.ndarray, w: float) -> np.ndarray:
+        return deconvolve(im, bank, method="wiener", weight=w, prior=DECONV_PRIOR)
+
+    return calibrate_mismatch(img / level, gt / level, bank, mask=chans["mask.Y"] > 0.5,
+                              restore=restore)
+
+
+def calibrate_weights(setup: Setup, out: Path, *, truth: Path, sweep: Path,
+                      bank: Path) -> dict:
+    """Write the bank's mismatch profile, calibrated on the calibration scene (the
+    calibration task; :func:`calibration_profile`).
+
+    Parameters
+    ----------
+    setup : mitsweep.config.Setup
+        The dataset's setup (the task's signature; the renders and bank hold it).
+    out : Path
+        The JSON written (:meth:`~mitsweep.deconv.weights.MismatchProfile.to_dict`).
+    truth, sweep : Path
+        The calibration scene's pinhole and noise-free sweep renders.
+    bank : Path
+        The dataset's IPSF bank.
+
+    Returns
+    -------
+    dict
+        ``calibrate_s``: the calibration's time, seconds (for the task's log).
+    """
+    import json
+
+    from ..io import write_text_atomic
+    from ..io.bank import load_bank
+
+    t0 = time.perf_counter()
+    profile = calibration_profile(truth, sweep, load_bank(bank))
+    write_text_atomic(out, json.dumps(profile.to_dict(), indent=1) + "\n")
+    return {"calibrate_s": time.perf_counter() - t0}
+
+
+def read_mismatch(path: str | Path | None):
+    """A mismatch profile written by :func:`calibrate_weights`.
+
+    Parameters
+    ----------
+    path : path
+        The JSON file.
+
+    Returns
+    -------
+    mitsweep.deconv.weights.MismatchProfile
+        The profile.
+
+    Raises
+    ------
+    DatasetError
+        The file is missing, not JSON, or not a profile.
+    """
+    import json
+
+    from ..deconv.weights import MismatchProfile
+
+    try:
+        return MismatchProfile.from_dict(json.loads(Path(str(path)).read_text()))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise DatasetError(f"{path}: not a readable mismatch profile ({exc})") from None
 
 
 def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
             nsr: float | None = None, noise: dict | None = None,
-            ground_truth: Path | None = None, weights: str = "estimated") -> dict:
+            ground_truth: Path | None = None, weights: str = "estimated",
+            mismatch: Path | None = None) -> dict:
     """Deconvolve ``image`` with ``method`` and the weight ``weights`` says.
 
-    ``weights="model"`` (every task :func:`plan` makes): Wiener's NSR (and the NSR of
+    ``weights="calibrated"`` (every task :func:`plan` makes): Wiener's NSR (and the NSR
+    of the priors' first Wiener step) is :func:`mitsweep.deconv.weights.model_nsr` with
+    the bank's mismatch profile (``mismatch``, :func:`calibrate_weights`' JSON): the NSR
+    of least expected error with the noise variance of the image's sensor model (as
+    below) and the profile's share of the image's own spectrum, read over the mirror's
+    image, as the model's mismatch.
+
+    ``weights="model"`` (the tasks of earlier manifests): Wiener's NSR (and the NSR of
     the priors' first Wiener step) is :func:`mitsweep.deconv.weights.model_nsr`: the
     NSR of least expected error for this image, with the noise variance of the sensor
     model the image carries (``noise``, ``SensorNoise.as_dict()`` as :func:`add_noise`
@@ -494,10 +649,13 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
         The image's noise model, ``SensorNoise.as_dict()`` (None: a noise-free sweep).
     ground_truth : Path, optional
         The scene's pinhole render, whose ``mask.Y`` bounds the NSR's estimate
-        (``weights="model"`` or ``"mirror"``).
-    weights : {"estimated", "model", "mirror"}
-        The weight rule (above); ``"estimated"`` is the default of the tasks of older
-        manifests, which do not record it.
+        (``weights`` other than ``"estimated"``; required for ``"calibrated"``).
+    weights : {"calibrated", "model", "mirror", "estimated"}
+        The weight rule (above, :data:`WEIGHT_RULES`); ``"estimated"`` is the default of
+        the tasks of older manifests, which do not record it.
+    mismatch : Path, optional
+        The bank's mismatch profile (``weights="calibrated"`` only, where it is
+        required).
 
     Returns
     -------
@@ -507,16 +665,20 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     Raises
     ------
     ValueError
-        An unknown weight rule, or ``noise`` with Wiener under the former rule.
+        An unknown weight rule, ``noise`` with Wiener under the first rule, or
+        ``weights="calibrated"`` without ``mismatch`` and ``ground_truth``.
     DatasetError
         The image's metadata does not record ``noise``.
     """
     from ..deconv import SensorNoise, deconvolve, estimate_nsr
     from ..io.bank import load_bank
 
-    if weights not in ("mirror", "model", "estimated"):
-        raise ValueError("restore: weights must be 'mirror', 'model' or 'estimated', "
+    if weights not in WEIGHT_RULES:
+        raise ValueError(f"restore: weights must be one of {', '.join(WEIGHT_RULES)}, "
                          f"got {weights!r}")
+    if weights == "calibrated" and (mismatch is None or ground_truth is None):
+        raise ValueError("restore: weights 'calibrated' needs the mismatch profile and "
+                         "the ground truth (its mirror mask)")
     img, _, meta = read_rgb(image)
     if noise is not None and method == "wiener" and weights == "estimated":
         raise ValueError("restore: method 'wiener' takes its noise as nsr, not noise=")
@@ -528,7 +690,7 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
     model = SensorNoise.from_dict(noise) if noise is not None else None
     level = np.float32(meta["white_level"]) if noise is not None else np.float32(1.0)
     record: dict[str, Any] = {}
-    if weights in ("model", "mirror"):
+    if weights != "estimated":
         from ..deconv.weights import model_nsr
 
         mask = None
@@ -536,8 +698,14 @@ def restore(setup: Setup, out: Path, *, image: Path, bank: Path, method: str,
             chans = read_rgb(ground_truth)[1]
             mask = chans["mask.Y"] > 0.5 if "mask.Y" in chans else None
         details: dict = {}
+        kw_rule: dict[str, Any] = {"spectrum": "mirror" if weights == "mirror" else "frame"}
+        if weights == "calibrated":
+            kw_rule["mismatch"] = read_mismatch(mismatch)
+            if mask is None:
+                raise DatasetError(f"{ground_truth}: no mask.Y channel (the mirror mask "
+                                   f"AOV), which the calibrated weight reads over")
         used = model_nsr(img, ipsf, model, mask=mask, level=float(level), details=details,
-                         spectrum="frame" if weights == "model" else "mirror")
+                         **kw_rule)
         record = {"nsr_rule": weights, "noise_variance": details["noise_variance"]}
     else:
         estimated = estimate_nsr(img)
@@ -624,9 +792,9 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
     Returns
     -------
     list of Task
-        The bank (shared, group None), then per scene (its index the shard group) the
-        renders, the EDOF images, the noisy images and their restorations. Task names
-        are the items' paths in the directory.
+        The bank and the calibration scene's tasks (shared, group None), then per scene
+        (its index the shard group) the renders, the EDOF images, the noisy images and
+        their restorations. Task names are the items' paths in the directory.
     """
     from ..deconv import paper_fig10_settings
 
@@ -634,7 +802,7 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
                             "grid": bank_grid(opts, setup), "seed": opts.seed}
     if opts.motion is not None:   # in the parameters only when set: older manifests hold
         bank["motion"] = opts.motion
-    tasks = [Task(BANK, trace_bank, bank)]
+    tasks = [Task(BANK, trace_bank, bank), *_calibration_tasks(opts, setup)]
     settings = [paper_fig10_settings(NOISE_PIXEL_MM, lux) for lux in opts.light_levels_lux]
     own_scene = setup_scene_digests(setup) if opts.family == "room" else None
     for i in range(opts.scenes):
@@ -646,20 +814,11 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
 
         source = scene_source(opts, i)
         for mode in MODES:
-            params = {"scene": i, "mode": mode, "spp": opts.spp[mode], "seed": opts.seed + i,
-                      "f_number": opts.stopped_f_number if mode == "stopped" else None,
-                      "diffraction": opts.diffraction and mode != "pinhole",
-                      "sampler": MODE_SAMPLERS[mode]}
-            if source is not None:
-                params["scene_source"] = source
-            if opts.motion is not None:
-                params["motion"] = opts.motion
-            if source is None and own_scene is not None:
-                params["setup_scene"] = own_scene
-            add(f"{mode}.exr", render, params)
+            add(f"{mode}.exr", render, _render_params(opts, i, mode, source, own_scene))
         for m in opts.methods:
             add(f"{edof_name(m)}.exr", restore, {"method": m, "weights": WEIGHT_RULE},
-                {"image": f"{d}/sweep.exr", "bank": BANK, "ground_truth": f"{d}/pinhole.exr"})
+                {"image": f"{d}/sweep.exr", "bank": BANK, "ground_truth": f"{d}/pinhole.exr",
+                 "mismatch": MISMATCH})
         for j, lux in enumerate(opts.light_levels_lux):
             for mode in ("sweep", "stopped"):
                 s = settings[j][mode]
@@ -675,8 +834,39 @@ def plan(opts: DatasetOptions, setup: Setup | None = None) -> list[Task]:
                           "weights": WEIGHT_RULE}
                 add(f"{edof_name(m, f'_{lux:g}lux')}.exr", restore, params,
                     {"image": f"{d}/sweep_{lux:g}lux.exr", "bank": BANK,
-                     "ground_truth": f"{d}/pinhole.exr"})
+                     "ground_truth": f"{d}/pinhole.exr", "mismatch": MISMATCH})
     return tasks
+
+
+def _render_params(opts: DatasetOptions, index: int, mode: str, source: dict | None,
+                   own_scene: dict | None) -> dict:
+    """A render task's parameters: scene ``index`` (made of ``source``,
+    :func:`scene_source`) in ``mode``, Monte Carlo seed ``seed + index`` (32-bit)."""
+    params = {"scene": index, "mode": mode, "spp": opts.spp[mode],
+              "seed": (opts.seed + index) % (MAX_SEED + 1),
+              "f_number": opts.stopped_f_number if mode == "stopped" else None,
+              "diffraction": opts.diffraction and mode != "pinhole",
+              "sampler": MODE_SAMPLERS[mode]}
+    if source is not None:
+        params["scene_source"] = source
+    if opts.motion is not None:
+        params["motion"] = opts.motion
+    if source is None and own_scene is not None:
+        params["setup_scene"] = own_scene
+    return params
+
+
+def _calibration_tasks(opts: DatasetOptions, setup: Setup | None) -> list[Task]:
+    """The calibration scene's pinhole and noise-free sweep renders and the bank's
+    mismatch profile on them (shared tasks, group None)."""
+    index = CALIBRATION_SCENE
+    source = scene_source(opts, index) if opts.family == "procedural" else None
+    own_scene = setup_scene_digests(setup)
+    renders = [Task(f"{CALIBRATION_DIR}/{mode}.exr", render,
+                    _render_params(opts, index, mode, source, own_scene))
+               for mode in ("pinhole", "sweep")]
+    return renders + [Task(MISMATCH, calibrate_weights, {},
+                           {"truth": renders[0].name, "sweep": renders[1].name, "bank": BANK})]
 
 
 def item_names(opts: DatasetOptions) -> list[str]:

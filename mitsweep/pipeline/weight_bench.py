@@ -5,14 +5,17 @@ For every scene's noise-free sweep and noisy sweep of a complete dataset,
 prior, the bank's 500-mm kernels) with the oracle NSR
 (:func:`mitsweep.deconv.budget.oracle_weight`), with the former rule (``before``: the
 larger of the image's variance-based estimate and the noise model's NSR at exposure
-0.5), with the dataset's rule now (``after``: :func:`mitsweep.deconv.weights.model_nsr`
-with the image's noise model and mirror mask, the whole frame's spectrum) and with the
+0.5), with the noise-model rule (``after``: :func:`mitsweep.deconv.weights.model_nsr`
+with the image's noise model and mirror mask, the whole frame's spectrum; the datasets'
+rule before the calibrated one) and with the
 same read over the mirror's image (``mirror``: ``spectrum="mirror"``), and reports each
 one's PSNR loss against the oracle, in one process. With a ``calibration_scene``, that
 scene's noise-free sweep and truth calibrate the bank's mismatch profile
 (:func:`mitsweep.deconv.weights.calibrate_mismatch`) and the other scenes are also
 restored with it (``calibrated``: ``model_nsr(..., mismatch=profile)``): held out, as a rig's
-profile measured on renders would be used on its photos.
+profile measured on renders would be used on its photos. Without one, the ``calibrated``
+column uses the dataset's own profile, measured on its calibration scene (the datasets'
+rule, :data:`mitsweep.pipeline.tasks.WEIGHT_RULE`).
 """
 
 from __future__ import annotations
@@ -24,7 +27,8 @@ import numpy as np
 
 from .dataset import load_manifest
 from .evaluation import checked_items, read_finite
-from .tasks import BANK, DECONV_PRIOR, white_level
+from .tasks import (BANK, DECONV_PRIOR, MISMATCH, calibration_profile, is_scene_item,
+                    read_mismatch, white_level)
 
 __all__ = ["dataset_weight_bench"]
 
@@ -54,8 +58,9 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None,
         counted among them).
     calibration_scene : int, optional
         The scene (its index) whose noise-free sweep and truth give the mismatch
-        profile of the ``calibrated`` weight; it is not itself restored. Default: no
-        ``calibrated`` column.
+        profile of the ``calibrated`` weight; it is not itself restored. Default: the
+        dataset's own profile (its calibration scene's, :data:`~.tasks.MISMATCH`, the
+        datasets' rule), or no ``calibrated`` column for a dataset made before it.
 
     Returns
     -------
@@ -73,8 +78,8 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None,
     root = Path(directory)
     files = checked_items(root, load_manifest(root))
     bank = load_bank(files[BANK])
-    scene_dirs = sorted({Path(n).parent.name for n in files if "/" in n})
-    profile = None
+    scene_dirs = sorted({Path(n).parent.name for n in files if is_scene_item(n)})
+    profile = read_mismatch(files[MISMATCH]) if MISMATCH in files else None
     if calibration_scene is not None:
         if not 0 <= calibration_scene < len(scene_dirs) or len(scene_dirs) < 2:
             raise ValueError(f"calibration_scene must be one of the dataset's scenes "
@@ -114,16 +119,6 @@ def dataset_weight_bench(directory: str | Path, *, scenes: int | None = None,
 
 def _profile(files: dict, bank, scene: str):
     """The bank's mismatch profile calibrated on ``scene``'s noise-free sweep and truth
-    (:func:`mitsweep.deconv.weights.calibrate_mismatch`, the dataset's restoration)."""
-    from ..deconv import deconvolve
-    from ..deconv.weights import calibrate_mismatch
-
-    gt, chans, _ = read_finite(files[f"{scene}/pinhole.exr"])
-    level = white_level(gt, chans["mask.Y"])
-    sweep, _, _ = read_finite(files[f"{scene}/sweep.exr"])
-
-    def restore(im, w):
-        return deconvolve(im, bank, method="wiener", weight=w, prior=DECONV_PRIOR)
-
-    return calibrate_mismatch(sweep / level, gt / level, bank, mask=chans["mask.Y"] > 0.5,
-                              restore=restore)
+    (:func:`mitsweep.pipeline.tasks.calibration_profile`, the dataset's restoration)."""
+    return calibration_profile(files[f"{scene}/pinhole.exr"], files[f"{scene}/sweep.exr"],
+                               bank)
