@@ -52,6 +52,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--nsr", type=_nsr, metavar="X",
                    help="Wiener noise-to-signal power ratio, (0, 1e6] (default: estimated from "
                         "the image)")
+    p.add_argument("--mismatch", metavar="PROFILE.json",
+                   help="the bank's mismatch profile (a dataset's calibration/mismatch.json, "
+                        "made with the same --bank): the weight is then the calibrated "
+                        "rule's, from the photo's noise and the profile (not with --nsr)")
     p.add_argument("--prior", choices=["natural", "constant"], default="natural",
                    help="Wiener regulariser: natural-image 1/f^2 spectrum (default) or a flat "
                         "one (constant NSR)")
@@ -82,7 +86,8 @@ def run(args) -> int:
         method=args.method, operator=args.operator, nsr=args.nsr, prior=args.prior,
         depth=args.depth, grid=args.grid, center=args.center, pixel_pitch=args.pixel_pitch,
         white_balance=args.white_balance, transfer=args.transfer, rays=args.rays,
-        force=args.force, bank_extent=args.bank_extent, progress=True)
+        force=args.force, bank_extent=args.bank_extent, mismatch=args.mismatch,
+        progress=True)
     s = result.summary
     if args.json:
         print_json(s)

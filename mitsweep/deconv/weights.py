@@ -50,10 +50,13 @@ independent blur it lands within 0.05 dB of the oracle (:mod:`mitsweep.deconv.we
 from __future__ import annotations
 
 import functools
+import json
 import logging
 import math
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import scipy.fft as sfft
@@ -393,6 +396,56 @@ class MismatchProfile:
         """JSON-ready (lists and floats), for :meth:`from_dict`."""
         return {"f": np.asarray(self.f).tolist(), "share": np.asarray(self.share).tolist(),
                 "scale": float(self.scale), "oracle_nsr": float(self.oracle_nsr)}
+
+    def write(self, path: str | os.PathLike) -> None:
+        """Write :meth:`to_dict` as JSON (atomically: a reader never sees half a file).
+
+        Parameters
+        ----------
+        path : path-like
+            The JSON file.
+        """
+        from ..io import write_text_atomic
+
+        write_text_atomic(path, json.dumps(self.to_dict(), indent=1) + "\n")
+
+    @classmethod
+    def read(cls, path: str | os.PathLike) -> MismatchProfile:
+        """The profile :meth:`write` wrote (a dataset's ``calibration/mismatch.json``).
+
+        Parameters
+        ----------
+        path : path-like
+            The JSON file.
+
+        Returns
+        -------
+        MismatchProfile
+            Checked: ``f`` increasing, ``share`` in [0, 1] of its length, ``scale`` and
+            ``oracle_nsr`` finite and > 0.
+
+        Raises
+        ------
+        ValueError
+            Not JSON, or not such a profile (naming the file and what is wrong).
+        OSError
+            The file cannot be read.
+        """
+        data = Path(path).read_bytes()
+        try:
+            profile = cls.from_dict(json.loads(data.decode("utf-8")))
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{path}: not a mismatch profile ({type(exc).__name__}: "
+                             f"{exc})") from None
+        f, share = profile.f, profile.share
+        if f.ndim != 1 or f.shape != share.shape or len(f) < 2 \
+                or not np.all(np.isfinite(f)) or np.any(np.diff(f) <= 0) \
+                or not np.all((share >= 0) & (share <= 1)) \
+                or not all(math.isfinite(v) and v > 0
+                           for v in (profile.scale, profile.oracle_nsr)):
+            raise ValueError(f"{path}: not a mismatch profile (f increasing, share in "
+                             f"[0, 1] of its length, scale and oracle_nsr finite and > 0)")
+        return profile
 
     @classmethod
     def from_dict(cls, d: dict) -> MismatchProfile:

@@ -556,14 +556,10 @@ def calibrate_weights(setup: Setup, out: Path, *, truth: Path, sweep: Path,
     dict
         ``calibrate_s``: the calibration's time, seconds (for the task's log).
     """
-    import json
-
-    from ..io import write_text_atomic
     from ..io.bank import load_bank
 
     t0 = time.perf_counter()
-    profile = calibration_profile(truth, sweep, load_bank(bank))
-    write_text_atomic(out, json.dumps(profile.to_dict(), indent=1) + "\n")
+    calibration_profile(truth, sweep, load_bank(bank)).write(out)
     return {"calibrate_s": time.perf_counter() - t0}
 
 
@@ -585,13 +581,11 @@ def read_mismatch(path: str | Path | None):
     DatasetError
         The file is missing, not JSON, or not a profile.
     """
-    import json
-
     from ..deconv.weights import MismatchProfile
 
     try:
-        return MismatchProfile.from_dict(json.loads(Path(str(path)).read_text()))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+        return MismatchProfile.read(Path(str(path)))
+    except (OSError, ValueError) as exc:
         raise DatasetError(f"{path}: not a readable mismatch profile ({exc})") from None
 
 

@@ -278,6 +278,50 @@ def _restore(pixels: np.ndarray, bank, *, method: str, operator: str | None, gri
         shift
 
 
+def _calibrated_nsr(pixels: np.ndarray, bank, mismatch, sigma: float | None,
+                    center: tuple[float, float], setup: Setup | None) -> float:
+    """The calibrated rule's NSR for a photo (``restore_photo``'s ``mismatch``)."""
+    from ..deconv.weights import MismatchProfile, blind_noise_variance, model_nsr
+
+    try:
+        profile = MismatchProfile.read(mismatch)
+    except (OSError, ValueError) as exc:
+        raise InputError(str(exc)) from None
+    mask = _mirror_mask(pixels.shape[:2], center, setup, bank)
+    if sigma is None:
+        sigma = float(np.sqrt(blind_noise_variance(pixels)))
+    return model_nsr(pixels, bank, sigma, mask=mask, mismatch=profile)
+
+
+def _mirror_mask(shape: tuple[int, int], center: tuple[float, float], setup: Setup | None,
+                 bank) -> np.ndarray:
+    """The mirror's image in a photo: the setup's predicted outline around ``center``,
+    else the radial bank's extent (a disc); refused where neither is known or the
+    image holds all of it (nothing outside to tell)."""
+    from skimage.draw import polygon
+
+    from ..deconv.kernels import radii_px
+    from ..deconv.metrics import disk_mask
+
+    if setup is not None:
+        from ..optics.outline import predicted_outline
+
+        points = predicted_outline(setup).offsets_px(bank.pixel_pitch)[0]
+        mask = np.zeros(shape, bool)
+        rr, cc = polygon(points[:, 0] + center[0], points[:, 1] + center[1], shape)
+        mask[rr, cc] = True
+    elif bank.kind == "radial":
+        mask = disk_mask(shape, float(np.max(radii_px(bank))), center=center)
+    else:
+        raise InputError("--mismatch reads the weight over the mirror's image: give --setup "
+                         "(its outline) with a grid bank")
+    if not mask.any() or mask.all():
+        raise InputError(f"--mismatch: the mirror's image ({int(mask.sum())} of "
+                         f"{mask.size} pixels at centre {center[0]:.1f}, {center[1]:.1f}) "
+                         f"must lie partly inside the photo, with pixels outside it")
+    return mask
+
+
 def _check_depth(depth):
     if depth is None or depth == "mean":
         return depth
@@ -314,6 +358,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
                   pixel_pitch: float | None = None, white_balance: str = "camera",
                   transfer: str | None = None, rays: int | None = None, force: bool = False,
                   cache_dir: str | os.PathLike | None = None, bank_extent: str = "fov",
+                  mismatch: str | os.PathLike | None = None,
                   progress: Progress = None) -> WorkflowResult:
     """Restore the EDOF image of a focal-sweep photo (what ``mitsweep deconvolve`` runs).
 
@@ -342,7 +387,8 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         auto (default): polar for radial banks, spatially varying for grid banks; grid on
         a radial bank rotates its kernels onto a ``grid`` x ``grid`` grid.
     nsr : float, optional
-        Wiener noise-to-signal power ratio; default: estimated from the image.
+        Wiener noise-to-signal power ratio (for the priors, their first Wiener step's);
+        default: estimated from the image, or the calibrated rule's with ``mismatch``.
     prior : {"natural", "constant"}
         Wiener regulariser: a natural-image 1/f² spectrum, or a flat one.
     depth : float or "mean", optional
@@ -368,6 +414,15 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         sweep does not bring the scene into focus but the blur is still traced (a grid
         bank's nodes off the mirror take the nearest traced kernel). Cached under its
         own key. Not for a given ``bank``.
+    mismatch : path-like, optional
+        The bank's mismatch profile (JSON: a dataset's ``calibration/mismatch.json``,
+        made with the same bank, or
+        :meth:`mitsweep.deconv.weights.MismatchProfile.write`'s): the NSR is then the
+        calibrated rule's (:func:`mitsweep.deconv.weights.model_nsr` with
+        ``mismatch=``), with the noise σ the file states or, where it states none, the
+        image's own (:func:`~mitsweep.deconv.weights.blind_noise_variance`), read over
+        the mirror's image (the setup's predicted outline around the centre, else the
+        radial bank's extent). Not with ``nsr``.
     progress : None, True or callable
         Progress of a bank trace (:func:`mitsweep.workflows.progress_callback`).
 
@@ -411,6 +466,8 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
 
     depth = _check_depth(depth)
     method, operator, deprecated = split_method(method, operator)
+    if mismatch is not None and nsr is not None:
+        raise InputError("--mismatch and --nsr both set the weight: give one")
     src = Path(image)
     if not src.is_file():
         raise FileNotFoundError(f"{src}: no such image file")
@@ -419,7 +476,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         if out.suffix.lower() not in OUTPUT_SUFFIXES:
             raise InputError(f"--out must be an {', '.join(OUTPUT_SUFFIXES)} file, got {out}")
     setup_path = None if setup is None or isinstance(setup, Setup) else setup
-    check_outputs([src, bank, setup_path, record], {"--out": out})
+    check_outputs([src, bank, setup_path, record, mismatch], {"--out": out})
     # its warnings are logged once the photo is accepted: a refusal is the only line
     try:
         photo = read_camera_image(src, log_warnings=False, pixel_pitch=pixel_pitch,
@@ -477,10 +534,14 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         logger.warning("--method %s is deprecated: --method now names the restoration method "
                        "(%s); use --operator %s", deprecated, "wiener", deprecated)
 
+    noise, noise_from = _file_noise(photo.meta)
+    nsr_rule = "given" if nsr is not None else "estimated"
+    if mismatch is not None:
+        nsr = _calibrated_nsr(pixels, kernels, mismatch, noise, center, photo_setup)
+        nsr_rule = "calibrated"
     t0 = time.perf_counter()
     kw = dict(nsr=nsr, prior=prior, depth=depth) if method == "wiener" else \
         dict(nsr=nsr, depth=depth)
-    noise, noise_from = _file_noise(photo.meta)
     if noise is not None:
         kw["noise"] = noise
     restored, used, shift = _restore(pixels, kernels, method=method, operator=operator,
@@ -495,7 +556,8 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
         "bank": bank_source, "bank_kind": kernels.kind, "bank_cache": cache,
         "bank_extent": (kernels.metadata or {}).get("extent", "fov"),
         "method": method, "operator": used,
-        "nsr": nsr if nsr is not None else "estimated", "prior": prior,
+        "nsr": nsr if nsr is not None else "estimated", "nsr_rule": nsr_rule,
+        "mismatch": None if mismatch is None else os.fspath(mismatch), "prior": prior,
         "noise_sigma": noise, "noise_from": noise_from,
         "depth_mm": depth if depth is not None else 500.0,
         "center_rc": list(center) if explicit_center else None,
