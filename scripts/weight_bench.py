@@ -7,8 +7,10 @@ and on each dataset given (:func:`mitsweep.pipeline.weight_bench.dataset_weight_
 
     .venv/bin/python scripts/weight_bench.py --sizes 512 2048 --datasets DIR [DIR ...]
 
-``--calibration-scene K`` adds the ``calibrated`` weight on datasets of two scenes or
-more: the bank's mismatch profile measured on scene K, the other scenes restored with it
+The ``calibrated`` column is the datasets' rule: the noise model and the bank's mismatch
+profile measured on the dataset's own calibration scene (``calibration/mismatch.json``;
+datasets made before it have none). ``--calibration-scene K`` measures the profile on
+scene K instead (datasets of two scenes or more), the other scenes restored with it
 (:func:`mitsweep.deconv.weights.mismatch_share`).
 
 ``--photos DIR`` adds the photos' restoration (:func:`mitsweep.workflows.restore_photo`,
@@ -178,9 +180,12 @@ def main(argv: list[str] | None = None) -> int:
               "before: max(variance estimate, model NSR at 0.5); after: noise model + the "
               "frame's spectrum; mirror: noise model + the mirror's spectrum"
               + ("; calibrated: noise model + the mismatch profile of scene "
-                 f"{a.calibration_scene}" if a.calibration_scene is not None else ""))
+                 f"{a.calibration_scene}" if a.calibration_scene is not None else
+                 "; calibrated: noise model + the dataset's own profile (its calibration "
+                 "scene, the datasets' rule)"))
+        calibrated = any("calibrated" in r for r in data)
         print(format_rows(data, ("before", "after", "mirror")
-                          + (("calibrated",) if a.calibration_scene is not None else ())))
+                          + (("calibrated",) if calibrated else ())))
     if photos:
         print("photos (restore_photo, polar Wiener, natural prior); before: the former "
               "default (discrepancy principle); default: restore_photo without nsr now")

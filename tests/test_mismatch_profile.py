@@ -154,7 +154,7 @@ def test_the_dataset_bench_calibrates_on_one_scene_and_restores_the_others(tmp_p
     from dataclasses import replace
 
     from mitsweep.config import DEFAULT_SETUP, Sensor
-    from mitsweep.pipeline import DatasetOptions, build_dataset
+    from mitsweep.pipeline import DatasetOptions, build_dataset, tasks
     from mitsweep.pipeline.weight_bench import dataset_weight_bench
 
     setup = replace(DEFAULT_SETUP, sensor=Sensor(resolution=(48, 48), pixel_pitch=0.18))
@@ -170,6 +170,17 @@ def test_the_dataset_bench_calibrates_on_one_scene_and_restores_the_others(tmp_p
         assert np.isfinite(c["psnr_db"]) and 0 < c["weight"] < 1
         # never better than the oracle, beyond its search's tolerance (5 % in weight)
         assert c["loss_db"] > -0.05
+    # without one, the calibrated column is the dataset's own rule: the weight each EDOF
+    # image was restored with (its calibration scene's profile); that scene is no case
+    own = dataset_weight_bench(tmp_path / "two")
+    assert [r["case"] for r in own] == [f"two scene_00{i} {n}" for i in (0, 1)
+                                        for n in ("sweep", "sweep_50lux")]
+    for r in own:
+        scene, image = r["case"].split()[1:]
+        edof = "edof" + image[len("sweep"):]
+        recorded = tasks.read_rgb(tmp_path / "two" / scene / f"{edof}.exr")[2]
+        assert recorded["nsr_rule"] == "calibrated"
+        assert r["calibrated"]["weight"] == pytest.approx(recorded["nsr"], rel=1e-9)
     with pytest.raises(ValueError, match="calibration_scene must be one of"):
         dataset_weight_bench(tmp_path / "two", calibration_scene=2)
     build_dataset(setup, tmp_path / "one", replace(opts, scenes=1), progress=False)
