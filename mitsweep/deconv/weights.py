@@ -407,7 +407,7 @@ class MismatchProfile:
         """
         from ..io import write_text_atomic
 
-        write_text_atomic(path, json.dumps(self.to_dict(), indent=1) + "\n")
+        write_text_atomic(Path(path), json.dumps(self.to_dict(), indent=1) + "\n")
 
     @classmethod
     def read(cls, path: str | os.PathLike) -> MismatchProfile:

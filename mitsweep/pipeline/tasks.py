@@ -43,7 +43,7 @@ import logging
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -55,6 +55,10 @@ from ..resources import FileTypeError
 from ..io.scene_files import SceneFileError, changed_files, scene_digests
 from .options import MAX_SCENES, MAX_SEED, DatasetOptions
 from .runner import DatasetError, Task, sha256
+
+if TYPE_CHECKING:   # imported when used: the deconvolution is not needed to plan
+    from ..deconv.weights import MismatchProfile
+    from ..io.bank import IPSFBank
 
 __all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source",
            "setup_scene_digests", "trace_bank",
@@ -494,7 +498,7 @@ def is_scene_item(name: str) -> bool:
     return len(parts) == 2 and parts[0].startswith("scene_") and parts[0][6:].isdigit()
 
 
-def calibration_profile(truth: Path, sweep: Path, bank: Any):
+def calibration_profile(truth: Path, sweep: Path, bank: IPSFBank) -> MismatchProfile:
     """The bank's mismatch profile on a scene's pinhole render and noise-free sweep,
     for the dataset's restoration (Wiener, :data:`DECONV_PRIOR`;
     :func:`mitsweep.deconv.weights.calibrate_mismatch`), both divided by the scene's
@@ -563,7 +567,7 @@ def calibrate_weights(setup: Setup, out: Path, *, truth: Path, sweep: Path,
     return {"calibrate_s": time.perf_counter() - t0}
 
 
-def read_mismatch(path: str | Path | None):
+def read_mismatch(path: str | Path | None) -> MismatchProfile:
     """A mismatch profile written by :func:`calibrate_weights`.
 
     Parameters
