@@ -9,7 +9,7 @@ to the measured error, and writes them all as JSON (``--json``)::
 
     .venv/bin/python scripts/budget_study.py OUT --json docs/reference/budget_study.json
 
-About 3 minutes on two cores (2.6 min measured). A rerun reuses what ``OUT`` already holds (the demo, the
+About 5 minutes on two cores (4.9 min measured). A rerun reuses what ``OUT`` already holds (the demo, the
 datasets, the second-seed renders), so ``--json`` alone rewrites the record quickly.
 """
 

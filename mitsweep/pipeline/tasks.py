@@ -43,12 +43,14 @@ import logging
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..config import Setup
 from ..io import read_exr, write_exr
+from ..deconv.weights import MismatchProfile   # NumPy/SciPy only: no renderer to plan
+from ..io.bank import IPSFBank
 from ..io.exr import stack_channels
 from ..render.api import MODE_SAMPLERS, MODES  # render imports Mitsuba only when rendering
 from ..resources import FileTypeError
@@ -56,9 +58,6 @@ from ..io.scene_files import SceneFileError, changed_files, scene_digests
 from .options import MAX_SCENES, MAX_SEED, DatasetOptions
 from .runner import DatasetError, Task, sha256
 
-if TYPE_CHECKING:   # imported when used: the deconvolution is not needed to plan
-    from ..deconv.weights import MismatchProfile
-    from ..io.bank import IPSFBank
 
 __all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source",
            "setup_scene_digests", "trace_bank",
@@ -585,8 +584,6 @@ def read_mismatch(path: str | Path | None) -> MismatchProfile:
     DatasetError
         The file is missing, not JSON, or not a profile.
     """
-    from ..deconv.weights import MismatchProfile
-
     try:
         return MismatchProfile.read(Path(str(path)))
     except (OSError, ValueError) as exc:

@@ -240,6 +240,21 @@ def _unwindow(photo: np.ndarray, window: np.ndarray, shift) -> np.ndarray:
     return out
 
 
+def _given_photo_bank(bank, operator, grid, shape, pitch, src) -> IPSFBank:
+    """A given bank, loaded and checked against the operator and the photo's ``shape``
+    and pixel ``pitch`` (None: the bank's is assumed, with a warning)."""
+    from ..deconv.kernels import check_bank_matches
+    from ..io.bank import load_bank
+
+    kernels = load_bank(os.fspath(bank))
+    _check_operator(operator, kernels.kind, grid, shape[:2])
+    if pitch is None:
+        logger.warning("%s: no pixel pitch in the metadata; assuming the bank's %g mm",
+                       src, kernels.pixel_pitch)
+    check_bank_matches(kernels, shape, pixel_pitch=pitch)
+    return kernels
+
+
 def _given_bank_identity(bank, optics_from: tuple, src: Path, force: bool) -> dict:
     """The identity record of a given bank checked against the photo's optics
     (``optics_from``: :func:`_image_optics`' optics and where they came from); a bank of
@@ -459,9 +474,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
     >>> result.provenance["center_from"]                         # doctest: +SKIP
     'the image centre'
     """
-    from ..deconv.kernels import check_bank_matches
     from ..io import write_exr
-    from ..io.bank import load_bank
     from ..io.camera import CameraFileError, read_camera_image, write_display_image
 
     depth = _check_depth(depth)
@@ -510,12 +523,7 @@ def restore_photo(image: str | os.PathLike, *, setup: Setup | str | os.PathLike 
             raise InputError("--bank-extent applies to a traced bank only: a given --bank "
                              "reaches as far as it was traced")
         bank_source = str(bank)
-        kernels = load_bank(os.fspath(bank))
-        _check_operator(operator, kernels.kind, grid, (H, W))
-        if pitch is None:
-            logger.warning("%s: no pixel pitch in the metadata; assuming the bank's %g mm",
-                           src, kernels.pixel_pitch)
-        check_bank_matches(kernels, pixels.shape, pixel_pitch=pitch)
+        kernels = _given_photo_bank(bank, operator, grid, pixels.shape, pitch, src)
         identity = _given_bank_identity(kernels, _image_optics(meta, given, setup_path, src,
                                                             motion), src, force)
     else:
