@@ -134,10 +134,18 @@ def energy_map(lum: np.ndarray) -> tuple[np.ndarray, float]:
     return np.log(d2 + eps), eps
 
 
+def _span(at: float, reach: float, n: int) -> tuple[int, int]:
+    """The index range ``[lo, hi)`` of an axis of ``n`` pixels within ``reach`` (+2 px) of
+    ``at``: empty, never reversed, where a fit has moved ``at`` off the image (a limb fit
+    on a photo without a mirror: scikit-image's moon)."""
+    lo = min(max(int(at - reach - 2), 0), n)
+    return lo, max(min(int(at + reach + 3), n), lo)
+
+
 def _radial_profile(e, centre, r_lo, r_hi, step=0.5, shown=None):
     H, W = e.shape
-    c0 = max(int(centre[0] - r_hi - 2), 0), min(int(centre[0] + r_hi + 3), H)
-    c1 = max(int(centre[1] - r_hi - 2), 0), min(int(centre[1] + r_hi + 3), W)
+    c0 = _span(centre[0], r_hi, H)
+    c1 = _span(centre[1], r_hi, W)
     rows, cols = np.mgrid[c0[0]:c0[1], c1[0]:c1[1]]
     r = np.hypot(rows + 0.5 - centre[0], cols + 0.5 - centre[1])
     sub = e[c0[0]:c0[1], c1[0]:c1[1]]
@@ -188,8 +196,7 @@ def _energy_step_fit(e, centre, radius, band, shown=None):
     from scipy.special import erf
 
     H, W = e.shape
-    r0 = max(int(centre[0] - radius - band - 2), 0), min(int(centre[0] + radius + band + 3), H)
-    c0 = max(int(centre[1] - radius - band - 2), 0), min(int(centre[1] + radius + band + 3), W)
+    r0, c0 = _span(centre[0], radius + band, H), _span(centre[1], radius + band, W)
     rows, cols = np.mgrid[r0[0]:r0[1], c0[0]:c0[1]]
     y, x = rows + 0.5, cols + 0.5
     r = np.hypot(y - centre[0], x - centre[1])
@@ -197,8 +204,8 @@ def _energy_step_fit(e, centre, radius, band, shown=None):
     if shown is not None:
         m &= shown[r0[0]:r0[1], c0[0]:c0[1]]
     y, x, s, rm = y[m], x[m], e[r0[0]:r0[1], c0[0]:c0[1]][m], r[m]
-    if len(s) < 50:
-        return centre, radius, 0.0
+    if len(s) < 50 or (rm < radius).all() or (rm >= radius).all():
+        return centre, radius, 0.0   # too little of the annulus, or one side only, shown
     a0 = float(np.median(s[rm < radius]))
     b0 = float(np.median(s[rm >= radius])) - a0
 
@@ -230,8 +237,7 @@ def _radial_gradient_sq(lum_s, gy, gx, centre, radius, band):
     """Squared radial derivative (about ``centre``) of the smoothed luminance over the
     annulus ``radius ± band``: pixel rows, cols and values."""
     H, W = lum_s.shape
-    r0 = max(int(centre[0] - radius - band - 2), 0), min(int(centre[0] + radius + band + 3), H)
-    c0 = max(int(centre[1] - radius - band - 2), 0), min(int(centre[1] + radius + band + 3), W)
+    r0, c0 = _span(centre[0], radius + band, H), _span(centre[1], radius + band, W)
     rows, cols = np.mgrid[r0[0]:r0[1], c0[0]:c0[1]]
     dy, dx = rows - centre[0], cols - centre[1]
     rr = np.hypot(dy, dx)
