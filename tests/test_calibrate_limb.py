@@ -266,3 +266,33 @@ def test_a_sphere_setup_refuses_a_photo_without_a_mirror():
     setup = replace(base, sensor=Sensor(resolution=(W, H), pixel_pitch=pitch))
     with pytest.raises(NoMirrorError):
         calibrate_photo(img, setup)
+
+
+@pytest.mark.parametrize("share", [0.15, 0.3])
+def test_a_limb_fit_run_off_a_photo_without_a_mirror_is_refused_not_a_crash(sphere, share):
+    """scikit-image's moon (a real photo shipped with the package) under a sphere setup:
+    the limb fit moved its circle off the image, and NumPy raised on a reversed index
+    window (predicted 30% of the side; this case fails on the code before the fix) and,
+    once the window was clamped, SciPy on a NaN start (15%: the annulus shown on one
+    side only); either way a
+    CalibrationError (found and refused, or no mirror) is the only allowed outcome."""
+    import warnings
+    from dataclasses import replace
+
+    import skimage.data
+
+    from mitsweep.config import Sensor
+    from mitsweep.photo import CalibrationError
+
+    img = (skimage.data.moon().astype(np.float32) / 255.0) ** 2.2
+    img = np.repeat(img[..., None], 3, axis=-1)
+    H, W = img.shape[:2]
+    pitch = predicted_outline(sphere).equivalent_radius_px(1.0) / (share * min(H, W))
+    setup = replace(sphere, sensor=Sensor(resolution=(W, H), pixel_pitch=pitch))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            cal = calibrate_photo(img, setup)
+        except CalibrationError:
+            return
+    assert np.all(np.isfinite(cal.center_px)) and np.isfinite(cal.rim_radius_px)

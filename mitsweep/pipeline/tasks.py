@@ -58,7 +58,6 @@ from ..io.scene_files import SceneFileError, changed_files, scene_digests
 from .options import MAX_SCENES, MAX_SEED, DatasetOptions
 from .runner import DatasetError, Task, sha256
 
-
 __all__ = ["plan", "item_names", "white_level", "read_rgb", "render", "scene_source",
            "setup_scene_digests", "trace_bank",
            "add_noise", "restore", "edof_name", "NOISE_PIXEL_MM", "DECONV_PRIOR", "WEIGHT_RULE",
