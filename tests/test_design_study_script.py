@@ -48,10 +48,11 @@ def test_measured_study_runs_both_profiles_on_the_same_scene_and_noise(tmp_path)
     for tag, prof in (("linear", lin), ("opt_2lux", opt)):
         items = json.loads((tmp_path / "datasets" / "sphere" / tag / "manifest.json")
                            .read_text())["items"]
-        motions = [v["params"]["motion"] for k, v in items.items()
-                   if k == "bank.npz" or k.endswith("/sweep.exr")]
-        assert len(motions) == 2
-        for m in motions:
+        motions = {k: v["params"]["motion"] for k, v in items.items()
+                   if k == "bank.npz" or k.endswith("/sweep.exr")}
+        # the calibration scene's sweep (the calibrated weight's) runs the profile too
+        assert sorted(motions) == ["bank.npz", "calibration/sweep.exr", "scene_000/sweep.exr"]
+        for m in motions.values():
             np.testing.assert_allclose(m["positions_mm"], prof.positions, rtol=0, atol=1e-12)
             np.testing.assert_allclose(m["times"], prof.times, rtol=0, atol=1e-12)
     # the two profiles differ, so their sweeps do (same seed, same scene)

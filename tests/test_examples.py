@@ -134,10 +134,10 @@ def test_inverse_sweep_recovers_the_sweep_end_and_writes_its_history(tmp_path):
 
 @pytest.mark.slow
 def test_dataset_on_dask_builds_resumes_and_scores(tmp_path):
-    """9 items on a 2-worker LocalCluster; the second build redoes none; every image is
-    scored."""
+    """12 items (9 of the scene, 3 of the calibration scene) on a 2-worker LocalCluster;
+    the second build redoes none; every image is scored."""
     out, root = run_example("dataset_on_dask.py", tmp_path, timeout=600)
-    assert out["build"]["complete"] and out["build"]["items"] == 9
+    assert out["build"]["complete"] and out["build"]["items"] == 12
     assert out["build"]["redone_on_rebuild"] == []
     scores = out["mean_psnr_db"]
     assert set(scores) == {"edof", "edof_50lux", "focused", "stopped", "stopped_50lux",
