@@ -19,15 +19,17 @@ Run::
     python examples/dataset_on_dask.py                 # 2 scenes, 96 px, 2 workers
     python examples/dataset_on_dask.py --quick --out /tmp/ds
 
-Measured (the paper's sphere, 2 loaded cores): ``--quick`` (1 scene at 48 px, 4–8 spp,
-50 lux) builds its 9 items in 15 s on 2 workers (28 s with the cluster's start and the
-evaluation); the second build redoes 0 items in 0.1 s. Mean PSNR at 50 lux: EDOF 18.1 dB,
-sweep 17.4 dB, stopped-down (f/11) 20.3 dB (at 48 px and 8 spp the renders' noise, not
-the blur, dominates). The default (2 scenes at 96 px, the default samples, 50 and 2 lux):
-23 items in 54 s; at 2 lux EDOF 23.7 dB, sweep 23.7 dB, stopped-down 20.9 dB; at 50 lux
-EDOF 23.9 dB, stopped-down 24.3 dB. At 96 px the sweep's blur is about a pixel, so
-deconvolution gains nothing over the sweep itself; the low-light gain over stopping
-down is the sweep's (2.8 dB at 2 lux). ``mitsweep dataset`` at 512 px is the study.
+Measured (the paper's sphere, this 2-core machine, otherwise idle): ``--quick``
+(1 scene at 48 px, 4–8 spp, 50 lux) builds its 12 items (9 of the scene, 3 of the
+calibration scene that sets the restoration's weight) in 4.4 s on 2 workers (7 s with
+the cluster's start and the evaluation); the second build redoes 0 items. Mean PSNR at
+50 lux: EDOF 17.9 dB, sweep 17.4 dB, stopped-down (f/11) 20.3 dB (at 48 px and 8 spp
+the renders' noise, not the blur, dominates). The default (2 scenes at 96 px, the
+default samples, 50 and 2 lux): 26 items in 6.8 s; at 2 lux EDOF 23.5 dB, sweep 23.7 dB,
+stopped-down 20.9 dB; at 50 lux EDOF 23.6 dB, stopped-down 24.3 dB. At 96 px the
+sweep's blur is about a pixel, so deconvolution gains nothing over the sweep itself
+(it loses 0.2 dB at 2 lux); the low-light gain over stopping down is the sweep's
+(2.8 dB at 2 lux). ``mitsweep dataset`` at 512 px is the study.
 """
 
 from __future__ import annotations
