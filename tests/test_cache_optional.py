@@ -153,7 +153,8 @@ def _one_cache_warning(err: str) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("command", ["render", "deconvolve"])
+@pytest.mark.parametrize("command", [pytest.param("render", marks=pytest.mark.slow),
+                                     "deconvolve"])
 def test_a_file_in_place_of_the_cache_folder_is_one_warning(tmp_path, paraboloid, command):
     blocker = tmp_path / "cache"
     blocker.write_text("not a folder\n")
@@ -179,6 +180,7 @@ def test_a_read_only_cache_is_one_warning(tmp_path, paraboloid, tmpfs):  # noqa:
     json.loads(out)
 
 
+@pytest.mark.slow   # 4 s; the cache's other switches stay; to keep the default run under 4 minutes on 2 cores
 def test_an_empty_home_puts_no_cache_anywhere(tmp_path, paraboloid):
     before = sorted(Path("/.cache/mitsweep").rglob("*")) if Path("/.cache").exists() else []
     # Dr.Jit's kernel cache has its own warning for an empty HOME, and its own variable

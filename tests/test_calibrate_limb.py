@@ -125,7 +125,8 @@ def _limb_params(sizes, misses=None):
                 if misses and (size, mode, case) in misses:
                     marks.append(pytest.mark.xfail(reason=misses[size, mode, case],
                                                    strict=True))
-                if size > 200 or marks:   # the default run: 200 px; known misses in CI
+                # the default run: the 200-px full frames; the rest and known misses in CI
+                if size > 200 or case != "full" or marks:
                     marks.append(pytest.mark.slow)
                 yield pytest.param(size, mode, case, id=f"{mode}{size}-{case}", marks=marks)
 
@@ -268,7 +269,7 @@ def test_a_sphere_setup_refuses_a_photo_without_a_mirror():
         calibrate_photo(img, setup)
 
 
-@pytest.mark.parametrize("share", [0.15, 0.3])
+@pytest.mark.parametrize("share", [pytest.param(0.15, marks=pytest.mark.slow), 0.3])
 def test_a_limb_fit_run_off_a_photo_without_a_mirror_is_refused_not_a_crash(sphere, share):
     """scikit-image's moon (a real photo shipped with the package) under a sphere setup:
     the limb fit moved its circle off the image, and NumPy raised on a reversed index

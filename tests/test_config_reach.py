@@ -95,6 +95,7 @@ def test_a_tilted_mirror_is_refused_in_its_tilt_plane(scenes_dir):
 # rim_frac = 1), placements, tilts and small asphere terms. Each example compares the
 # two reaches, and the two decisions on FOVs just either side of the reach and at a
 # random FOV (a FOV within the margin of the reach may be decided either way).
+@pytest.mark.slow   # 10 s; the fixed cases above stay in the default run
 @settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     radius=st.floats(5.0, 200.0),

@@ -76,8 +76,9 @@ def _stamps(root: Path) -> dict:
     return {n: ((root / n).stat().st_ino, (root / n).stat().st_mtime_ns) for n in _items(root)}
 
 
-@pytest.mark.parametrize("change", ["radiance in the included file", "the scene XML",
-                                    "the texture"])
+@pytest.mark.parametrize("change", [
+    "radiance in the included file",
+    *(pytest.param(c, marks=pytest.mark.slow) for c in ("the scene XML", "the texture"))])
 def test_a_changed_scene_file_redoes_every_item_made_from_it(world, capsys, change):
     """The issue's case: change the scene, delete one item, rerun. Every item of the
     scene is made again (the bank, which does not see the scene, is kept), so no old

@@ -280,6 +280,7 @@ def test_dask_executor_gives_the_same_directory(tmp_path, serial, dask_client):
     assert files_of(tmp_path) == serial
 
 
+@pytest.mark.slow   # 8 s; the process pool's killed worker stays in the default run
 def test_dask_worker_killed_by_pid_mid_task_still_completes(tmp_path, serial, dask_client):
     """SIGKILL the worker process running a task while it runs: Dask reschedules it on
     the other worker (or the restarted one) and the directory is the serial one."""

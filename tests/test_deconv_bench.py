@@ -8,6 +8,7 @@ import pytest
 from mitsweep.cli.main import main
 
 
+@pytest.mark.slow   # 4 s; to keep the default run under 4 minutes on 2 cores
 def test_quick_bench_reports_time_and_psnr_against_the_baseline(capsys):
     assert main(["bench", "deconv", "--quick", "--json"]) == 0
     res = json.loads(capsys.readouterr().out)

@@ -139,6 +139,7 @@ def test_inset_regions_refuse_an_empty_mask():
         inset_regions(np.zeros((32, 32)), np.zeros((32, 32)))
 
 
+@pytest.mark.slow   # 3 s; to keep the default run under 4 minutes on 2 cores
 def test_psf_planes_share_one_colour_bar_and_window(tmp_path, drawn):
     kernels = np.stack([np.stack([gaussian_kernel(0.5 + 0.1 * i + 0.1 * j)
                                   for j in range(3)]) for i in range(2)])
@@ -157,6 +158,7 @@ def test_psf_planes_share_one_colour_bar_and_window(tmp_path, drawn):
     assert -lo == pytest.approx(hi) and hi < 15 / 2 * 18.0
 
 
+@pytest.mark.slow   # 3 s; to keep the default run under 4 minutes on 2 cores
 def test_sweep_ranges_key_clears_the_panels_and_depths_differ_in_style(tmp_path, drawn):
     depths = (500.0, 5000.0, 50000.0)
     per_depth = [cross_sections(gaussian_kernel(1.0 + 0.1 * d), 0.0) for d in range(3)]

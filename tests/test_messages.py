@@ -92,7 +92,8 @@ def test_a_scene_with_a_utf8_byte_order_mark_renders(capsys, tmp_path, tiny):
     assert out.is_file()
 
 
-@pytest.mark.parametrize("value", ["\u00b2", "x8", "8.0", "-16"])
+@pytest.mark.parametrize("value", ["\u00b2", *(pytest.param(v, marks=pytest.mark.slow)
+                                                for v in ("x8", "8.0", "-16"))])
 def test_llvm_vector_width_variable_is_named(tmp_path, tiny, value):
     # a fresh process: the backend (and the width) is chosen once per process
     rc, out, err = run_cli("render", tiny, "--mode", "pinhole", "--spp", "1", "--out",

@@ -150,6 +150,7 @@ def test_concurrent_dataset_runs_one_refused_one_completes(tmp_path):
     _assert_complete_and_verified(root)
 
 
+@pytest.mark.slow   # 10 s; the concurrent runs' test above stays in the default run
 def test_sigkilled_holder_is_taken_over_by_the_next_run(tmp_path):
     setup = tiny_setup_toml(tmp_path)
     root = tmp_path / "ds"

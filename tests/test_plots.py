@@ -134,6 +134,7 @@ def test_ipsf_png_has_a_colour_bar_and_unclashing_labels(tmp_path, drawn):
         assert not _boxes_overlap(ylabel, other.get_tightbbox(renderer))
 
 
+@pytest.mark.slow   # 4 s; to keep the default run under 4 minutes on 2 cores
 def test_bank_png_thumbnails_share_a_colour_bar_without_overlap(tmp_path, drawn):
     bank = tiny_bank()
     path = plots.plot_bank(bank, tmp_path / "bank.png", sections=bank_sections(bank))
@@ -175,7 +176,8 @@ def test_table1_png_tick_labels_do_not_overlap(tmp_path, drawn, n_rows):
 
 
 @pytest.mark.parametrize("levels", [LIGHT_LEVELS,
-                                    tuple(100.0 / 2 ** np.arange(MAX_LIGHT_LEVELS))],
+                                    pytest.param(tuple(100.0 / 2 ** np.arange(MAX_LIGHT_LEVELS)),
+                                                 marks=pytest.mark.slow)],
                          ids=["paper", "most"])
 def test_per_radius_png_gives_each_light_level_its_own_style(tmp_path, drawn, levels):
     results = evaluation_results(levels)

@@ -80,7 +80,9 @@ def test_a_malformed_profile_is_ignored(tmp_path, scene, values):
 LEVELS = [((2e-5, 1e-6), -0.5), ((2e-4, 4e-6), 1.0), ((2e-3, 1e-5), 5.0)]
 
 
-@pytest.mark.parametrize("profile, gain", LEVELS)
+@pytest.mark.parametrize("profile, gain", [
+    pytest.param(*LEVELS[0], marks=pytest.mark.slow), LEVELS[1],
+    pytest.param(*LEVELS[2], marks=pytest.mark.slow)])
 def test_the_stated_noise_weights_the_restoration(tmp_path, scene, profile, gain):
     """Restored with the stated σ (the discrepancy principle's noise), the image gains
     over the σ estimated from the image where noise matters. Both stay short of the

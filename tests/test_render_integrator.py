@@ -33,7 +33,8 @@ def _scene(setup, mode, spp, sampler="independent", integrator=None):
     return mi.load_dict(d), info
 
 
-@pytest.mark.parametrize("name", ["sphere", "paraboloid_tilted"])
+@pytest.mark.parametrize("name", ["sphere", pytest.param("paraboloid_tilted",
+                                                         marks=pytest.mark.slow)])
 @pytest.mark.parametrize("mode", ["pinhole", "focused", "sweep"])
 def test_mirrorview_gives_the_path_integrators_image_bit_for_bit(name, mode):
     """Same sampler, same seed: the emissive scene's only paths are camera → emitter and

@@ -229,6 +229,7 @@ def test_the_lit_room_built_by_mitsweep_is_differentiable_through_the_mirror():
     assert np.isfinite(g).all() and abs(float(g[0])) > 0
 
 
+@pytest.mark.slow   # 4 s; the gradient checks above stay in the default run
 def test_inverse_problem_recovers_a_perturbed_sweep_end_through_the_mirror_in_a_lit_scene():
     """examples/inverse_sweep.py --lit, reduced: a sweep end 240 µm (20 % of the span) off
     is found by Gauss-Newton steps on the forward-mode Jacobian image through the mirror.

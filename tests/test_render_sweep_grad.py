@@ -185,8 +185,8 @@ def cases():
 
 
 @pytest.mark.parametrize("case, mode", [
-    ("linear-start", "forward"), ("linear-start", "reverse"),
-    ("linear-end", "forward"), ("linear-end", "reverse"),
+    ("linear-start", "forward"), pytest.param("linear-start", "reverse", marks=pytest.mark.slow),
+    pytest.param("linear-end", "forward", marks=pytest.mark.slow), ("linear-end", "reverse"),
     # Forward and reverse mode agree to 1e-4 with the same seed (the CRN test below,
     # for every case), so the other profiles need one mode here.
     ("trapezoidal-end", "reverse"), ("tabulated-knot", "forward"), ("fixed", "reverse"),

@@ -39,7 +39,8 @@ def squashed(tmp_path):
     return tiny_setup_toml(tmp_path), scene
 
 
-@pytest.mark.parametrize("json_flag", [True, False], ids=["json", "text"])
+@pytest.mark.parametrize("json_flag", [True, pytest.param(False, marks=pytest.mark.slow)],
+                         ids=["json", "text"])
 def test_mitsuba_warning_goes_to_stderr_not_stdout(tmp_path, squashed, json_flag):
     setup, scene = squashed
     out = tmp_path / "out.exr"

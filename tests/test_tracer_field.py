@@ -58,7 +58,7 @@ def _focal_lines_brute_force(setup, x, y, depth, seed=0):
 
 
 @pytest.mark.parametrize("x,y", OFF_PLANE)
-@pytest.mark.parametrize("depth", [300.0, 10000.0])
+@pytest.mark.parametrize("depth", [300.0, pytest.param(10000.0, marks=pytest.mark.slow)])
 def test_line_foci_are_where_the_pencil_collapses_to_a_line(x, y, depth):
     res = numeric_focus(TILTED, source_from_mirror(TILTED, x, y, depth,
                                                    reference_sensor_distance=REF))
