@@ -342,20 +342,20 @@ def test_a_sphere_setup_refuses_sample_photos_without_a_mirror(sphere, name, sha
 
 
 def test_the_direction_cue_reads_rings_as_a_limb_and_spokes_as_not():
-    """limb._radial_share on drawn patterns, where the answer is known: concentric rings
+    """limb.radial_share on drawn patterns, where the answer is known: concentric rings
     (detail along the radius, as a reflection squeezed at a limb) read 1 in every sector,
     spokes (detail across it) 0; sectors the frame crops away (under 10 pixels) are not
     counted, so half a ring pattern still reads 1."""
-    from mitsweep.photo.limb import _radial_share
+    from mitsweep.photo.limb import radial_share
 
     n, c, R = 200, (100.0, 100.0), 80.0
     y, x = np.mgrid[0:n, 0:n].astype(float)
     r, th = np.hypot(y - c[0], x - c[1]), np.arctan2(y - c[0], x - c[1])
     rings, spokes = np.sin(2.0 * r), np.sin(40.0 * th)
-    assert _radial_share(*np.gradient(rings), c, R) == 1.0
-    assert _radial_share(*np.gradient(spokes), c, R) == 0.0
+    assert radial_share(*np.gradient(rings), c, R) == 1.0
+    assert radial_share(*np.gradient(spokes), c, R) == 0.0
     shown = np.zeros((n, n), bool)
     shown[:, :100] = True                      # the left half only
-    assert _radial_share(*np.gradient(rings), c, R, shown) == 1.0
-    assert _radial_share(*np.gradient(spokes), c, R, shown) == 0.0
-    assert _radial_share(*np.gradient(rings), c, R, np.zeros((n, n), bool)) == 0.0
+    assert radial_share(*np.gradient(rings), c, R, shown) == 1.0
+    assert radial_share(*np.gradient(spokes), c, R, shown) == 0.0
+    assert radial_share(*np.gradient(rings), c, R, np.zeros((n, n), bool)) == 0.0

@@ -36,12 +36,16 @@ __all__ = [
     "LIMB_ANNULUS_PX",
     "LIMB_HALF_WIDTH_PX",
     "LIMB_SMOOTHING_PX",
+    "MIN_RADIAL_SHARE",
     "MIN_RIDGE",
+    "RADIAL_BAND_PX",
+    "RADIAL_SECTORS",
     "RIDGE_SMOOTHING_PX",
     "STRONG_ENERGY_STEP",
     "LimbFit",
     "energy_map",
     "fit_limb",
+    "radial_share",
 ]
 
 #: Gaussian smoothing (px) of the luminance the sign-agnostic step is located on.
@@ -253,11 +257,24 @@ def _energy_step_fit(e, centre, radius, band, shown=None):
     return (float(cy), float(cx)), float(R), float(-b)
 
 
-def _radial_share(gy, gx, centre, radius, shown=None) -> float:
+def radial_share(gy: np.ndarray, gx: np.ndarray, centre: tuple[float, float],
+                 radius: float, shown: np.ndarray | None = None) -> float:
     """Share of the :data:`RADIAL_SECTORS` angular sectors in which the gradient
     (``gy``, ``gx``) just inside the circle (see :data:`MIN_RADIAL_SHARE`) has more
     energy along the radius than across it; a sector with under 10 shown pixels there
-    (a frame's crop) is not counted, and none counted reads 0."""
+    (a frame's crop) is not counted, and none counted reads 0.
+
+    Parameters
+    ----------
+    gy, gx : (H, W) ndarray
+        The luminance's derivatives along rows and columns.
+    centre : (float, float)
+        The circle's centre ``(row, col)``, px.
+    radius : float
+        Its radius, px.
+    shown : (H, W) bool ndarray, optional
+        Pixels the photo shows.
+    """
     H, W = gy.shape
     width = max(RADIAL_BAND_PX, 0.08 * radius)
     r0, c0 = _span(centre[0], radius, H), _span(centre[1], radius, W)
@@ -500,7 +517,7 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     used[np.flatnonzero(good)[inl]] = True
     edges = np.asarray(c)[None, :] + scale * pts + np.nan_to_num(off)[:, None] * nrm
     coherence = _step_coherence(lum_s, c, scale, pts, nrm, good)
-    radial = _radial_share(gy, gx, c, R, shown)
+    radial = radial_share(gy, gx, c, R, shown)
     if radial < MIN_RADIAL_SHARE:   # a circle in a texture, not a reflection's limb
         return None
     return LimbFit(center_px=(float(c[0]), float(c[1])), radius_px=float(R),
