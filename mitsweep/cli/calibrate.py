@@ -96,6 +96,8 @@ def _run_free(args) -> int:
         f"centre           row {row:.3f}, col {col:.3f} px "
         f"(offset from the image centre {offset[0]:+.3f}, {offset[1]:+.3f} px)",
         f"radius           {out['radius_px']:.3f} px (a circle; no setup)",
+        *(["outline          a sphere's limb, found where the photo shows no edge (from "
+           "how the image changes across it)"] if out.get("limb") else []),
         f"fit              {out['points_used']} of {out['points_total']} outline points, rms "
         f"{out['residual_rms_px']:.3f} px (centre standard error "
         f"{out['center_standard_error_px']:.3f} px)",

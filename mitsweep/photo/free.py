@@ -20,6 +20,13 @@ for an axis ratio of :data:`MIN_AXIS_RATIO`, gives points that a RANSAC ellipse
 (scikit-image) turns into an elliptical outline, which is refined and validated as any
 outline is; the ellipse through the refined edge points then reshapes the outline, for at
 most :data:`ELLIPSE_ROUNDS` rounds.
+
+A sphere's outline is its limb, where a photo may show no edge that stands out (the
+reflection there continues what lies behind the mirror). Where neither a circle nor an
+ellipse is accepted, each candidate is looked at last as a limb
+(:func:`mitsweep.photo.limb.fit_limb`, over the :data:`WIDE_LOOK` scales): found from how
+the image changes across it, and only where the detail just inside it runs along it, as
+a reflection squeezed at a limb does. The fit's ``limb`` says which it is.
 """
 
 from __future__ import annotations
@@ -32,12 +39,13 @@ import numpy as np
 from ..optics.outline import RimOutline
 from .coarse import MAX_CANDIDATES, coarse_search, search_scales
 from .image import fill_void, photo_void, reduce_by
-from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit, fit_rim, settled,
-                  working_luminance)
+from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit, fit_rim,
+                  rim_fit_of_limb, settled, working_luminance)
 
 __all__ = ["find_circle", "circle_outline", "ellipse_outline", "ellipse_of_edges",
-           "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "ELLIPSE_SIGNIFICANCE",
-           "ELLIPSE_MIN_PX", "MIN_AXIS_RATIO", "WIDE_LOOK", "ELLIPSE_ROUNDS", "ELLIPSE_TRIALS"]
+           "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "FREE_LIMB_RADIAL_SHARE",
+           "ELLIPSE_SIGNIFICANCE", "ELLIPSE_MIN_PX", "MIN_AXIS_RATIO", "WIDE_LOOK",
+           "ELLIPSE_ROUNDS", "ELLIPSE_TRIALS"]
 
 logger = logging.getLogger(__name__)
 
@@ -46,6 +54,15 @@ logger = logging.getLogger(__name__)
 #: (:data:`mitsweep.photo.rim.PLAUSIBLE_SCALE`).
 WIDE_LOOK = (1.0 / (1.0 + PLAUSIBLE_SCALE), 1.0 / (1.0 - PLAUSIBLE_SCALE))
 
+#: Without a setup nothing says a sphere is there: a limb is accepted only where the
+#: detail just inside it runs along it in every one of the
+#: :data:`mitsweep.photo.limb.RADIAL_SECTORS` sectors (a setup's limb fit asks for
+#: :data:`mitsweep.photo.limb.MIN_RADIAL_SHARE`). Measured on the limbs that fit found
+#: (renders of the sphere 200-400 px, the real chrome balls, PAGEOS and the dome: 28 of
+#: 30 read 1, sphere_tokyo's two 0.83, and its edge is found as a circle) and on circles
+#: in photos without a mirror (0.25-1: 2 of 28 read 1, both the astronaut portrait's
+#: circle, which ``--free`` finds as an edge anyway; the Kodak photo's 0.83).
+FREE_LIMB_RADIAL_SHARE = 1.0
 #: Smallest outline radius searched, as a share of the photo's shorter side.
 MIN_RADIUS_SHARE = 0.08
 #: Largest outline radius searched, as a share of the photo's longer side.
@@ -169,6 +186,15 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
         fit = _reshaped_ellipse(image, (a * f, b * f, angle))
         return fit, _equivalent_radius(fit)
     step = 1.0 + 2.0 / radius  # two reduced pixels' worth of scale
+    if fit.limb:   # a limb: fitted again at full resolution, from the reduced copy's
+        centre = (fit.center_px[0] * f + (f - 1) / 2, fit.center_px[1] * f + (f - 1) / 2)
+        found = _limb_at(lum, _shown(image), centre, radius * f, (1.0 / step, step))
+        if found is None:
+            raise NoMirrorError(f"no mirror found: a sphere's limb found on the photo "
+                                f"reduced {f}x (centre row {centre[0]:.1f}, col "
+                                f"{centre[1]:.1f}, radius {radius * f:.1f} px) is not "
+                                f"found again at full resolution")
+        return found
     # one start: the candidate is chosen already, at its own size
     fit = fit_rim(image, circle_outline(radius * f), 1.0, scale_range=(1.0 / step, step),
                   starts=1)
@@ -255,7 +281,7 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
                 continue
             # the outline explained best: most points, least scatter relative to its size
             size = radius * fit.scale
-            key = (fit.points_used / fit.points_total) * size / max(fit.residual_rms_px, 0.1)
+            key = _explained(fit, size)
             if best is None or key > best[0]:
                 best = (key, fit, size)
         if best is not None:
@@ -263,10 +289,47 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
     found = _best_ellipse(lum, image, candidates[:CANDIDATES])
     if found is not None:
         return found
+    shown = _shown(image)
+    looks = (_limb_at(lum, shown, centre, radius, WIDE_LOOK)
+             for _score, centre, radius in candidates[:CANDIDATES])
+    limbs = [fr for fr in looks if fr is not None]
+    if limbs:
+        fit, radius = max(limbs, key=lambda fr: _explained(fr[0], fr[1]))
+        return fit, radius, None
     raise NoMirrorError(f"no mirror found: no circle of radius {lo:.0f}-{hi:.0f} px "
                         f"stands out as a mirror's outline, nor an ellipse of axis ratio "
-                        f"{MIN_AXIS_RATIO:g} or more (the strongest candidate: "
-                        f"{failures[0].removeprefix('no mirror found: ')})")
+                        f"{MIN_AXIS_RATIO:g} or more, nor a sphere's limb (the strongest "
+                        f"candidate: {failures[0].removeprefix('no mirror found: ')})")
+
+
+def _explained(fit: RimFit, size: float) -> float:
+    """How well a fit explains its outline: the share of its points used, times its size
+    over its scatter (the key the candidates are compared by)."""
+    return (fit.points_used / fit.points_total) * size / max(fit.residual_rms_px, 0.1)
+
+
+def _shown(image: np.ndarray) -> np.ndarray | None:
+    """The pixels a photo shows (None where it shows all, or none)."""
+    void = photo_void(image)
+    return ~void if void.any() and not void.all() else None
+
+
+def _limb_at(lum: np.ndarray, shown: np.ndarray | None, centre: tuple[float, float],
+             radius: float, scale_range: tuple[float, float]
+             ) -> tuple[RimFit, float] | None:
+    """A sphere's limb near the circle ``centre``, ``radius`` (px), its size within
+    ``scale_range`` times it (:func:`mitsweep.photo.limb.fit_limb`, where the photo shows
+    no edge that stands out: the PAGEOS balloon in ``tests/data/real``), as ``(fit,
+    radius_px)``; None where none is found."""
+    from .limb import fit_limb
+
+    pts, nrm = circle_outline(radius).offsets_px(1.0)
+    limb = fit_limb(lum, centre, pts, nrm, scale_range, shown=shown, near_px=radius)
+    if limb is None or limb.radial_share < FREE_LIMB_RADIAL_SHARE:
+        return None
+    logger.info("free search: limb at (%.1f, %.1f) px, radius %.1f px (radial share %.2f)",
+                *limb.center_px, limb.radius_px, limb.radial_share)
+    return rim_fit_of_limb(limb, pts, nrm, radius), limb.radius_px
 
 
 def _equivalent_radius(fit: RimFit) -> float:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,8 +52,11 @@ from .image import fill_void, luminance, noise_sigma, photo_void, smooth
 from .robust import (EDGE_CORRELATION_PX, centre_standard_error, consensus_lstsq,
                      tukey_lstsq)
 
+if TYPE_CHECKING:
+    from .limb import LimbFit
+
 __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim",
-           "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
+           "rim_fit_of_limb", "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
            "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
            "RESIDUAL_WIDTH_SHARE", "RESIDUAL_RADIUS_SHARE", "PLAUSIBLE_SCALE",
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE", "LIMB_INSIDE_SHARE",
@@ -393,16 +397,34 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
     logger.info("limb fit: centre (%.2f, %.2f) px, radius %.2f px (energy step %.2f; the "
                 "edge fit %s)", *limb.center_px, limb.radius_px, limb.energy_step,
                 f"found {edge.scale * radius:.2f} px" if edge is not None else "refused")
+    return rim_fit_of_limb(limb, pts, nrm, radius)
+
+
+def rim_fit_of_limb(limb: LimbFit, pts: np.ndarray, nrm: np.ndarray,
+                    radius_px: float) -> RimFit:
+    """A limb found (:func:`mitsweep.photo.limb.fit_limb`) as a :class:`RimFit` of the
+    outline it was fitted to (``limb`` True; no edge width, tolerance or roll), with the
+    centre's standard error from its inliers' residuals.
+
+    Parameters
+    ----------
+    limb : mitsweep.photo.limb.LimbFit
+        The limb fit.
+    pts, nrm : (N, 2) ndarray
+        The outline's points (offsets from the axis, px) and outward normals it was
+        fitted to.
+    radius_px : float
+        The outline's radius, px (:meth:`RimOutline.equivalent_radius_px`): the fit's
+        ``scale`` is the limb's radius over it.
+    """
     A = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])
-    scale = limb.radius_px / radius
-    edges = limb.edge_points_px
     used, res = limb.used_index, limb.residuals_px
     se = centre_standard_error(A[used], res, limb.points_used / limb.points_total
                                * 2.0 * math.pi * limb.radius_px)
-    return RimFit(center_px=limb.center_px, scale=float(scale), points_used=limb.points_used,
-                  points_total=limb.points_total, residual_rms_px=limb.residual_rms_px,
-                  edge_points_px=edges, iterations=0, center_se_px=se,
-                  roll_deg=None, edge_width_px=math.nan,
+    return RimFit(center_px=limb.center_px, scale=float(limb.radius_px / radius_px),
+                  points_used=limb.points_used, points_total=limb.points_total,
+                  residual_rms_px=limb.residual_rms_px, edge_points_px=limb.edge_points_px,
+                  iterations=0, center_se_px=se, roll_deg=None, edge_width_px=math.nan,
                   residual_tolerance_px=math.nan, limb=True)
 
 

@@ -133,7 +133,8 @@ def find_mirror_circle(photo: str | os.PathLike, *, pixel_pitch: float | None = 
     WorkflowResult
         ``value``: the circle fit (:func:`mitsweep.photo.free.find_circle`'s).
         ``summary``: what ``mitsweep calibrate --free --json`` prints (``center_px``,
-        ``radius_px``, ``center_offset_px``, ``setup_skeleton``, fit statistics, and
+        ``radius_px``, ``center_offset_px``, ``setup_skeleton``, fit statistics,
+        ``limb`` (the outline was found as a sphere's limb, showing no edge), and
         ``ellipse``: the ellipse through the same edge points,
         :func:`mitsweep.photo.free.ellipse_of_edges`, whose ``significant`` says the
         outline is no circle: a tilted view).
@@ -174,7 +175,7 @@ def find_mirror_circle(photo: str | os.PathLike, *, pixel_pitch: float | None = 
            "center_offset_px": list(offset), "pixel_pitch_mm": pitch,
            "points_used": fit.points_used, "points_total": fit.points_total,
            "residual_rms_px": fit.residual_rms_px,
-           "center_standard_error_px": fit.center_se_px,
+           "center_standard_error_px": fit.center_se_px, "limb": fit.limb,
            "setup_skeleton": "\n".join(skeleton) + "\n",
            "ellipse": ellipse_of_edges(fit),
            "warnings": list(image.warnings)}
