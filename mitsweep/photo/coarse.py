@@ -167,6 +167,8 @@ def coarse_candidates(lum: np.ndarray, pts: np.ndarray, nrm: np.ndarray,
         return ((r + 0.5) * factor - 0.5, (c + 0.5) * factor - 0.5)
 
     out = [(full(row, col), float(scales[j]), float(local[j]))]
+    if max_candidates <= 1:   # coarse_search's: no need of the volume's other maxima
+        return out
     taken = [(j, row, col)]
     # (a featureless photo scores nothing anywhere: its maxima are no outlines)
     is_max = (volume == maximum_filter(volume, size=(3, 3, 3), mode="nearest")) \
