@@ -38,7 +38,6 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -49,11 +48,9 @@ from .coarse import (COARSE_RADIUS_PX, COARSE_SCALE_STEP, MAX_CANDIDATES, coarse
                      coarse_search, search_scales)
 from .edges import edge_candidates, edge_offsets, edge_prominence
 from .image import fill_void, luminance, noise_sigma, photo_void, smooth
+from .limb import LimbFit
 from .robust import (EDGE_CORRELATION_PX, centre_standard_error, consensus_lstsq,
                      tukey_lstsq)
-
-if TYPE_CHECKING:
-    from .limb import LimbFit
 
 __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim",
            "rim_fit_of_limb", "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
