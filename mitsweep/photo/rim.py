@@ -162,9 +162,6 @@ class NoMirrorError(CalibrationError):
     px, where it was a well-fitted outline refused for its contrast alone (its edges no
     more prominent than their surroundings, :data:`MIN_EDGE_PROMINENCE`): a start for
     a fit that does not go by edges (a limb's, :func:`_limb_or_edge`); else None.
-    ``start`` is the coarse search's best centre (row, col), px, where the refusal ends
-    a search (:func:`fit_edges`): where a fit that does not go by edges starts, without
-    searching again; else None.
 
     Parameters
     ----------
@@ -172,16 +169,12 @@ class NoMirrorError(CalibrationError):
         What was not found, and why (one line, shown to the user).
     outline : ((float, float), float), optional
         The refused outline's centre (row, col) and radius, px (see above).
-    start : (float, float), optional
-        The coarse search's best centre (see above).
     """
 
     def __init__(self, message: str, *,
-                 outline: tuple[tuple[float, float], float] | None = None,
-                 start: tuple[float, float] | None = None) -> None:
+                 outline: tuple[tuple[float, float], float] | None = None) -> None:
         super().__init__(message)
         self.outline = outline
-        self.start = start
 
 
 class SetupMismatchError(CalibrationError):
@@ -377,10 +370,7 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
     if edge is not None:
         tries: list[tuple[tuple[float, float], float | None]] = [(edge.center_px, None)]
     else:
-        start = getattr(refused, "start", None)   # the refused search's coarse best
-        if start is None:
-            start = coarse_search(lum, pts, nrm, search_scales(*scale_range))[0]
-        tries = [(start, None)]
+        tries = [(coarse_search(lum, pts, nrm, search_scales(*scale_range))[0], None)]
         if faint is not None:
             # then an outline fitted all round but refused for its contrast alone (the
             # PAGEOS balloon's limb, whose top the draped Mylar hides: 9-10 px from the
@@ -536,7 +526,6 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
                         "%d starts refined", i + 1, len(begin))
             break
     if not fits:
-        refusals[0].start = begin[0][0]   # where a limb's fit starts (_limb_or_edge)
         raise refusals[0]
     return choose_fit(fits)
 
