@@ -40,7 +40,7 @@ from ..optics.outline import RimOutline
 from .coarse import MAX_CANDIDATES, coarse_search, search_scales
 from .image import fill_void, photo_void, reduce_by
 from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit, fit_rim,
-                  rim_fit_of_limb, settled, working_luminance)
+                  WORKING_SIDE_PX, rim_fit_of_limb, settled, working_luminance)
 
 __all__ = ["find_circle", "circle_outline", "ellipse_outline", "ellipse_of_edges",
            "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "FREE_LIMB_RADIAL_SHARE",
@@ -72,8 +72,9 @@ MAX_RADIUS_SHARE = 0.75
 #: the three strongest coarse scores (texture in a sky, a building's windows).
 CANDIDATES = 6
 #: Shorter side (px) of the copy the candidates are compared on (larger photos are
-#: reduced by an integer factor; the winner is refined at full resolution).
-FREE_WORKING_SIDE_PX = 1024
+#: reduced by an integer factor; the winner is refined at full resolution): the setup
+#: path's :data:`mitsweep.photo.rim.WORKING_SIDE_PX`.
+FREE_WORKING_SIDE_PX = WORKING_SIDE_PX
 #: Outline points of the circle template.
 N_POINTS = 1440
 #: Smallest minor-to-major axis ratio the ellipse search allows for (a view tilted by up

@@ -6,7 +6,9 @@ camera's roll about its axis can be a fourth where the outline shows it (a tilte
 mirror's; ``fit_roll``). Three steps:
 
 1. *Coarse* (:mod:`mitsweep.photo.coarse`): position and scale by correlating
-   orientation fields with the outline's normals on a reduced copy.
+   orientation fields with the outline's normals on a reduced copy. (A photo from twice
+   :data:`WORKING_SIDE_PX` on its shorter side goes through all three steps on a copy
+   reduced by a whole factor, then :func:`refine_at_full_resolution`.)
 2. *Refine* (:mod:`mitsweep.photo.edges`): at full resolution, a sub-pixel edge along the
    outline's normal at each of N points; the normal offsets fitted by iteratively
    reweighted least squares (Tukey's biweight, :func:`mitsweep.photo.robust.tukey_lstsq`),
@@ -37,7 +39,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -47,13 +49,14 @@ from ..resources import check_allocation
 from .coarse import (COARSE_RADIUS_PX, COARSE_SCALE_STEP, MAX_CANDIDATES, coarse_candidates,
                      coarse_search, search_scales)
 from .edges import edge_candidates, edge_offsets, edge_prominence
-from .image import fill_void, luminance, noise_sigma, photo_void, smooth
+from .image import fill_void, luminance, noise_sigma, photo_void, reduce_by, smooth
 from .limb import LimbFit
 from .robust import (EDGE_CORRELATION_PX, centre_standard_error, consensus_lstsq,
                      tukey_lstsq)
 
 __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim",
-           "rim_fit_of_limb", "working_luminance", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
+           "rim_fit_of_limb", "refine_at_full_resolution", "working_luminance", "WORKING_SIDE_PX",
+           "REFINE_WINDOW_REDUCED_PX", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
            "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
            "RESIDUAL_WIDTH_SHARE", "RESIDUAL_RADIUS_SHARE", "PLAUSIBLE_SCALE",
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE", "LIMB_INSIDE_SHARE",
@@ -102,6 +105,14 @@ RESIDUAL_WIDTH_SHARE = 0.5
 #: photos of ``tests/data/real`` with circles: 0.1-1.2% of the radius. The square border
 #: of a cropped render (the wrong shape, 1.8-2.0 px at 80 px) stays refused.
 RESIDUAL_RADIUS_SHARE = 0.012
+#: Shorter side (px) from twice which a photo is searched on a copy reduced by a whole
+#: factor to between this and twice it (:func:`fit_rim`): the search's windows and
+#: thresholds were set on photos and renders of 200-1232 px, and an outline on a larger
+#: photo is the same outline with wider edges and more of its texture. The outline found
+#: there is refined at full resolution (:func:`refine_at_full_resolution`).
+WORKING_SIDE_PX = 1024
+#: Half-width of the full-resolution refinement's window, in reduced pixels.
+REFINE_WINDOW_REDUCED_PX = 2.0
 #: Peak working memory of a calibration, bytes per photo pixel (the photo itself not
 #: counted): float64 luminance, its smoothed and void-filled copies, the coarse cues.
 #: Measured: 27 (a setup) and 38 (--free) on a 24 MP JPEG.
@@ -321,6 +332,17 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
         1 refines only the outline nearest the prediction from each normal's strongest
         edge: faster, for a setup known to be right within a few per cent.
     """
+    factor = min(np.shape(image)[:2]) // WORKING_SIDE_PX
+    if factor >= 2:
+        small = reduce_by(working_luminance(image, 8), factor)
+        found = fit_rim(small, outline, pixel_pitch * factor, scale_range=scale_range,
+                        max_iterations=max_iterations,
+                        edge_half_width_px=None if edge_half_width_px is None
+                        else edge_half_width_px / factor, fit_roll=fit_roll, starts=starts)
+        logger.info("rim search at 1/%d: centre (%.1f, %.1f) px, scale %.4f", factor,
+                    *(factor * c + (factor - 1) / 2 for c in found.center_px), found.scale)
+        return refine_at_full_resolution(image, outline, pixel_pitch, found, factor,
+                                         max_iterations=max_iterations)
     if outline.on_rim.any():
         return fit_edges(image, outline, pixel_pitch, scale_range=scale_range,
                          max_iterations=max_iterations,
@@ -330,6 +352,75 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
                          max_iterations=max_iterations,
                          edge_half_width_px=edge_half_width_px, fit_roll=fit_roll,
                          starts=starts)
+
+
+def refine_at_full_resolution(image: np.ndarray, outline: RimOutline, pixel_pitch: float,
+                              fit: RimFit, factor: int, *, max_iterations: int = 30) -> RimFit:
+    """An outline found on a copy of ``image`` reduced by ``factor`` (block means, the
+    outline at ``factor`` times the pitch), refined at full resolution within
+    :data:`REFINE_WINDOW_REDUCED_PX` reduced pixels of it: the edges along its normals
+    (:func:`fit_edges`' refinement and tests), or a limb (:func:`mitsweep.photo.limb.fit_limb`).
+    Where the refinement is refused or strays beyond that window, the reduced fit itself,
+    in full-resolution pixels (found and validated at the working size, it is as good
+    as that size allows: a few hundredths of its pixels on the renders).
+
+    Parameters
+    ----------
+    image : (H, W) or (H, W, 3) ndarray
+        The full-resolution photo.
+    outline : RimOutline
+        The outline searched for.
+    pixel_pitch : float
+        The photo's pixel pitch, mm.
+    fit : RimFit
+        The outline found on the reduced copy (its pixels).
+    factor : int
+        The reduction.
+    max_iterations : int
+        Refinement passes at most.
+    """
+    f = int(factor)
+    centre = (fit.center_px[0] * f + (f - 1) / 2, fit.center_px[1] * f + (f - 1) / 2)
+    reduced = replace(fit, center_px=centre,
+                      edge_points_px=fit.edge_points_px * f + (f - 1) / 2,
+                      residual_rms_px=fit.residual_rms_px * f,
+                      center_se_px=fit.center_se_px * f, edge_width_px=fit.edge_width_px * f,
+                      residual_tolerance_px=fit.residual_tolerance_px * f)
+    lum = working_luminance(image, 8)
+    pts, nrm = outline.offsets_px(pixel_pitch)
+    radius = outline.equivalent_radius_px(pixel_pitch)
+    window = REFINE_WINDOW_REDUCED_PX * f
+    void = photo_void(image)
+    hidden = _in_void(void, centre, fit.scale, pts)
+    if void.any() and (~void).any() and (fit.limb or hidden.mean() <= 1.0 - MIN_INLIER_FRACTION):
+        lum = fill_void(lum, void)
+    else:   # nothing hidden, or a clipped black background (see fit_edges)
+        void = np.zeros(lum.shape, bool)
+    try:
+        if fit.limb:
+            from .limb import fit_limb
+
+            step = 1.0 + window / (radius * fit.scale)
+            limb = fit_limb(lum, centre, pts, nrm, (fit.scale / step, fit.scale * step),
+                            shown=~void if void.any() else None, near_px=radius * fit.scale)
+            if limb is None:
+                raise NoMirrorError("no limb found at full resolution")
+            refined = rim_fit_of_limb(limb, pts, nrm, radius)
+        else:
+            work = _Work(lum_s=smooth(lum, PROFILE_SMOOTHING_PX), sigma=noise_sigma(lum, ~void),
+                         void=void, pts=pts, nrm=nrm, radius=radius, pitch=pixel_pitch,
+                         half=window, max_iterations=max_iterations,
+                         fit_roll=fit.roll_deg is not None)
+            refined = _refine(work, centre, fit.scale, search_px=window)
+    except NoMirrorError as exc:
+        logger.info("refinement at full resolution refused (%s): the fit at 1/%d kept", exc, f)
+        return reduced
+    moved = max(math.dist(refined.center_px, centre), abs(refined.scale - fit.scale) * radius)
+    if moved > window:
+        logger.info("refinement at full resolution moved the outline by %.1f px (more than "
+                    "%.1f): the fit at 1/%d kept", moved, window, f)
+        return reduced
+    return refined
 
 
 def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
@@ -645,7 +736,8 @@ def _consensus_start(work: _Work, centre: tuple[float, float], scale: float,
 
 
 def _refine(work: _Work, centre: tuple[float, float], scale: float, *,
-            consensus: bool = False, passes: int | None = None) -> RimFit:
+            consensus: bool = False, passes: int | None = None,
+            search_px: float | None = None) -> RimFit:
     """Refine one starting point to sub-pixel edges and validate it (steps 2 and 3 of
     the module docstring); :class:`NoMirrorError` where the outline found fails a test.
     With ``consensus``, the first step is the outline most normals show an edge on
@@ -664,7 +756,7 @@ def _refine(work: _Work, centre: tuple[float, float], scale: float, *,
     roll = 0.0
     # The first window covers the coarse search's steps: a reduced pixel and a scale step.
     factor = max(1, int(radius / COARSE_RADIUS_PX))
-    search = max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
+    search = search_px or max(half, 1.5 * factor + (COARSE_SCALE_STEP - 1) * radius * scale)
     if consensus:
         moved = _consensus_start(work, centre, scale, search)
         if moved is None:
