@@ -40,7 +40,8 @@ from ..optics.outline import RimOutline
 from .coarse import MAX_CANDIDATES, coarse_search, search_scales
 from .image import fill_void, photo_void, reduce_by
 from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit, fit_rim,
-                  WORKING_SIDE_PX, rim_fit_of_limb, settled, working_luminance)
+                  WORKING_SIDE_PX, rim_fit_of_limb, settled, working_factor,
+                  working_luminance)
 
 __all__ = ["find_circle", "circle_outline", "ellipse_outline", "ellipse_of_edges",
            "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "FREE_LIMB_RADIAL_SHARE",
@@ -171,9 +172,9 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
     void = photo_void(image)
     if void.any() and not void.all():
         lum = fill_void(lum, void)
-    # The candidates are found and compared on a copy at most ~FREE_WORKING_SIDE_PX on its
-    # shorter side; only the winner is refined at full resolution.
-    f = max(1, min(H, W) // FREE_WORKING_SIDE_PX)
+    # The candidates are found and compared on a copy of ~FREE_WORKING_SIDE_PX (0.75-1.5
+    # times) on its shorter side; only the winner is refined at full resolution.
+    f = working_factor((H, W))
     if f == 1:
         fit, radius, shape = _best_circle(lum, image, lo, hi)
         return fit, radius

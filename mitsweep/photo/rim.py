@@ -6,9 +6,9 @@ camera's roll about its axis can be a fourth where the outline shows it (a tilte
 mirror's; ``fit_roll``). Three steps:
 
 1. *Coarse* (:mod:`mitsweep.photo.coarse`): position and scale by correlating
-   orientation fields with the outline's normals on a reduced copy. (A photo from twice
-   :data:`WORKING_SIDE_PX` on its shorter side goes through all three steps on a copy
-   reduced by a whole factor, then :func:`refine_at_full_resolution`.)
+   orientation fields with the outline's normals on a reduced copy. (A photo from 1.5
+   times :data:`WORKING_SIDE_PX` on its shorter side goes through all three steps on a
+   copy reduced by a whole factor, then :func:`refine_at_full_resolution`.)
 2. *Refine* (:mod:`mitsweep.photo.edges`): at full resolution, a sub-pixel edge along the
    outline's normal at each of N points; the normal offsets fitted by iteratively
    reweighted least squares (Tukey's biweight, :func:`mitsweep.photo.robust.tukey_lstsq`),
@@ -55,7 +55,8 @@ from .robust import (EDGE_CORRELATION_PX, centre_standard_error, consensus_lstsq
                      tukey_lstsq)
 
 __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", "fit_rim",
-           "rim_fit_of_limb", "refine_at_full_resolution", "working_luminance", "WORKING_SIDE_PX",
+           "rim_fit_of_limb", "refine_at_full_resolution", "working_factor",
+           "working_luminance", "WORKING_SIDE_PX",
            "REFINE_WINDOW_REDUCED_PX", "MIN_INLIER_FRACTION", "MIN_CONSISTENT_FRACTION",
            "MIN_EDGE_PROMINENCE", "MAX_RESIDUAL_RMS_PX",
            "RESIDUAL_WIDTH_SHARE", "RESIDUAL_RADIUS_SHARE", "PLAUSIBLE_SCALE",
@@ -105,8 +106,9 @@ RESIDUAL_WIDTH_SHARE = 0.5
 #: photos of ``tests/data/real`` with circles: 0.1-1.2% of the radius. The square border
 #: of a cropped render (the wrong shape, 1.8-2.0 px at 80 px) stays refused.
 RESIDUAL_RADIUS_SHARE = 0.012
-#: Shorter side (px) from twice which a photo is searched on a copy reduced by a whole
-#: factor to between this and twice it (:func:`fit_rim`): the search's windows and
+#: Shorter side (px) of the copy a photo is searched on: from 1.5 times it, a photo is
+#: reduced by the whole factor nearest its shorter side over this (:func:`working_factor`,
+#: :func:`fit_rim`), to 0.75-1.5 times it: the search's windows and
 #: thresholds were set on photos and renders of 200-1232 px, and an outline on a larger
 #: photo is the same outline with wider edges and more of its texture. The outline found
 #: there is refined at full resolution (:func:`refine_at_full_resolution`).
@@ -279,6 +281,18 @@ def _in_void(void: np.ndarray, centre, scale: float, pts: np.ndarray) -> np.ndar
     return out
 
 
+def working_factor(shape: tuple[int, ...]) -> int:
+    """The whole factor a photo of ``shape`` (H, W, ...) is reduced by for the search:
+    its shorter side over :data:`WORKING_SIDE_PX`, rounded (1: searched as it is).
+
+    Parameters
+    ----------
+    shape : tuple of int
+        The photo's shape.
+    """
+    return max(1, int(round(min(shape[0], shape[1]) / WORKING_SIDE_PX)))
+
+
 def working_luminance(image: np.ndarray, min_side: int) -> np.ndarray:
     """The luminance a rim search works on, after the memory gate for its work arrays
     (:data:`WORK_BYTES_PER_PIXEL`); :class:`NoMirrorError` for an image that is not
@@ -332,7 +346,7 @@ def fit_rim(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
         1 refines only the outline nearest the prediction from each normal's strongest
         edge: faster, for a setup known to be right within a few per cent.
     """
-    factor = min(np.shape(image)[:2]) // WORKING_SIDE_PX
+    factor = working_factor(np.shape(image)[:2])
     if factor >= 2:
         small = reduce_by(working_luminance(image, 8), factor)
         found = fit_rim(small, outline, pixel_pitch * factor, scale_range=scale_range,
