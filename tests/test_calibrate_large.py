@@ -33,8 +33,8 @@ import bench_large_photos  # noqa: E402
 #: 1x the same photo reads ~0.4 px of its 0.6 px tolerance, and the refinement at full
 #: resolution moves the outline outward (its edge search takes the outermost edge, as at
 #: 1x; the fit at 1/3 alone reads 1.11 px). omni_kaidan.jpg x2 (1280x960: searched as it
-#: is) and x4 (searched at 1/2, as x2): the mount's edge, 65-80 px outside the mirror's
-#: rim, is found first (the +9% guess lies between the two); at 1x the search near the
+#: is) and x4 (searched at 1/2, as x2): the mount's edge, 15% outside the mirror's rim
+#: (65 and 131 px), is found first (the +9% guess lies between the two); at 1x the search near the
 #: guess is refused and the wider one finds the rim.
 LARGE_MISSES = {("sphere_lamp.jpg", 3): "radius 1.92 px off, tolerance 1.79 px",
                 ("omni_kaidan.jpg", 2): "the mount's edge taken for the rim",
