@@ -140,6 +140,26 @@ class HostBoard:
         # the board is separate hardware: the host's load must not slow it (as for the
         # simulator's thread, mitsweep.rig.sim.pty); single-threaded, so its pid suffices
         raise_priority(self.proc.pid)
+        # A board powered up before the host connects: its first READY is read here, so
+        # that a test's opening of the port (pyserial flushes it: a reset, as an Uno's
+        # DTR) is followed by exactly one READY. Without this, on a loaded machine the
+        # program could print its first READY after that flush and then reset on it: a
+        # second READY where the test reads its first command's reply (seen once in CI).
+        self._first_line(b"READY ", timeout_s=10.0)
+
+    def _first_line(self, prefix: bytes, timeout_s: float) -> None:
+        import os
+        import select
+        import time
+
+        data, deadline = b"", time.monotonic() + timeout_s
+        while not (data.startswith(prefix) and b"\n" in data):
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([self.slave], [], [], left)[0]:
+                self.close()
+                raise AssertionError(f"the host firmware printed {data!r}, not {prefix!r}, "
+                                     f"within {timeout_s} s")
+            data += os.read(self.slave, 4096)
 
     def close(self) -> None:
         import os
