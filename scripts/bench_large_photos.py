@@ -41,7 +41,7 @@ from mitsweep.io.camera import read_camera_image  # noqa: E402
 from mitsweep.photo import CalibrationError, calibrate_photo, rim  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "scripts"))
-from bench_rough_setups import rough_setup  # noqa: E402
+from bench_rough_setups import print_totals, rough_setup, tally  # noqa: E402
 
 CASES = ["sphere_tokyo.jpg:1.5", "sphere_tokyo.jpg:2", "sphere_tokyo.jpg:3.5",
          "sphere_lamp.jpg:2", "sphere_lamp.jpg:3", "sphere_lamp.jpg:4",
@@ -95,17 +95,11 @@ def main(argv: list[str] | None = None) -> int:
             finally:
                 rim.WORKING_SIDE_PX = working
             dt = time.perf_counter() - t0
-            tot = totals[path]
-            tot[0] += ok
-            tot[1] += 1
-            tot[2] += dt
-            tot[3] = max(tot[3], dt)
+            tally(totals[path], ok, dt)
             H, W = img.shape[:2]
             print(f"{name:22s} x{float(k):<4g} {W}x{H} {path:8s} {dt:7.2f} s  {what}",
                   flush=True)
-    for path, (ok, n, total, worst) in totals.items():
-        print(f"{path}: {ok} of {n} within tolerance, {total:.1f} s in all, "
-              f"{worst:.1f} s at most")
+    print_totals(totals)
     return 0
 
 

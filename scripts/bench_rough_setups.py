@@ -92,17 +92,26 @@ def main(argv: list[str] | None = None) -> int:
                 except CalibrationError as exc:
                     ok, what = False, f"REFUSED {str(exc)[:60]}"
                 dt = time.perf_counter() - t0
-                tot = totals[starts]
-                tot[0] += ok
-                tot[1] += 1
-                tot[2] += dt
-                tot[3] = max(tot[3], dt)
+                tally(totals[starts], ok, dt)
                 print(f"{e['name']:28s} {guess:+.2f} starts {starts}  {dt:6.2f} s  {what}",
                       flush=True)
-    for starts, (ok, n, total, worst) in totals.items():
-        print(f"starts {starts}: {ok} of {n} within tolerance, {total:.1f} s in all, "
-              f"{worst:.1f} s at most")
+    print_totals({f"starts {s}": tot for s, tot in totals.items()})
     return 0
+
+
+def tally(tot: list, ok: bool, seconds: float) -> None:
+    """Count one case into ``tot`` = [passes, cases, total time, largest time]."""
+    tot[0] += ok
+    tot[1] += 1
+    tot[2] += seconds
+    tot[3] = max(tot[3], seconds)
+
+
+def print_totals(totals: dict) -> None:
+    """One line per search: its passes, cases, total and largest time."""
+    for name, (ok, n, total, worst) in totals.items():
+        print(f"{name}: {ok} of {n} within tolerance, {total:.1f} s in all, "
+              f"{worst:.1f} s at most")
 
 
 if __name__ == "__main__":

@@ -45,10 +45,6 @@ CASES = [("sphere_tokyo.jpg", 1.5), ("sphere_tokyo.jpg", 2), ("sphere_tokyo.jpg"
          ("omni_vmr_clipped.jpg", 3), ("omni_kaidan.jpg", 2), ("omni_kaidan.jpg", 4)]
 
 
-def _enlarged(name: str, k: float):
-    return bench_large_photos.enlarged(name, k)
-
-
 def _params():
     for name, k in CASES:
         marks = [pytest.mark.slow]
@@ -59,7 +55,7 @@ def _params():
 
 @pytest.mark.parametrize("name, k", list(_params()))
 def test_a_large_photo_calibrates(name, k):
-    img, entry = _enlarged(name, k)
+    img, entry = bench_large_photos.enlarged(name, k)
     cal = calibrate_photo(img, _rough_setup(entry, img.shape[:2], 0.09))
     tol = entry["tolerance_px"]
     assert np.abs(np.subtract(cal.center_px, entry["centre"])).max() < tol
@@ -68,7 +64,7 @@ def test_a_large_photo_calibrates(name, k):
 
 @pytest.mark.slow
 def test_free_finds_a_chrome_ball_on_a_large_photo():
-    img, entry = _enlarged("sphere_tokyo.jpg", 3.5)
+    img, entry = bench_large_photos.enlarged("sphere_tokyo.jpg", 3.5)
     fit, radius = find_circle(img)
     tol = entry["tolerance_px"]
     assert np.abs(np.subtract(fit.center_px, entry["centre"])).max() < tol
@@ -85,3 +81,46 @@ def test_the_large_photo_benchmark_prints_both_paths(capsys):
     assert all("PASS" in line for line in out[:2])
     assert out[2].startswith("reduced: 1 of 1 within tolerance")
     assert out[3].startswith("full: 1 of 1 within tolerance")
+
+
+def test_the_working_size_and_what_the_docs_say_of_it():
+    """The reduction starts at 1.5 working sides and rounds to the nearest factor; the
+    docs state the threshold and the enlargements the tests cover, and cannot drift."""
+    from mitsweep.photo.rim import WORKING_SIDE_PX, working_factor
+
+    first = int(1.5 * WORKING_SIDE_PX)
+    assert working_factor((first - 1, 10 * first)) == 1
+    assert working_factor((first, first)) == 2
+    assert working_factor((4000, 6000, 3)) == 4        # 24 MP: searched at 1000x1500
+    assert working_factor((1, 5000)) == 1              # never below 1
+    text = (SCENES.parent / "docs" / "reference" / "photos.md").read_text()
+    text = " ".join(text.split())
+    balls = [k for name, k in CASES if name.startswith("sphere_")]
+    assert f"A photo from {first} px on its shorter side" in text
+    assert f"chrome balls enlarged {min(balls):g}-{max(balls):g} times" in text
+    assert f"keeps {['no', 'one', 'two', 'three', 'four'][len(LARGE_MISSES)]} strict " \
+           "expected failures" in text
+    project = " ".join((SCENES.parent / "docs" / "reference" / "project.md").read_text().split())
+    ks = [k for _, k in CASES]
+    assert f"enlarged {min(ks):g}-{max(ks):g} times" in project
+
+
+@pytest.mark.parametrize("limb", [False, True], ids=["edge", "limb"])
+def test_a_refused_refinement_keeps_the_reduced_fit_in_full_resolution_pixels(limb):
+    """A flat photo shows no edge and no limb at full resolution: the fit found on the
+    copy reduced 3x stands, its reduced pixel (r, c) mapped to the centre of its 3x3
+    block, (3r + 1, 3c + 1), and its lengths tripled."""
+    from mitsweep.photo.free import circle_outline
+    from mitsweep.photo.rim import RimFit, refine_at_full_resolution
+
+    found = RimFit(center_px=(100.0, 120.5), scale=1.02, points_used=1000,
+                   points_total=1440, residual_rms_px=0.3,
+                   edge_points_px=np.array([[10.0, 20.0]]), center_se_px=0.05,
+                   edge_width_px=1.5, residual_tolerance_px=1.5, limb=limb)
+    flat = np.full((600, 720), 0.3)
+    fit = refine_at_full_resolution(flat, circle_outline(240.0), 1.0 / 3, found, 3)
+    assert fit.center_px == (301.0, 362.5)
+    assert fit.scale == found.scale and fit.limb == limb
+    np.testing.assert_array_equal(fit.edge_points_px, [[31.0, 61.0]])
+    assert (fit.residual_rms_px, fit.center_se_px, fit.edge_width_px) == \
+        pytest.approx((0.9, 0.15, 4.5))
