@@ -9,7 +9,7 @@ mask matches to 0.03 px (200 and 400 px, ``--check-mask``).
 Usage::
 
     .venv/bin/python scripts/limb_study.py [--sizes 200 400] [--modes pinhole sweep]
-        [--spp 32] [--cache /tmp/limb_study] [--check-mask]
+        [--spp 32] [--seeds 1] [--cache /tmp/limb_study] [--check-mask]
 
 Renders are cached as .npy under ``--cache`` (rendering costs minutes of CPU at 1024 px).
 Prints one line per case: kind, size, placement, offset, centre error (row, col, norm),
@@ -103,12 +103,14 @@ def main(argv=None) -> int:
     p.add_argument("--sizes", type=int, nargs="+", default=[200, 400])
     p.add_argument("--modes", nargs="+", default=["pinhole", "sweep"])
     p.add_argument("--spp", type=int, default=32)
+    p.add_argument("--seeds", type=int, nargs="+", default=[1],
+                   help="render seeds (the sweep's error varies with the seed: 1-5 at 200 px)")
     p.add_argument("--cache", type=Path, default=Path("/tmp/limb_study"))
     p.add_argument("--check-mask", action="store_true")
     args = p.parse_args(argv)
     from mitsweep.photo import CalibrationError, calibrate_photo
 
-    print("kind     size case     centre_err_px(row,col,|c|)   radius_err_px  found")
+    print("kind     size seed case     centre_err_px(row,col,|c|)   radius_err_px  found")
     for size in args.sizes:
         setup = sphere_setup(size)
         pitch = setup.sensor.pixel_pitch
@@ -119,21 +121,21 @@ def main(argv=None) -> int:
             m = render_image(setup, "pinhole", spp=1, aovs=("mask",)).aovs["mask"] > 0.5
             print(f"# {size} px: mask radius {math.sqrt(m.sum() / math.pi):.3f}, "
                   f"predicted {R:.3f}")
-        for mode in args.modes:
-            img = render(size, mode, args.spp, args.cache)
+        for mode, seed in ((m, s) for m in args.modes for s in args.seeds):
+            img = render(size, mode, args.spp, args.cache, seed)
             for name, canvas, at, sub in cases(size):
                 photo, truth = place(img, canvas, at, sub)
                 t = time.time()
                 try:
                     cal = calibrate_photo(photo, setup)
                 except CalibrationError as exc:
-                    print(f"{mode:8s} {size:4d} {name:8s} refused: {exc}")
+                    print(f"{mode:8s} {size:4d} {seed:4d} {name:8s} refused: {exc}")
                     continue
                 dc = np.subtract(cal.center_px, truth)
                 dr = cal.rim_radius_px - R
                 ok = np.hypot(*dc) <= 0.25 and abs(dr) <= 0.5
                 limb = any("limb" in w for w in cal.warnings)
-                print(f"{mode:8s} {size:4d} {name:8s} {dc[0]:+.3f} {dc[1]:+.3f} "
+                print(f"{mode:8s} {size:4d} {seed:4d} {name:8s} {dc[0]:+.3f} {dc[1]:+.3f} "
                       f"{np.hypot(*dc):.3f}   {dr:+.3f}   {'PASS' if ok else 'miss'}"
                       f"{'  limb-warning' if limb else ''}  {time.time() - t:.1f}s",
                       flush=True)

@@ -147,6 +147,66 @@ def test_the_radius_of_a_sphere_renders_limb(sphere_renders, size, mode, case):
     assert not any("pixel pitch would be" in w for w in cal.warnings)
 
 
+#: Over render seeds, not one (scripts/limb_study.py renders with seed 1): at 200 px and
+#: 32 spp the pinhole renders' centres are 0.10-0.18 px off at seeds 1-5 (full, offset,
+#: cropped), the sweep renders' 0.05-0.43 px (7 of 15 within the bar; 0.20-0.36 at 128
+#: spp, pointing the same way, +row +col, at every seed: a bias of the sweep's limb, which
+#: the noise adds to), while the fit's standard error says 0.07-0.10 px. A 180-degree
+#: turn of the photo turns the error with it, so the bias is the scene's, not a pixel
+#: convention's. Seed 1 happens to be within the bar.
+#: (scripts/limb_study.py --sizes 200 --seeds 1 2 3 4 5 [--spp 128])
+SEED_MISSES = {"sweep": "sweep renders at 200 px over seeds 1-5: centre 0.05-0.43 px off "
+                        "(7 of 15 cases within 0.25 px)"}
+
+
+@pytest.mark.slow   # 15 renders and calibrations at 200 px
+@pytest.mark.parametrize("mode", [
+    "pinhole", pytest.param("sweep", marks=pytest.mark.xfail(reason=SEED_MISSES["sweep"],
+                                                             strict=True))])
+def test_the_centre_of_a_sphere_renders_limb_over_seeds(tmp_path_factory, mode):
+    import sys
+
+    from conftest import SCENES
+
+    sys.path.insert(0, str(SCENES.parent / "scripts"))
+    import limb_study
+
+    cache = tmp_path_factory.mktemp("seeds")
+    setup = limb_study.sphere_setup(200)
+    errors = []
+    for seed in range(1, 6):
+        img = limb_study.render(200, mode, 32, cache, seed)
+        for case in ("full", "offset", "cropped"):
+            _, canvas, at, sub = next(c for c in limb_study.cases(200) if c[0] == case)
+            photo, truth = limb_study.place(img, canvas, at, sub)
+            errors.append(np.hypot(*np.subtract(calibrate_photo(photo, setup).center_px,
+                                                truth)))
+    assert max(errors) <= CENTRE_TOL_PX, np.round(errors, 2)
+
+
+@pytest.mark.slow   # two 128-spp renders at 200 px
+@pytest.mark.parametrize("seed", [3, 4])
+def test_a_clean_sweep_renders_limb_is_found_past_the_boards_energy_step(tmp_path_factory,
+                                                                          seed):
+    """At 128 spp the reflected boards' edge, 14% inside the limb, makes the strongest
+    step of the fine-detail energy: the limb's fit from it leaves the searched sizes, and
+    the ridges nearest the prediction are tried next (the boards' edge was taken, 10 px
+    inside, at these seeds)."""
+    import sys
+
+    from conftest import SCENES
+
+    sys.path.insert(0, str(SCENES.parent / "scripts"))
+    import limb_study
+
+    setup = limb_study.sphere_setup(200)
+    img = limb_study.render(200, "sweep", 128, tmp_path_factory.mktemp("clean"), seed)
+    cal = calibrate_photo(img, setup)
+    radius = predicted_outline(setup).equivalent_radius_px(setup.sensor.pixel_pitch)
+    assert cal.fit.limb
+    assert abs(cal.rim_radius_px - radius) <= RADIUS_TOL_PX
+
+
 #: Renders of only the mirror's window (``mitsweep render`` without ``--full-frame``:
 #: exact zeros from 8 px beyond the outline's box, treated as not shown), placed in a
 #: larger black canvas: the limb fit has only ~6 px of background beside the limb at

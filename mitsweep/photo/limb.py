@@ -23,14 +23,17 @@ fraction of a pixel. Measured in ``scripts/limb_study.py``.
 
 from __future__ import annotations
 
+import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .edges import edge_offsets
 from .image import smooth
 from .robust import tukey_lstsq
+
+logger = logging.getLogger(__name__)
 
 __all__ = [
     "LIMB_ANNULUS_PX",
@@ -540,26 +543,46 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     if math.isfinite(start) and drop >= STRONG_ENERGY_STEP:
         for _ in range(2):
             c, R, step = _energy_step_fit(e, c, R, band, e_shown)
-    if step >= STRONG_ENERGY_STEP:
-        starts = [(c, R)]
-    else:  # no render noise to go by: the ridges, nearest the prediction first
-        near = radius0 if near_px is None else float(near_px)
-        starts = [(centre, r) for r in _ridge_starts(gy, gx, lum_r, centre, r_lo, r_hi,
-                                                     near, shown)[:MAX_RIDGE_STARTS]]
-    for c0, R0 in starts:
-        c, R, height, _ = _ridge_fit(gy, gx, lum_r, c0, R0, band, shown)
-        if height >= MIN_RIDGE and r_lo / 1.04 <= R <= r_hi * 1.04:
-            break
-    else:
-        return None
-    energy_c, energy_R = c0, R0
-    # Then the step of the mean along each normal, whatever its sign, within
-    # LIMB_HALF_WIDTH_PX of that circle, fitted as the circle plus an offset of the
-    # bright-outside steps against the dark-outside ones (0.1-0.25 px on the renders),
-    # which the centre would otherwise absorb where one sign prevails on one side (the
-    # sweep renders from 400 px: 0.3-0.4 px, 0.17-0.22 px with the offset).
-    scale = R / radius0
+    # the energy step's circle where there is one, then the ridges, nearest the
+    # prediction first: after the energy step's circle fails (an edge inside the limb,
+    # such as the reflected boards in a clean sweep render), and after a ridge whose
+    # step fit does not settle in the range; not after a ridge the direction cues refuse
+    # (the ridge nearest the prediction is a texture's circle: trying farther ones finds
+    # circles in photos without a mirror, such as scikit-image's text sample)
+    starts = [(c, R, step)] if step >= STRONG_ENERGY_STEP else []
+    near = radius0 if near_px is None else float(near_px)
+    starts += [(centre, r, 0.0) for r in _ridge_starts(gy, gx, lum_r, centre, r_lo, r_hi,
+                                                         near, shown)[:MAX_RIDGE_STARTS]]
     lum_s = smooth(lum, LIMB_SMOOTHING_PX)
+    for c0, R0, step in starts:
+        c, R, height, _ = _ridge_fit(gy, gx, lum_r, c0, R0, band, shown)
+        if not (height >= MIN_RIDGE and r_lo / 1.04 <= R <= r_hi * 1.04):
+            continue
+        fit, by_cue = _limb_from_ridge(lum_s, gy, gx, c, R / radius0, height, pts, nrm,
+                                       (r_lo, r_hi), shown, iterations)
+        if fit is not None:
+            return replace(fit, energy_step=float(step),
+                           energy_center_px=(float(c0[0]), float(c0[1])),
+                           energy_radius_px=float(R0))
+        if by_cue and step < STRONG_ENERGY_STEP:
+            return None
+    logger.debug("limb fit from (%.1f, %.1f): no limb in %.1f-%.1f px (%d starts)",
+                 *centre, r_lo, r_hi, len(starts))
+    return None
+
+
+def _limb_from_ridge(lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, iterations):
+    """The limb from a ridge's circle (centre ``c``, ``scale`` times the outline, ridge
+    ``height``): the
+    step of the mean along each normal, whatever its sign, within LIMB_HALF_WIDTH_PX of
+    that circle, fitted as the circle plus an offset of the bright-outside steps against
+    the dark-outside ones (0.1-0.25 px on the renders), which the centre would otherwise
+    absorb where one sign prevails on one side (the sweep renders from 400 px: 0.3-0.4
+    px, 0.17-0.22 px with the offset); then the direction cues. The fit (its energy
+    step's fields the caller's), or None where it leaves ``radii`` (r_lo, r_hi) or a cue
+    refuses it; and whether a cue did."""
+    radius0 = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
+    r_lo, r_hi = radii
     A3 = np.column_stack([nrm[:, 0], nrm[:, 1], np.sum(pts * nrm, axis=1)])
     good = np.zeros(len(pts), bool)
     wts = res = np.zeros(0)
@@ -574,7 +597,8 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
             good &= ins
             good[ins] &= shown[at[ins, 0], at[ins, 1]]
         if good.sum() < 8:
-            return None
+            logger.debug("limb fit: %d normals show a step", int(good.sum()))
+            return None, False
         sign = np.sign(_steps(lum_s, c, scale, pts, nrm))
         A = np.column_stack([A3, sign])[good]
         x, wts = tukey_lstsq(A, off[good], np.ones(int(good.sum())))
@@ -585,24 +609,32 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
             break
     R = scale * radius0
     if not r_lo / 1.04 <= R <= r_hi * 1.04:
-        return None
+        logger.debug("limb fit: the step fit's radius %.1f px left %.1f-%.1f", R, r_lo, r_hi)
+        return None, False
     inl = wts > 0
     res = res[inl]
     rms = float(np.sqrt(np.mean(res ** 2))) if inl.any() else math.inf
     used = np.zeros(len(pts), bool)
     used[np.flatnonzero(good)[inl]] = True
     edges = np.asarray(c)[None, :] + scale * pts + np.nan_to_num(off)[:, None] * nrm
-    coherence = _step_coherence(lum_s, c, scale, pts, nrm, good)
     radial = radial_share(gy, gx, c, R, shown)
     if radial < MIN_RADIAL_SHARE or (radial < 1.0 and height < PARTIAL_SHARE_RIDGE):
-        return None   # a circle in a texture, not a reflection's limb
+        # a circle in a texture, not a reflection's limb
+        logger.debug("limb fit: circle (%.1f, %.1f) r %.1f px refused: detail along the "
+                     "radius in a share %.2f of the sectors, ridge %.2f", *c, R, radial,
+                     height)
+        return None, True
     rise = radial_rise(gy, gx, c, R, shown)
     if rise < MIN_RADIAL_RISE:
-        return None   # detail along the radius, but not squeezed toward the edge
+        # detail along the radius, but not squeezed toward the edge
+        logger.debug("limb fit: circle (%.1f, %.1f) r %.1f px refused: a rise of %.2f",
+                     *c, R, rise)
+        return None, True
     return LimbFit(center_px=(float(c[0]), float(c[1])), radius_px=float(R),
-                   energy_step=float(step), ridge_height=float(height),
-                   step_coherence=coherence, radial_share=radial, radial_rise=rise,
-                   energy_center_px=energy_c, energy_radius_px=energy_R,
+                   energy_step=0.0, ridge_height=float(height),
+                   step_coherence=_step_coherence(lum_s, c, scale, pts, nrm, good),
+                   radial_share=radial, radial_rise=rise,
+                   energy_center_px=(float(c[0]), float(c[1])), energy_radius_px=float(R),
                    points_used=int(used.sum()), points_total=len(pts),
                    residual_rms_px=rms, edge_points_px=edges[used],
-                   used_index=np.flatnonzero(used), residuals_px=res)
+                   used_index=np.flatnonzero(used), residuals_px=res), False

@@ -472,10 +472,14 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
         shown = None
     faint = getattr(refused, "outline", None)
     radius = outline.equivalent_radius_px(pitch)
+    coarse = (coarse_search(lum, pts, nrm, search_scales(*scale_range))[0], None)
     if edge is not None:
-        tries: list[tuple[tuple[float, float], float | None]] = [(edge.center_px, None)]
+        # the edge fit's centre, then the coarse search's (an edge fitted to an outline
+        # inside the limb, off its centre: the boards' edge in a 16-spp sweep render)
+        tries: list[tuple[tuple[float, float], float | None]] = [(edge.center_px, None),
+                                                                  coarse]
     else:
-        tries = [(coarse_search(lum, pts, nrm, search_scales(*scale_range))[0], None)]
+        tries = [coarse]
         if faint is not None:
             # then an outline fitted all round but refused for its contrast alone (the
             # PAGEOS balloon's limb, whose top the draped Mylar hides: 9-10 px from the
