@@ -55,13 +55,20 @@ if [ ! -x .venv/bin/python ]; then
     "$py" -m venv .venv
 fi
 stamp=".venv/.mitsweep-installed"
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ] || [ scripts/constraints.txt -nt "$stamp" ]; then
     echo "bootstrap: installing mitsweep and its dependencies into .venv (log: .venv/pip-install.log)" >&2
+    # the versions the docs' figures were checked with (scripts/constraints.txt) where this
+    # Python and platform have them; otherwise the newest that pyproject.toml allows
     if ! { .venv/bin/python -m pip install -q --upgrade pip &&
-           .venv/bin/python -m pip install -q -e ".[dev,docs,test]"; } >.venv/pip-install.log 2>&1; then
-        tail -n 30 .venv/pip-install.log >&2
-        echo "bootstrap: pip install failed (full log: .venv/pip-install.log)" >&2
-        exit 1
+           .venv/bin/python -m pip install -q -c scripts/constraints.txt -e ".[dev,docs,test]"; } \
+            >.venv/pip-install.log 2>&1; then
+        echo "bootstrap: the checked versions (scripts/constraints.txt) do not install here;" \
+             "installing the newest allowed (the docs' last digits may differ)" >&2
+        if ! .venv/bin/python -m pip install -q -e ".[dev,docs,test]" >>.venv/pip-install.log 2>&1; then
+            tail -n 30 .venv/pip-install.log >&2
+            echo "bootstrap: pip install failed (full log: .venv/pip-install.log)" >&2
+            exit 1
+        fi
     fi
     touch "$stamp"
 fi
