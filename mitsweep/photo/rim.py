@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -472,21 +473,22 @@ def _limb_or_edge(image: np.ndarray, outline: RimOutline, pitch: float, *,
         shown = None
     faint = getattr(refused, "outline", None)
     radius = outline.equivalent_radius_px(pitch)
-    coarse = (coarse_search(lum, pts, nrm, search_scales(*scale_range))[0], None)
-    if edge is not None:
+
+    def limb_starts() -> Iterator[tuple[tuple[float, float], float | None]]:
         # the edge fit's centre, then the coarse search's (an edge fitted to an outline
-        # inside the limb, off its centre: the boards' edge in a 16-spp sweep render)
-        tries: list[tuple[tuple[float, float], float | None]] = [(edge.center_px, None),
-                                                                  coarse]
-    else:
-        tries = [coarse]
-        if faint is not None:
+        # inside the limb, off its centre: the boards' edge in a 16-spp sweep render; the
+        # search runs only where the first start finds no limb)
+        if edge is not None:
+            yield edge.center_px, None
+        yield coarse_search(lum, pts, nrm, search_scales(*scale_range))[0], None
+        if edge is None and faint is not None:
             # then an outline fitted all round but refused for its contrast alone (the
             # PAGEOS balloon's limb, whose top the draped Mylar hides: 9-10 px from the
             # coarse search's start, and 54% larger than a setup 35% off predicts)
-            tries.append(faint)
+            yield faint
+
     limb = None
-    for start, near in tries:
+    for start, near in limb_starts():
         limb = fit_limb(lum, start, pts, nrm, scale_range, shown=shown, near_px=near)
         if limb is not None and not scale_range[0] * 0.96 <= limb.radius_px / radius \
                 <= scale_range[1] * 1.04:
