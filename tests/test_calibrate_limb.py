@@ -389,12 +389,11 @@ def _sample_photo_under_a_sphere(name: str, sphere, share: float):
     side."""
     from dataclasses import replace
 
-    import skimage.data
+    from sample_photos import sample_photo
 
     from mitsweep.config import Sensor
 
-    img = (getattr(skimage.data, name)().astype(np.float32) / 255.0) ** 2.2
-    img = np.repeat(img[..., None], 3, axis=-1) if img.ndim == 2 else img[..., :3]
+    img = sample_photo(name)
     H, W = img.shape[:2]
     pitch = predicted_outline(sphere).equivalent_radius_px(1.0) / (share * min(H, W))
     return img, replace(sphere, sensor=Sensor(resolution=(W, H), pixel_pitch=pitch))

@@ -45,6 +45,7 @@ from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit, fit_
 
 __all__ = ["find_circle", "circle_outline", "ellipse_outline", "ellipse_of_edges",
            "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "FREE_LIMB_RADIAL_SHARE",
+           "FREE_MIN_SUPPORT", "visible_support",
            "ELLIPSE_SIGNIFICANCE", "ELLIPSE_MIN_PX", "MIN_AXIS_RATIO", "WIDE_LOOK",
            "ELLIPSE_ROUNDS", "ELLIPSE_TRIALS"]
 
@@ -64,6 +65,18 @@ WIDE_LOOK = (1.0 / (1.0 + PLAUSIBLE_SCALE), 1.0 / (1.0 - PLAUSIBLE_SCALE))
 #: in photos without a mirror (0.25-1: 2 of 28 read 1, both the astronaut portrait's
 #: circle, which ``--free`` finds as an edge anyway; the Kodak photo's 0.83).
 FREE_LIMB_RADIAL_SHARE = 1.0
+#: Without a setup nothing says where a mirror is, so a circle or an ellipse is taken for
+#: its outline only where the fit uses at least this share of the outline's points that
+#: the photo shows (in the frame, not in a render's void); a setup's fit asks for
+#: :data:`mitsweep.photo.rim.MIN_INLIER_FRACTION` of all of them. Measured
+#: (``scripts/free_support.py``): the circles and the ellipse found in the photos of
+#: mirrors in ``tests/data/real`` 0.83-1.00 (a lamp's holder, a mount; the rim cut by the
+#: frame 0.95 of what the frame shows); the circles ``--free`` took in scikit-image's
+#: sample photos without a mirror: a brick wall's 0.70 (now refused), and round things
+#: fitted all round (a coin, a crater, a cup's rim: 0.98-1.00) or nearly (a circle cut by
+#: the frame in the astronaut portrait, 0.85), still taken. A mirror whose holder hides
+#: more of its outline is calibrated with a setup.
+FREE_MIN_SUPPORT = 0.75
 #: Smallest outline radius searched, as a share of the photo's shorter side.
 MIN_RADIUS_SHARE = 0.08
 #: Largest outline radius searched, as a share of the photo's longer side.
@@ -265,6 +278,7 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
         base *= 2.0
     candidates.sort(key=lambda c: -c[0])
     failures: list[str] = []
+    weak: list[str] = []    # outlines fitted but refused for their support: said first
     # First each candidate at its own size, one start (this search compares its
     # candidates itself); where none is accepted, a second look at each as a rough
     # setup's prediction is searched (a coarse candidate can be a ring inside the mirror's
@@ -275,11 +289,15 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
             logger.info("free search candidate: centre (%.1f, %.1f) px, radius %.1f px "
                         "(score %.3g), scales %.2f-%.2f", *centre, radius, score,
                         *scale_range)
+            outline = circle_outline(radius)
             try:
-                fit = fit_rim(image, circle_outline(radius), 1.0, scale_range=scale_range,
-                              starts=starts)
+                fit = fit_rim(image, outline, 1.0, scale_range=scale_range, starts=starts)
             except CalibrationError as exc:
                 failures.append(str(exc))
+                continue
+            why = _weakly_supported(fit, outline, image)
+            if why:
+                weak.append(why)
                 continue
             # the outline explained best: most points, least scatter relative to its size
             size = radius * fit.scale
@@ -298,10 +316,52 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
     if limbs:
         fit, radius = max(limbs, key=lambda fr: _explained(fr[0], fr[1]))
         return fit, radius, None
+    nearest = (f"a circle: {weak[0].removeprefix('no mirror found: ')}" if weak else
+               f"the strongest candidate: {failures[0].removeprefix('no mirror found: ')}")
     raise NoMirrorError(f"no mirror found: no circle of radius {lo:.0f}-{hi:.0f} px "
                         f"stands out as a mirror's outline, nor an ellipse of axis ratio "
-                        f"{MIN_AXIS_RATIO:g} or more, nor a sphere's limb (the strongest "
-                        f"candidate: {failures[0].removeprefix('no mirror found: ')})")
+                        f"{MIN_AXIS_RATIO:g} or more, nor a sphere's limb ({nearest})")
+
+
+def visible_support(fit: RimFit, outline: RimOutline, image: np.ndarray) -> float:
+    """The share of an outline's points that the photo shows (in its frame, not in a
+    render's void) which a fit used: what :data:`FREE_MIN_SUPPORT` is judged on.
+
+    Parameters
+    ----------
+    fit : RimFit
+        A fit of ``outline`` (its ``center_px``, ``scale`` and ``points_used``).
+    outline : RimOutline
+        The outline fitted, in pixels (pixel pitch 1, as :func:`circle_outline` makes it).
+    image : (H, W) or (H, W, C) ndarray
+        The photo it was fitted on.
+
+    Returns
+    -------
+    float
+        ``points_used`` over the points shown; 0 where none is.
+    """
+    pts, _nrm = outline.offsets_px(1.0)
+    at = np.rint(np.asarray(fit.center_px)[None, :] + fit.scale * pts).astype(np.int64)
+    H, W = np.shape(image)[:2]
+    inside = (at[:, 0] >= 0) & (at[:, 0] < H) & (at[:, 1] >= 0) & (at[:, 1] < W)
+    shown = _shown(image)
+    if shown is not None:
+        inside[inside] = shown[at[inside, 0], at[inside, 1]]
+    n = int(inside.sum())
+    return fit.points_used / n if n else 0.0
+
+
+def _weakly_supported(fit: RimFit, outline: RimOutline, image: np.ndarray) -> str | None:
+    """Why a circle or an ellipse fitted without a setup is not taken for a mirror's
+    outline (:data:`FREE_MIN_SUPPORT`), or None where it is supported."""
+    support = visible_support(fit, outline, image)
+    if support >= FREE_MIN_SUPPORT:
+        return None
+    return (f"no mirror found: an outline at row {fit.center_px[0]:.1f}, col "
+            f"{fit.center_px[1]:.1f} is fitted to {support:.0%} of its points the photo "
+            f"shows; without a setup {FREE_MIN_SUPPORT:.0%} are needed (a mirror whose "
+            f"holder hides more of its outline is calibrated with --setup)")
 
 
 def _explained(fit: RimFit, size: float) -> float:
@@ -374,6 +434,10 @@ def _best_ellipse(lum: np.ndarray, image: np.ndarray, candidates: list
         if e is None:
             continue
         a, b = e["semi_axes_px"]
+        why = _weakly_supported(fit, ellipse_outline(a, b, e["angle_deg"]), image)
+        if why:
+            logger.info("ellipse candidate (%.1f, %.1f) px refused: %s", row, col, why)
+            continue
         key = (fit.points_used / fit.points_total) * math.sqrt(a * b) \
             / max(fit.residual_rms_px, 0.1)
         if best is None or key > best[0]:

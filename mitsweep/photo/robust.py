@@ -134,8 +134,9 @@ def consensus_lstsq(A: np.ndarray, candidates: np.ndarray, tolerance: float, *,
     best, best_n = None, -1
     for chunk in range(0, len(xs), 256):
         pred = xs[chunk:chunk + 256] @ A.T
-        err = np.abs(cand[None, :, :] - pred[:, :, None])
-        agree = np.nanmin(np.where(np.isfinite(err), err, np.inf), axis=2) <= tolerance
+        # a row agrees where any of its candidates is within the tolerance (a missing
+        # candidate, NaN, never is)
+        agree = (np.abs(cand[None, :, :] - pred[:, :, None]) <= tolerance).any(axis=2)
         n = agree.sum(axis=1)
         i = int(np.argmax(n))
         if n[i] > best_n:
