@@ -124,3 +124,24 @@ def test_a_refused_refinement_keeps_the_reduced_fit_in_full_resolution_pixels(li
     np.testing.assert_array_equal(fit.edge_points_px, [[31.0, 61.0]])
     assert (fit.residual_rms_px, fit.center_se_px, fit.edge_width_px) == \
         pytest.approx((0.9, 0.15, 4.5))
+
+
+def test_a_limb_found_on_a_reduced_copy_is_refined_at_full_resolution():
+    """A limb found on a copy reduced 2x, 0.3 reduced pixels off (0.6 px), is refined at
+    full resolution to the issue's bars: the refinement's circles are fitted to every
+    2nd pixel row and column of the annulus (limb.fit_limb's ``stride``: a 24 MP photo's
+    refinement took minutes on all of them), the normals' fit to all."""
+    from test_calibrate_limb import CENTRE_TOL_PX, RADIUS_TOL_PX, _drawn_ball
+
+    from mitsweep.photo.free import circle_outline
+    from mitsweep.photo.rim import RimFit, refine_at_full_resolution
+
+    lum, centre, radius = _drawn_ball()
+    reduced = ((centre[0] - 0.5) / 2 + 0.3, (centre[1] - 0.5) / 2 - 0.2)
+    found = RimFit(center_px=reduced, scale=1.0, points_used=1400, points_total=1440,
+                   residual_rms_px=0.3, edge_points_px=np.zeros((0, 2)), center_se_px=0.05,
+                   edge_width_px=1.5, residual_tolerance_px=1.5, limb=True)
+    fit = refine_at_full_resolution(lum, circle_outline(radius), 1.0, found, 2)
+    assert fit.limb
+    assert np.hypot(*np.subtract(fit.center_px, centre)) < CENTRE_TOL_PX
+    assert abs(fit.scale * radius - radius) < RADIUS_TOL_PX

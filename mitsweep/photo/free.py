@@ -203,7 +203,8 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
     step = 1.0 + 2.0 / radius  # two reduced pixels' worth of scale
     if fit.limb:   # a limb: fitted again at full resolution, from the reduced copy's
         centre = (fit.center_px[0] * f + (f - 1) / 2, fit.center_px[1] * f + (f - 1) / 2)
-        found = _limb_at(lum, _shown(image), centre, radius * f, (1.0 / step, step))
+        found = _limb_at(lum, _shown(image), centre, radius * f, (1.0 / step, step),
+                         stride=f)
         if found is None:
             raise NoMirrorError(f"no mirror found: a sphere's limb found on the photo "
                                 f"reduced {f}x (centre row {centre[0]:.1f}, col "
@@ -377,16 +378,18 @@ def _shown(image: np.ndarray) -> np.ndarray | None:
 
 
 def _limb_at(lum: np.ndarray, shown: np.ndarray | None, centre: tuple[float, float],
-             radius: float, scale_range: tuple[float, float]
+             radius: float, scale_range: tuple[float, float], stride: int = 1
              ) -> tuple[RimFit, float] | None:
     """A sphere's limb near the circle ``centre``, ``radius`` (px), its size within
     ``scale_range`` times it (:func:`mitsweep.photo.limb.fit_limb`, where the photo shows
     no edge that stands out: the PAGEOS balloon in ``tests/data/real``), as ``(fit,
-    radius_px)``; None where none is found."""
+    radius_px)``; None where none is found. ``stride``: see
+    :func:`mitsweep.photo.limb.fit_limb` (the refinement of a limb found on a reduced copy)."""
     from .limb import fit_limb
 
     pts, nrm = circle_outline(radius).offsets_px(1.0)
-    limb = fit_limb(lum, centre, pts, nrm, scale_range, shown=shown, near_px=radius)
+    limb = fit_limb(lum, centre, pts, nrm, scale_range, shown=shown, near_px=radius,
+                    stride=stride)
     if limb is None or limb.radial_share < FREE_LIMB_RADIAL_SHARE:
         return None
     logger.info("free search: limb at (%.1f, %.1f) px, radius %.1f px (radial share %.2f)",

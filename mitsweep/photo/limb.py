@@ -208,16 +208,22 @@ def _span(at: float, reach: float, n: int) -> tuple[int, int]:
     return lo, max(min(int(at + reach + 3), n), lo)
 
 
-def _radial_profile(e, centre, r_lo, r_hi, step=0.5, shown=None):
-    H, W = e.shape
-    c0 = _span(centre[0], r_hi, H)
-    c1 = _span(centre[1], r_hi, W)
-    rows, cols = np.mgrid[c0[0]:c0[1], c1[0]:c1[1]]
+def _window(centre, reach, shape, stride=1):
+    """The pixel rows and columns within ``reach`` (+2 px) of ``centre``, every
+    ``stride``-th of each, and the slices that cut them from an image of ``shape``."""
+    r0, c0 = _span(centre[0], reach, shape[0]), _span(centre[1], reach, shape[1])
+    sl = (slice(r0[0], r0[1], stride), slice(c0[0], c0[1], stride))
+    rows, cols = np.mgrid[sl]
+    return rows, cols, sl
+
+
+def _radial_profile(e, centre, r_lo, r_hi, step=0.5, shown=None, stride=1):
+    rows, cols, sl = _window(centre, r_hi, e.shape, stride)
     r = np.hypot(rows + 0.5 - centre[0], cols + 0.5 - centre[1])
-    sub = e[c0[0]:c0[1], c1[0]:c1[1]]
+    sub = e[sl]
     ok = (r >= r_lo) & (r < r_hi)
     if shown is not None:
-        ok &= shown[c0[0]:c0[1], c1[0]:c1[1]]
+        ok &= shown[sl]
     bins = np.arange(r_lo, r_hi + step, step)
     idx = np.digitize(r[ok], bins) - 1
     n = np.bincount(idx, minlength=len(bins))[:len(bins) - 1]
@@ -226,10 +232,11 @@ def _radial_profile(e, centre, r_lo, r_hi, step=0.5, shown=None):
         return 0.5 * (bins[:-1] + bins[1:]), s / n
 
 
-def _radial_start(e, centre, r_lo, r_hi, window, shown=None):
+def _radial_start(e, centre, r_lo, r_hi, window, shown=None, stride=1):
     """The radius in ``[r_lo, r_hi]`` where the azimuthal mean log energy drops most
     from the ``window`` px inside to the ``window`` px outside, and that drop."""
-    r, prof = _radial_profile(e, centre, max(r_lo - window, 1.0), r_hi + window, 0.5, shown)
+    r, prof = _radial_profile(e, centre, max(r_lo - window, 1.0), r_hi + window, 0.5, shown,
+                              stride)
     k = round(window / 0.5)
     best, at = -math.inf, math.nan
     for i in range(k, len(r) - k):
@@ -254,22 +261,20 @@ def _one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def _energy_step_fit(e, centre, radius, band, shown=None):
+def _energy_step_fit(e, centre, radius, band, shown=None, stride=1):
     """Circle of the smooth step of the log energy over the annulus ``radius ± band``:
     ``a + b Φ((r - R)/w)`` by least squares (soft L1), returning centre, radius and the
     inside-minus-outside drop ``-b``."""
     from scipy.optimize import least_squares
     from scipy.special import erf
 
-    H, W = e.shape
-    r0, c0 = _span(centre[0], radius + band, H), _span(centre[1], radius + band, W)
-    rows, cols = np.mgrid[r0[0]:r0[1], c0[0]:c0[1]]
+    rows, cols, sl = _window(centre, radius + band, e.shape, stride)
     y, x = rows + 0.5, cols + 0.5
     r = np.hypot(y - centre[0], x - centre[1])
     m = np.abs(r - radius) < band
     if shown is not None:
-        m &= shown[r0[0]:r0[1], c0[0]:c0[1]]
-    y, x, s, rm = y[m], x[m], e[r0[0]:r0[1], c0[0]:c0[1]][m], r[m]
+        m &= shown[sl]
+    y, x, s, rm = y[m], x[m], e[sl][m], r[m]
     if len(s) < 50 or (rm < radius).all() or (rm >= radius).all():
         return centre, radius, 0.0   # too little of the annulus, or one side only, shown
     a0 = float(np.median(s[rm < radius]))
@@ -299,18 +304,16 @@ def _energy_step_fit(e, centre, radius, band, shown=None):
     return (float(cy), float(cx)), float(R), float(-b)
 
 
-def _band_derivatives(gy, gx, centre, r_in, r_out, shown=None):
+def _band_derivatives(gy, gx, centre, r_in, r_out, shown=None, stride=1):
     """The squared derivatives along and across the radius, and the angle, at the shown
-    pixels ``r_in < r < r_out`` from ``centre``."""
-    H, W = gy.shape
-    r0, c0 = _span(centre[0], r_out, H), _span(centre[1], r_out, W)
-    rows, cols = np.mgrid[r0[0]:r0[1], c0[0]:c0[1]]
+    pixels ``r_in < r < r_out`` from ``centre`` (every ``stride``-th row and column)."""
+    rows, cols, sl = _window(centre, r_out, gy.shape, stride)
     dy, dx = rows - centre[0], cols - centre[1]
     rr = np.maximum(np.hypot(dy, dx), 1e-9)
     m = (rr > r_in) & (rr < r_out)
     if shown is not None:
-        m &= shown[r0[0]:r0[1], c0[0]:c0[1]]
-    gyw, gxw = gy[r0[0]:r0[1], c0[0]:c0[1]][m], gx[r0[0]:r0[1], c0[0]:c0[1]][m]
+        m &= shown[sl]
+    gyw, gxw = gy[sl][m], gx[sl][m]
     dy, dx, rr = dy[m], dx[m], rr[m]
     radial = ((gyw * dy + gxw * dx) / rr) ** 2
     across = ((gxw * dy - gyw * dx) / rr) ** 2
@@ -318,7 +321,7 @@ def _band_derivatives(gy, gx, centre, r_in, r_out, shown=None):
 
 
 def radial_share(gy: np.ndarray, gx: np.ndarray, centre: tuple[float, float],
-                 radius: float, shown: np.ndarray | None = None) -> float:
+                 radius: float, shown: np.ndarray | None = None, *, stride: int = 1) -> float:
     """Share of the :data:`RADIAL_SECTORS` angular sectors in which the gradient
     (``gy``, ``gx``) just inside the circle (see :data:`MIN_RADIAL_SHARE`) has more
     energy along the radius than across it; a sector with under 10 shown pixels there
@@ -334,10 +337,13 @@ def radial_share(gy: np.ndarray, gx: np.ndarray, centre: tuple[float, float],
         Its radius, px.
     shown : (H, W) bool ndarray, optional
         Pixels the photo shows.
+    stride : int
+        Every ``stride``-th pixel row and column counted (a large photo's refinement:
+        its reduced copy's spacing; the bands' pixel counts fall by ``stride²``).
     """
     width = max(RADIAL_BAND_PX, 0.08 * radius)
     radial, across, angle = _band_derivatives(gy, gx, centre, radius - width, radius - 2.0,
-                                              shown)
+                                              shown, stride)
     sector = ((angle + math.pi) / (2.0 * math.pi) * RADIAL_SECTORS).astype(int) \
         % RADIAL_SECTORS
     counted = np.bincount(sector, minlength=RADIAL_SECTORS) >= 10
@@ -347,7 +353,7 @@ def radial_share(gy: np.ndarray, gx: np.ndarray, centre: tuple[float, float],
 
 
 def radial_rise(gy: np.ndarray, gx: np.ndarray, centre: tuple[float, float],
-                radius: float, shown: np.ndarray | None = None) -> float:
+                radius: float, shown: np.ndarray | None = None, *, stride: int = 1) -> float:
     """How much more the gradient (``gy``, ``gx``) runs along the radius just inside the
     circle than in its middle (see :data:`MIN_RADIAL_RISE`): the natural log of the
     ratio of the squared derivative along the radius to the one across it, summed over
@@ -364,10 +370,13 @@ def radial_rise(gy: np.ndarray, gx: np.ndarray, centre: tuple[float, float],
         Its radius, px.
     shown : (H, W) bool ndarray, optional
         Pixels the photo shows.
+    stride : int
+        Every ``stride``-th pixel row and column counted (a large photo's refinement:
+        its reduced copy's spacing; the bands' pixel counts fall by ``stride²``).
     """
     logs = []
     for r_in, r_out in ((0.85 * radius, radius - 2.0), (0.5 * radius, 0.7 * radius)):
-        radial, across, _ = _band_derivatives(gy, gx, centre, r_in, r_out, shown)
+        radial, across, _ = _band_derivatives(gy, gx, centre, r_in, r_out, shown, stride)
         a, b = float(radial.sum()), float(across.sum())
         if radial.size < RADIAL_RISE_MIN_PIXELS or not (a > 0.0 and b > 0.0):
             return math.nan
@@ -375,21 +384,19 @@ def radial_rise(gy: np.ndarray, gx: np.ndarray, centre: tuple[float, float],
     return logs[0] - logs[1]
 
 
-def _radial_gradient_sq(lum_s, gy, gx, centre, radius, band):
+def _radial_gradient_sq(lum_s, gy, gx, centre, radius, band, stride=1):
     """Squared radial derivative (about ``centre``) of the smoothed luminance over the
-    annulus ``radius ± band``: pixel rows, cols and values."""
-    H, W = lum_s.shape
-    r0, c0 = _span(centre[0], radius + band, H), _span(centre[1], radius + band, W)
-    rows, cols = np.mgrid[r0[0]:r0[1], c0[0]:c0[1]]
+    annulus ``radius ± band`` (every ``stride``-th row and column): pixel rows, cols and
+    values, the annulus' mask in the window and the window's slices."""
+    rows, cols, sl = _window(centre, radius + band, lum_s.shape, stride)
     dy, dx = rows - centre[0], cols - centre[1]
     rr = np.hypot(dy, dx)
-    g = (gy[r0[0]:r0[1], c0[0]:c0[1]] * dy + gx[r0[0]:r0[1], c0[0]:c0[1]] * dx) \
-        / np.maximum(rr, 1e-9)
+    g = (gy[sl] * dy + gx[sl] * dx) / np.maximum(rr, 1e-9)
     m = np.abs(rr - radius) < band
-    return rows[m].astype(np.float64), cols[m].astype(np.float64), g[m] ** 2, m, (r0, c0)
+    return rows[m].astype(np.float64), cols[m].astype(np.float64), g[m] ** 2, m, sl
 
 
-def _ridge_fit(gy, gx, lum_s, centre, radius, band, shown=None, iterations=3):
+def _ridge_fit(gy, gx, lum_s, centre, radius, band, shown=None, iterations=3, stride=1):
     """Circle of the ridge of the squared radial derivative: ``a + b exp(-q²/2w²) +
     c Φ(q/w)`` with ``q`` the distance from the circle (a ridge where the mean steps
     at the limb, whatever its sign, and a step where the texture changes), fitted by
@@ -401,9 +408,9 @@ def _ridge_fit(gy, gx, lum_s, centre, radius, band, shown=None, iterations=3):
 
     p = None
     for _ in range(iterations):
-        y, x, s, m, (r0, c0) = _radial_gradient_sq(lum_s, gy, gx, centre, radius, band)
+        y, x, s, m, sl = _radial_gradient_sq(lum_s, gy, gx, centre, radius, band, stride)
         if shown is not None:
-            keep = shown[r0[0]:r0[1], c0[0]:c0[1]][m]
+            keep = shown[sl][m]
             y, x, s = y[keep], x[keep], s[keep]
         if len(s) < 50:
             return centre, radius, 0.0, None
@@ -441,7 +448,7 @@ def _ridge_fit(gy, gx, lum_s, centre, radius, band, shown=None, iterations=3):
     return centre, radius, float(p[4] / (med + 1e-30)), p
 
 
-def _ridge_starts(gy, gx, lum_s, centre, r_lo, r_hi, predicted, shown=None):
+def _ridge_starts(gy, gx, lum_s, centre, r_lo, r_hi, predicted, shown=None, stride=1):
     """Radii of the ridges of the azimuthal mean squared radial derivative in
     ``[r_lo, r_hi]``: the peaks at least :data:`RIDGE_SHARE` as prominent as the most
     prominent (over the median within 6% of the radius), nearest ``predicted`` first."""
@@ -451,9 +458,9 @@ def _ridge_starts(gy, gx, lum_s, centre, r_lo, r_hi, predicted, shown=None):
     # the profile reaches a median window beyond both ends, so that a ridge at the
     # range's end is judged as one inside it
     band = 0.5 * (r_hi - r_lo) + k * step + 4.0
-    y, x, s, m, (r0, c0) = _radial_gradient_sq(lum_s, gy, gx, centre, mid, band)
+    y, x, s, m, sl = _radial_gradient_sq(lum_s, gy, gx, centre, mid, band, stride)
     if shown is not None:
-        keep = shown[r0[0]:r0[1], c0[0]:c0[1]][m]
+        keep = shown[sl][m]
         y, x, s = y[keep], x[keep], s[keep]
     r = np.hypot(y - centre[0], x - centre[1])
     bins = np.arange(mid - band, mid + band + step, step)
@@ -502,7 +509,7 @@ def _step_coherence(lum_s, centre, scale, pts, nrm, good) -> float:
 def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
              nrm: np.ndarray, scale_range: tuple[float, float], *,
              shown: np.ndarray | None = None, iterations: int = 6,
-             near_px: float | None = None) -> LimbFit | None:
+             near_px: float | None = None, stride: int = 1) -> LimbFit | None:
     """Find a circular limb (see the module docstring) about ``centre`` (row, col; good
     to a few px), its size within ``scale_range`` times the outline ``pts`` (N, 2
     offsets from the axis, px, with outward normals ``nrm``). None where neither cue
@@ -528,7 +535,15 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
         are tried first (default the outline's own size; an outline found otherwise,
         such as an edge fit refused for its contrast, is a better guess where the
         setup is far off).
+    stride : int
+        The circles of the annulus (the energy step, the ridge) and the direction cues
+        are fitted to every ``stride``-th pixel row and column: a large photo's limb,
+        refined at full resolution near the one found on a copy reduced ``stride``
+        times, on as many pixels as there (the fit along the normals uses them all).
     """
+    if int(stride) < 1:
+        raise ValueError(f"stride must be a whole number of pixels >= 1, got {stride}")
+    stride = int(stride)
     radius0 = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
     r_lo, r_hi = radius0 * scale_range[0], radius0 * scale_range[1]
     e, _ = energy_map(lum)
@@ -537,12 +552,12 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     band = max(LIMB_ANNULUS_PX, 0.04 * radius0 * scale_range[0])
     lum_r = smooth(lum, RIDGE_SMOOTHING_PX)
     gy, gx = np.gradient(lum_r)
-    start, drop = _radial_start(e, centre, r_lo, r_hi, band, e_shown)
+    start, drop = _radial_start(e, centre, r_lo, r_hi, band, e_shown, stride)
     step = 0.0
     c, R = centre, start
     if math.isfinite(start) and drop >= STRONG_ENERGY_STEP:
         for _ in range(2):
-            c, R, step = _energy_step_fit(e, c, R, band, e_shown)
+            c, R, step = _energy_step_fit(e, c, R, band, e_shown, stride)
     # the energy step's circle where there is one, then the ridges, nearest the
     # prediction first: after the energy step's circle fails (an edge inside the limb,
     # such as the reflected boards in a clean sweep render), and after a ridge whose
@@ -552,14 +567,14 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     starts = [(c, R, step)] if step >= STRONG_ENERGY_STEP else []
     near = radius0 if near_px is None else float(near_px)
     starts += [(centre, r, 0.0) for r in _ridge_starts(gy, gx, lum_r, centre, r_lo, r_hi,
-                                                         near, shown)[:MAX_RIDGE_STARTS]]
+                                                         near, shown, stride)[:MAX_RIDGE_STARTS]]
     lum_s = smooth(lum, LIMB_SMOOTHING_PX)
     for c0, R0, step in starts:
-        c, R, height, _ = _ridge_fit(gy, gx, lum_r, c0, R0, band, shown)
+        c, R, height, _ = _ridge_fit(gy, gx, lum_r, c0, R0, band, shown, stride=stride)
         if not (height >= MIN_RIDGE and r_lo / 1.04 <= R <= r_hi * 1.04):
             continue
         fit, by_cue = _limb_from_ridge(lum_s, gy, gx, c, R / radius0, height, pts, nrm,
-                                       (r_lo, r_hi), shown, iterations)
+                                       (r_lo, r_hi), shown, iterations, stride)
         if fit is not None:
             return replace(fit, energy_step=float(step),
                            energy_center_px=(float(c0[0]), float(c0[1])),
@@ -571,7 +586,8 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     return None
 
 
-def _limb_from_ridge(lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, iterations):
+def _limb_from_ridge(lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, iterations,
+                     stride=1):
     """The limb from a ridge's circle (centre ``c``, ``scale`` times the outline, ridge
     ``height``): the
     step of the mean along each normal, whatever its sign, within LIMB_HALF_WIDTH_PX of
@@ -617,14 +633,14 @@ def _limb_from_ridge(lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, it
     used = np.zeros(len(pts), bool)
     used[np.flatnonzero(good)[inl]] = True
     edges = np.asarray(c)[None, :] + scale * pts + np.nan_to_num(off)[:, None] * nrm
-    radial = radial_share(gy, gx, c, R, shown)
+    radial = radial_share(gy, gx, c, R, shown, stride=stride)
     if radial < MIN_RADIAL_SHARE or (radial < 1.0 and height < PARTIAL_SHARE_RIDGE):
         # a circle in a texture, not a reflection's limb
         logger.debug("limb fit: circle (%.1f, %.1f) r %.1f px refused: detail along the "
                      "radius in a share %.2f of the sectors, ridge %.2f", *c, R, radial,
                      height)
         return None, True
-    rise = radial_rise(gy, gx, c, R, shown)
+    rise = radial_rise(gy, gx, c, R, shown, stride=stride)
     if rise < MIN_RADIAL_RISE:
         # detail along the radius, but not squeezed toward the edge
         logger.debug("limb fit: circle (%.1f, %.1f) r %.1f px refused: a rise of %.2f",

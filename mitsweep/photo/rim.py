@@ -417,7 +417,8 @@ def refine_at_full_resolution(image: np.ndarray, outline: RimOutline, pixel_pitc
 
             step = 1.0 + window / (radius * fit.scale)
             limb = fit_limb(lum, centre, pts, nrm, (fit.scale / step, fit.scale * step),
-                            shown=~void if void.any() else None, near_px=radius * fit.scale)
+                            shown=~void if void.any() else None, near_px=radius * fit.scale,
+                            stride=f)
             if limb is None:
                 raise NoMirrorError("no limb found at full resolution")
             refined = rim_fit_of_limb(limb, pts, nrm, radius)
