@@ -40,8 +40,8 @@ from ..optics.outline import RimOutline
 from .coarse import MAX_CANDIDATES, coarse_search, search_scales
 from .image import fill_void, photo_void, reduce_by
 from .rim import (PLAUSIBLE_SCALE, CalibrationError, NoMirrorError, RimFit, fit_rim,
-                  WORKING_SIDE_PX, rim_fit_of_limb, settled, working_factor,
-                  working_luminance)
+                  WORKING_SIDE_PX, refine_at_full_resolution, rim_fit_of_limb, settled,
+                  working_factor, working_luminance)
 
 __all__ = ["find_circle", "circle_outline", "ellipse_outline", "ellipse_of_edges",
            "MIN_RADIUS_SHARE", "MAX_RADIUS_SHARE", "CANDIDATES", "FREE_LIMB_RADIAL_SHARE",
@@ -211,10 +211,10 @@ def find_circle(image: np.ndarray, *, radius_range_px: tuple[float, float] | Non
                                 f"{centre[1]:.1f}, radius {radius * f:.1f} px) is not "
                                 f"found again at full resolution")
         return found
-    # one start: the candidate is chosen already, at its own size
-    fit = fit_rim(image, circle_outline(radius * f), 1.0, scale_range=(1.0 / step, step),
-                  starts=1)
-    return fit, radius * f * fit.scale
+    # the candidate is chosen and fitted already: refined at full resolution near it
+    template_px = radius * f / fit.scale   # the circle it was fitted to, scaled by f
+    fit = refine_at_full_resolution(image, circle_outline(template_px), 1.0, fit, f)
+    return fit, template_px * fit.scale
 
 
 #: The outline is reported as an ellipse (a tilted view) where its semi-axes differ by
