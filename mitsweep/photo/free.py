@@ -9,7 +9,10 @@ for that octave; the strongest candidates are refined and validated as a setup's
 outline is (:func:`mitsweep.photo.rim.fit_rim`), and the validated one whose edge stands
 out most from its surroundings is kept. Where none is accepted at its own size (a
 candidate can be a ring inside the mirror's image), each is searched again as a rough
-setup's prediction would be (:data:`WIDE_LOOK`, several starts).
+setup's prediction would be (:data:`WIDE_LOOK`, several starts). Without a setup nothing
+says where a mirror is, so a circle (or an ellipse, below) is accepted only where the fit
+uses most of the outline the photo shows (:data:`FREE_MIN_SUPPORT`; a circle along a
+brick wall's mortar is not).
 
 A camera that does not look straight at an untilted mirror sees its outline as an
 ellipse; up to a tilt of about 9 degrees a circle still explains it (and
