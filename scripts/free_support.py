@@ -44,37 +44,57 @@ def photos() -> list[tuple[str, str, object]]:
     return out
 
 
+def measure(names=None):
+    """One dict per photo (all, or those in ``names``): ``name``, ``kind`` ("mirror" or
+    "no mirror"), ``found`` (False where even the lowered bar finds nothing), ``limb``,
+    ``centre`` and ``radius`` (px), ``support`` (None for a limb, judged by its own cue)
+    and ``seconds``, with the bar lowered to 0 for the search."""
+    logging.getLogger("mitsweep.io.camera").setLevel(logging.ERROR)  # 8-bit, JPEG: known
+    bar = free.FREE_MIN_SUPPORT
+    free.FREE_MIN_SUPPORT = 0.0
+    try:
+        for name, kind, load in photos():
+            if names and name not in names:
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                image = load()
+                t = time.perf_counter()
+                try:
+                    fit, radius = free.find_circle(image)
+                except NoMirrorError:
+                    yield {"name": name, "kind": kind, "found": False, "limb": False,
+                           "centre": None, "radius": None, "support": None,
+                           "seconds": time.perf_counter() - t}
+                    continue
+            support = None if fit.limb else free.visible_support(
+                fit, free.circle_outline(radius / fit.scale), image)
+            yield {"name": name, "kind": kind, "found": True, "limb": bool(fit.limb),
+                   "centre": fit.center_px, "radius": radius, "support": support,
+                   "seconds": time.perf_counter() - t}
+    finally:
+        free.FREE_MIN_SUPPORT = bar
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--photos", nargs="*", help="only these (file or sample names)")
     args = ap.parse_args(argv)
-    logging.getLogger("mitsweep.io.camera").setLevel(logging.ERROR)  # 8-bit, JPEG: known
     bar = free.FREE_MIN_SUPPORT
-    free.FREE_MIN_SUPPORT = 0.0
     print(f"{'photo':28s} {'kind':9s} {'found':34s} {'support':>7s} {'time':>6s}  "
           f"with the bar ({bar:g})")
-    for name, kind, load in photos():
-        if args.photos and name not in args.photos:
+    for m in measure(args.photos):
+        head = f"{m['name']:28s} {m['kind']:9s}"
+        if not m["found"]:
+            print(f"{head} {'none':34s} {'':>7s} {m['seconds']:5.1f}s  refused")
             continue
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            image = load()
-            t = time.perf_counter()
-            try:
-                fit, radius = free.find_circle(image)
-            except NoMirrorError:
-                print(f"{name:28s} {kind:9s} {'none':34s} {'':>7s} "
-                      f"{time.perf_counter() - t:5.1f}s  refused")
-                continue
-        dt = time.perf_counter() - t
-        what = (f"({fit.center_px[0]:.1f}, {fit.center_px[1]:.1f}) r {radius:.1f}"
-                + (" limb" if fit.limb else ""))
-        if fit.limb:   # a limb is judged by its own cue (FREE_LIMB_RADIAL_SHARE)
-            print(f"{name:28s} {kind:9s} {what:34s} {'-':>7s} {dt:5.1f}s  kept (a limb)")
+        what = (f"({m['centre'][0]:.1f}, {m['centre'][1]:.1f}) r {m['radius']:.1f}"
+                + (" limb" if m["limb"] else ""))
+        if m["support"] is None:   # a limb is judged by its own cue (FREE_LIMB_RADIAL_SHARE)
+            print(f"{head} {what:34s} {'-':>7s} {m['seconds']:5.1f}s  kept (a limb)")
             continue
-        support = free.visible_support(fit, free.circle_outline(radius / fit.scale), image)
-        print(f"{name:28s} {kind:9s} {what:34s} {support:7.2f} {dt:5.1f}s  "
-              f"{'kept' if support >= bar else 'refused'}")
+        print(f"{head} {what:34s} {m['support']:7.2f} {m['seconds']:5.1f}s  "
+              f"{'kept' if m['support'] >= bar else 'refused'}")
     return 0
 
 

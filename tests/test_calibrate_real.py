@@ -174,6 +174,7 @@ def test_free_cli_refuses_a_photo_without_a_mirror(capsys):
     raw = corpus(with_outline=False)[0]["path"]  # buildings, no mirror
     line = refused(capsys, ["calibrate", str(raw), "--free"])
     assert line.startswith("mitsweep: error: no mirror found")
+    assert "setup" not in line          # --free has none: the message does not ask for one
 
 
 @pytest.mark.parametrize("side", [20, 48])

@@ -95,3 +95,29 @@ def test_the_guide_states_what_free_makes_of_the_sample_photos():
     n = len(FREE_REFUSED) + len(FREE_ROUND_THINGS)
     said = re.search(r"`--free` refuses (\d+) of (\d+) of scikit-image's sample photos", text)
     assert said is not None and said.groups() == (str(len(FREE_REFUSED)), str(n))
+
+
+@pytest.mark.slow   # the corpus' photos of mirrors and the brick wall: about a minute
+def test_the_guide_states_the_supports_free_support_measures():
+    """photos.md's figures for FREE_MIN_SUPPORT are what scripts/free_support.py measures
+    (the bar lowered to 0): the range over the photos of mirrors found as an outline (not
+    a limb), the rim cut by the frame, and the brick wall's circle."""
+    import sys
+
+    from real_corpus import corpus
+
+    sys.path.insert(0, str(SCENES.parent / "scripts"))
+    import free_support
+
+    names = [e["name"] for e in corpus(with_outline=True)] + ["brick"]
+    got = {m["name"]: m for m in free_support.measure(names)}
+    mirrors = [m["support"] for m in got.values() if m["kind"] == "mirror"
+               and m["support"] is not None]
+    assert len(mirrors) == 7 and got["sphere_pageos_nasa.png"]["limb"]
+    assert min(mirrors) >= FREE_MIN_SUPPORT > got["brick"]["support"]
+    text = " ".join((SCENES.parent / "docs" / "reference" / "photos.md").read_text().split())
+    assert (f"The photos of mirrors above read {min(mirrors):.2f}–{max(mirrors):.2f}"
+            in text)
+    assert (f"the rim cut by the frame, {got['omni_vmr_clipped.jpg']['support']:.2f} of what "
+            "the frame shows") in text
+    assert f"a circle in a brick wall {got['brick']['support']:.2f}" in text

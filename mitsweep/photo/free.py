@@ -320,8 +320,10 @@ def _best_circle(lum: np.ndarray, image: np.ndarray, lo: float, hi: float
     if limbs:
         fit, radius = max(limbs, key=lambda fr: _explained(fr[0], fr[1]))
         return fit, radius, None
+    # the fits' messages speak to a setup's user; here there is none
     nearest = (f"a circle: {weak[0].removeprefix('no mirror found: ')}" if weak else
-               f"the strongest candidate: {failures[0].removeprefix('no mirror found: ')}")
+               "the strongest candidate: " + failures[0].removeprefix("no mirror found: ")
+               .removesuffix(_SETUP_HINT))
     raise NoMirrorError(f"no mirror found: no circle of radius {lo:.0f}-{hi:.0f} px "
                         f"stands out as a mirror's outline, nor an ellipse of axis ratio "
                         f"{MIN_AXIS_RATIO:g} or more, nor a sphere's limb ({nearest})")
@@ -366,6 +368,11 @@ def _weakly_supported(fit: RimFit, outline: RimOutline, image: np.ndarray) -> st
             f"{fit.center_px[1]:.1f} is fitted to {support:.0%} of its points the photo "
             f"shows; without a setup {FREE_MIN_SUPPORT:.0%} are needed (a mirror whose "
             f"holder hides more of its outline is calibrated with --setup)")
+
+
+#: How the setup path's refusals end (:func:`mitsweep.photo.rim.fit_rim`): left out of
+#: ``--free``'s, which has no setup.
+_SETUP_HINT = "; check that the photo shows the mirror of this setup"
 
 
 def _explained(fit: RimFit, size: float) -> float:
