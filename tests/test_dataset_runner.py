@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from mitsweep.io import write_bytes_atomic
 from mitsweep.pipeline.runner import (LOG_DIR, MANIFEST, SHARD_DIR, DatasetError, Shard, Task,
                                       read_task_log, run_tasks, sha256)
 
@@ -32,7 +33,9 @@ def make_bytes(context, out: Path, *, value: int, delay_s: float = 0.0, **inputs
     time.sleep(delay_s)
     data = f"{context}:{value}:".encode() + b"".join(
         Path(p).read_bytes() for _, p in sorted(inputs.items()))
-    out.write_bytes(hashlib.sha256(data).digest() * 64)
+    # atomically, as the dataset's tasks write (Task's contract): two shards at once both
+    # make the shared item, and one hashed the other's half-written file (a flaky CI run)
+    write_bytes_atomic(out, hashlib.sha256(data).digest() * 64)
     return {"toy_s": delay_s}
 
 

@@ -155,7 +155,10 @@ class Shard:
 class Task:
     """One item of a directory and how to make it.
 
-    ``fn(context, out, **inputs, **params)`` writes the file ``out``.
+    ``fn(context, out, **inputs, **params)`` writes the file ``out``, atomically
+    (:func:`mitsweep.io.atomic_path`, :func:`mitsweep.io.write_bytes_atomic`): an item
+    that tasks of every group need (``group`` None) is made by every shard, at the same
+    time where shards run at once, and each shard hashes what it wrote.
 
     Attributes
     ----------
