@@ -18,7 +18,8 @@ import math
 import numpy as np
 
 __all__ = ["edge_offsets", "edge_candidates", "gaussian_peak", "edge_prominence",
-           "EDGE_PEAK_HALF_WIDTH_PX", "PROMINENCE_TRIM"]
+           "blurred_step_offsets", "EDGE_PEAK_HALF_WIDTH_PX", "PROMINENCE_TRIM",
+           "STEP_MODEL_HALF_PX", "STEP_MODEL_SIGMAS_PX"]
 
 #: Half-width (px) of the top of the derivative lobe fitted by a Gaussian to locate the
 #: edge (:func:`gaussian_peak`). Measured on Mitsuba sweep renders of the tilted
@@ -26,6 +27,12 @@ __all__ = ["edge_offsets", "edge_candidates", "gaussian_peak", "edge_prominence"
 #: 0.20-0.33 px off, a Gaussian over the lobe above half its peak 0.18-0.27, above 0.7
 #: of it 0.13-0.23, over +-0.25 px 0.06-0.20, over +-0.5 px 0.05-0.18.
 EDGE_PEAK_HALF_WIDTH_PX = 0.5
+#: Half-length (px) of the profile a blurred step is fitted to (:func:`blurred_step_offsets`):
+#: a few blur widths of the sharp limbs it is used on (0.5-0.7 px chosen on the renders).
+STEP_MODEL_HALF_PX = 3.0
+#: Blur widths (Gaussian standard deviation, px) tried by :func:`blurred_step_offsets`;
+#: the one with the least residual over all the normals is kept.
+STEP_MODEL_SIGMAS_PX = (0.5, 0.7, 0.9, 1.2, 1.6, 2.1, 2.8)
 #: Share of the outline's points cut at each end of the mean absolute derivative of
 #: :func:`edge_prominence`.
 PROMINENCE_TRIM = 0.2
@@ -117,6 +124,78 @@ def edge_offsets(lum_s: np.ndarray, centre: tuple[float, float], scale: float,
         centroid = (wgt * t[None, :]).sum(axis=1) / total
         width = np.sqrt((wgt * (t[None, :] - centroid[:, None]) ** 2).sum(axis=1) / total)
     return off, step_size, np.where(np.isfinite(off), width, np.nan)
+
+
+def blurred_step_offsets(lum: np.ndarray, centre: tuple[float, float], scale: float,
+                         pts: np.ndarray, nrm: np.ndarray, reach: float = 1.5,
+                         ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Sub-pixel edge offset along each normal from a model of the whole profile: a step
+    blurred by a Gaussian, on a ramp, ``a + b Φ((t - t0) / σ) + c t``, fitted (least
+    squares) to the luminance (not smoothed) within :data:`STEP_MODEL_HALF_PX` of the outline, ``t0``
+    searched within ``reach`` px of it (to 1/20 px, then the vertex of a parabola through
+    the residuals), ``σ`` one of :data:`STEP_MODEL_SIGMAS_PX` shared by all normals.
+
+    Used for the sphere's limb (:mod:`mitsweep.photo.limb`), whose steps it places
+    better than the peak of a smoothed profile's derivative on the sweep renders (figures
+    there). On drawn discs, a ramp or a texture on one side of the step pulls both alike
+    (``tests/test_photo_step_model.py``): it is a measured gain on the limb, not a cure
+    for detail beside an edge. A step beyond the reach is not reported as such: the
+    offset is wherever the model fits best within it (NaN only at its ends), so the
+    circle it starts from should be within a pixel of the step.
+
+    Parameters
+    ----------
+    lum : (H, W) ndarray
+        Luminance, not smoothed (the model has its own blur).
+    centre, scale, pts, nrm
+        As :func:`edge_offsets`.
+    reach : float
+        How far from the outline (px) the step is looked for.
+
+    Returns
+    -------
+    offsets : (N,) ndarray
+        The step's position along each normal, px (NaN where it is at the end of the
+        reach or the profile leaves the photo).
+    steps : (N,) ndarray
+        Each step's height ``b`` (its sign: brighter outside where positive).
+    sigma : float
+        The blur kept, px.
+    """
+    from scipy.special import ndtr
+
+    step = 0.25
+    t, prof, inside = _profiles(lum, centre, scale, pts, nrm, STEP_MODEL_HALF_PX, step)
+    n = len(pts)
+    t0s = np.arange(-reach, reach + 1e-9, 0.05)
+    energy = np.sum(prof ** 2, axis=1)
+    best = (math.inf, STEP_MODEL_SIGMAS_PX[0], np.zeros((len(t0s), n)))
+    for sigma in STEP_MODEL_SIGMAS_PX:
+        rss = np.empty((len(t0s), n))
+        for i, t0 in enumerate(t0s):
+            # the residual of a least-squares fit: what an orthonormal basis of the
+            # model's columns leaves of each profile
+            q, _ = np.linalg.qr(np.column_stack([np.ones_like(t), ndtr((t - t0) / sigma), t]))
+            rss[i] = energy - np.sum((prof @ q) ** 2, axis=1)
+        total = float(np.sum(rss.min(axis=0)[inside]))
+        if total < best[0]:
+            best = (total, sigma, rss)
+    _, sigma, rss = best
+    k = np.argmin(rss, axis=0)
+    kk = np.clip(k, 1, len(t0s) - 2)
+    ix = np.arange(n)
+    y0, y1, y2 = rss[kk - 1, ix], rss[kk, ix], rss[kk + 1, ix]
+    curv = y0 - 2.0 * y1 + y2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shift = np.where(curv > 0, 0.5 * (y0 - y2) / curv, 0.0)
+    off = t0s[kk] + 0.05 * np.clip(shift, -1.0, 1.0)
+    off[(k == 0) | (k == len(t0s) - 1) | ~inside] = np.nan
+    # each profile's step height at its offset
+    u = (t[None, :] - np.nan_to_num(off)[:, None]) / sigma
+    A = np.stack([np.ones_like(u), ndtr(u), np.broadcast_to(t, u.shape)], axis=-1)
+    coef = np.linalg.solve(np.einsum("ntj,ntk->njk", A, A),
+                           np.einsum("ntj,nt->nj", A, prof)[..., None])[..., 0]
+    return off, coef[:, 1], float(sigma)
 
 
 def edge_candidates(lum_s: np.ndarray, centre: tuple[float, float], scale: float,

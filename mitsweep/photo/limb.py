@@ -15,10 +15,15 @@ difference, where a render's noise lives) steps down at the limb: a smooth step 
 log energy, fitted as a circle over an annulus (centre and radius shared by all the
 pixels, not per normal), finds the limb to ~1 px; and (2) along each normal, the mean
 steps at the limb by the local background's difference from its far average, a step of
-random sign whose azimuthal mean cancels: a sign-agnostic edge (the derivative lobe's
-peak, :func:`mitsweep.photo.edges.edge_offsets`) searched within a pixel and a half of
-that circle, fitted robustly (:func:`mitsweep.photo.robust.tukey_lstsq`), places it to a
-fraction of a pixel. Measured in ``scripts/limb_study.py``.
+random sign whose azimuthal mean cancels: a blurred step on a ramp fitted to each
+normal's profile (:func:`mitsweep.photo.edges.blurred_step_offsets`), searched within a
+pixel and a half of that circle, each normal weighted by its step's height and fitted
+robustly (:func:`mitsweep.photo.robust.tukey_lstsq`), places it to a fraction of a
+pixel. Measured in ``scripts/limb_study.py`` (32 spp, 200-1024 px, full frame, offset
+and cropped; seeds 1-5 at 200 px): the centre within 0.07 px on the pinhole renders and
+0.24 px on the sweep renders; with the peak of a smoothed profile's derivative for each
+step and equal weights, within 0.18 px and 0.44 px (the sweep's beyond the 0.25 px bar
+in 11 of 20 cases at 200 px).
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .edges import edge_offsets
+from .edges import blurred_step_offsets
 from .image import smooth
 from .robust import tukey_lstsq
 
@@ -39,6 +44,7 @@ __all__ = [
     "LIMB_ANNULUS_PX",
     "LIMB_HALF_WIDTH_PX",
     "LIMB_SMOOTHING_PX",
+    "LIMB_STEP_WEIGHT_RANGE",
     "MIN_RADIAL_RISE",
     "MIN_RADIAL_SHARE",
     "MIN_RIDGE",
@@ -55,11 +61,16 @@ __all__ = [
     "radial_share",
 ]
 
-#: Gaussian smoothing (px) of the luminance the sign-agnostic step is located on.
+#: Gaussian smoothing (px) of the luminance the sign of each normal's step is read on.
 LIMB_SMOOTHING_PX = 1.0
 #: Half-width (px) of the search for the step along each normal, about the circle the
 #: energy step gives (that circle is within ~1 px of the limb).
 LIMB_HALF_WIDTH_PX = 1.5
+#: Largest ratio of two normals' weights in the limb's circle fit (each normal weighted by
+#: the height of its step, :func:`_limb_from_ridge`). On the sweep renders of the sphere at
+#: 200-1024 px (32 spp) weighting by height takes the centre from 0.35 px off at worst to
+#: 0.24 px (``scripts/limb_study.py``).
+LIMB_STEP_WEIGHT_RANGE = 10.0
 #: Half-width (px) of the annulus over which the energy step is fitted (at least; 6% of
 #: the radius on large images).
 LIMB_ANNULUS_PX = 6.0
@@ -573,7 +584,7 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
         c, R, height, _ = _ridge_fit(gy, gx, lum_r, c0, R0, band, shown, stride=stride)
         if not (height >= MIN_RIDGE and r_lo / 1.04 <= R <= r_hi * 1.04):
             continue
-        fit, by_cue = _limb_from_ridge(lum_s, gy, gx, c, R / radius0, height, pts, nrm,
+        fit, by_cue = _limb_from_ridge(lum, lum_s, gy, gx, c, R / radius0, height, pts, nrm,
                                        (r_lo, r_hi), shown, iterations, stride)
         if fit is not None:
             return replace(fit, energy_step=float(step),
@@ -586,15 +597,15 @@ def fit_limb(lum: np.ndarray, centre: tuple[float, float], pts: np.ndarray,
     return None
 
 
-def _limb_from_ridge(lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, iterations,
+def _limb_from_ridge(lum, lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, iterations,
                      stride=1):
     """The limb from a ridge's circle (centre ``c``, ``scale`` times the outline, ridge
-    ``height``): the
-    step of the mean along each normal, whatever its sign, within LIMB_HALF_WIDTH_PX of
-    that circle, fitted as the circle plus an offset of the bright-outside steps against
-    the dark-outside ones (0.1-0.25 px on the renders), which the centre would otherwise
-    absorb where one sign prevails on one side (the sweep renders from 400 px: 0.3-0.4
-    px, 0.17-0.22 px with the offset); then the direction cues. The fit (its energy
+    ``height``): the step of the luminance ``lum`` along each normal, whatever its sign,
+    within LIMB_HALF_WIDTH_PX of that circle (a blurred step on a ramp,
+    :func:`mitsweep.photo.edges.blurred_step_offsets`), each weighted by its height,
+    fitted as the circle plus an offset of the bright-outside steps against the
+    dark-outside ones, which the centre would otherwise absorb where one sign prevails on
+    one side; then the direction cues (on ``lum_s``, smoothed). The fit (its energy
     step's fields the caller's), or None where it leaves ``radii`` (r_lo, r_hi) or a cue
     refuses it; and whether a cue did."""
     radius0 = float(np.sqrt(np.mean(np.sum(pts ** 2, axis=1))))
@@ -604,7 +615,7 @@ def _limb_from_ridge(lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, it
     wts = res = np.zeros(0)
     off = np.full(len(pts), np.nan)
     for _ in range(iterations):
-        off, _strength, _width = edge_offsets(lum_s, c, scale, pts, nrm, LIMB_HALF_WIDTH_PX)
+        off, heights, _sigma = blurred_step_offsets(lum, c, scale, pts, nrm, LIMB_HALF_WIDTH_PX)
         good = np.isfinite(off)
         if shown is not None:
             at = np.rint(np.asarray(c)[None, :] + scale * pts).astype(int)
@@ -617,7 +628,12 @@ def _limb_from_ridge(lum_s, gy, gx, c, scale, height, pts, nrm, radii, shown, it
             return None, False
         sign = np.sign(_steps(lum_s, c, scale, pts, nrm))
         A = np.column_stack([A3, sign])[good]
-        x, wts = tukey_lstsq(A, off[good], np.ones(int(good.sum())))
+        # a step's position is as uncertain as its height is small (the noise over the
+        # step); the tallest tenth set the scale, and no normal counts less than a tenth
+        h = np.abs(heights[good])
+        top = max(float(np.quantile(h, 0.9)), 1e-300)
+        uncertainty = np.clip(top / np.maximum(h, 1e-300), 1.0, LIMB_STEP_WEIGHT_RANGE)
+        x, wts = tukey_lstsq(A, off[good], uncertainty)
         res = off[good] - A @ x
         c = (c[0] + float(x[0]), c[1] + float(x[1]))
         scale += float(x[2])
