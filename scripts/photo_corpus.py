@@ -84,7 +84,7 @@ def measure(entry: dict) -> dict:
             "size_px": [W, H], "format": entry["format"], "clipped": entry["clipped"],
             "bright_rim": entry["bright_rim"], "centre_px": list(entry["centre"]),
             "radius_px": entry["radius"], "tolerance_px": entry["tolerance_px"],
-            "runs": runs}
+            "semi_axes_px": entry["semi_axes"], "runs": runs}
 
 
 def table(rows: list[dict]) -> str:
@@ -100,8 +100,11 @@ def table(rows: list[dict]) -> str:
     lines = [head, "|" + "---|" * 10]
     for r in rows:
         kind = f"{r['mirror']}, {r['outline'].replace('sphere limb', 'limb')}"
+        axes = r.get("semi_axes_px") or (0.0, 0.0)
         extra = [w for w, on in ((f"clipped {'/'.join(r['clipped'])}", r["clipped"]),
-                                 ("bright rim", r["bright_rim"])) if on]
+                                 ("bright rim", r["bright_rim"]),
+                                 (f"an ellipse {axes[0]:.1f}/{axes[1]:.1f}, radius their "
+                                  "mean", r.get("semi_axes_px"))) if on]
         if extra:
             kind += f" ({', '.join(extra)})"
         W, H = r["size_px"]

@@ -5,8 +5,9 @@ the way the other helpers in this folder (``camera_files``, ``rig_fixtures``) ar
 imported. Where each file came from, its licence and its SHA-256 are in
 ``tests/data/real/SOURCES.md``; the reference outlines are in
 ``tests/data/real/references.json``, measured by ``tests/test_real_corpus.py``
-(scikit-image Canny edges in a hand-picked annulus, a RANSAC circle, a least-squares
-refit; no mitsweep code) and checked against the photos there on every test run.
+(scikit-image Canny edges in a hand-picked annulus, a RANSAC circle or, for an
+elliptical outline, ellipse, a least-squares refit; no mitsweep code) and checked
+against the photos there on every test run.
 
 Each entry of :func:`corpus` is a dict:
 
@@ -18,7 +19,11 @@ the RAW file, which shows no mirror), ``outline`` ("sphere limb", "rim" or None)
 highlights sit on the outline), ``centre`` ((row, col) px, or None), ``radius`` (px, or
 None), ``tolerance_px`` (how far a measurement of the centre or the radius may be from
 the reference and still agree; None without a reference), ``sd_px`` (the spread of the
-reference measurement itself), ``camera`` (str or None), ``note`` (str).
+reference measurement itself), ``camera`` (str or None), ``note`` (str), and where the
+outline is an ellipse (the reference measured with scikit-image's ``EllipseModel``;
+``radius`` is then the mean of its semi-axes, ``centre`` its centre): ``semi_axes``
+((major, minor) px), ``axes_tolerance_px`` and ``angle_deg`` (the major axis, from the
++column axis toward +row); None for a circle.
 
 Pixel convention: row/column of pixel centres, (0, 0) the top-left pixel's centre, as in
 NumPy indexing (scikit-image's convention); the radius is in the stored file's pixels.
@@ -64,5 +69,8 @@ def corpus(*, with_outline: bool | None = None) -> list[dict]:
             "sd_px": float(ref["sd_px"]) if ref else None,
             "camera": r.get("camera"),
             "note": r.get("note", ""),
+            "semi_axes": tuple(ref["semi_axes_px"]) if ref and "semi_axes_px" in ref else None,
+            "axes_tolerance_px": ref.get("axes_tolerance_px") if ref else None,
+            "angle_deg": ref.get("angle_deg") if ref else None,
         })
     return out
