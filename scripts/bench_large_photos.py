@@ -1,7 +1,9 @@
 """Benchmark (issue 24 item 3): ``calibrate_photo`` on large photos, the search on a copy
 reduced to the working size then refined at full resolution (the default,
 :func:`mitsweep.photo.rim.working_factor`) beside the search at full resolution (the
-working size set beyond the photo), in the same process.
+working size set beyond the photo), in the same process; or (``fixed-smoothing``) the
+reduced search refined with the working size's smoothing of the edge profiles rather than
+one grown with the reduction (:data:`mitsweep.photo.rim.REFINE_SMOOTHING_GROWS`).
 
 The photos are the real ones of ``tests/data/real`` enlarged ``k`` times (bilinear): the
 same outline with ``k`` times wider edges, as a high-resolution camera's soft edge. The
@@ -12,7 +14,7 @@ one of the photo's mirror kind, 9% too large (as ``tests/test_calibrate_real.py`
 Usage::
 
     .venv/bin/python scripts/bench_large_photos.py [--cases NAME:K ...]
-        [--paths reduced full]
+        [--paths reduced full fixed-smoothing]
 
 Prints one line per case and path: the photo's size, time (s), the centre's and radius'
 errors (px) against the tolerance, PASS / MISS / REFUSED; then, per path, the passes and
@@ -48,6 +50,9 @@ CASES = ["sphere_tokyo.jpg:1.5", "sphere_tokyo.jpg:2", "sphere_tokyo.jpg:3.5",
          "paraboloid_mei.jpg:2.5", "omni_vmr_clipped.jpg:3", "omni_kaidan.jpg:2",
          "omni_kaidan.jpg:4"]
 
+#: The paths compared (see ``--paths``).
+PATHS = ("reduced", "full", "fixed-smoothing")
+
 
 def enlarged(name: str, k: float) -> tuple[np.ndarray, dict]:
     """The corpus photo ``name`` enlarged ``k`` times and its reference mapped to it."""
@@ -67,8 +72,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--cases", nargs="+", default=CASES, help="NAME:K, corpus photo and "
                     "enlargement")
-    ap.add_argument("--paths", nargs="+", choices=("reduced", "full"),
-                    default=["reduced", "full"])
+    ap.add_argument("--paths", nargs="+", choices=PATHS, default=["reduced", "full"],
+                    help="reduced: the default; full: the search at full resolution; "
+                         "fixed-smoothing: reduced, refined with the working size's "
+                         "smoothing (rim.REFINE_SMOOTHING_GROWS off)")
     args = ap.parse_args(argv)
     logging.getLogger("mitsweep").setLevel(logging.ERROR)   # the calibrations' warnings
     working = rim.WORKING_SIDE_PX
@@ -79,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         setup = rough_setup(e, img.shape[:2], 0.09)
         for path in args.paths:
             # the full-resolution search: a working size beyond the photo (factor 1)
-            rim.WORKING_SIDE_PX = working if path == "reduced" else 10 ** 9
+            rim.WORKING_SIDE_PX = 10 ** 9 if path == "full" else working
+            rim.REFINE_SMOOTHING_GROWS = path != "fixed-smoothing"
             t0 = time.perf_counter()
             try:
                 with warnings.catch_warnings():
@@ -93,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
             except CalibrationError as exc:
                 ok, what = False, f"REFUSED {str(exc)[:60]}"
             finally:
-                rim.WORKING_SIDE_PX = working
+                rim.WORKING_SIDE_PX, rim.REFINE_SMOOTHING_GROWS = working, True
             dt = time.perf_counter() - t0
             tally(totals[path], ok, dt)
             H, W = img.shape[:2]
