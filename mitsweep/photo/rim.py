@@ -121,10 +121,8 @@ REFINE_WINDOW_REDUCED_PX = 2.0
 #: :data:`PROFILE_SMOOTHING_PX` times the reduction (True), so that the edge refined is
 #: the one found at the working size, at that size's scale, or by
 #: :data:`PROFILE_SMOOTHING_PX` (False). ``scripts/bench_large_photos.py --paths reduced
-#: fixed-smoothing`` runs both (docs/reference/photos.md gives the chrome balls'
-#: figures, which a test measures); the larger of the centre's and the radius' error
-#: against the reference, True against False: the paraboloid x2.5 1.36 against 1.63 px
-#: (its radius 1.05 against 0.24), the clipped rim x3 1.19 against 1.10.
+#: fixed-smoothing`` runs both side by side; docs/reference/photos.md gives the enlarged
+#: chrome balls' figures, which tests/test_calibrate_large.py measures.
 REFINE_SMOOTHING_GROWS = True
 #: Peak working memory of a calibration, bytes per photo pixel (the photo itself not
 #: counted): float64 luminance, its smoothed and void-filled copies, the coarse cues.
