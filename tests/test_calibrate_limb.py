@@ -172,7 +172,7 @@ def test_the_guide_states_the_sweep_renders_centres_over_seeds():
 
     text = " ".join((SCENES.parent / "docs" / "guide" / "restore.md").read_text().split())
     assert SEED_FIGURES in text
-    assert "A render of the mirror's window only at 200 px is still 0.28 px off" in text
+    assert "At seed 1 a render of the mirror's window only at 200 px is still 0.28 px off" in text
     assert WINDOW_MISSES[200, "sweep"].endswith("the centre 0.28 px off")
 
 
@@ -211,14 +211,22 @@ def test_a_clean_sweep_renders_limb_is_found_past_the_boards_energy_step(tmp_pat
 
 #: Renders of only the mirror's window (``mitsweep render`` without ``--full-frame``:
 #: exact zeros from 8 px beyond the outline's box, treated as not shown), placed in a
-#: larger black canvas: the limb fit has only ~6 px of background beside the limb at
-#: the window's sides. Measured (32 spp, seed 1): pinhole 0.02/0.04 px centre at 200/400
+#: larger black canvas. Measured (32 spp, seed 1): pinhole 0.02/0.04 px centre at 200/400
 #: px; sweep 0.28 px at 200 px and 0.19 px at 400 px (0.27 and 0.31 px when each
 #: normal's step was the peak of a smoothed profile's derivative), radius within 0.03 px.
-WINDOW_MISSES = {(200, "sweep"): "sweep render of the mirror's window only at 200 px (~6 px "
-                                 "of background beside the limb; docs/guide/restore.md asks "
-                                 "for --full-frame, which is within the bar): the centre "
-                                 "0.28 px off"}
+#: The miss is the render's noise, not the cut background (the test after this one).
+WINDOW_MISSES = {(200, "sweep"): "sweep render of the mirror's window only at 200 px, 32 spp, "
+                                 "seed 1 (the render's noise: 2 of 5 seeds miss, 0 of 5 at "
+                                 "128 spp): the centre 0.28 px off"}
+
+
+def _on_canvas(img: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A square render placed off-centre in a larger black canvas, and its axis there."""
+    size = img.shape[0]
+    at = (int(0.11 * size), int(0.23 * size))
+    canvas = np.zeros((int(1.3 * size), int(1.4 * size), 3), np.float32)
+    canvas[at[0]:at[0] + size, at[1]:at[1] + size] = img
+    return canvas, np.add(optical_center_px((size, size)), at)
 
 
 def _window_params():
@@ -235,15 +243,52 @@ def test_the_limb_of_a_render_of_the_mirrors_window(tmp_path_factory, limb_study
                                                     mode):
     img = limb_study.render(size, mode, 32, tmp_path_factory.mktemp("window"),
                             full_frame=False)
-    at = (int(0.11 * size), int(0.23 * size))
-    canvas = np.zeros((int(1.3 * size), int(1.4 * size), 3), np.float32)
-    canvas[at[0]:at[0] + size, at[1]:at[1] + size] = img
-    truth = np.add(optical_center_px((size, size)), at)
+    canvas, truth = _on_canvas(img)
     setup = limb_study.sphere_setup(size)
     cal = calibrate_photo(canvas, setup)
     radius = predicted_outline(setup).equivalent_radius_px(setup.sensor.pixel_pitch)
     assert np.hypot(*np.subtract(cal.center_px, truth)) <= CENTRE_TOL_PX
     assert abs(cal.rim_radius_px - radius) <= RADIUS_TOL_PX
+
+
+#: docs/guide/restore.md's account of the window renders' misses, held by the test below.
+WINDOW_FIGURES = ("over seeds 1-5 the window's sweep renders at 200 px are 0.09-0.31 px off "
+                  "at 32 spp (3 of 5 within 0.25 px) and 0.06-0.17 px at 128 spp")
+
+
+@pytest.mark.slow   # 20 renders at 200 px (1-4 s each) and their calibrations
+def test_a_window_renders_miss_is_its_noise_not_its_cut_background(tmp_path_factory,
+                                                                   limb_study):
+    """The window render's pixels with the full-frame render's background around them
+    miss as the window render does, and the full-frame render cut to the window's mask
+    is found as the full frame is: the ~8 px of background left beside the limb is not
+    the cause. The window render is another noise draw; over seeds the misses are the
+    32-spp noise and go at 128 spp (a ~0.07 px bias of the sweep renders' limb stays)."""
+    cache = tmp_path_factory.mktemp("window-seeds")
+    setup = limb_study.sphere_setup(200)
+
+    def error(img):
+        canvas, truth = _on_canvas(img)
+        return float(np.hypot(*np.subtract(calibrate_photo(canvas, setup).center_px, truth)))
+
+    full = limb_study.render(200, "sweep", 32, cache, 1)
+    window = limb_study.render(200, "sweep", 32, cache, 1, full_frame=False)
+    shown = (window != 0).any(axis=-1, keepdims=True)
+    assert error(np.where(shown, window, full)) == pytest.approx(error(window), abs=0.01)
+    assert error(np.where(shown, full, 0)) == pytest.approx(error(full), abs=0.01)
+
+    errors = {spp: [error(limb_study.render(200, "sweep", spp, cache, seed, full_frame=False))
+                    for seed in range(1, 6)] for spp in (32, 128)}
+    assert max(errors[128]) <= CENTRE_TOL_PX, np.round(errors[128], 3)
+    within = sum(e <= CENTRE_TOL_PX for e in errors[32])
+    figures = (f"over seeds 1-5 the window's sweep renders at 200 px are "
+               f"{min(errors[32]):.2f}-{max(errors[32]):.2f} px off at 32 spp ({within} of 5 "
+               f"within 0.25 px) and {min(errors[128]):.2f}-{max(errors[128]):.2f} px at 128 spp")
+    assert figures == WINDOW_FIGURES
+    from conftest import SCENES
+
+    text = " ".join((SCENES.parent / "docs" / "guide" / "restore.md").read_text().split())
+    assert WINDOW_FIGURES in text
 
 
 def test_a_limb_at_the_end_of_the_searched_sizes_is_found():
