@@ -3,7 +3,9 @@ reduced to the working size then refined at full resolution (the default,
 :func:`mitsweep.photo.rim.working_factor`) beside the search at full resolution (the
 working size set beyond the photo), in the same process; or (``fixed-smoothing``) the
 reduced search refined with the working size's smoothing of the edge profiles rather than
-one grown with the reduction (:data:`mitsweep.photo.rim.REFINE_SMOOTHING_GROWS`).
+one grown with the reduction (:data:`mitsweep.photo.rim.REFINE_SMOOTHING_GROWS`); or
+(``no-concentric``) the reduced search without the starts about a first fit's centre
+(:data:`mitsweep.photo.rim.CONCENTRIC_STARTS`).
 
 The photos are the real ones of ``tests/data/real`` enlarged ``k`` times (bilinear): the
 same outline with ``k`` times wider edges, as a high-resolution camera's soft edge. The
@@ -14,7 +16,7 @@ one of the photo's mirror kind, 9% too large (as ``tests/test_calibrate_real.py`
 Usage::
 
     .venv/bin/python scripts/bench_large_photos.py [--cases NAME:K ...]
-        [--paths reduced full fixed-smoothing]
+        [--paths reduced full fixed-smoothing no-concentric]
 
 Prints one line per case and path: the photo's size, time (s), the centre's and radius'
 errors (px) against the tolerance, PASS / MISS / REFUSED; then, per path, the passes and
@@ -51,7 +53,7 @@ CASES = ["sphere_tokyo.jpg:1.5", "sphere_tokyo.jpg:2", "sphere_tokyo.jpg:3.5",
          "omni_kaidan.jpg:4"]
 
 #: The paths compared (see ``--paths``).
-PATHS = ("reduced", "full", "fixed-smoothing")
+PATHS = ("reduced", "full", "fixed-smoothing", "no-concentric")
 
 
 def enlarged(name: str, k: float) -> tuple[np.ndarray, dict]:
@@ -75,7 +77,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--paths", nargs="+", choices=PATHS, default=["reduced", "full"],
                     help="reduced: the default; full: the search at full resolution; "
                          "fixed-smoothing: reduced, refined with the working size's "
-                         "smoothing (rim.REFINE_SMOOTHING_GROWS off)")
+                         "smoothing (rim.REFINE_SMOOTHING_GROWS off); no-concentric: "
+                         "reduced, without rim.CONCENTRIC_STARTS")
     args = ap.parse_args(argv)
     logging.getLogger("mitsweep").setLevel(logging.ERROR)   # the calibrations' warnings
     working = rim.WORKING_SIDE_PX
@@ -88,6 +91,7 @@ def main(argv: list[str] | None = None) -> int:
             # the full-resolution search: a working size beyond the photo (factor 1)
             rim.WORKING_SIDE_PX = 10 ** 9 if path == "full" else working
             rim.REFINE_SMOOTHING_GROWS = path != "fixed-smoothing"
+            rim.CONCENTRIC_STARTS = path != "no-concentric"
             t0 = time.perf_counter()
             try:
                 with warnings.catch_warnings():
@@ -102,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
                 ok, what = False, f"REFUSED {str(exc)[:60]}"
             finally:
                 rim.WORKING_SIDE_PX, rim.REFINE_SMOOTHING_GROWS = working, True
+                rim.CONCENTRIC_STARTS = True
             dt = time.perf_counter() - t0
             tally(totals[path], ok, dt)
             H, W = img.shape[:2]

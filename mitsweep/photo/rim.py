@@ -65,7 +65,7 @@ __all__ = ["CalibrationError", "NoMirrorError", "SetupMismatchError", "RimFit", 
            "PROFILE_SMOOTHING_PX", "MAX_EDGE_SNR", "ROLL_OBSERVABLE", "LIMB_INSIDE_SHARE",
            "MAX_LIMB_COHERENCE", "CONSENSUS_EDGES", "CONSENSUS_TOLERANCE_PX",
            "CLEARLY_BETTER", "SUPPORT_RMS_FLOOR_PX", "SETTLED_SHARE", "SETTLED_RMS_PX",
-           "START_PASSES",
+           "START_PASSES", "CONCENTRIC_STARTS",
            "fit_edges", "fit_support", "choose_fit", "unbeatable", "settled"]
 
 logger = logging.getLogger(__name__)
@@ -124,6 +124,13 @@ REFINE_WINDOW_REDUCED_PX = 2.0
 #: fixed-smoothing`` runs both side by side; docs/reference/photos.md gives the enlarged
 #: chrome balls' figures, which tests/test_calibrate_large.py measures.
 REFINE_SMOOTHING_GROWS = True
+#: Whether a first fit that did not :func:`settle <settled>` is followed by starts about
+#: its centre at the coarse starts' other scales, each from the outline most normals
+#: show an edge on within two coarse scale steps (True), or not (False): a mirror's rim
+#: and its mount are concentric, and the coarse search's centres can be tens of pixels
+#: off. ``scripts/bench_large_photos.py --paths reduced no-concentric`` runs both side by
+#: side; tests/test_calibrate_large.py holds the enlarged photo it was made for.
+CONCENTRIC_STARTS = True
 #: Peak working memory of a calibration, bytes per photo pixel (the photo itself not
 #: counted): float64 luminance, its smoothed and void-filled copies, the coarse cues.
 #: Measured: 27 (a setup) and 38 (--free) on a 24 MP JPEG.
@@ -651,7 +658,34 @@ def fit_edges(image: np.ndarray, outline: RimOutline, pixel_pitch: float, *,
             break
     if not fits:
         raise refusals[0]
+    if CONCENTRIC_STARTS and starts > 1 and not settled(fits[0]):
+        fits += _concentric_fits(work, fits[0], [scale for _, scale, _ in begin])
     return choose_fit(fits)
+
+
+def _concentric_fits(work: _Work, first: RimFit, scales: list[float]) -> list[RimFit]:
+    """Fits refined about the centre of ``first`` (a validated fit that did not
+    :func:`settle <settled>`) at the coarse starts' scales, each at least a coarse scale
+    step from those already refined, from the outline most normals show an edge on within
+    two scale steps (:data:`CONCENTRIC_STARTS`): a mirror's rim inside its mount is
+    concentric with it, and the coarse search's centres can be tens of pixels off (on
+    omni_kaidan.jpg enlarged twice, 30-50 px, and no start reached the rim)."""
+    fits: list[RimFit] = []
+    tried = [first.scale]
+    for scale in scales:
+        if min(abs(scale / t - 1.0) for t in tried) < COARSE_SCALE_STEP - 1.0:
+            continue
+        tried.append(scale)
+        try:
+            fit = _refine(work, first.center_px, scale, consensus=True, passes=START_PASSES,
+                          search_px=2.0 * (COARSE_SCALE_STEP - 1.0) * work.radius * scale)
+        except NoMirrorError as exc:
+            logger.info("concentric start at scale %.3f refused: %s", scale, exc)
+            continue
+        logger.info("concentric start at scale %.3f: a fit at scale %.4f", scale, fit.scale)
+        fits.append(fit)
+        tried.append(fit.scale)
+    return fits
 
 
 @dataclass(frozen=True)
