@@ -9,11 +9,16 @@ mask matches to 0.03 px (200 and 400 px, ``--check-mask``).
 Usage::
 
     .venv/bin/python scripts/limb_study.py [--sizes 200 400] [--modes pinhole sweep]
-        [--spp 32] [--seeds 1] [--cache /tmp/limb_study] [--check-mask]
+        [--spp 32] [--seeds 1] [--locators model peak] [--cache /tmp/limb_study]
+        [--check-mask]
 
 Renders are cached as .npy under ``--cache`` (rendering costs minutes of CPU at 1024 px).
 Prints one line per case: kind, size, placement, offset, centre error (row, col, norm),
-radius error, and what ``calibrate_photo`` warned.
+radius error, and what ``calibrate_photo`` warned; with ``--locators``, each case once per
+way of locating each normal's step (:data:`mitsweep.photo.limb.LIMB_STEP_LOCATOR`: the
+blurred-step model, the default, and the derivative's peak, its baseline) in the same
+process, and per locator and kind the range of the centre's error and the cases within
+0.25 px.
 """
 
 from __future__ import annotations
@@ -98,6 +103,26 @@ def cases(size: int):
     yield "cropped", (size, size - cut), (0, -cut), (0.21, 0.33)
 
 
+def _one_case(photo: np.ndarray, setup, truth: tuple[float, float],
+              R: float) -> tuple[str, float]:
+    """One calibration of a placed render: the printed result and the centre's error (px;
+    inf where refused)."""
+    from mitsweep.photo import CalibrationError, calibrate_photo
+
+    t = time.time()
+    try:
+        cal = calibrate_photo(photo, setup)
+    except CalibrationError as exc:
+        return f"refused: {exc}", math.inf
+    dc = np.subtract(cal.center_px, truth)
+    dr = cal.rim_radius_px - R
+    ok = np.hypot(*dc) <= 0.25 and abs(dr) <= 0.5
+    limb = any("limb" in w for w in cal.warnings)
+    return (f"{dc[0]:+.3f} {dc[1]:+.3f} {np.hypot(*dc):.3f}   {dr:+.3f}   "
+            f"{'PASS' if ok else 'miss'}{'  limb-warning' if limb else ''}  "
+            f"{time.time() - t:.1f}s"), float(np.hypot(*dc))
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[200, 400])
@@ -105,16 +130,19 @@ def main(argv=None) -> int:
     p.add_argument("--spp", type=int, default=32)
     p.add_argument("--seeds", type=int, nargs="+", default=[1],
                    help="render seeds (the sweep's error varies with the seed: 1-5 at 200 px)")
+    p.add_argument("--locators", nargs="+", default=["model"], choices=["model", "peak"],
+                   help="how each normal's step is located (limb.LIMB_STEP_LOCATOR)")
     p.add_argument("--cache", type=Path, default=Path("/tmp/limb_study"))
     p.add_argument("--check-mask", action="store_true")
     args = p.parse_args(argv)
-    from mitsweep.photo import CalibrationError, calibrate_photo
+    from mitsweep.photo import limb
 
-    print("kind     size seed case     centre_err_px(row,col,|c|)   radius_err_px  found")
+    print("locator kind     size seed case     centre_err_px(row,col,|c|)   radius_err_px  "
+          "found")
+    errors: dict[tuple[str, str], list[float]] = {}
     for size in args.sizes:
         setup = sphere_setup(size)
-        pitch = setup.sensor.pixel_pitch
-        R = predicted_outline(setup).equivalent_radius_px(pitch)
+        R = predicted_outline(setup).equivalent_radius_px(setup.sensor.pixel_pitch)
         if args.check_mask:
             from mitsweep.render.api import render_image
 
@@ -125,20 +153,19 @@ def main(argv=None) -> int:
             img = render(size, mode, args.spp, args.cache, seed)
             for name, canvas, at, sub in cases(size):
                 photo, truth = place(img, canvas, at, sub)
-                t = time.time()
-                try:
-                    cal = calibrate_photo(photo, setup)
-                except CalibrationError as exc:
-                    print(f"{mode:8s} {size:4d} {seed:4d} {name:8s} refused: {exc}")
-                    continue
-                dc = np.subtract(cal.center_px, truth)
-                dr = cal.rim_radius_px - R
-                ok = np.hypot(*dc) <= 0.25 and abs(dr) <= 0.5
-                limb = any("limb" in w for w in cal.warnings)
-                print(f"{mode:8s} {size:4d} {seed:4d} {name:8s} {dc[0]:+.3f} {dc[1]:+.3f} "
-                      f"{np.hypot(*dc):.3f}   {dr:+.3f}   {'PASS' if ok else 'miss'}"
-                      f"{'  limb-warning' if limb else ''}  {time.time() - t:.1f}s",
-                      flush=True)
+                for locator in args.locators:
+                    limb.LIMB_STEP_LOCATOR = locator
+                    try:
+                        line, err = _one_case(photo, setup, truth, R)
+                    finally:
+                        limb.LIMB_STEP_LOCATOR = "model"
+                    errors.setdefault((locator, mode), []).append(err)
+                    print(f"{locator:7s} {mode:8s} {size:4d} {seed:4d} {name:8s} {line}",
+                          flush=True)
+    for (locator, mode), errs in errors.items():
+        within = sum(e <= 0.25 for e in errs)
+        print(f"{locator} {mode}: centre {min(errs):.2f}-{max(errs):.2f} px, {within} of "
+              f"{len(errs)} within 0.25 px")
     return 0
 
 

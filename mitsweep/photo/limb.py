@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .edges import blurred_step_offsets
+from .edges import blurred_step_offsets, edge_offsets
 from .image import smooth
 from .robust import tukey_lstsq
 
@@ -44,6 +44,8 @@ __all__ = [
     "LIMB_ANNULUS_PX",
     "LIMB_HALF_WIDTH_PX",
     "LIMB_SMOOTHING_PX",
+    "LIMB_STEP_LOCATOR",
+    "LIMB_STEP_LOCATORS",
     "LIMB_STEP_WEIGHT_RANGE",
     "MIN_RADIAL_RISE",
     "MIN_RADIAL_SHARE",
@@ -71,6 +73,17 @@ LIMB_HALF_WIDTH_PX = 1.5
 #: 200-1024 px (32 spp) weighting by height takes the centre from 0.35 px off at worst to
 #: 0.24 px (``scripts/limb_study.py``).
 LIMB_STEP_WEIGHT_RANGE = 10.0
+#: How each normal's step is located in the limb's circle fit: ``"model"``, a blurred step
+#: on a ramp fitted to the unsmoothed profile and weighted by its height
+#: (:func:`mitsweep.photo.edges.blurred_step_offsets`, :data:`LIMB_STEP_WEIGHT_RANGE`),
+#: or ``"peak"``, the peak of the smoothed profile's derivative
+#: (:func:`mitsweep.photo.edges.edge_offsets`), every normal weighted alike (the fit
+#: until stop 49, kept as the baseline). ``scripts/limb_study.py --locators model peak``
+#: runs both side by side; docs/guide/restore.md gives the figures, which
+#: tests/test_calibrate_limb.py measures.
+LIMB_STEP_LOCATOR = "model"
+#: The values :data:`LIMB_STEP_LOCATOR` may take.
+LIMB_STEP_LOCATORS = ("model", "peak")
 #: Half-width (px) of the annulus over which the energy step is fitted (at least; 6% of
 #: the radius on large images).
 LIMB_ANNULUS_PX = 6.0
@@ -614,8 +627,15 @@ def _limb_from_ridge(lum, lum_s, gy, gx, c, scale, height, pts, nrm, radii, show
     good = np.zeros(len(pts), bool)
     wts = res = np.zeros(0)
     off = np.full(len(pts), np.nan)
+    if LIMB_STEP_LOCATOR not in LIMB_STEP_LOCATORS:
+        raise ValueError(f"limb.LIMB_STEP_LOCATOR must be one of {LIMB_STEP_LOCATORS}, "
+                         f"got {LIMB_STEP_LOCATOR!r}")
     for _ in range(iterations):
-        off, heights, _sigma = blurred_step_offsets(lum, c, scale, pts, nrm, LIMB_HALF_WIDTH_PX)
+        if LIMB_STEP_LOCATOR == "model":
+            off, heights, _sigma = blurred_step_offsets(lum, c, scale, pts, nrm,
+                                                        LIMB_HALF_WIDTH_PX)
+        else:
+            off, heights, _width = edge_offsets(lum_s, c, scale, pts, nrm, LIMB_HALF_WIDTH_PX)
         good = np.isfinite(off)
         if shown is not None:
             at = np.rint(np.asarray(c)[None, :] + scale * pts).astype(int)
@@ -632,7 +652,8 @@ def _limb_from_ridge(lum, lum_s, gy, gx, c, scale, height, pts, nrm, radii, show
         # step); the tallest tenth set the scale, and no normal counts less than a tenth
         h = np.abs(heights[good])
         top = max(float(np.quantile(h, 0.9)), 1e-300)
-        uncertainty = np.clip(top / np.maximum(h, 1e-300), 1.0, LIMB_STEP_WEIGHT_RANGE)
+        uncertainty = np.clip(top / np.maximum(h, 1e-300), 1.0, LIMB_STEP_WEIGHT_RANGE) \
+            if LIMB_STEP_LOCATOR == "model" else np.ones(len(h))
         x, wts = tukey_lstsq(A, off[good], uncertainty)
         res = off[good] - A @ x
         c = (c[0] + float(x[0]), c[1] + float(x[1]))
